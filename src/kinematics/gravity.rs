@@ -1,0 +1,291 @@
+//! Static gravity holding torques by Newton–Euler (thesis §3.7, eq. 3.26–3.31), and their exact
+//! derivative with respect to the joints (needed by the inverse kinematics, where the compliance
+//! deflection moves with q).
+//!
+//! τ is the torque each motor applies to hold the arm (gravity injected as a base acceleration
+//! v̇₀ = −g), which is why identified compliances come out negative (§5.3). As in the thesis
+//! (§4.2.1 step 1) the torques come from the *nominal* geometry: they do not depend on the
+//! identified parameters, and the payload (tool) mass is lumped into the last link.
+
+use nalgebra::{Matrix3, Vector3};
+
+use super::chain::Chain;
+use super::frame::{rot_x, rot_y, rot_z};
+use super::model::{MAX_JOINTS, RobotModel, Tool};
+use super::params::ParamLayout;
+
+/// Masses, centres of mass and the nominal geometry needed for the holding torques.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GravityModel {
+    n: usize,
+    /// Nominal rows: α, a, β, θ offset, d.
+    alpha: [f64; MAX_JOINTS],
+    a: [f64; MAX_JOINTS],
+    beta: [f64; MAX_JOINTS],
+    offset: [f64; MAX_JOINTS],
+    d: [f64; MAX_JOINTS],
+    mass: [f64; MAX_JOINTS],
+    /// Centres of mass in the link frames, the payload lumped into the last link.
+    com: [Vector3<f64>; MAX_JOINTS],
+    gravity: Vector3<f64>,
+    chain: Chain,
+}
+
+impl GravityModel {
+    /// From a robot's nominal structure and the payload its tool carries.
+    pub fn new(model: &RobotModel, tool: &Tool) -> Self {
+        let n = model.dof();
+        let mut g = GravityModel {
+            n,
+            alpha: [0.0; MAX_JOINTS],
+            a: [0.0; MAX_JOINTS],
+            beta: [0.0; MAX_JOINTS],
+            offset: [0.0; MAX_JOINTS],
+            d: [0.0; MAX_JOINTS],
+            mass: [0.0; MAX_JOINTS],
+            com: [Vector3::zeros(); MAX_JOINTS],
+            gravity: model.gravity,
+            chain: {
+                let layout = ParamLayout::full(model);
+                Chain::new(
+                    model,
+                    &layout,
+                    &layout.nominal_values(model, &Tool::flange(), &[0.0; 6]),
+                )
+            },
+        };
+        for (j, l) in model.links.iter().enumerate() {
+            g.alpha[j] = l.alpha;
+            g.a[j] = l.a;
+            g.beta[j] = l.beta.unwrap_or(0.0);
+            g.offset[j] = l.theta;
+            g.d[j] = l.d;
+            g.mass[j] = l.mass;
+            g.com[j] = l.com;
+        }
+        let last = n - 1;
+        let m = g.mass[last] + tool.mass;
+        if m > 0.0 {
+            g.com[last] = (g.com[last] * g.mass[last] + tool.com * tool.mass) / m;
+        }
+        g.mass[last] = m;
+        g
+    }
+
+    pub fn dof(&self) -> usize {
+        self.n
+    }
+
+    /// Holding torques τ(q), N·m, by the simplified Newton–Euler recursion of eq. 3.26–3.31,
+    /// in the link frames.
+    pub fn torques(&self, q: &[f64]) -> [f64; MAX_JOINTS] {
+        let n = self.n;
+        // R_i^{i−1} and P_i^{i−1} of each row.
+        let mut r = [Matrix3::identity(); MAX_JOINTS];
+        let mut p = [Vector3::zeros(); MAX_JOINTS];
+        for j in 0..n {
+            let rab = rot_x(self.alpha[j]) * rot_y(self.beta[j]);
+            r[j] = rab * rot_z(q[j] + self.offset[j]);
+            p[j] = Vector3::new(self.a[j], 0.0, 0.0) + rab * Vector3::new(0.0, 0.0, self.d[j]);
+        }
+        // Outward: v̇_{i} = R_{i−1}^{i} v̇_{i−1}, v̇_0 = −g; F_i = m_i v̇_i.
+        let mut acc = -self.gravity;
+        let mut force = [Vector3::zeros(); MAX_JOINTS];
+        for j in 0..n {
+            acc = r[j].transpose() * acc;
+            force[j] = acc * self.mass[j];
+        }
+        // Inward: f_i = R f_{i+1} + F_i; n_i = R n_{i+1} + Pc_i × F_i + P_{i+1} × (R f_{i+1}).
+        let mut tau = [0.0; MAX_JOINTS];
+        let mut f_next = Vector3::zeros();
+        let mut n_next = Vector3::zeros();
+        for j in (0..n).rev() {
+            let (rf, rn, pn) = if j + 1 < n {
+                (r[j + 1] * f_next, r[j + 1] * n_next, p[j + 1])
+            } else {
+                (Vector3::zeros(), Vector3::zeros(), Vector3::zeros())
+            };
+            let f = rf + force[j];
+            let nn = rn + self.com[j].cross(&force[j]) + pn.cross(&rf);
+            tau[j] = nn.z;
+            f_next = f;
+            n_next = nn;
+        }
+        tau
+    }
+
+    /// Holding torques and their exact Jacobian ∂τ_i/∂q_j (row i, column j), from the
+    /// world-frame form τ_i = z_i · ((C_i − M_i o_i) × G), with M_i and C_i the mass and first
+    /// moment of links i..n and G = −g. Rotating joint j moves every frame distal to it:
+    /// j ≤ i rotates z_i and (C_i − M_i o_i) together; j > i moves only C_i.
+    #[allow(clippy::needless_range_loop)]
+    pub fn torques_and_jacobian(
+        &self,
+        q: &[f64],
+    ) -> ([f64; MAX_JOINTS], [[f64; MAX_JOINTS]; MAX_JOINTS]) {
+        let n = self.n;
+        let mut theta = [0.0; MAX_JOINTS];
+        for j in 0..n {
+            theta[j] = q[j] + self.offset[j];
+        }
+        let tr = self.chain.trace(&theta);
+        let mut c_world = [Vector3::zeros(); MAX_JOINTS];
+        for j in 0..n {
+            c_world[j] = tr.link_frame(j).transform_point(&self.com[j]);
+        }
+        let g = -self.gravity;
+        // Suffix sums: M_i, C_i (first moment).
+        let mut m_suf = [0.0; MAX_JOINTS + 1];
+        let mut c_suf = [Vector3::zeros(); MAX_JOINTS + 1];
+        for j in (0..n).rev() {
+            m_suf[j] = m_suf[j + 1] + self.mass[j];
+            c_suf[j] = c_suf[j + 1] + c_world[j] * self.mass[j];
+        }
+        let mut tau = [0.0; MAX_JOINTS];
+        let mut jac = [[0.0; MAX_JOINTS]; MAX_JOINTS];
+        for i in 0..n {
+            let (zi, oi) = tr.joint_axis(i);
+            let v = c_suf[i] - oi * m_suf[i];
+            tau[i] = zi.dot(&v.cross(&g));
+            for j in 0..n {
+                let (zj, oj) = tr.joint_axis(j);
+                jac[i][j] = if j <= i {
+                    zj.cross(&zi).dot(&v.cross(&g)) + zi.dot(&zj.cross(&v).cross(&g))
+                } else {
+                    let w = c_suf[j] - oj * m_suf[j];
+                    zi.dot(&zj.cross(&w).cross(&g))
+                };
+            }
+        }
+        (tau, jac)
+    }
+
+    /// Potential energy V(q) = Σ m_k (−g)·c_k, J (used by the tests as an independent identity:
+    /// τ = ∂V/∂q).
+    pub fn potential_energy(&self, q: &[f64]) -> f64 {
+        let mut rot = Matrix3::identity();
+        let mut o = Vector3::zeros();
+        let mut v = 0.0;
+        for j in 0..self.n {
+            let rab = rot * rot_x(self.alpha[j]) * rot_y(self.beta[j]);
+            o += rot * Vector3::new(self.a[j], 0.0, 0.0) + rab * Vector3::new(0.0, 0.0, self.d[j]);
+            rot = rab * rot_z(q[j] + self.offset[j]);
+            v += self.mass[j] * (-self.gravity).dot(&(o + rot * self.com[j]));
+        }
+        v
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kinematics::model::{irb120, ur10};
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn trical() -> Tool {
+        Tool {
+            tcp: [0.04, 0.0, 0.13, 0.0, 0.0, 0.0],
+            mass: 1.7,
+            com: Vector3::new(0.030, 0.0, 0.064),
+        }
+    }
+
+    fn models() -> Vec<(RobotModel, Tool)> {
+        let mut tilted = ur10();
+        tilted.gravity = Vector3::new(2.0, -1.0, -9.5); // a robot mounted on a slope
+        vec![
+            (irb120(), trical()),
+            (irb120(), Tool::flange()),
+            (ur10(), trical()),
+            (tilted, trical()),
+        ]
+    }
+
+    /// Independent identity: the holding torque is the gradient of the potential energy.
+    #[test]
+    fn newton_euler_equals_gradient_of_potential_energy() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for (model, tool) in models() {
+            let g = GravityModel::new(&model, &tool);
+            for _ in 0..200 {
+                let q: Vec<f64> = model
+                    .links
+                    .iter()
+                    .map(|l| rng.random_range(l.limits[0]..l.limits[1]))
+                    .collect();
+                let tau = g.torques(&q);
+                for j in 0..model.dof() {
+                    let h = 1e-6;
+                    let mut qp = q.clone();
+                    qp[j] += h;
+                    let mut qm = q.clone();
+                    qm[j] -= h;
+                    let fd = (g.potential_energy(&qp) - g.potential_energy(&qm)) / (2.0 * h);
+                    assert!(
+                        (tau[j] - fd).abs() < 1e-7 * (1.0 + fd.abs()),
+                        "joint {j}: {} vs {fd}",
+                        tau[j]
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn world_form_agrees_and_its_jacobian_matches_differences() {
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        for (model, tool) in models() {
+            let g = GravityModel::new(&model, &tool);
+            let n = model.dof();
+            for _ in 0..100 {
+                let q: Vec<f64> = model
+                    .links
+                    .iter()
+                    .map(|l| rng.random_range(l.limits[0]..l.limits[1]))
+                    .collect();
+                let (tau, jac) = g.torques_and_jacobian(&q);
+                let ne = g.torques(&q);
+                for i in 0..n {
+                    assert!((tau[i] - ne[i]).abs() < 1e-11, "{} vs {}", tau[i], ne[i]);
+                }
+                for j in 0..n {
+                    let h = 1e-6;
+                    let mut qp = q.clone();
+                    qp[j] += h;
+                    let mut qm = q.clone();
+                    qm[j] -= h;
+                    let (tp, tm) = (g.torques(&qp), g.torques(&qm));
+                    for i in 0..n {
+                        let fd = (tp[i] - tm[i]) / (2.0 * h);
+                        assert!(
+                            (jac[i][j] - fd).abs() < 1e-6 * (1.0 + fd.abs()),
+                            "d tau{i}/d q{j}: {} vs {fd}",
+                            jac[i][j]
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn axis_one_parallel_to_gravity_carries_no_torque() {
+        let g = GravityModel::new(&irb120(), &trical());
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        for _ in 0..50 {
+            let q: Vec<f64> = (0..6).map(|_| rng.random_range(-1.5..1.5)).collect();
+            assert!(g.torques(&q)[0].abs() < 1e-12);
+        }
+        // Upper arm horizontal (q2 = 90°), forearm hanging down. By hand, with Table 3.4: link 2
+        // CoM 0.14 m from axis 2, link 3 at 0.27 + 0.05, links 4–6 on the forearm line at 0.34,
+        // the TriCal 0.03 m back from it (flange x points backwards here): Σ m·x =
+        // 4.2·0.14 + 3.2·0.32 + 3.2·0.34 + 1.7·0.31 = 3.227 kg·m. Gravity about +y is +3.227·g,
+        // so the holding torque is −31.646 N·m.
+        let tau = g.torques(&[0.0, std::f64::consts::FRAC_PI_2, 0.0, 0.0, 0.0, 0.0]);
+        assert!(
+            (tau[1] + 3.227 * crate::kinematics::model::STANDARD_GRAVITY).abs() < 1e-9,
+            "{tau:?}"
+        );
+    }
+}

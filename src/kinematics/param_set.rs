@@ -1,0 +1,91 @@
+//! A robot model, its tool and one value for every parameter: what identification produces, what
+//! compensation consumes, and what the parameter-set JSON files carry.
+
+use super::chain::{Chain, JointState};
+use super::frame::Frame;
+use super::gravity::GravityModel;
+use super::model::{RobotModel, Tool};
+use super::params::{Param, ParamLayout};
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParameterSet {
+    pub model: RobotModel,
+    /// The tool as declared (its TCP is the nominal of `tool_x` … `tool_c`; its payload drives the
+    /// gravity torques).
+    pub tool: Tool,
+    pub layout: ParamLayout,
+    /// Nominal value of each parameter (SI).
+    pub nominal: Vec<f64>,
+    /// Current value of each parameter (SI).
+    pub values: Vec<f64>,
+}
+
+impl ParameterSet {
+    /// The nominal parameter set of a model with a tool and a base pose χ (m, rad).
+    pub fn nominal(model: RobotModel, tool: Tool, base: [f64; 6]) -> Self {
+        let layout = ParamLayout::full(&model);
+        let nominal = layout.nominal_values(&model, &tool, &base);
+        Self {
+            values: nominal.clone(),
+            nominal,
+            layout,
+            model,
+            tool,
+        }
+    }
+
+    pub fn dof(&self) -> usize {
+        self.model.dof()
+    }
+
+    pub fn value(&self, p: Param) -> Option<f64> {
+        self.layout.index_of(p).map(|i| self.values[i])
+    }
+
+    pub fn nominal_value(&self, p: Param) -> Option<f64> {
+        self.layout.index_of(p).map(|i| self.nominal[i])
+    }
+
+    /// Set a parameter's value; false when the model has no such parameter.
+    pub fn set(&mut self, p: Param, v: f64) -> bool {
+        match self.layout.index_of(p) {
+            Some(i) => {
+                self.values[i] = v;
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// The chain at the current values.
+    pub fn chain(&self) -> Chain {
+        Chain::new(&self.model, &self.layout, &self.values)
+    }
+
+    /// The chain at the nominal values: the controller's model.
+    pub fn nominal_chain(&self) -> Chain {
+        Chain::new(&self.model, &self.layout, &self.nominal)
+    }
+
+    /// Gravity torques of this robot carrying this tool's payload (nominal geometry).
+    pub fn gravity(&self) -> GravityModel {
+        GravityModel::new(&self.model, &self.tool)
+    }
+
+    /// Pose vector χ of a block (`Param::Base` or `Param::Tool`) at the current values.
+    pub fn pose_of(&self, block: fn(usize) -> Param) -> [f64; 6] {
+        let mut chi = [0.0; 6];
+        for (k, v) in chi.iter_mut().enumerate() {
+            *v = self.value(block(k)).unwrap_or(0.0);
+        }
+        chi
+    }
+
+    /// Convenience: T_T^W at joint readings q (rad), torques computed here. Batch callers should
+    /// build the [`Chain`] and [`GravityModel`] once instead.
+    pub fn fk(&self, q: &[f64]) -> Frame {
+        let tau = self.gravity().torques(q);
+        self.chain()
+            .fk(&JointState::with_torques(q, &tau[..self.dof()]))
+    }
+}
