@@ -25,10 +25,7 @@ pub struct JointState {
 impl JointState {
     /// A state from joint readings; torques zero.
     pub fn new(q: &[f64]) -> Self {
-        let mut s = Self {
-            q: [0.0; MAX_JOINTS],
-            tau: [0.0; MAX_JOINTS],
-        };
+        let mut s = Self { q: [0.0; MAX_JOINTS], tau: [0.0; MAX_JOINTS] };
         s.q[..q.len()].copy_from_slice(q);
         s
     }
@@ -69,11 +66,7 @@ struct Axes {
 
 impl Axes {
     fn from_matrix(r: &Matrix3<f64>) -> Self {
-        Self {
-            x: r.column(0).into(),
-            y: r.column(1).into(),
-            z: r.column(2).into(),
-        }
+        Self { x: r.column(0).into(), y: r.column(1).into(), z: r.column(2).into() }
     }
     fn to_matrix(self) -> Matrix3<f64> {
         Matrix3::from_columns(&[self.x, self.y, self.z])
@@ -329,23 +322,13 @@ impl Chain {
     ///
     /// Writes column-major: entry (r, c) goes to `out[c * ld + r]`, so a caller can fill a block of
     /// a tall stacked matrix directly. Returns the TCP frame.
-    pub fn jacobian_into(
-        &self,
-        s: &JointState,
-        layout: &ParamLayout,
-        rows: Rows,
-        out: &mut [f64],
-        ld: usize,
-    ) -> Frame {
+    pub fn jacobian_into(&self, s: &JointState, layout: &ParamLayout, rows: Rows, out: &mut [f64], ld: usize) -> Frame {
         let theta = self.joint_angles(s);
         let t = self.trace(&theta);
         let p = t.tcp.t;
         let nr = rows as usize;
         let m = layout.len();
-        assert!(
-            ld >= nr && out.len() >= (m - 1) * ld + nr,
-            "output block too small"
-        );
+        assert!(ld >= nr && out.len() >= (m - 1) * ld + nr, "output block too small");
         let b = self.base_chi;
         let tc = self.tool_chi;
         for (c, param) in layout.params().iter().enumerate() {
@@ -355,9 +338,7 @@ impl Chain {
                 Param::Beta(j) => rot_col(&t.y_beta[j], &t.o_beta[j], &p),
                 Param::Theta(j) => rot_col(&t.z[j], &t.o[j], &p),
                 Param::D(j) => trans_col(&t.z[j]),
-                Param::Joint(j, JointTerm::Compliance) => {
-                    scale(rot_col(&t.z[j], &t.o[j], &p), s.tau[j])
-                }
+                Param::Joint(j, JointTerm::Compliance) => scale(rot_col(&t.z[j], &t.o[j], &p), s.tau[j]),
                 Param::Base(k) => {
                     let origin = self.base.t;
                     match k {
@@ -422,12 +403,7 @@ mod tests {
 
     /// FK as the literal product of 4×4-style elementary transforms (eq. 3.2, 3.10): an
     /// independent second implementation.
-    fn fk_reference(
-        model: &RobotModel,
-        layout: &ParamLayout,
-        values: &[f64],
-        s: &JointState,
-    ) -> Frame {
+    fn fk_reference(model: &RobotModel, layout: &ParamLayout, values: &[f64], s: &JointState) -> Frame {
         let get = |p: Param| layout.index_of(p).map(|i| values[i]);
         let tx = |a: f64| Frame::new(Matrix3::identity(), Vector3::new(a, 0.0, 0.0));
         let tz = |d: f64| Frame::new(Matrix3::identity(), Vector3::new(0.0, 0.0, d));
@@ -444,25 +420,18 @@ mod tests {
             let th = s.q[j]
                 + get(Param::Theta(j)).unwrap()
                 + get(Param::Joint(j, JointTerm::Compliance)).unwrap() * s.tau[j];
-            t = t
-                .compose(&r(rot_x(get(Param::Alpha(j)).unwrap())))
-                .compose(&tx(get(Param::A(j)).unwrap()));
+            t = t.compose(&r(rot_x(get(Param::Alpha(j)).unwrap()))).compose(&tx(get(Param::A(j)).unwrap()));
             if let Some(b) = get(Param::Beta(j)) {
                 t = t.compose(&r(rot_y(b)));
             }
-            t = t
-                .compose(&r(rot_z(th)))
-                .compose(&tz(get(Param::D(j)).unwrap()));
+            t = t.compose(&r(rot_z(th))).compose(&tz(get(Param::D(j)).unwrap()));
         }
         t.compose(&Frame::from_xyzabc(&chi(Param::Tool)))
     }
 
     fn random_values(model: &RobotModel, layout: &ParamLayout, rng: &mut ChaCha8Rng) -> Vec<f64> {
-        let nominal = crate::kinematics::ParameterSet::nominal(
-            model.clone(),
-            crate::kinematics::Tool::flange(),
-            [0.0; 6],
-        );
+        let nominal =
+            crate::kinematics::ParameterSet::nominal(model.clone(), crate::kinematics::Tool::flange(), [0.0; 6]);
         layout
             .params()
             .iter()
@@ -476,14 +445,8 @@ mod tests {
     }
 
     fn random_state(model: &RobotModel, rng: &mut ChaCha8Rng) -> JointState {
-        let q: Vec<f64> = model
-            .links
-            .iter()
-            .map(|l| rng.random_range(l.limits[0]..l.limits[1]))
-            .collect();
-        let tau: Vec<f64> = (0..model.dof())
-            .map(|_| rng.random_range(-30.0..30.0))
-            .collect();
+        let q: Vec<f64> = model.links.iter().map(|l| rng.random_range(l.limits[0]..l.limits[1])).collect();
+        let tau: Vec<f64> = (0..model.dof()).map(|_| rng.random_range(-30.0..30.0)).collect();
         JointState::with_torques(&q, &tau)
     }
 
@@ -543,21 +506,11 @@ mod tests {
                     let dw = rotation_vector(&(fp.r * fm.r.transpose())) / (2.0 * h);
                     let fd = [dp.x, dp.y, dp.z, dw.x, dw.y, dw.z];
                     let an = &jac[c * 6..c * 6 + 6];
-                    let scale = an
-                        .iter()
-                        .chain(fd.iter())
-                        .fold(0.0f64, |a, v| a.max(v.abs()))
-                        .max(1e-3);
+                    let scale = an.iter().chain(fd.iter()).fold(0.0f64, |a, v| a.max(v.abs())).max(1e-3);
                     for r in 0..6 {
                         let rel = (an[r] - fd[r]).abs() / scale;
                         worst = worst.max(rel);
-                        assert!(
-                            rel <= 1e-6,
-                            "{} row {r}: analytic {} vs fd {}",
-                            layout.params()[c],
-                            an[r],
-                            fd[r]
-                        );
+                        assert!(rel <= 1e-6, "{} row {r}: analytic {} vs fd {}", layout.params()[c], an[r], fd[r]);
                     }
                 }
                 // The position-only block is the first three rows of the pose block.

@@ -120,17 +120,13 @@ impl Compensator {
                 let turns = self.closed_form()?.solve_confdata(target, c)?;
                 let mut q = self.branch_seed(target, c.cfx)?;
                 for j in [0, 3, 5] {
-                    q[j] +=
-                        ((turns[j] - q[j]) / std::f64::consts::TAU).round() * std::f64::consts::TAU;
+                    q[j] += ((turns[j] - q[j]) / std::f64::consts::TAU).round() * std::f64::consts::TAU;
                 }
                 (q.to_vec(), Some(c.cfx))
             }
             Seed::Joints(q) => {
                 if q.len() != n {
-                    return Err(IkError::InvalidTarget(format!(
-                        "seed has {} joints, the robot {n}",
-                        q.len()
-                    )));
+                    return Err(IkError::InvalidTarget(format!("seed has {} joints, the robot {n}", q.len())));
                 }
                 (q.to_vec(), self.branch_on_calibrated(q))
             }
@@ -140,10 +136,7 @@ impl Compensator {
         if let (Some(want), Some(got)) = (expected, branch)
             && want != got
         {
-            return Err(IkError::BranchChanged {
-                expected: want.cfx(),
-                got: got.cfx(),
-            });
+            return Err(IkError::BranchChanged { expected: want.cfx(), got: got.cfx() });
         }
         for (j, (&v, [lo, hi])) in sol.joints().iter().zip(&self.limits).enumerate() {
             if v < *lo || v > *hi {
@@ -196,17 +189,12 @@ impl Compensator {
     fn branch_on_calibrated(&self, q: &[f64]) -> Option<Branch> {
         let ik = self.seed_ik.as_ref()?;
         let tau = self.gravity.torques(q);
-        Some(ik.classify_on(
-            &self.calibrated,
-            &JointState::with_torques(q, &tau[..q.len()]),
-        ))
+        Some(ik.classify_on(&self.calibrated, &JointState::with_torques(q, &tau[..q.len()])))
     }
 
     fn closed_form(&self) -> Result<&AnalyticIk, IkError> {
         self.seed_ik.as_ref().ok_or_else(|| {
-            IkError::Unsupported(
-                "no closed-form IK for this robot; give seed joints instead of a branch".into(),
-            )
+            IkError::Unsupported("no closed-form IK for this robot; give seed joints instead of a branch".into())
         })
     }
 }
@@ -224,19 +212,9 @@ mod tests {
 
     /// A "calibrated" IRB 120: thesis Table 5.1 means, with the TriCal tool.
     pub(crate) fn table_5_1() -> ParameterSet {
-        let tool = Tool {
-            tcp: [0.04, 0.0, 0.13, 0.0, 0.0, 0.0],
-            mass: 1.7,
-            com: Vector3::new(0.03, 0.0, 0.064),
-        };
-        let base = [
-            0.160211,
-            -0.255727,
-            -0.220548,
-            91.603f64.to_radians(),
-            0.496f64.to_radians(),
-            -1.384f64.to_radians(),
-        ];
+        let tool = Tool { tcp: [0.04, 0.0, 0.13, 0.0, 0.0, 0.0], mass: 1.7, com: Vector3::new(0.03, 0.0, 0.064) };
+        let base =
+            [0.160211, -0.255727, -0.220548, 91.603f64.to_radians(), 0.496f64.to_radians(), -1.384f64.to_radians()];
         let mut set = ParameterSet::nominal(irb120(), tool, base);
         let table: [(&str, f64); 31] = [
             ("alpha1", -90.034),
@@ -290,17 +268,12 @@ mod tests {
         let mut rng = ChaCha8Rng::seed_from_u64(9);
         let gravity = set.gravity();
         let calibrated = set.chain();
-        let (mut done, mut worst_p, mut worst_r, mut max_it, mut refused) =
-            (0, 0.0f64, 0.0f64, 0, 0);
+        let (mut done, mut worst_p, mut worst_r, mut max_it, mut refused) = (0, 0.0f64, 0.0f64, 0, 0);
         let mut sliver = 0;
         let mut shift_mm = Vec::new();
         while done < 500 {
-            let q: Vec<f64> = set
-                .model
-                .links
-                .iter()
-                .map(|l| rng.random_range(l.limits[0] * 0.9..l.limits[1] * 0.9))
-                .collect();
+            let q: Vec<f64> =
+                set.model.links.iter().map(|l| rng.random_range(l.limits[0] * 0.9..l.limits[1] * 0.9)).collect();
             let mut q = q;
             q[5] = wrap_pi(q[5]);
             if q[4].abs() < 0.05 {
@@ -313,18 +286,11 @@ mod tests {
                 Ok(r) => r,
                 // The calibrated arm is a different arm: near the limits or the edge of reach
                 // some nominal targets are legitimately refused. Count them.
-                Err(
-                    IkError::JointLimit { .. }
-                    | IkError::Unreachable(_)
-                    | IkError::NotConverged { .. },
-                ) => {
+                Err(IkError::JointLimit { .. } | IkError::Unreachable(_) | IkError::NotConverged { .. }) => {
                     // Only at the edge of reach: elbow within 8° of fully stretched
                     // (θ3 + φ = q3 + atan2(d4, a3) ≈ q3 + 76.96°).
                     let stretch = (q[2] + 0.302f64.atan2(0.070)).to_degrees();
-                    assert!(
-                        stretch.abs() < 8.0,
-                        "refused a target {stretch}° from the elbow singularity"
-                    );
+                    assert!(stretch.abs() < 8.0, "refused a target {stretch}° from the elbow singularity");
                     refused += 1;
                     continue;
                 }
@@ -347,57 +313,32 @@ mod tests {
         eprintln!(
             "compensation: {done} targets, worst {worst_p:.2e} m {worst_r:.2e} rad, max {max_it} iterations, {refused} refused, {sliver} sliver"
         );
-        assert!(
-            worst_p <= 1e-9 && worst_r <= 1e-6,
-            "worst {worst_p} m, {worst_r} rad"
-        );
+        assert!(worst_p <= 1e-9 && worst_r <= 1e-6, "worst {worst_p} m, {worst_r} rad");
         assert!(max_it <= 8, "{max_it} iterations");
-        assert!(
-            refused <= 10,
-            "{refused} of {} targets refused",
-            done + refused
-        );
-        assert!(
-            sliver <= 5,
-            "{sliver} targets with a different controller cfx"
-        );
+        assert!(refused <= 10, "{refused} of {} targets refused", done + refused);
+        assert!(sliver <= 5, "{sliver} targets with a different controller cfx");
         let mean_shift = shift_mm.iter().sum::<f64>() / shift_mm.len() as f64;
-        assert!(
-            mean_shift > 0.5,
-            "fake targets move by millimetres, got {mean_shift} mm"
-        );
+        assert!(mean_shift > 0.5, "fake targets move by millimetres, got {mean_shift} mm");
     }
 
     #[test]
     fn nominal_joint_targets_and_seeded_robots() {
         // UR10: no closed form, seeded from the nominal joints.
-        let tool = Tool {
-            tcp: [0.0, 0.0, 0.1, 0.0, 0.0, 0.0],
-            mass: 1.0,
-            com: Vector3::new(0.0, 0.0, 0.05),
-        };
+        let tool = Tool { tcp: [0.0, 0.0, 0.1, 0.0, 0.0, 0.0], mass: 1.0, com: Vector3::new(0.0, 0.0, 0.05) };
         let mut set = ParameterSet::nominal(ur10(), tool, [0.0; 6]);
         set.set(Param::A(2), -0.6125);
         set.set(Param::Theta(1), 0.002);
         set.set(Param::Beta(2), 0.001);
-        set.set(
-            Param::Joint(1, crate::kinematics::params::JointTerm::Compliance),
-            -2e-5,
-        );
+        set.set(Param::Joint(1, crate::kinematics::params::JointTerm::Compliance), -2e-5);
         let comp = Compensator::new(&set);
         assert!(!comp.has_closed_form());
         let q = [0.3, -1.2, 1.4, -0.9, 1.1, 0.4];
         let res = comp.joints(&q).unwrap();
         let target = set.nominal_chain().fk(&JointState::new(&q));
         let tau = set.gravity().torques(res.joints());
-        let f = set
-            .chain()
-            .fk(&JointState::with_torques(res.joints(), &tau[..6]));
+        let f = set.chain().fk(&JointState::with_torques(res.joints(), &tau[..6]));
         let (dp, dr) = pose_error(&f, &target);
         assert!(dp <= 1e-9 && dr <= 1e-6);
-        assert!(matches!(
-            comp.pose(&target, Seed::Branch(Branch::new(0).unwrap())),
-            Err(IkError::Unsupported(_))
-        ));
+        assert!(matches!(comp.pose(&target, Seed::Branch(Branch::new(0).unwrap())), Err(IkError::Unsupported(_))));
     }
 }

@@ -21,10 +21,7 @@ impl Default for Frame {
 
 impl Frame {
     pub fn identity() -> Self {
-        Self {
-            r: Matrix3::identity(),
-            t: Vector3::zeros(),
-        }
+        Self { r: Matrix3::identity(), t: Vector3::zeros() }
     }
 
     pub fn new(r: Matrix3<f64>, t: Vector3<f64>) -> Self {
@@ -33,10 +30,7 @@ impl Frame {
 
     /// `Tr(x, y, z) · Rz(a) · Ry(b) · Rx(c)`: the pose vector χ of eq. 3.6 (metres, radians).
     pub fn from_xyzabc(chi: &[f64; 6]) -> Self {
-        Self {
-            r: rot_zyx(chi[3], chi[4], chi[5]),
-            t: Vector3::new(chi[0], chi[1], chi[2]),
-        }
+        Self { r: rot_zyx(chi[3], chi[4], chi[5]), t: Vector3::new(chi[0], chi[1], chi[2]) }
     }
 
     /// The pose vector χ = (x, y, z, a, b, c) of this frame (ZY'X'' Euler angles).
@@ -46,18 +40,12 @@ impl Frame {
     }
 
     pub fn compose(&self, other: &Frame) -> Frame {
-        Frame {
-            r: self.r * other.r,
-            t: self.r * other.t + self.t,
-        }
+        Frame { r: self.r * other.r, t: self.r * other.t + self.t }
     }
 
     pub fn inverse(&self) -> Frame {
         let rt = self.r.transpose();
-        Frame {
-            r: rt,
-            t: -(rt * self.t),
-        }
+        Frame { r: rt, t: -(rt * self.t) }
     }
 
     pub fn transform_point(&self, p: &Vector3<f64>) -> Vector3<f64> {
@@ -66,10 +54,7 @@ impl Frame {
 
     /// Position distance and geodesic rotation angle between two frames (m, rad).
     pub fn distance(&self, other: &Frame) -> (f64, f64) {
-        (
-            (self.t - other.t).norm(),
-            rotation_angle(&(self.r.transpose() * other.r)),
-        )
+        ((self.t - other.t).norm(), rotation_angle(&(self.r.transpose() * other.r)))
     }
 }
 
@@ -133,11 +118,7 @@ pub fn rotation_angle(r: &Matrix3<f64>) -> f64 {
 /// residual and finite difference in this crate. Here the angle is `atan2(|skew|, cos)`, exact to
 /// rounding everywhere, with the symmetric part giving the axis near π.
 pub fn rotation_vector(r: &Matrix3<f64>) -> Vector3<f64> {
-    let v = Vector3::new(
-        r[(2, 1)] - r[(1, 2)],
-        r[(0, 2)] - r[(2, 0)],
-        r[(1, 0)] - r[(0, 1)],
-    ) * 0.5;
+    let v = Vector3::new(r[(2, 1)] - r[(1, 2)], r[(0, 2)] - r[(2, 0)], r[(1, 0)] - r[(0, 1)]) * 0.5;
     let s = v.norm();
     let c = (r.trace() - 1.0) * 0.5;
     let angle = s.atan2(c);
@@ -167,11 +148,7 @@ pub fn rotation_vector(r: &Matrix3<f64>) -> Vector3<f64> {
 /// Unit quaternion (w, x, y, z) of a rotation matrix.
 pub fn quaternion_from_rot(r: &Matrix3<f64>) -> [f64; 4] {
     let q = nalgebra::UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(*r));
-    let q = if q.w < 0.0 {
-        -q.into_inner()
-    } else {
-        q.into_inner()
-    };
+    let q = if q.w < 0.0 { -q.into_inner() } else { q.into_inner() };
     [q.w, q.i, q.j, q.k]
 }
 
@@ -182,9 +159,7 @@ pub fn rot_from_quaternion(q: [f64; 4]) -> Option<Matrix3<f64>> {
     if !n.is_finite() || n < 1e-12 {
         return None;
     }
-    let uq = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
-        q[0], q[1], q[2], q[3],
-    ));
+    let uq = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]));
     Some(*uq.to_rotation_matrix().matrix())
 }
 
@@ -210,11 +185,7 @@ mod tests {
     fn zyx_matches_the_product_of_elementary_rotations() {
         let mut rng = ChaCha8Rng::seed_from_u64(1);
         for _ in 0..200 {
-            let (a, b, c) = (
-                rng.random_range(-3.1..3.1),
-                rng.random_range(-1.5..1.5),
-                rng.random_range(-3.1..3.1),
-            );
+            let (a, b, c) = (rng.random_range(-3.1..3.1), rng.random_range(-1.5..1.5), rng.random_range(-3.1..3.1));
             let r = rot_zyx(a, b, c);
             let p = rot_z(a) * rot_y(b) * rot_x(c);
             assert!((r - p).abs().max() < 1e-15);
@@ -257,19 +228,15 @@ mod tests {
     fn rotation_vector_inverts_rodrigues_everywhere() {
         let mut rng = ChaCha8Rng::seed_from_u64(2);
         for i in 0..2000 {
-            let axis = Vector3::new(
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-            )
-            .normalize();
+            let axis =
+                Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0))
+                    .normalize();
             let angle = match i % 4 {
                 0 => 10f64.powf(rng.random_range(-12.0..0.0)),
                 1 => std::f64::consts::PI - 10f64.powf(rng.random_range(-9.0..0.0)),
                 _ => rng.random_range(0.0..std::f64::consts::PI),
             };
-            let r =
-                *Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), angle).matrix();
+            let r = *Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), angle).matrix();
             let w = rotation_vector(&r);
             let err = (w - axis * angle).norm();
             assert!(err <= 1e-15 + 1e-13 * angle, "angle {angle}: err {err}");
@@ -278,14 +245,7 @@ mod tests {
 
     #[test]
     fn wrap_pi_range() {
-        for a in [
-            -10.0,
-            -std::f64::consts::PI,
-            0.0,
-            3.0,
-            std::f64::consts::PI,
-            7.0,
-        ] {
+        for a in [-10.0, -std::f64::consts::PI, 0.0, 3.0, std::f64::consts::PI, 7.0] {
             let w = wrap_pi(a);
             assert!(w > -std::f64::consts::PI - 1e-15 && w <= std::f64::consts::PI);
             assert!(

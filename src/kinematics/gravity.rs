@@ -24,6 +24,9 @@ pub struct GravityModel {
     beta: [f64; MAX_JOINTS],
     offset: [f64; MAX_JOINTS],
     d: [f64; MAX_JOINTS],
+    /// Constant part of each row: Rx(α)·Ry(β), and P_i^{i−1} = (a, 0, 0) + Rx(α)·Ry(β)·(0, 0, d).
+    rab: [Matrix3<f64>; MAX_JOINTS],
+    p: [Vector3<f64>; MAX_JOINTS],
     mass: [f64; MAX_JOINTS],
     /// Centres of mass in the link frames, the payload lumped into the last link.
     com: [Vector3<f64>; MAX_JOINTS],
@@ -42,16 +45,14 @@ impl GravityModel {
             beta: [0.0; MAX_JOINTS],
             offset: [0.0; MAX_JOINTS],
             d: [0.0; MAX_JOINTS],
+            rab: [Matrix3::identity(); MAX_JOINTS],
+            p: [Vector3::zeros(); MAX_JOINTS],
             mass: [0.0; MAX_JOINTS],
             com: [Vector3::zeros(); MAX_JOINTS],
             gravity: model.gravity,
             chain: {
                 let layout = ParamLayout::full(model);
-                Chain::new(
-                    model,
-                    &layout,
-                    &layout.nominal_values(model, &Tool::flange(), &[0.0; 6]),
-                )
+                Chain::new(model, &layout, &layout.nominal_values(model, &Tool::flange(), &[0.0; 6]))
             },
         };
         for (j, l) in model.links.iter().enumerate() {
@@ -62,6 +63,8 @@ impl GravityModel {
             g.d[j] = l.d;
             g.mass[j] = l.mass;
             g.com[j] = l.com;
+            g.rab[j] = rot_x(g.alpha[j]) * rot_y(g.beta[j]);
+            g.p[j] = Vector3::new(g.a[j], 0.0, 0.0) + g.rab[j] * Vector3::new(0.0, 0.0, g.d[j]);
         }
         let last = n - 1;
         let m = g.mass[last] + tool.mass;
@@ -80,14 +83,15 @@ impl GravityModel {
     /// in the link frames.
     pub fn torques(&self, q: &[f64]) -> [f64; MAX_JOINTS] {
         let n = self.n;
-        // R_i^{i−1} and P_i^{i−1} of each row.
+        // R_i^{i−1} of each row: the constant Rx(α)·Ry(β) times Rz(θ), by columns.
         let mut r = [Matrix3::identity(); MAX_JOINTS];
-        let mut p = [Vector3::zeros(); MAX_JOINTS];
         for j in 0..n {
-            let rab = rot_x(self.alpha[j]) * rot_y(self.beta[j]);
-            r[j] = rab * rot_z(q[j] + self.offset[j]);
-            p[j] = Vector3::new(self.a[j], 0.0, 0.0) + rab * Vector3::new(0.0, 0.0, self.d[j]);
+            let (s, c) = (q[j] + self.offset[j]).sin_cos();
+            let m = &self.rab[j];
+            let (x, y) = (m.column(0), m.column(1));
+            r[j] = Matrix3::from_columns(&[x * c + y * s, y * c - x * s, m.column(2).into_owned()]);
         }
+        let p = &self.p;
         // Outward: v̇_{i} = R_{i−1}^{i} v̇_{i−1}, v̇_0 = −g; F_i = m_i v̇_i.
         let mut acc = -self.gravity;
         let mut force = [Vector3::zeros(); MAX_JOINTS];
@@ -118,11 +122,7 @@ impl GravityModel {
     /// world-frame form τ_i = z_i · ((C_i − M_i o_i) × G), with M_i and C_i the mass and first
     /// moment of links i..n and G = −g. Rotating joint j moves every frame distal to it:
     /// j ≤ i rotates z_i and (C_i − M_i o_i) together; j > i moves only C_i.
-    #[allow(clippy::needless_range_loop)]
-    pub fn torques_and_jacobian(
-        &self,
-        q: &[f64],
-    ) -> ([f64; MAX_JOINTS], [[f64; MAX_JOINTS]; MAX_JOINTS]) {
+    pub fn torques_and_jacobian(&self, q: &[f64]) -> ([f64; MAX_JOINTS], [[f64; MAX_JOINTS]; MAX_JOINTS]) {
         let n = self.n;
         let mut theta = [0.0; MAX_JOINTS];
         for j in 0..n {
@@ -184,22 +184,13 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     fn trical() -> Tool {
-        Tool {
-            tcp: [0.04, 0.0, 0.13, 0.0, 0.0, 0.0],
-            mass: 1.7,
-            com: Vector3::new(0.030, 0.0, 0.064),
-        }
+        Tool { tcp: [0.04, 0.0, 0.13, 0.0, 0.0, 0.0], mass: 1.7, com: Vector3::new(0.030, 0.0, 0.064) }
     }
 
     fn models() -> Vec<(RobotModel, Tool)> {
         let mut tilted = ur10();
         tilted.gravity = Vector3::new(2.0, -1.0, -9.5); // a robot mounted on a slope
-        vec![
-            (irb120(), trical()),
-            (irb120(), Tool::flange()),
-            (ur10(), trical()),
-            (tilted, trical()),
-        ]
+        vec![(irb120(), trical()), (irb120(), Tool::flange()), (ur10(), trical()), (tilted, trical())]
     }
 
     /// Independent identity: the holding torque is the gradient of the potential energy.
@@ -209,11 +200,7 @@ mod tests {
         for (model, tool) in models() {
             let g = GravityModel::new(&model, &tool);
             for _ in 0..200 {
-                let q: Vec<f64> = model
-                    .links
-                    .iter()
-                    .map(|l| rng.random_range(l.limits[0]..l.limits[1]))
-                    .collect();
+                let q: Vec<f64> = model.links.iter().map(|l| rng.random_range(l.limits[0]..l.limits[1])).collect();
                 let tau = g.torques(&q);
                 for j in 0..model.dof() {
                     let h = 1e-6;
@@ -222,11 +209,7 @@ mod tests {
                     let mut qm = q.clone();
                     qm[j] -= h;
                     let fd = (g.potential_energy(&qp) - g.potential_energy(&qm)) / (2.0 * h);
-                    assert!(
-                        (tau[j] - fd).abs() < 1e-7 * (1.0 + fd.abs()),
-                        "joint {j}: {} vs {fd}",
-                        tau[j]
-                    );
+                    assert!((tau[j] - fd).abs() < 1e-7 * (1.0 + fd.abs()), "joint {j}: {} vs {fd}", tau[j]);
                 }
             }
         }
@@ -239,11 +222,7 @@ mod tests {
             let g = GravityModel::new(&model, &tool);
             let n = model.dof();
             for _ in 0..100 {
-                let q: Vec<f64> = model
-                    .links
-                    .iter()
-                    .map(|l| rng.random_range(l.limits[0]..l.limits[1]))
-                    .collect();
+                let q: Vec<f64> = model.links.iter().map(|l| rng.random_range(l.limits[0]..l.limits[1])).collect();
                 let (tau, jac) = g.torques_and_jacobian(&q);
                 let ne = g.torques(&q);
                 for i in 0..n {
@@ -283,9 +262,6 @@ mod tests {
         // 4.2·0.14 + 3.2·0.32 + 3.2·0.34 + 1.7·0.31 = 3.227 kg·m. Gravity about +y is +3.227·g,
         // so the holding torque is −31.646 N·m.
         let tau = g.torques(&[0.0, std::f64::consts::FRAC_PI_2, 0.0, 0.0, 0.0, 0.0]);
-        assert!(
-            (tau[1] + 3.227 * crate::kinematics::model::STANDARD_GRAVITY).abs() < 1e-9,
-            "{tau:?}"
-        );
+        assert!((tau[1] + 3.227 * crate::kinematics::model::STANDARD_GRAVITY).abs() < 1e-9, "{tau:?}");
     }
 }

@@ -34,16 +34,8 @@ use super::model::RobotModel;
 pub struct Branch(u8);
 
 impl Branch {
-    pub const ALL: [Branch; 8] = [
-        Branch(0),
-        Branch(1),
-        Branch(2),
-        Branch(3),
-        Branch(4),
-        Branch(5),
-        Branch(6),
-        Branch(7),
-    ];
+    pub const ALL: [Branch; 8] =
+        [Branch(0), Branch(1), Branch(2), Branch(3), Branch(4), Branch(5), Branch(6), Branch(7)];
 
     pub fn new(cfx: u8) -> Option<Branch> {
         (cfx < 8).then_some(Branch(cfx))
@@ -79,21 +71,9 @@ impl fmt::Display for Branch {
             f,
             "cfx {} (wrist centre {} axis 1, {} the lower arm, axis 5 {})",
             self.0,
-            if self.shoulder_back() {
-                "behind"
-            } else {
-                "in front of"
-            },
-            if self.elbow_behind() {
-                "behind"
-            } else {
-                "in front of"
-            },
-            if self.wrist_negative() {
-                "negative"
-            } else {
-                "positive"
-            }
+            if self.shoulder_back() { "behind" } else { "in front of" },
+            if self.elbow_behind() { "behind" } else { "in front of" },
+            if self.wrist_negative() { "negative" } else { "positive" }
         )
     }
 }
@@ -107,9 +87,10 @@ pub struct Confdata {
     pub cfx: Branch,
 }
 
-/// Quadrant of a joint angle: k such that q ∈ [k·90°, (k+1)·90°).
+/// Quadrant of a joint angle: k such that q ∈ [k·90°, (k+1)·90°). Angles within 1 nrad below a
+/// boundary count as on it, so rounding noise (−1e−14 for a zero) does not flip the label.
 pub fn quadrant(q: f64) -> i32 {
-    (q / FRAC_PI_2).floor() as i32
+    ((q + 1e-9) / FRAC_PI_2).floor() as i32
 }
 
 /// Which singularity a target sits on.
@@ -143,25 +124,12 @@ pub enum IkError {
     Unreachable(String),
     #[error("target at a {0}")]
     Singular(Singularity),
-    #[error(
-        "joint {joint} would be at {value_deg:.4}°, outside its limits [{lower_deg:.1}°, {upper_deg:.1}°]"
-    )]
-    JointLimit {
-        joint: usize,
-        value_deg: f64,
-        lower_deg: f64,
-        upper_deg: f64,
-    },
+    #[error("joint {joint} would be at {value_deg:.4}°, outside its limits [{lower_deg:.1}°, {upper_deg:.1}°]")]
+    JointLimit { joint: usize, value_deg: f64, lower_deg: f64, upper_deg: f64 },
     #[error("no solution in the requested configuration: {0}")]
     Configuration(String),
-    #[error(
-        "did not converge in {iterations} iterations (residual {residual_mm:.3e} mm, {residual_urad:.3e} µrad)"
-    )]
-    NotConverged {
-        iterations: usize,
-        residual_mm: f64,
-        residual_urad: f64,
-    },
+    #[error("did not converge in {iterations} iterations (residual {residual_mm:.3e} mm, {residual_urad:.3e} µrad)")]
+    NotConverged { iterations: usize, residual_mm: f64, residual_urad: f64 },
     #[error("solution left the seed's configuration branch (cfx {expected} became cfx {got})")]
     BranchChanged { expected: u8, got: u8 },
     #[error("analytic inverse kinematics is not available for this robot: {0}")]
@@ -201,10 +169,7 @@ impl AnalyticIk {
     /// `tool` is T_T^6.
     pub fn new(model: &RobotModel, base: &Frame, tool: &Frame) -> Result<Self, IkError> {
         if model.dof() != 6 {
-            return Err(IkError::Unsupported(format!(
-                "needs 6 joints, the model has {}",
-                model.dof()
-            )));
+            return Err(IkError::Unsupported(format!("needs 6 joints, the model has {}", model.dof())));
         }
         let l = &model.links;
         let alphas = [0.0, -FRAC_PI_2, 0.0, -FRAC_PI_2, FRAC_PI_2, -FRAC_PI_2];
@@ -220,26 +185,16 @@ impl AnalyticIk {
                 return Err(IkError::Unsupported(format!("beta{j} must be zero")));
             }
         }
-        for (name, v) in [
-            ("a0", l[0].a),
-            ("a4", l[4].a),
-            ("a5", l[5].a),
-            ("d2", l[1].d),
-            ("d3", l[2].d),
-            ("d5", l[4].d),
-        ] {
+        for (name, v) in
+            [("a0", l[0].a), ("a4", l[4].a), ("a5", l[5].a), ("d2", l[1].d), ("d3", l[2].d), ("d5", l[4].d)]
+        {
             if v.abs() > STRUCTURE_TOL {
-                return Err(IkError::Unsupported(format!(
-                    "{name} must be zero, it is {:.6} mm",
-                    v * 1e3
-                )));
+                return Err(IkError::Unsupported(format!("{name} must be zero, it is {:.6} mm", v * 1e3)));
             }
         }
         let (a2, a3, d4) = (l[2].a, l[3].a, l[3].d);
         if a2.abs() < 1e-6 || (a3 * a3 + d4 * d4).sqrt() < 1e-6 {
-            return Err(IkError::Unsupported(
-                "the upper and lower arm lengths must not be zero".into(),
-            ));
+            return Err(IkError::Unsupported("the upper and lower arm lengths must not be zero".into()));
         }
         let mut offset = [0.0; 6];
         let mut limits = [[0.0; 2]; 6];
@@ -330,18 +285,8 @@ impl AnalyticIk {
         self.solve_inner(target, branch, true)
     }
 
-    fn solve_inner(
-        &self,
-        target: &Frame,
-        branch: Branch,
-        lenient: bool,
-    ) -> Result<[f64; 6], IkError> {
-        if target
-            .t
-            .iter()
-            .chain(target.r.iter())
-            .any(|v| !v.is_finite())
-        {
+    fn solve_inner(&self, target: &Frame, branch: Branch, lenient: bool) -> Result<[f64; 6], IkError> {
+        if target.t.iter().chain(target.r.iter()).any(|v| !v.is_finite()) {
             return Err(IkError::InvalidTarget("non-finite pose".into()));
         }
         let flange = self.base_inv.compose(target).compose(&self.tool_inv);
@@ -353,18 +298,13 @@ impl AnalyticIk {
         if radial < SHOULDER_EPS {
             return Err(IkError::Singular(Singularity::Shoulder));
         }
-        let (theta1, r) = if branch.shoulder_back() {
-            ((-w.y).atan2(-w.x), -radial)
-        } else {
-            (w.y.atan2(w.x), radial)
-        };
+        let (theta1, r) = if branch.shoulder_back() { ((-w.y).atan2(-w.x), -radial) } else { (w.y.atan2(w.x), radial) };
 
         // Arm plane of frame 2 (before θ2): u along x1, v along −z1.
         let u = r - self.a1;
         let v = -(w.z - self.d1);
         // Axis 3 (A I-12 … A I-23): |w|² = a2² + ρ² + 2·a2·ρ·cos(θ3 + φ).
-        let cos_e =
-            (u * u + v * v - self.a2 * self.a2 - self.rho * self.rho) / (2.0 * self.a2 * self.rho);
+        let cos_e = (u * u + v * v - self.a2 * self.a2 - self.rho * self.rho) / (2.0 * self.a2 * self.rho);
         // Lenient seeding accepts a few millimetres beyond the nominal reach.
         let slack = if lenient { 1e-2 } else { 1e-12 };
         if cos_e.abs() > 1.0 + slack {
@@ -378,10 +318,7 @@ impl AnalyticIk {
         }
         let (cos_e, sin_e) = if lenient {
             // Keep the seed 1 mrad off the stretched/folded line, on the requested side.
-            let e = cos_e
-                .clamp(-1.0, 1.0)
-                .acos()
-                .clamp(1e-3, std::f64::consts::PI - 1e-3);
+            let e = cos_e.clamp(-1.0, 1.0).acos().clamp(1e-3, std::f64::consts::PI - 1e-3);
             (e.cos(), e.sin())
         } else {
             let c = cos_e.clamp(-1.0, 1.0);
@@ -391,11 +328,7 @@ impl AnalyticIk {
             return Err(IkError::Singular(Singularity::Elbow));
         }
         // sin(θ3 + φ) has the home sign in front of the lower arm.
-        let side = if branch.elbow_behind() {
-            -self.elbow_home_sign
-        } else {
-            self.elbow_home_sign
-        };
+        let side = if branch.elbow_behind() { -self.elbow_home_sign } else { self.elbow_home_sign };
         let theta3 = (side * sin_e).atan2(cos_e) - self.phi;
         // Axis 2 (A I-24 … A I-28).
         let (s3, c3) = theta3.sin_cos();
@@ -458,21 +391,13 @@ impl AnalyticIk {
 
     /// Full configuration data of a joint configuration.
     pub fn confdata(&self, q: &[f64]) -> Confdata {
-        Confdata {
-            cf1: quadrant(q[0]),
-            cf4: quadrant(q[3]),
-            cf6: quadrant(q[5]),
-            cfx: self.classify(q),
-        }
+        Confdata { cf1: quadrant(q[0]), cf4: quadrant(q[3]), cf6: quadrant(q[5]), cfx: self.classify(q) }
     }
 }
 
 /// Pose error between two frames: (position distance m, rotation angle rad).
 pub fn pose_error(a: &Frame, b: &Frame) -> (f64, f64) {
-    (
-        (a.t - b.t).norm(),
-        rotation_vector(&(a.r * b.r.transpose())).norm(),
-    )
+    ((a.t - b.t).norm(), rotation_vector(&(a.r * b.r.transpose())).norm())
 }
 
 #[cfg(test)]
@@ -487,11 +412,7 @@ mod tests {
 
     fn setup(base: [f64; 6], tcp: [f64; 6]) -> (Chain, AnalyticIk, RobotModel) {
         let model = irb120();
-        let tool = Tool {
-            tcp,
-            mass: 1.7,
-            com: Vector3::new(0.03, 0.0, 0.064),
-        };
+        let tool = Tool { tcp, mass: 1.7, com: Vector3::new(0.03, 0.0, 0.064) };
         let set = ParameterSet::nominal(model.clone(), tool, base);
         let chain = set.nominal_chain();
         let ik = AnalyticIk::new(&model, chain.base(), chain.tool()).unwrap();
@@ -510,10 +431,7 @@ mod tests {
     /// that has a solution; the generating configuration is recovered on its own branch.
     #[test]
     fn fk_of_ik_round_trips_on_10000_targets() {
-        let (chain, ik, model) = setup(
-            [0.16, -0.25, -0.22, 1.6, 0.01, -0.02],
-            [0.04, 0.0, 0.13, 0.1, -0.2, 0.3],
-        );
+        let (chain, ik, model) = setup([0.16, -0.25, -0.22, 1.6, 0.01, -0.02], [0.04, 0.0, 0.13, 0.1, -0.2, 0.3]);
         let mut rng = ChaCha8Rng::seed_from_u64(42);
         let (mut solved, mut worst_p, mut worst_r) = (0usize, 0.0f64, 0.0f64);
         let mut targets = 0;
@@ -526,14 +444,9 @@ mod tests {
             targets += 1;
             let target = chain.fk(&JointState::new(&q));
             let own = ik.classify(&q);
-            let back = ik
-                .solve_unchecked(&target, own)
-                .expect("generating branch solvable");
+            let back = ik.solve_unchecked(&target, own).expect("generating branch solvable");
             for j in 0..6 {
-                assert!(
-                    (wrap_pi(back[j] - q[j])).abs() < 1e-7,
-                    "joint {j}: {back:?} vs {q:?}"
-                );
+                assert!((wrap_pi(back[j] - q[j])).abs() < 1e-7, "joint {j}: {back:?} vs {q:?}");
             }
             for (b, res) in ik.solve_all(&target) {
                 let Ok(sol) = res else { continue };
@@ -542,22 +455,11 @@ mod tests {
                 let (dp, dr) = pose_error(&f, &target);
                 worst_p = worst_p.max(dp);
                 worst_r = worst_r.max(dr);
-                assert_eq!(
-                    ik.classify(&sol),
-                    b,
-                    "solution labelled with its own branch"
-                );
-                assert_eq!(
-                    ik.classify_on(&chain, &JointState::new(&sol)),
-                    b,
-                    "geometric and closed-form labels agree"
-                );
+                assert_eq!(ik.classify(&sol), b, "solution labelled with its own branch");
+                assert_eq!(ik.classify_on(&chain, &JointState::new(&sol)), b, "geometric and closed-form labels agree");
             }
         }
-        assert!(
-            worst_p <= 1e-9 && worst_r <= 1e-9,
-            "worst {worst_p} m {worst_r} rad"
-        );
+        assert!(worst_p <= 1e-9 && worst_r <= 1e-9, "worst {worst_p} m {worst_r} rad");
         assert!(solved > 10_000);
     }
 
@@ -567,59 +469,28 @@ mod tests {
         assert_eq!(ik.classify(&[0.0, 0.0, 0.0, 0.0, 0.1, 0.0]).cfx(), 0);
         assert_eq!(ik.classify(&[0.0, 0.0, 0.0, 0.0, -0.1, 0.0]).cfx(), 1);
         // Arm bent back over the head: q2 = −100° puts the wrist centre behind axis 1.
-        assert!(
-            ik.classify(&[
-                0.0,
-                -100f64.to_radians(),
-                -40f64.to_radians(),
-                0.0,
-                0.1,
-                0.0
-            ])
-            .shoulder_back()
-        );
+        assert!(ik.classify(&[0.0, -100f64.to_radians(), -40f64.to_radians(), 0.0, 0.1, 0.0]).shoulder_back());
     }
 
     #[test]
     fn unreachable_and_singular_targets_are_typed_errors() {
         let (chain, ik, _) = setup([0.0; 6], [0.0; 6]);
         let far = Frame::new(nalgebra::Matrix3::identity(), Vector3::new(2.0, 0.0, 0.5));
-        assert!(matches!(
-            ik.solve(&far, Branch(0)),
-            Err(IkError::Unreachable(_))
-        ));
+        assert!(matches!(ik.solve(&far, Branch(0)), Err(IkError::Unreachable(_))));
         // Wrist singular: q5 = 0.
         let t = chain.fk(&JointState::new(&[0.2, 0.1, -0.3, 0.4, 0.0, 0.5]));
-        assert_eq!(
-            ik.solve(&t, Branch(0)),
-            Err(IkError::Singular(Singularity::Wrist))
-        );
+        assert_eq!(ik.solve(&t, Branch(0)), Err(IkError::Singular(Singularity::Wrist)));
         // Shoulder singular: wrist centre on axis 1.
         // Flange pointing down with the wrist centre 0.6 m above the base, on axis 1.
         let r = rot_x(std::f64::consts::PI);
-        let t = Frame::new(
-            r,
-            Vector3::new(0.0, 0.0, 0.6) + r * Vector3::new(0.0, 0.0, 0.072),
-        );
-        assert_eq!(
-            ik.solve(&t, Branch(0)),
-            Err(IkError::Singular(Singularity::Shoulder))
-        );
-        let nan = Frame::new(
-            nalgebra::Matrix3::identity(),
-            Vector3::new(f64::NAN, 0.0, 0.0),
-        );
-        assert!(matches!(
-            ik.solve(&nan, Branch(0)),
-            Err(IkError::InvalidTarget(_))
-        ));
+        let t = Frame::new(r, Vector3::new(0.0, 0.0, 0.6) + r * Vector3::new(0.0, 0.0, 0.072));
+        assert_eq!(ik.solve(&t, Branch(0)), Err(IkError::Singular(Singularity::Shoulder)));
+        let nan = Frame::new(nalgebra::Matrix3::identity(), Vector3::new(f64::NAN, 0.0, 0.0));
+        assert!(matches!(ik.solve(&nan, Branch(0)), Err(IkError::InvalidTarget(_))));
         // Outside limits on every branch that reaches it: far behind and low.
         let q = [0.0, 0.0, 1.3, 0.0, 0.5, 0.0]; // q3 = 74.5° > 70°
         let t = chain.fk(&JointState::new(&q));
-        assert!(matches!(
-            ik.solve(&t, ik.classify(&q)),
-            Err(IkError::JointLimit { joint: 3, .. })
-        ));
+        assert!(matches!(ik.solve(&t, ik.classify(&q)), Err(IkError::JointLimit { joint: 3, .. })));
     }
 
     #[test]
@@ -633,23 +504,14 @@ mod tests {
         for j in 0..6 {
             assert!((sol[j] - q[j]).abs() < 1e-9);
         }
-        let bad = Confdata {
-            cf4: conf.cf4 + 1,
-            ..conf
-        };
-        assert!(matches!(
-            ik.solve_confdata(&t, bad),
-            Err(IkError::Configuration(_))
-        ));
+        let bad = Confdata { cf4: conf.cf4 + 1, ..conf };
+        assert!(matches!(ik.solve_confdata(&t, bad), Err(IkError::Configuration(_))));
     }
 
     #[test]
     fn other_families_are_refused() {
         let ur = ur10();
-        assert!(matches!(
-            AnalyticIk::new(&ur, &Frame::identity(), &Frame::identity()),
-            Err(IkError::Unsupported(_))
-        ));
+        assert!(matches!(AnalyticIk::new(&ur, &Frame::identity(), &Frame::identity()), Err(IkError::Unsupported(_))));
         let _ = ParamLayout::full(&ur);
     }
 }

@@ -30,12 +30,7 @@ impl Default for IkOptions {
         // Well inside the 1 nm / 1 µrad contract, well above double-precision noise at 1 m.
         // Easy targets converge in 2–4 iterations; the budget is for proving a target out of reach,
         // where the damping has to grow until no step lowers the error.
-        Self {
-            tol_position: 1e-11,
-            tol_rotation: 1e-10,
-            max_iterations: 100,
-            max_step: 0.2,
-        }
+        Self { tol_position: 1e-11, tol_rotation: 1e-10, max_iterations: 100, max_step: 0.2 }
     }
 }
 
@@ -76,18 +71,11 @@ pub fn solve(
     opts: &IkOptions,
 ) -> Result<IkSolution, IkError> {
     let n = chain.dof();
-    if target
-        .t
-        .iter()
-        .chain(target.r.iter())
-        .any(|v| !v.is_finite())
-    {
+    if target.t.iter().chain(target.r.iter()).any(|v| !v.is_finite()) {
         return Err(IkError::InvalidTarget("non-finite pose".into()));
     }
     if seed.len() < n || seed[..n].iter().any(|v| !v.is_finite()) {
-        return Err(IkError::InvalidTarget(
-            "seed must have one finite value per joint".into(),
-        ));
+        return Err(IkError::InvalidTarget("seed must have one finite value per joint".into()));
     }
     let mut q = [0.0; MAX_JOINTS];
     q[..n].copy_from_slice(&seed[..n]);
@@ -114,13 +102,7 @@ pub fn solve(
         let (ep, er) = (dp.norm(), dr.norm());
         let merit = ep * ep + (ROTATION_WEIGHT_M * er).powi(2);
         if ep <= opts.tol_position && er <= opts.tol_rotation {
-            return Ok(IkSolution {
-                q,
-                dof: n,
-                iterations,
-                residual_position: ep,
-                residual_rotation: er,
-            });
+            return Ok(IkSolution { q, dof: n, iterations, residual_position: ep, residual_rotation: er });
         }
         if merit < best.2 {
             best_q = q;
@@ -157,34 +139,20 @@ pub fn solve(
             break;
         }
         iterations += 1;
-        let step = damped_step(&best_j, n, &best_e, lambda)
-            .ok_or(IkError::Singular(Singularity::Jacobian))?;
+        let step = damped_step(&best_j, n, &best_e, lambda).ok_or(IkError::Singular(Singularity::Jacobian))?;
         let biggest = step.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        let scale = if biggest > opts.max_step {
-            opts.max_step / biggest
-        } else {
-            1.0
-        };
+        let scale = if biggest > opts.max_step { opts.max_step / biggest } else { 1.0 };
         for k in 0..n {
             q[k] = best_q[k] + step[k] * scale;
         }
     }
-    Err(IkError::NotConverged {
-        iterations,
-        residual_mm: best.0 * 1e3,
-        residual_urad: best.1 * 1e6,
-    })
+    Err(IkError::NotConverged { iterations, residual_mm: best.0 * 1e3, residual_urad: best.1 * 1e6 })
 }
 
 /// The step Δq: Newton (J·Δq = e) when undamped and square, otherwise the weighted
 /// Levenberg–Marquardt normal equations (JᵀWJ + λ·diag(JᵀWJ) + λ·I)Δq = JᵀW·e, W weighing rotation
 /// rows by L².
-fn damped_step(
-    jq: &[[f64; 6]; MAX_JOINTS],
-    n: usize,
-    e: &Vector6<f64>,
-    lambda: f64,
-) -> Option<[f64; MAX_JOINTS]> {
+fn damped_step(jq: &[[f64; 6]; MAX_JOINTS], n: usize, e: &Vector6<f64>, lambda: f64) -> Option<[f64; MAX_JOINTS]> {
     let mut out = [0.0; MAX_JOINTS];
     if n == 6 && lambda == 0.0 {
         let j = Matrix6::from_fn(|r, k| jq[k][r]);
@@ -196,14 +164,7 @@ fn damped_step(
             return Some(out);
         }
     }
-    let w = [
-        1.0,
-        1.0,
-        1.0,
-        ROTATION_WEIGHT_M.powi(2),
-        ROTATION_WEIGHT_M.powi(2),
-        ROTATION_WEIGHT_M.powi(2),
-    ];
+    let w = [1.0, 1.0, 1.0, ROTATION_WEIGHT_M.powi(2), ROTATION_WEIGHT_M.powi(2), ROTATION_WEIGHT_M.powi(2)];
     let mut a = DMatrix::<f64>::zeros(n, n);
     let mut b = DVector::<f64>::zeros(n);
     for i in 0..n {

@@ -62,11 +62,7 @@ pub struct Tool {
 impl Tool {
     /// A massless tool at the flange origin.
     pub fn flange() -> Self {
-        Self {
-            tcp: [0.0; 6],
-            mass: 0.0,
-            com: Vector3::zeros(),
-        }
+        Self { tcp: [0.0; 6], mass: 0.0, com: Vector3::zeros() }
     }
 }
 
@@ -105,11 +101,7 @@ pub enum ModelError {
     #[error("a robot needs between 1 and {MAX_JOINTS} joints, got {0}")]
     JointCount(usize),
     #[error("joints[{joint}].{field}: {reason}")]
-    Field {
-        joint: usize,
-        field: &'static str,
-        reason: String,
-    },
+    Field { joint: usize, field: &'static str, reason: String },
     #[error("gravity: {0}")]
     Gravity(String),
 }
@@ -126,18 +118,9 @@ impl RobotModel {
             return Err(ModelError::JointCount(n));
         }
         for (j, l) in self.links.iter().enumerate() {
-            let bad = |field: &'static str, reason: &str| ModelError::Field {
-                joint: j,
-                field,
-                reason: reason.to_string(),
-            };
-            for (field, v) in [
-                ("alpha", l.alpha),
-                ("a", l.a),
-                ("theta", l.theta),
-                ("d", l.d),
-                ("mass", l.mass),
-            ] {
+            let bad =
+                |field: &'static str, reason: &str| ModelError::Field { joint: j, field, reason: reason.to_string() };
+            for (field, v) in [("alpha", l.alpha), ("a", l.a), ("theta", l.theta), ("d", l.d), ("mass", l.mass)] {
                 if !v.is_finite() {
                     return Err(bad(field, "must be a finite number"));
                 }
@@ -180,66 +163,12 @@ pub fn irb120() -> RobotModel {
     // (α_{i−1} °, a_{i−1} mm, θ offset °, d_i mm, β?, limits °, mass kg, CoM mm)
     #[allow(clippy::type_complexity)]
     let rows: [(f64, f64, f64, f64, bool, [f64; 2], f64, [f64; 3]); 6] = [
-        (
-            0.0,
-            0.0,
-            0.0,
-            290.0,
-            false,
-            [-165.0, 165.0],
-            6.0,
-            [0.0, 0.0, -3.0],
-        ),
-        (
-            -90.0,
-            0.0,
-            -90.0,
-            0.0,
-            false,
-            [-110.0, 110.0],
-            4.2,
-            [140.0, 0.0, 0.0],
-        ),
-        (
-            0.0,
-            270.0,
-            0.0,
-            0.0,
-            true,
-            [-110.0, 70.0],
-            3.2,
-            [50.0, 40.0, 0.0],
-        ),
-        (
-            -90.0,
-            70.0,
-            0.0,
-            302.0,
-            false,
-            [-160.0, 160.0],
-            1.8,
-            [0.0, 0.0, -72.0],
-        ),
-        (
-            90.0,
-            0.0,
-            0.0,
-            0.0,
-            false,
-            [-120.0, 120.0],
-            1.2,
-            [0.0, 10.0, 0.0],
-        ),
-        (
-            -90.0,
-            0.0,
-            180.0,
-            72.0,
-            false,
-            [-400.0, 400.0],
-            0.2,
-            [0.0, 0.0, 0.0],
-        ),
+        (0.0, 0.0, 0.0, 290.0, false, [-165.0, 165.0], 6.0, [0.0, 0.0, -3.0]),
+        (-90.0, 0.0, -90.0, 0.0, false, [-110.0, 110.0], 4.2, [140.0, 0.0, 0.0]),
+        (0.0, 270.0, 0.0, 0.0, true, [-110.0, 70.0], 3.2, [50.0, 40.0, 0.0]),
+        (-90.0, 70.0, 0.0, 302.0, false, [-160.0, 160.0], 1.8, [0.0, 0.0, -72.0]),
+        (90.0, 0.0, 0.0, 0.0, false, [-120.0, 120.0], 1.2, [0.0, 10.0, 0.0]),
+        (-90.0, 0.0, 180.0, 72.0, false, [-400.0, 400.0], 0.2, [0.0, 0.0, 0.0]),
     ];
     RobotModel {
         name: "irb120".into(),
@@ -283,17 +212,10 @@ pub struct StandardDhRow {
 /// standard flange: returned as a pose χ so that tools can be re-expressed exactly. Each centre of
 /// mass moves from the standard frame i (distal) to the modified frame i (proximal):
 /// `p_mod = Tx(a_i) · Rx(α_i) · p_std`. `beta_joints` lists (0-based) joints to give a Hayati β.
-pub fn modified_from_standard(
-    rows: &[StandardDhRow],
-    beta_joints: &[usize],
-) -> (Vec<Link>, [f64; 6]) {
+pub fn modified_from_standard(rows: &[StandardDhRow], beta_joints: &[usize]) -> (Vec<Link>, [f64; 6]) {
     let mut links = Vec::with_capacity(rows.len());
     for (i, row) in rows.iter().enumerate() {
-        let (alpha, a) = if i == 0 {
-            (0.0, 0.0)
-        } else {
-            (rows[i - 1].alpha, rows[i - 1].a)
-        };
+        let (alpha, a) = if i == 0 { (0.0, 0.0) } else { (rows[i - 1].alpha, rows[i - 1].a) };
         let com = rot_x(row.alpha) * row.com + Vector3::new(row.a, 0.0, 0.0);
         links.push(Link {
             alpha,
@@ -376,28 +298,48 @@ mod tests {
         assert!(m.links[2].beta.is_some());
     }
 
+    /// The modified-DH UR10 against the standard-DH product Π Rz(θ)·Tz(d)·Tx(a)·Rx(α) on random
+    /// configurations: same flange pose, and the same centres of mass in the world.
+    #[test]
+    fn ur10_conversion_preserves_forward_kinematics() {
+        use crate::kinematics::frame::{Frame, rot_z};
+        use crate::kinematics::{JointState, ParameterSet};
+        use rand::{Rng, SeedableRng};
+        let std_rows = ur10_standard_dh();
+        let model = ur10();
+        let chain = ParameterSet::nominal(model.clone(), Tool::flange(), [0.0; 6]).nominal_chain();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12);
+        for _ in 0..500 {
+            let q: Vec<f64> = (0..6).map(|_| rng.random_range(-6.2..6.2)).collect();
+            let mut t = Frame::identity();
+            let mut com_std = Vec::new();
+            for (row, &qi) in std_rows.iter().zip(&q) {
+                t = t
+                    .compose(&Frame::new(rot_z(qi + row.theta), Vector3::new(0.0, 0.0, row.d)))
+                    .compose(&Frame::new(rot_x(row.alpha), Vector3::new(row.a, 0.0, 0.0)));
+                com_std.push(t.transform_point(&row.com));
+            }
+            let theta: Vec<f64> = (0..6).map(|j| q[j] + model.links[j].theta).collect();
+            let mut th = [0.0; MAX_JOINTS];
+            th[..6].copy_from_slice(&theta);
+            let tr = chain.trace(&th);
+            let f = chain.fk(&JointState::new(&q));
+            assert!((f.t - t.t).norm() < 1e-14 && (f.r - t.r).abs().max() < 1e-14);
+            for j in 0..6 {
+                let c_mod = tr.link_frame(j).transform_point(&model.links[j].com);
+                assert!((c_mod - com_std[j]).norm() < 1e-14, "link {j}");
+            }
+        }
+    }
+
     #[test]
     fn invalid_models_are_refused() {
         let mut m = irb120();
         m.links[2].limits = [1.0, -1.0];
-        assert!(matches!(
-            m.validate(),
-            Err(ModelError::Field {
-                joint: 2,
-                field: "limits",
-                ..
-            })
-        ));
+        assert!(matches!(m.validate(), Err(ModelError::Field { joint: 2, field: "limits", .. })));
         let mut m = irb120();
         m.links[0].d = f64::NAN;
-        assert!(matches!(
-            m.validate(),
-            Err(ModelError::Field {
-                joint: 0,
-                field: "d",
-                ..
-            })
-        ));
+        assert!(matches!(m.validate(), Err(ModelError::Field { joint: 0, field: "d", .. })));
         let mut m = irb120();
         m.links.clear();
         assert_eq!(m.validate(), Err(ModelError::JointCount(0)));

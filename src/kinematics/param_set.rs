@@ -25,13 +25,7 @@ impl ParameterSet {
     pub fn nominal(model: RobotModel, tool: Tool, base: [f64; 6]) -> Self {
         let layout = ParamLayout::full(&model);
         let nominal = layout.nominal_values(&model, &tool, &base);
-        Self {
-            values: nominal.clone(),
-            nominal,
-            layout,
-            model,
-            tool,
-        }
+        Self { values: nominal.clone(), nominal, layout, model, tool }
     }
 
     pub fn dof(&self) -> usize {
@@ -85,7 +79,6 @@ impl ParameterSet {
     /// build the [`Chain`] and [`GravityModel`] once instead.
     pub fn fk(&self, q: &[f64]) -> Frame {
         let tau = self.gravity().torques(q);
-        self.chain()
-            .fk(&JointState::with_torques(q, &tau[..self.dof()]))
+        self.chain().fk(&JointState::with_torques(q, &tau[..self.dof()]))
     }
 }

@@ -101,16 +101,10 @@ impl Param {
     /// Whether the robot has such a parameter is checked by the layout, not here.
     pub fn parse(name: &str) -> Option<Param> {
         if let Some(k) = name.strip_prefix("base_") {
-            return POSE_COMPONENTS
-                .iter()
-                .position(|c| *c == k)
-                .map(Param::Base);
+            return POSE_COMPONENTS.iter().position(|c| *c == k).map(Param::Base);
         }
         if let Some(k) = name.strip_prefix("tool_") {
-            return POSE_COMPONENTS
-                .iter()
-                .position(|c| *c == k)
-                .map(Param::Tool);
+            return POSE_COMPONENTS.iter().position(|c| *c == k).map(Param::Tool);
         }
         let split = name.find(|c: char| c.is_ascii_digit())?;
         let (stem, digits) = name.split_at(split);
@@ -162,11 +156,7 @@ impl ParamLayout {
         params.extend((0..n).map(Param::A));
         params.extend((0..n).map(Param::D));
         params.extend((0..n).map(Param::Theta));
-        params.extend(
-            (0..n)
-                .filter(|&j| model.links[j].beta.is_some())
-                .map(Param::Beta),
-        );
+        params.extend((0..n).filter(|&j| model.links[j].beta.is_some()).map(Param::Beta));
         params.extend((0..n).map(|j| Param::Joint(j, JointTerm::Compliance)));
         params.extend((0..6).map(Param::Base));
         params.extend((0..6).map(Param::Tool));
@@ -243,8 +233,8 @@ mod tests {
         assert_eq!(l.len(), 43);
         let names: Vec<String> = l.params().iter().map(|p| p.to_string()).collect();
         for n in [
-            "alpha0", "alpha5", "a0", "a5", "d1", "d6", "theta1", "theta6", "beta2", "c1", "c6",
-            "base_x", "base_c", "tool_x", "tool_c",
+            "alpha0", "alpha5", "a0", "a5", "d1", "d6", "theta1", "theta6", "beta2", "c1", "c6", "base_x", "base_c",
+            "tool_x", "tool_c",
         ] {
             assert!(names.iter().any(|x| x == n), "{n} missing");
         }
@@ -260,9 +250,7 @@ mod tests {
                 assert_eq!(l.find(&p.to_string()), Some(i));
             }
         }
-        for bad in [
-            "d0", "theta0", "c0", "alpha", "alpha01", "gamma1", "base_q", "tool_", "a1x",
-        ] {
+        for bad in ["d0", "theta0", "c0", "alpha", "alpha01", "gamma1", "base_q", "tool_", "a1x"] {
             assert_eq!(Param::parse(bad), None, "{bad}");
         }
         assert_eq!(ParamLayout::full(&irb120()).find("beta3"), None);
@@ -274,10 +262,7 @@ mod tests {
         assert_eq!(Param::A(2).unit(), Unit::Mm);
         assert_eq!(Param::Base(3).unit(), Unit::Deg);
         assert_eq!(Param::Tool(1).unit(), Unit::Mm);
-        assert_eq!(
-            Param::Joint(1, JointTerm::Compliance).unit(),
-            Unit::DegPerNm
-        );
+        assert_eq!(Param::Joint(1, JointTerm::Compliance).unit(), Unit::DegPerNm);
         assert_eq!(Unit::parse("deg/(N*m)"), Some(Unit::DegPerNm));
         assert_eq!(Unit::parse("m"), None);
     }

@@ -1,0 +1,23 @@
+# syntax=docker/dockerfile:1
+# Build: docker build -t robocal .
+# Run:   docker run --rm -v robocal-data:/data robocal --help
+
+FROM rust:1.95-slim-bookworm AS build
+WORKDIR /src
+COPY Cargo.toml Cargo.lock rustfmt.toml ./
+COPY src ./src
+COPY benches ./benches
+COPY migrations ./migrations
+COPY openapi ./openapi
+RUN cargo build --release --locked --bin robocal
+
+FROM debian:bookworm-slim AS runtime
+RUN groupadd --system --gid 10001 robocal \
+    && useradd --system --uid 10001 --gid 10001 --home-dir /data --shell /usr/sbin/nologin robocal \
+    && mkdir -p /data && chown 10001:10001 /data
+COPY --from=build /src/target/release/robocal /usr/local/bin/robocal
+USER 10001:10001
+WORKDIR /data
+VOLUME ["/data"]
+ENTRYPOINT ["/usr/local/bin/robocal"]
+CMD ["--help"]

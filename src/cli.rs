@@ -1,0 +1,425 @@
+//! The `robocal` command line: a thin front end over the library. Inputs and outputs in mm and
+//! degrees; every error names the argument (or file field) at fault.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use clap::{Args, Parser, Subcommand};
+use serde_json::{Value, json};
+
+use crate::domain::pose::{Choice, Target, frame_from_parts, position_mm};
+use crate::domain::{
+    CompensationResult, DEG, DomainError, MM, ParameterSetDoc, PoseOut, RobotSpec, TargetSpec, ToolSpec, from_json,
+    joints_deg, to_deg,
+};
+use crate::kinematics::{AnalyticIk, Branch, Compensator, Confdata, IkError, JointState, ParameterSet, Seed, Tool};
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "robocal",
+    version,
+    about = "Robot calibration: kinematic models, identification and compensated targets"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Forward kinematics: joints (deg) → TCP pose (mm, deg).
+    Fk(FkArgs),
+    /// Inverse kinematics: TCP pose → joints, for one configuration branch or all eight.
+    Ik(IkArgs),
+    /// Fake-target compensation of a batch of targets with a calibrated parameter set.
+    Compensate(CompensateArgs),
+    /// Write the nominal parameter set of a robot and tool (a starting point for custom models).
+    Nominal(NominalArgs),
+}
+
+/// Which model to evaluate.
+#[derive(Args, Debug)]
+pub struct ModelArgs {
+    /// A preset (irb120, ur10) or a robot JSON file: the nominal model.
+    #[arg(long, conflicts_with = "params")]
+    pub robot: Option<String>,
+    /// A parameter-set JSON file: the calibrated model (its tool included).
+    #[arg(long)]
+    pub params: Option<PathBuf>,
+    /// With --params: evaluate the set's nominal values instead of its calibrated ones.
+    #[arg(long, requires = "params")]
+    pub nominal: bool,
+    #[command(flatten)]
+    pub tool: ToolArgs,
+}
+
+/// The tool, for a nominal robot (a parameter set carries its own).
+#[derive(Args, Debug)]
+pub struct ToolArgs {
+    /// Tool JSON file: {"tcp_mm": [x, y, z], "tcp_rotation_deg": [a, b, c], "mass_kg": m, "com_mm": [x, y, z]}.
+    #[arg(long, conflicts_with_all = ["tcp_mm", "tcp_rotation_deg", "payload_kg", "payload_com_mm"])]
+    pub tool: Option<PathBuf>,
+    /// TCP position in the flange frame, mm: x,y,z.
+    #[arg(long, allow_hyphen_values = true)]
+    pub tcp_mm: Option<String>,
+    /// TCP orientation in the flange frame, ZY'X'' deg: a,b,c.
+    #[arg(long, allow_hyphen_values = true)]
+    pub tcp_rotation_deg: Option<String>,
+    /// Payload mass, kg.
+    #[arg(long, allow_hyphen_values = true)]
+    pub payload_kg: Option<f64>,
+    /// Payload centre of mass in the flange frame, mm: x,y,z.
+    #[arg(long, allow_hyphen_values = true)]
+    pub payload_com_mm: Option<String>,
+}
+
+#[derive(Args, Debug)]
+pub struct FkArgs {
+    #[command(flatten)]
+    pub model: ModelArgs,
+    /// Joint readings, deg: q1,q2,…
+    #[arg(long, allow_hyphen_values = true)]
+    pub joints_deg: String,
+}
+
+#[derive(Args, Debug)]
+pub struct IkArgs {
+    #[command(flatten)]
+    pub model: ModelArgs,
+    /// TCP position in {W}, mm: x,y,z.
+    #[arg(long, allow_hyphen_values = true)]
+    pub position_mm: String,
+    /// TCP orientation in {W}, ZY'X'' deg: a,b,c.
+    #[arg(long, allow_hyphen_values = true, conflicts_with = "quaternion")]
+    pub rotation_deg: Option<String>,
+    /// TCP orientation as a unit quaternion: w,x,y,z.
+    #[arg(long, allow_hyphen_values = true)]
+    pub quaternion: Option<String>,
+    /// Configuration branch (ABB cfx 0–7); all eight when absent.
+    #[arg(long, conflicts_with_all = ["confdata", "seed_joints_deg"])]
+    pub cfx: Option<u8>,
+    /// ABB configuration data: cf1,cf4,cf6,cfx.
+    #[arg(long, allow_hyphen_values = true, conflicts_with = "seed_joints_deg")]
+    pub confdata: Option<String>,
+    /// Seed joints, deg (robots without a closed form).
+    #[arg(long, allow_hyphen_values = true)]
+    pub seed_joints_deg: Option<String>,
+}
+
+#[derive(Args, Debug)]
+pub struct CompensateArgs {
+    /// Calibrated parameter-set JSON file.
+    #[arg(long)]
+    pub params: PathBuf,
+    /// Targets JSON file: {"targets": [{"position_mm": …, "rotation_deg": …, "cfx": …} | {"joints_deg": …}, …]}.
+    #[arg(long)]
+    pub targets: PathBuf,
+    /// Write the result here instead of standard output.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+pub struct NominalArgs {
+    /// A preset (irb120, ur10) or a robot JSON file.
+    #[arg(long)]
+    pub robot: String,
+    #[command(flatten)]
+    pub tool: ToolArgs,
+    /// Base position T_0^W, mm: x,y,z.
+    #[arg(long, allow_hyphen_values = true)]
+    pub base_mm: Option<String>,
+    /// Base orientation T_0^W, ZY'X'' deg: a,b,c.
+    #[arg(long, allow_hyphen_values = true)]
+    pub base_deg: Option<String>,
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// A command-line failure: the argument (or file and field) and the reason.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct CliError(pub String);
+
+impl CliError {
+    fn arg(arg: &str, reason: impl std::fmt::Display) -> Self {
+        CliError(format!("{arg}: {reason}"))
+    }
+    fn file(path: &Path, e: DomainError) -> Self {
+        CliError(format!("{}: {e}", path.display()))
+    }
+}
+
+pub fn run(cli: Cli) -> Result<String, CliError> {
+    match cli.command {
+        Command::Fk(a) => fk(a),
+        Command::Ik(a) => ik(a),
+        Command::Compensate(a) => compensate(a),
+        Command::Nominal(a) => nominal(a),
+    }
+}
+
+fn read(path: &Path) -> Result<String, CliError> {
+    fs::read_to_string(path).map_err(|e| CliError(format!("{}: cannot read: {e}", path.display())))
+}
+
+fn write_or_return(out: &Option<PathBuf>, text: String) -> Result<String, CliError> {
+    match out {
+        Some(p) => {
+            fs::write(p, format!("{text}\n")).map_err(|e| CliError(format!("{}: cannot write: {e}", p.display())))?;
+            Ok(format!("wrote {}", p.display()))
+        }
+        None => Ok(text),
+    }
+}
+
+/// Parse "a,b,c" into exactly `n` finite numbers.
+fn numbers(arg: &str, text: &str, n: Option<usize>) -> Result<Vec<f64>, CliError> {
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|s| {
+            let s = s.trim();
+            s.parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| CliError::arg(arg, format!("'{s}' is not a finite number")))
+        })
+        .collect::<Result<_, _>>()?;
+    if let Some(n) = n
+        && v.len() != n
+    {
+        return Err(CliError::arg(arg, format!("expected {n} comma-separated values, got {}", v.len())));
+    }
+    Ok(v)
+}
+
+fn three(arg: &str, text: &str) -> Result<[f64; 3], CliError> {
+    let v = numbers(arg, text, Some(3))?;
+    Ok([v[0], v[1], v[2]])
+}
+
+fn robot_model(arg: &str, robot: &str) -> Result<crate::kinematics::RobotModel, CliError> {
+    let is_file = robot.ends_with(".json") || Path::new(robot).exists();
+    let value: Value = if is_file {
+        let path = Path::new(robot);
+        serde_json::from_str(&read(path)?).map_err(|e| CliError(format!("{}: not JSON: {e}", path.display())))?
+    } else {
+        json!({ "preset": robot })
+    };
+    RobotSpec::from_json_value(&value)
+        .and_then(|r| r.to_model())
+        .map_err(|e| if is_file { CliError(format!("{robot}: {e}")) } else { CliError::arg(arg, e.reason) })
+}
+
+fn tool(a: &ToolArgs) -> Result<Tool, CliError> {
+    if let Some(p) = &a.tool {
+        return from_json::<ToolSpec>(&read(p)?).and_then(|t| t.to_tool()).map_err(|e| CliError::file(p, e));
+    }
+    let spec = ToolSpec {
+        tcp_mm: a.tcp_mm.as_deref().map(|s| three("--tcp-mm", s)).transpose()?.unwrap_or([0.0; 3]),
+        tcp_rotation_deg: a.tcp_rotation_deg.as_deref().map(|s| three("--tcp-rotation-deg", s)).transpose()?,
+        mass_kg: a.payload_kg.unwrap_or(0.0),
+        com_mm: a.payload_com_mm.as_deref().map(|s| three("--payload-com-mm", s)).transpose()?.unwrap_or([0.0; 3]),
+    };
+    spec.to_tool().map_err(|e| {
+        let arg = match e.path.as_str() {
+            "mass_kg" => "--payload-kg",
+            p if p.starts_with("com_mm") => "--payload-com-mm",
+            _ => "--tcp-mm",
+        };
+        CliError::arg(arg, e.reason)
+    })
+}
+
+fn tool_given(a: &ToolArgs) -> bool {
+    a.tool.is_some()
+        || a.tcp_mm.is_some()
+        || a.tcp_rotation_deg.is_some()
+        || a.payload_kg.is_some()
+        || a.payload_com_mm.is_some()
+}
+
+/// The parameter set to evaluate, and whether it is a calibrated one.
+fn load_set(m: &ModelArgs) -> Result<(ParameterSet, bool), CliError> {
+    match (&m.robot, &m.params) {
+        (Some(r), None) => Ok((ParameterSet::nominal(robot_model("--robot", r)?, tool(&m.tool)?, [0.0; 6]), false)),
+        (None, Some(p)) => {
+            if tool_given(&m.tool) {
+                return Err(CliError::arg(
+                    "--tool",
+                    "a parameter set carries its own tool; tool options go with --robot",
+                ));
+            }
+            let doc = ParameterSetDoc::from_json(&read(p)?).map_err(|e| CliError::file(p, e))?;
+            let mut set = doc.set;
+            if m.nominal {
+                set.values = set.nominal.clone();
+            }
+            Ok((set, !m.nominal))
+        }
+        _ => Err(CliError::arg("--robot", "give a robot (--robot irb120) or a parameter set (--params FILE)")),
+    }
+}
+
+fn fk(a: FkArgs) -> Result<String, CliError> {
+    let (set, calibrated) = load_set(&a.model)?;
+    let q = numbers("--joints-deg", &a.joints_deg, None)?;
+    let q = joints_deg(&q, set.dof(), "--joints-deg").map_err(|e| CliError::arg("--joints-deg", e.reason))?;
+    for (j, &v) in q.iter().enumerate() {
+        if !set.model.within_limits(j, v) {
+            let [lo, hi] = set.model.links[j].limits;
+            return Err(CliError::arg(
+                "--joints-deg",
+                format!("q{} = {:.4}° is outside its limits [{:.1}°, {:.1}°]", j + 1, v / DEG, lo / DEG, hi / DEG),
+            ));
+        }
+    }
+    let tau = set.gravity().torques(&q);
+    let n = set.dof();
+    let f = set.chain().fk(&JointState::with_torques(&q, &tau[..n]));
+    let pose = PoseOut::from_frame(&f);
+    let mut out = json!({
+        "model": if calibrated { "calibrated" } else { "nominal" },
+        "joints_deg": to_deg(&q),
+        "position_mm": pose.position_mm,
+        "rotation_deg": pose.rotation_deg,
+        "quaternion": pose.quaternion,
+        "gravity_torques_nm": &tau[..n],
+    });
+    let chain = set.nominal_chain();
+    if let Ok(ik) = AnalyticIk::new(&set.model, chain.base(), chain.tool()) {
+        let c = ik.confdata(&q);
+        out["confdata"] = json!([c.cf1, c.cf4, c.cf6, c.cfx.cfx()]);
+    }
+    Ok(serde_json::to_string_pretty(&out).expect("json"))
+}
+
+fn ik(a: IkArgs) -> Result<String, CliError> {
+    let (set, _) = load_set(&a.model)?;
+    let position = three("--position-mm", &a.position_mm)?;
+    let rotation = a.rotation_deg.as_deref().map(|s| three("--rotation-deg", s)).transpose()?;
+    let quaternion = match a.quaternion.as_deref() {
+        Some(s) => {
+            let v = numbers("--quaternion", s, Some(4))?;
+            Some([v[0], v[1], v[2], v[3]])
+        }
+        None => None,
+    };
+    let target = frame_from_parts(position, rotation, quaternion).map_err(|e| {
+        let arg = match e.path.as_str() {
+            "position_mm" => "--position-mm",
+            "quaternion" => "--quaternion",
+            _ => "--rotation-deg",
+        };
+        CliError::arg(arg, e.reason)
+    })?;
+    let comp = Compensator::new(&set);
+    let dof = set.dof();
+    let seed_joints = match a.seed_joints_deg.as_deref() {
+        Some(s) => Some(
+            joints_deg(&numbers("--seed-joints-deg", s, None)?, dof, "")
+                .map_err(|e| CliError::arg("--seed-joints-deg", e.reason))?,
+        ),
+        None => None,
+    };
+    let confdata = match a.confdata.as_deref() {
+        Some(s) => {
+            let v = numbers("--confdata", s, Some(4))?;
+            if v.iter().any(|x| x.fract() != 0.0) {
+                return Err(CliError::arg("--confdata", "values must be integers"));
+            }
+            let cfx = Branch::new(v[3] as u8)
+                .filter(|_| (0.0..8.0).contains(&v[3]))
+                .ok_or_else(|| CliError::arg("--confdata", "cfx must be 0–7"))?;
+            Some(Confdata { cf1: v[0] as i32, cf4: v[1] as i32, cf6: v[2] as i32, cfx })
+        }
+        None => None,
+    };
+    let one = |seed: Seed<'_>| -> Value {
+        match comp.pose(&target, seed) {
+            Ok(c) => json!({
+                "joints_deg": to_deg(c.joints()),
+                "confdata": c.confdata.map(|d| [d.cf1, d.cf4, d.cf6, d.cfx.cfx() as i32]),
+                "residual_mm": c.residual_position / MM,
+                "residual_urad": c.residual_rotation * 1e6,
+                "iterations": c.iterations,
+            }),
+            Err(e) => json!({ "error": e.to_string() }),
+        }
+    };
+    let out = if let Some(q) = &seed_joints {
+        one(Seed::Joints(q))
+    } else if let Some(c) = confdata {
+        one(Seed::Confdata(c))
+    } else if let Some(cfx) = a.cfx {
+        let b = Branch::new(cfx).ok_or_else(|| CliError::arg("--cfx", format!("must be 0–7, got {cfx}")))?;
+        one(Seed::Branch(b))
+    } else {
+        if !comp.has_closed_form() {
+            return Err(CliError::arg(
+                "--seed-joints-deg",
+                IkError::Unsupported("this robot needs seed joints".into()),
+            ));
+        }
+        let solutions: Vec<Value> = Branch::ALL
+            .iter()
+            .map(|&b| {
+                let mut v = one(Seed::Branch(b));
+                v["cfx"] = json!(b.cfx());
+                v
+            })
+            .collect();
+        json!({ "position_mm": position_mm(&target.t), "solutions": solutions })
+    };
+    Ok(serde_json::to_string_pretty(&out).expect("json"))
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TargetsFile {
+    targets: Vec<TargetSpec>,
+}
+
+fn compensate(a: CompensateArgs) -> Result<String, CliError> {
+    let doc = ParameterSetDoc::from_json(&read(&a.params)?).map_err(|e| CliError::file(&a.params, e))?;
+    let file: TargetsFile = from_json(&read(&a.targets)?).map_err(|e| CliError::file(&a.targets, e))?;
+    let set = doc.set;
+    let comp = Compensator::new(&set);
+    let dof = set.dof();
+    let results: Vec<CompensationResult> = file
+        .targets
+        .iter()
+        .enumerate()
+        .map(|(i, t)| {
+            let id = t.id.clone();
+            let target = match t.to_target(dof) {
+                Ok(t) => t,
+                Err(e) => return CompensationResult::failed(id, e.within(&format!("targets[{i}]")).to_string()),
+            };
+            let res = match &target {
+                Target::NominalJoints(q) => comp.joints(q),
+                Target::Pose { pose, choice } => match choice {
+                    Choice::Branch(b) => comp.pose(pose, Seed::Branch(*b)),
+                    Choice::Confdata(c) => comp.pose(pose, Seed::Confdata(*c)),
+                    Choice::Seed(q) => comp.pose(pose, Seed::Joints(q)),
+                },
+            };
+            match res {
+                Ok(c) => CompensationResult::ok(id, &c),
+                Err(e) => CompensationResult::from_ik_error(id, &e),
+            }
+        })
+        .collect();
+    let failed = results.iter().filter(|r| r.error.is_some()).count();
+    let text = serde_json::to_string_pretty(&json!({ "results": results, "failed": failed })).expect("json");
+    write_or_return(&a.out, text)
+}
+
+fn nominal(a: NominalArgs) -> Result<String, CliError> {
+    let model = robot_model("--robot", &a.robot)?;
+    let t = a.base_mm.as_deref().map(|s| three("--base-mm", s)).transpose()?.unwrap_or([0.0; 3]);
+    let r = a.base_deg.as_deref().map(|s| three("--base-deg", s)).transpose()?.unwrap_or([0.0; 3]);
+    let base = [t[0] * MM, t[1] * MM, t[2] * MM, r[0] * DEG, r[1] * DEG, r[2] * DEG];
+    let set = ParameterSet::nominal(model, tool(&a.tool)?, base);
+    write_or_return(&a.out, ParameterSetDoc::new(set).to_json_pretty())
+}

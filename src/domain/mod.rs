@@ -1,0 +1,100 @@
+//! Validated input types and the one unit-conversion layer: files and the wire use millimetres
+//! and degrees with the unit in the field name; the kinematics use metres and radians.
+//! Parse, don't validate: every `to_*` conversion returns a checked SI value or a [`DomainError`]
+//! naming the field path and the reason.
+
+pub mod param_set;
+pub mod pose;
+pub mod robot;
+
+use std::fmt;
+
+use nalgebra::Vector3;
+use serde::de::DeserializeOwned;
+
+pub use param_set::{ParamEntry, ParameterSetDoc, ParameterSetFile};
+pub use pose::{Choice, CompensationResult, PoseOut, PoseSpec, Target, TargetSpec};
+pub use robot::{JointSpec, RobotSpec, ToolSpec};
+
+/// Millimetres → metres.
+pub const MM: f64 = 1e-3;
+/// Degrees → radians.
+pub const DEG: f64 = std::f64::consts::PI / 180.0;
+
+/// Bad input: where (a JSON-style path such as `parameters[3].value`) and why.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DomainError {
+    pub path: String,
+    pub reason: String,
+}
+
+impl DomainError {
+    pub fn new(path: impl Into<String>, reason: impl Into<String>) -> Self {
+        Self { path: path.into(), reason: reason.into() }
+    }
+
+    /// The same error, nested under `prefix`.
+    pub fn within(self, prefix: &str) -> Self {
+        let path = if self.path.is_empty() {
+            prefix.to_string()
+        } else if self.path.starts_with('[') {
+            format!("{prefix}{}", self.path)
+        } else {
+            format!("{prefix}.{}", self.path)
+        };
+        Self { path, reason: self.reason }
+    }
+}
+
+impl fmt::Display for DomainError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.path.is_empty() { f.write_str(&self.reason) } else { write!(f, "{}: {}", self.path, self.reason) }
+    }
+}
+
+impl std::error::Error for DomainError {}
+
+/// Deserialize JSON text, reporting the path of the first field that does not fit.
+pub fn from_json<T: DeserializeOwned>(text: &str) -> Result<T, DomainError> {
+    let de = &mut serde_json::Deserializer::from_str(text);
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let path = e.path().to_string();
+        let path = if path == "." { String::new() } else { path };
+        DomainError::new(path, e.into_inner().to_string())
+    })
+}
+
+/// Deserialize an already-parsed JSON value, with paths.
+pub fn from_value<T: DeserializeOwned>(v: &serde_json::Value) -> Result<T, DomainError> {
+    serde_path_to_error::deserialize(v).map_err(|e| {
+        let path = e.path().to_string();
+        let path = if path == "." { String::new() } else { path };
+        DomainError::new(path, e.into_inner().to_string())
+    })
+}
+
+/// A finite number, or an error at `path`.
+pub fn finite(v: f64, path: &str) -> Result<f64, DomainError> {
+    if v.is_finite() { Ok(v) } else { Err(DomainError::new(path, "must be a finite number")) }
+}
+
+/// A finite 3-vector in mm → metres.
+pub fn vec3_mm(v: [f64; 3], path: &str) -> Result<Vector3<f64>, DomainError> {
+    for (i, x) in v.iter().enumerate() {
+        finite(*x, &format!("{path}[{i}]"))?;
+    }
+    Ok(Vector3::new(v[0], v[1], v[2]) * MM)
+}
+
+/// Joint values in degrees → radians, checking the count and finiteness.
+pub fn joints_deg(v: &[f64], dof: usize, path: &str) -> Result<Vec<f64>, DomainError> {
+    if v.len() != dof {
+        return Err(DomainError::new(path, format!("expected {dof} joint values, got {}", v.len())));
+    }
+    v.iter().enumerate().map(|(i, x)| finite(*x, &format!("{path}[{i}]")).map(|x| x * DEG)).collect()
+}
+
+/// Radians → degrees for output.
+pub fn to_deg(v: &[f64]) -> Vec<f64> {
+    v.iter().map(|x| x / DEG).collect()
+}

@@ -1,0 +1,243 @@
+//! Parameter-set JSON, the contract every later stage shares:
+//! `{"robot": …, "tool": …, "parameters": [{"name": "a2", "value": 270.146, "nominal": 270.0,
+//! "unit": "mm"}, …]}` — values in mm, deg and deg/(N·m).
+//!
+//! On input `parameters` may list a subset: the others take their nominal values. A `nominal`
+//! that contradicts the robot's table is refused; for the base and tool (cell-specific, not in
+//! the table) a missing `nominal` means "the controller uses this value".
+
+use std::collections::HashSet;
+
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use super::robot::{RobotSpec, ToolSpec};
+use super::{DomainError, finite, from_json};
+use crate::kinematics::ParameterSet;
+use crate::kinematics::model::Tool;
+use crate::kinematics::params::{JointTerm, Param, Unit};
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ParamEntry {
+    pub name: String,
+    pub value: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nominal: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unit: Option<String>,
+    /// Standard deviation from the identification, in `unit`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub std: Option<f64>,
+    /// "identified", or why the parameter was held fixed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub status: Option<String>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ParameterSetFile {
+    pub robot: Value,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tool: Option<ToolSpec>,
+    #[serde(default)]
+    pub parameters: Vec<ParamEntry>,
+    /// The identification's quality report, carried along unchanged.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub quality: Option<Value>,
+}
+
+/// A parameter set with the per-parameter metadata files carry (SI).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParameterSetDoc {
+    pub set: ParameterSet,
+    pub std: Vec<Option<f64>>,
+    pub status: Vec<Option<String>>,
+    pub quality: Option<Value>,
+}
+
+impl ParameterSetDoc {
+    pub fn new(set: ParameterSet) -> Self {
+        let n = set.values.len();
+        Self { set, std: vec![None; n], status: vec![None; n], quality: None }
+    }
+
+    /// Parse and validate parameter-set JSON text.
+    pub fn from_json(text: &str) -> Result<Self, DomainError> {
+        from_json::<ParameterSetFile>(text)?.to_doc()
+    }
+
+    pub fn to_file(&self) -> ParameterSetFile {
+        let s = &self.set;
+        let parameters = s
+            .layout
+            .params()
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let k = p.unit().to_si();
+                ParamEntry {
+                    name: p.to_string(),
+                    value: s.values[i] / k,
+                    nominal: Some(s.nominal[i] / k),
+                    unit: Some(p.unit().as_str().to_string()),
+                    std: self.std[i].map(|v| v / k),
+                    status: self.status[i].clone(),
+                }
+            })
+            .collect();
+        ParameterSetFile {
+            robot: RobotSpec::from_model(&s.model).to_json_value(),
+            tool: Some(ToolSpec::from_tool(&s.tool)),
+            parameters,
+            quality: self.quality.clone(),
+        }
+    }
+
+    pub fn to_json_pretty(&self) -> String {
+        serde_json::to_string_pretty(&self.to_file()).expect("parameter set serialises")
+    }
+}
+
+impl ParameterSetFile {
+    pub fn to_doc(&self) -> Result<ParameterSetDoc, DomainError> {
+        let model =
+            RobotSpec::from_json_value(&self.robot).and_then(|r| r.to_model()).map_err(|e| e.within("robot"))?;
+        let tool = match &self.tool {
+            Some(t) => t.to_tool().map_err(|e| e.within("tool"))?,
+            None => Tool::flange(),
+        };
+        let mut set = ParameterSet::nominal(model, tool, [0.0; 6]);
+        let mut doc = ParameterSetDoc::new(set.clone());
+        let mut seen = HashSet::new();
+        for (i, e) in self.parameters.iter().enumerate() {
+            let path = |f: &str| format!("parameters[{i}].{f}");
+            let Some(idx) = set.layout.find(&e.name) else {
+                let reason = match Param::parse(&e.name) {
+                    Some(_) => format!("'{}' is not a parameter of robot '{}'", e.name, set.model.name),
+                    None => format!("unknown parameter name '{}'", e.name),
+                };
+                return Err(DomainError::new(path("name"), reason));
+            };
+            if !seen.insert(idx) {
+                return Err(DomainError::new(path("name"), format!("'{}' is listed twice", e.name)));
+            }
+            let p = set.layout.params()[idx];
+            let unit = p.unit();
+            if let Some(u) = &e.unit
+                && Unit::parse(u) != Some(unit)
+            {
+                return Err(DomainError::new(path("unit"), format!("'{}' is in {}, not '{u}'", e.name, unit.as_str())));
+            }
+            let k = unit.to_si();
+            let value = finite(e.value, &path("value"))? * k;
+            let table_nominal = set.nominal[idx];
+            let nominal = match (e.nominal, p) {
+                (Some(n), _) => Some(finite(n, &path("nominal"))? * k),
+                (None, Param::Base(_)) => Some(value),
+                (None, _) => None,
+            };
+            if let Some(n) = nominal {
+                let from_table = !matches!(p, Param::Base(_) | Param::Tool(_));
+                if from_table && (n - table_nominal).abs() > 1e-9 * (1.0 + table_nominal.abs()) {
+                    return Err(DomainError::new(
+                        path("nominal"),
+                        format!(
+                            "{} {} contradicts the robot's nominal {} {}",
+                            e.nominal.unwrap_or(n / k),
+                            unit.as_str(),
+                            table_nominal / k,
+                            unit.as_str()
+                        ),
+                    ));
+                }
+                set.nominal[idx] = n;
+            }
+            if let Param::Joint(_, JointTerm::Compliance) = p
+                && value.abs() > 1.0
+            {
+                return Err(DomainError::new(path("value"), "a compliance above 57 deg/(N·m) is not a gear"));
+            }
+            set.values[idx] = value;
+            if let Some(sd) = e.std {
+                let sd = finite(sd, &path("std"))?;
+                if sd < 0.0 {
+                    return Err(DomainError::new(path("std"), "must not be negative"));
+                }
+                doc.std[idx] = Some(sd * k);
+            }
+            doc.status[idx] = e.status.clone();
+        }
+        doc.set = set;
+        doc.quality = self.quality.clone();
+        Ok(doc)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn round_trip_keeps_every_value() {
+        let mut set = ParameterSet::nominal(
+            crate::kinematics::model::irb120(),
+            Tool::flange(),
+            [0.1, 0.2, 0.3, 0.01, 0.02, 0.03],
+        );
+        set.set(Param::A(2), 0.270146);
+        set.set(Param::Joint(4, JointTerm::Compliance), -30.448e-3f64.to_radians());
+        set.set(Param::Beta(2), 0.039f64.to_radians());
+        let mut doc = ParameterSetDoc::new(set);
+        doc.std[5] = Some(4e-6);
+        doc.status[5] = Some("identified".into());
+        let text = doc.to_json_pretty();
+        let back = ParameterSetDoc::from_json(&text).unwrap();
+        for (a, b) in back.set.values.iter().zip(&doc.set.values) {
+            assert!((a - b).abs() <= 1e-15 * (1.0 + b.abs()), "{a} vs {b}");
+        }
+        assert_eq!(back.set.nominal.len(), 43);
+        assert!((back.std[5].unwrap() - 4e-6).abs() < 1e-18);
+        let v: Value = serde_json::from_str(&text).unwrap();
+        let a2 = v["parameters"].as_array().unwrap().iter().find(|p| p["name"] == "a2").unwrap();
+        assert_eq!(a2["unit"], "mm");
+        assert!((a2["value"].as_f64().unwrap() - 270.146).abs() < 1e-9);
+        assert_eq!(a2["nominal"].as_f64().unwrap(), 270.0);
+    }
+
+    #[test]
+    fn bad_entries_are_named() {
+        let doc = |params: Value| {
+            ParameterSetDoc::from_json(&json!({"robot": {"preset": "irb120"}, "parameters": params}).to_string())
+                .unwrap_err()
+        };
+        let e = doc(json!([{"name": "a2", "value": 270.1}, {"name": "a7", "value": 1.0}]));
+        assert_eq!(e.path, "parameters[1].name");
+        let e = doc(json!([{"name": "beta3", "value": 0.0}]));
+        assert!(e.reason.contains("not a parameter"), "{e}");
+        let e = doc(json!([{"name": "a2", "value": 270.1, "unit": "m"}]));
+        assert_eq!(e.path, "parameters[0].unit");
+        let e = doc(json!([{"name": "a2", "value": 270.1, "nominal": 280.0}]));
+        assert_eq!(e.path, "parameters[0].nominal");
+        let e = doc(json!([{"name": "a2", "value": 1.0}, {"name": "a2", "value": 2.0}]));
+        assert!(e.reason.contains("twice"));
+        let e = doc(json!([{"name": "a2", "value": "x"}]));
+        assert_eq!(e.path, "parameters[0].value");
+        let e = ParameterSetDoc::from_json(r#"{"robot": {"preset": "irb120"}, "parametres": []}"#).unwrap_err();
+        assert!(e.reason.contains("parametres"));
+        let e = ParameterSetDoc::from_json(r#"{"robot": {"name": "x", "joints": []}}"#).unwrap_err();
+        assert_eq!(e.path, "robot.joints");
+    }
+
+    #[test]
+    fn base_nominal_defaults_to_the_value() {
+        let d = ParameterSetDoc::from_json(
+            &json!({"robot": {"preset": "irb120"}, "parameters": [{"name": "base_x", "value": 158.865}, {"name": "base_y", "value": -253.8, "nominal": -255.727}]})
+                .to_string(),
+        )
+        .unwrap();
+        assert!((d.set.nominal_value(Param::Base(0)).unwrap() - 0.158865).abs() < 1e-15);
+        assert!((d.set.nominal_value(Param::Base(1)).unwrap() + 0.255727).abs() < 1e-15);
+    }
+}

@@ -1,0 +1,275 @@
+//! Poses and compensation targets on the wire: `position_mm` with either ZY'X'' `rotation_deg`
+//! or a unit `quaternion` (w, x, y, z); a configuration branch as ABB `cfx` or full `confdata`
+//! (cf1, cf4, cf6, cfx); or nominal `joints_deg` targets.
+
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+use super::{DEG, DomainError, MM, finite, joints_deg, to_deg, vec3_mm};
+use crate::kinematics::frame::{quaternion_from_rot, rot_from_quaternion, rot_zyx, zyx_from_rot};
+use crate::kinematics::{Branch, Compensated, Confdata, Frame, IkError};
+
+/// A TCP pose in {W}.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseSpec {
+    pub position_mm: [f64; 3],
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rotation_deg: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub quaternion: Option<[f64; 4]>,
+}
+
+/// Turn `position_mm` + (`rotation_deg` | `quaternion`) into a frame; exactly one orientation.
+pub fn frame_from_parts(
+    position_mm: [f64; 3],
+    rotation_deg: Option<[f64; 3]>,
+    quaternion: Option<[f64; 4]>,
+) -> Result<Frame, DomainError> {
+    let t = vec3_mm(position_mm, "position_mm")?;
+    let r = match (rotation_deg, quaternion) {
+        (Some(_), Some(_)) => {
+            return Err(DomainError::new("rotation_deg", "give rotation_deg or quaternion, not both"));
+        }
+        (None, None) => {
+            return Err(DomainError::new(
+                "rotation_deg",
+                "an orientation is required: rotation_deg [a, b, c] or quaternion [w, x, y, z]",
+            ));
+        }
+        (Some(r), None) => {
+            for (i, v) in r.iter().enumerate() {
+                finite(*v, &format!("rotation_deg[{i}]"))?;
+            }
+            rot_zyx(r[0] * DEG, r[1] * DEG, r[2] * DEG)
+        }
+        (None, Some(q)) => {
+            for (i, v) in q.iter().enumerate() {
+                finite(*v, &format!("quaternion[{i}]"))?;
+            }
+            let n = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+            if (n - 1.0).abs() > 1e-6 {
+                return Err(DomainError::new("quaternion", format!("must be a unit quaternion, its norm is {n:.9}")));
+            }
+            rot_from_quaternion(q).ok_or_else(|| DomainError::new("quaternion", "must not be zero"))?
+        }
+    };
+    Ok(Frame::new(r, t))
+}
+
+impl PoseSpec {
+    pub fn to_frame(&self) -> Result<Frame, DomainError> {
+        frame_from_parts(self.position_mm, self.rotation_deg, self.quaternion)
+    }
+}
+
+/// A pose as output: every representation, so no reader has to convert.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PoseOut {
+    pub position_mm: [f64; 3],
+    pub rotation_deg: [f64; 3],
+    pub quaternion: [f64; 4],
+}
+
+impl PoseOut {
+    pub fn from_frame(f: &Frame) -> Self {
+        let [a, b, c] = zyx_from_rot(&f.r);
+        PoseOut {
+            position_mm: [f.t.x / MM, f.t.y / MM, f.t.z / MM],
+            rotation_deg: [a / DEG, b / DEG, c / DEG],
+            quaternion: quaternion_from_rot(&f.r),
+        }
+    }
+}
+
+/// One compensation target: a pose with how to choose the solution, or a nominal joint target.
+#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TargetSpec {
+    /// Caller's label, echoed back.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub id: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position_mm: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rotation_deg: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub quaternion: Option<[f64; 4]>,
+    /// Configuration branch, ABB cfx 0–7.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cfx: Option<u8>,
+    /// ABB confdata [cf1, cf4, cf6, cfx].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub confdata: Option<[i32; 4]>,
+    /// Seed joints for robots without a closed-form IK.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed_joints_deg: Option<Vec<f64>>,
+    /// A nominal joint target instead of a pose: reach where the nominal model puts these joints.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joints_deg: Option<Vec<f64>>,
+}
+
+/// A validated target.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Target {
+    Pose { pose: Frame, choice: Choice },
+    NominalJoints(Vec<f64>),
+}
+
+/// How to pick the solution of a pose target.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Choice {
+    Branch(Branch),
+    Confdata(Confdata),
+    Seed(Vec<f64>),
+}
+
+impl TargetSpec {
+    pub fn to_target(&self, dof: usize) -> Result<Target, DomainError> {
+        if let Some(q) = &self.joints_deg {
+            if self.position_mm.is_some() || self.rotation_deg.is_some() || self.quaternion.is_some() {
+                return Err(DomainError::new("joints_deg", "give either a pose or nominal joints_deg, not both"));
+            }
+            if self.cfx.is_some() || self.confdata.is_some() || self.seed_joints_deg.is_some() {
+                return Err(DomainError::new(
+                    "joints_deg",
+                    "a nominal joint target keeps its own branch; drop cfx/confdata/seed_joints_deg",
+                ));
+            }
+            return Ok(Target::NominalJoints(joints_deg(q, dof, "joints_deg")?));
+        }
+        let Some(p) = self.position_mm else {
+            return Err(DomainError::new(
+                "position_mm",
+                "a target needs position_mm (with an orientation) or joints_deg",
+            ));
+        };
+        let pose = frame_from_parts(p, self.rotation_deg, self.quaternion)?;
+        let choice = match (self.cfx, self.confdata, &self.seed_joints_deg) {
+            (Some(c), None, None) => {
+                Choice::Branch(Branch::new(c).ok_or_else(|| DomainError::new("cfx", format!("must be 0–7, got {c}")))?)
+            }
+            (None, Some(cd), None) => {
+                let cfx = u8::try_from(cd[3])
+                    .ok()
+                    .and_then(Branch::new)
+                    .ok_or_else(|| DomainError::new("confdata[3]", format!("cfx must be 0–7, got {}", cd[3])))?;
+                Choice::Confdata(Confdata { cf1: cd[0], cf4: cd[1], cf6: cd[2], cfx })
+            }
+            (None, None, Some(q)) => Choice::Seed(joints_deg(q, dof, "seed_joints_deg")?),
+            (None, None, None) => {
+                return Err(DomainError::new(
+                    "cfx",
+                    "a pose target needs its configuration: cfx, confdata or seed_joints_deg",
+                ));
+            }
+            _ => return Err(DomainError::new("cfx", "give only one of cfx, confdata, seed_joints_deg")),
+        };
+        Ok(Target::Pose { pose, choice })
+    }
+}
+
+/// One target's answer (or its own error), as written by `compensate`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CompensationResult {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub id: Option<String>,
+    /// Joints to command, deg.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub joints_deg: Option<Vec<f64>>,
+    /// Nominal FK of the joints: the pose to program.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fake_pose: Option<PoseOut>,
+    /// Controller configuration data [cf1, cf4, cf6, cfx] to program with the fake pose.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub confdata: Option<[i32; 4]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub residual_mm: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub residual_urad: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub iterations: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+}
+
+impl CompensationResult {
+    pub fn ok(id: Option<String>, c: &Compensated) -> Self {
+        Self {
+            id,
+            joints_deg: Some(to_deg(c.joints())),
+            fake_pose: Some(PoseOut::from_frame(&c.fake_pose)),
+            confdata: c.confdata.map(|d| [d.cf1, d.cf4, d.cf6, d.cfx.cfx() as i32]),
+            residual_mm: Some(c.residual_position / MM),
+            residual_urad: Some(c.residual_rotation * 1e6),
+            iterations: Some(c.iterations),
+            error: None,
+        }
+    }
+
+    pub fn failed(id: Option<String>, error: String) -> Self {
+        Self {
+            id,
+            joints_deg: None,
+            fake_pose: None,
+            confdata: None,
+            residual_mm: None,
+            residual_urad: None,
+            iterations: None,
+            error: Some(error),
+        }
+    }
+
+    pub fn from_ik_error(id: Option<String>, e: &IkError) -> Self {
+        Self::failed(id, e.to_string())
+    }
+}
+
+/// Position of a frame in mm, for outputs.
+pub fn position_mm(t: &Vector3<f64>) -> [f64; 3] {
+    [t.x / MM, t.y / MM, t.z / MM]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::domain::from_json;
+
+    #[test]
+    fn poses_parse_in_both_orientation_forms() {
+        let a = from_json::<PoseSpec>(r#"{"position_mm": [300, 0, 500], "rotation_deg": [10, -20, 30]}"#)
+            .unwrap()
+            .to_frame()
+            .unwrap();
+        let out = PoseOut::from_frame(&a);
+        let b = PoseSpec { position_mm: out.position_mm, rotation_deg: None, quaternion: Some(out.quaternion) }
+            .to_frame()
+            .unwrap();
+        assert!((a.r - b.r).abs().max() < 1e-15 && (a.t - b.t).norm() < 1e-15);
+        assert!((out.rotation_deg[1] + 20.0).abs() < 1e-12);
+        let e = from_json::<PoseSpec>(r#"{"position_mm": [0, 0, 0]}"#).unwrap().to_frame().unwrap_err();
+        assert_eq!(e.path, "rotation_deg");
+        let e = from_json::<PoseSpec>(r#"{"position_mm": [0, 0, 0], "quaternion": [2, 0, 0, 0]}"#)
+            .unwrap()
+            .to_frame()
+            .unwrap_err();
+        assert_eq!(e.path, "quaternion");
+    }
+
+    #[test]
+    fn targets_need_exactly_one_choice() {
+        let t = |s: &str| from_json::<TargetSpec>(s).unwrap().to_target(6);
+        assert!(matches!(
+            t(r#"{"position_mm": [300, 0, 500], "rotation_deg": [0, 90, 0], "cfx": 0}"#),
+            Ok(Target::Pose { choice: Choice::Branch(_), .. })
+        ));
+        assert!(matches!(t(r#"{"joints_deg": [0, 0, 0, 0, 30, 0]}"#), Ok(Target::NominalJoints(_))));
+        assert_eq!(t(r#"{"position_mm": [300, 0, 500], "rotation_deg": [0, 90, 0]}"#).unwrap_err().path, "cfx");
+        assert_eq!(
+            t(r#"{"position_mm": [300, 0, 500], "rotation_deg": [0, 90, 0], "cfx": 9}"#).unwrap_err().path,
+            "cfx"
+        );
+        assert_eq!(t(r#"{"joints_deg": [0, 0, 0]}"#).unwrap_err().path, "joints_deg");
+        assert_eq!(t(r#"{"rotation_deg": [0, 0, 0], "cfx": 1}"#).unwrap_err().path, "position_mm");
+    }
+}

@@ -1,0 +1,126 @@
+//! The `robocal` binary: outputs checked against the library, errors naming the argument.
+
+use std::process::Command;
+
+use serde_json::{Value, json};
+
+fn robocal(args: &[&str]) -> (bool, Value, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_robocal")).args(args).output().expect("runs");
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    let v = serde_json::from_str(&stdout).unwrap_or(Value::Null);
+    (out.status.success(), v, stderr)
+}
+
+fn tmp(name: &str, contents: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("robocal-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join(name);
+    std::fs::write(&p, contents).unwrap();
+    p
+}
+
+fn nums(v: &Value) -> Vec<f64> {
+    v.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect()
+}
+
+#[test]
+fn fk_then_ik_round_trips_through_the_command_line() {
+    let (ok, fk, err) =
+        robocal(&["fk", "--robot", "irb120", "--joints-deg", "10,-20,30,-40,50,-60", "--tcp-mm", "40,0,130"]);
+    assert!(ok, "{err}");
+    let p = nums(&fk["position_mm"]);
+    let r = nums(&fk["rotation_deg"]);
+    let cfx = fk["confdata"][3].as_u64().unwrap().to_string();
+    let pos = format!("{},{},{}", p[0], p[1], p[2]);
+    let rot = format!("{},{},{}", r[0], r[1], r[2]);
+    let (ok, ik, err) = robocal(&[
+        "ik",
+        "--robot",
+        "irb120",
+        "--position-mm",
+        &pos,
+        "--rotation-deg",
+        &rot,
+        "--cfx",
+        &cfx,
+        "--tcp-mm",
+        "40,0,130",
+    ]);
+    assert!(ok, "{err}");
+    let q = nums(&ik["joints_deg"]);
+    for (a, b) in q.iter().zip([10.0, -20.0, 30.0, -40.0, 50.0, -60.0]) {
+        assert!((a - b).abs() < 1e-9, "{q:?}");
+    }
+    // Without a branch: all eight, each a solution or its reason.
+    let (ok, all, _) =
+        robocal(&["ik", "--robot", "irb120", "--position-mm", &pos, "--rotation-deg", &rot, "--tcp-mm", "40,0,130"]);
+    assert!(ok);
+    assert_eq!(all["solutions"].as_array().unwrap().len(), 8);
+}
+
+#[test]
+fn errors_name_the_argument() {
+    for (args, needle) in [
+        (vec!["fk", "--robot", "irb120", "--joints-deg", "0,0,0"], "--joints-deg: expected 6"),
+        (vec!["fk", "--robot", "irb120", "--joints-deg", "0,0,0,0,x,0"], "--joints-deg: 'x'"),
+        (vec!["fk", "--robot", "irb120", "--joints-deg", "0,0,0,0,130,0"], "q5"),
+        (vec!["fk", "--robot", "abb", "--joints-deg", "0,0,0,0,0,0"], "--robot: unknown preset"),
+        (vec!["fk", "--robot", "irb120", "--joints-deg", "0,0,0,0,0,0", "--payload-kg", "-1"], "--payload-kg"),
+        (vec!["ik", "--robot", "irb120", "--position-mm", "400,0", "--rotation-deg", "0,0,0"], "--position-mm"),
+        (
+            vec!["ik", "--robot", "irb120", "--position-mm", "400,0,500", "--rotation-deg", "0,0,0", "--cfx", "8"],
+            "--cfx",
+        ),
+        (vec!["ik", "--robot", "ur10", "--position-mm", "400,0,500", "--rotation-deg", "0,0,0"], "--seed-joints-deg"),
+    ] {
+        let (ok, _, err) = robocal(&args);
+        assert!(!ok, "{args:?} should fail");
+        assert!(err.contains(needle), "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn compensate_writes_joints_and_fake_poses() {
+    let (ok, _, err) = robocal(&[
+        "nominal",
+        "--robot",
+        "irb120",
+        "--tcp-mm",
+        "40,0,130",
+        "--payload-kg",
+        "1.7",
+        "--payload-com-mm",
+        "30,0,64",
+    ]);
+    assert!(ok, "{err}");
+    // A calibrated set: the nominal one with a longer upper arm, a joint-2 offset and compliance.
+    let params = json!({"robot": {"preset": "irb120"},
+        "tool": {"tcp_mm": [40, 0, 130], "mass_kg": 1.7, "com_mm": [30, 0, 64]},
+        "parameters": [{"name": "a2", "value": 270.146, "nominal": 270.0, "unit": "mm"},
+                       {"name": "theta2", "value": -89.91, "unit": "deg"},
+                       {"name": "c2", "value": -0.00206, "unit": "deg/(N·m)"}]});
+    let targets = json!({"targets": [
+        {"id": "p1", "position_mm": [400, 50, 450], "rotation_deg": [0, 90, 0], "cfx": 1},
+        {"id": "j1", "joints_deg": [10, 20, -10, 5, 40, 0]},
+        {"id": "bad", "position_mm": [400, 50, 450], "rotation_deg": [0, 90, 0]},
+        {"id": "far", "position_mm": [2000, 0, 0], "rotation_deg": [0, 0, 0], "cfx": 0}]});
+    let pp = tmp("params.json", &params.to_string());
+    let tp = tmp("targets.json", &targets.to_string());
+    let (ok, out, err) = robocal(&["compensate", "--params", pp.to_str().unwrap(), "--targets", tp.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    let r = out["results"].as_array().unwrap();
+    assert_eq!(out["failed"], 2);
+    assert!(r[0]["residual_mm"].as_f64().unwrap() < 1e-6);
+    assert_eq!(r[0]["confdata"][3], 1);
+    // The fake pose differs from the target by the model error (a few tenths of a mm here).
+    let fp = nums(&r[0]["fake_pose"]["position_mm"]);
+    let d = ((fp[0] - 400.0).powi(2) + (fp[1] - 50.0).powi(2) + (fp[2] - 450.0).powi(2)).sqrt();
+    assert!(d > 0.05 && d < 5.0, "{d}");
+    assert!(r[2]["error"].as_str().unwrap().contains("targets[2].cfx"), "{}", r[2]["error"]);
+    assert!(r[3]["error"].as_str().unwrap().contains("out of reach"), "{}", r[3]["error"]);
+    // A bad parameter file names its field.
+    let bad = tmp("bad.json", r#"{"robot": {"preset": "irb120"}, "parameters": [{"name": "a9", "value": 1}]}"#);
+    let (ok, _, err) = robocal(&["compensate", "--params", bad.to_str().unwrap(), "--targets", tp.to_str().unwrap()]);
+    assert!(!ok && err.contains("parameters[0].name"), "{err}");
+}
