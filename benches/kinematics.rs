@@ -8,55 +8,15 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use robocal::kinematics::frame::wrap_pi;
-use robocal::kinematics::model::irb120;
-use robocal::kinematics::{AnalyticIk, Compensator, Frame, JointState, Param, ParameterSet, Rows, Seed, Tool, Unit};
+use robocal::kinematics::thesis::{irb120_table_5_1, trical_tool};
+use robocal::kinematics::{AnalyticIk, Compensator, Frame, JointState, ParameterSet, Rows, Seed};
 
 /// The IRB 120 as the thesis identified it (Table 5.1 means), with the TriCal tool.
 fn calibrated() -> ParameterSet {
-    let tool = Tool { tcp: [0.04, 0.0, 0.13, 0.0, 0.0, 0.0], mass: 1.7, com: Vector3::new(0.03, 0.0, 0.064) };
-    let mut set = ParameterSet::nominal(irb120(), tool, [0.160211, -0.255727, -0.220548, 1.5988, 0.00866, -0.02416]);
-    for (name, v) in [
-        ("alpha1", -90.034),
-        ("alpha2", -0.045),
-        ("alpha3", -90.011),
-        ("alpha4", 89.998),
-        ("alpha5", -89.990),
-        ("a1", 0.013),
-        ("a2", 270.146),
-        ("a3", 70.120),
-        ("a4", -0.075),
-        ("a5", -0.012),
-        ("d3", -0.094),
-        ("d4", 302.296),
-        ("d5", 0.019),
-        ("d6", 72.163),
-        ("theta2", -89.910),
-        ("theta3", 0.097),
-        ("theta4", -0.013),
-        ("theta5", 0.062),
-        ("theta6", 180.259),
-        ("c2", -2.060e-3),
-        ("c3", -5.522e-3),
-        ("c4", -33.738e-3),
-        ("c5", -30.448e-3),
-        ("c6", -44.555e-3),
-        ("beta2", 0.039),
-        ("base_x", 158.865),
-        ("base_y", -253.835),
-        ("base_z", -219.170),
-        ("base_a", 91.677),
-        ("base_b", 0.148),
-        ("base_c", -1.380),
-    ] {
-        let p = Param::parse(name).unwrap();
-        let k: Unit = p.unit();
-        set.set(p, v * k.to_si());
-    }
-    set
+    irb120_table_5_1(trical_tool())
 }
 
 fn random_configs(set: &ParameterSet, n: usize, seed: u64) -> Vec<[f64; 6]> {

@@ -204,57 +204,15 @@ mod tests {
     use super::*;
     use crate::kinematics::frame::wrap_pi;
     use crate::kinematics::ik_analytic::pose_error;
-    use crate::kinematics::model::{Tool, irb120, ur10};
-    use crate::kinematics::params::{Param, Unit};
+    use crate::kinematics::model::{Tool, ur10};
+    use crate::kinematics::params::Param;
     use nalgebra::Vector3;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
     /// A "calibrated" IRB 120: thesis Table 5.1 means, with the TriCal tool.
     pub(crate) fn table_5_1() -> ParameterSet {
-        let tool = Tool { tcp: [0.04, 0.0, 0.13, 0.0, 0.0, 0.0], mass: 1.7, com: Vector3::new(0.03, 0.0, 0.064) };
-        let base =
-            [0.160211, -0.255727, -0.220548, 91.603f64.to_radians(), 0.496f64.to_radians(), -1.384f64.to_radians()];
-        let mut set = ParameterSet::nominal(irb120(), tool, base);
-        let table: [(&str, f64); 31] = [
-            ("alpha1", -90.034),
-            ("alpha2", -0.045),
-            ("alpha3", -90.011),
-            ("alpha4", 89.998),
-            ("alpha5", -89.990),
-            ("a1", 0.013),
-            ("a2", 270.146),
-            ("a3", 70.120),
-            ("a4", -0.075),
-            ("a5", -0.012),
-            ("d3", -0.094),
-            ("d4", 302.296),
-            ("d5", 0.019),
-            ("d6", 72.163),
-            ("theta2", -89.910),
-            ("theta3", 0.097),
-            ("theta4", -0.013),
-            ("theta5", 0.062),
-            ("theta6", 180.259),
-            ("c2", -2.060e-3),
-            ("c3", -5.522e-3),
-            ("c4", -33.738e-3),
-            ("c5", -30.448e-3),
-            ("c6", -44.555e-3),
-            ("beta2", 0.039),
-            ("base_x", 158.865),
-            ("base_y", -253.835),
-            ("base_z", -219.170),
-            ("base_a", 91.677),
-            ("base_b", 0.148),
-            ("base_c", -1.380),
-        ];
-        for (name, v) in table {
-            let p = Param::parse(name).unwrap();
-            let unit: Unit = p.unit();
-            assert!(set.set(p, v * unit.to_si()));
-        }
-        set
+        crate::kinematics::thesis::irb120_table_5_1(crate::kinematics::thesis::trical_tool())
     }
 
     /// Round trip: with a perturbed "calibrated" model, calibrated FK(q*) equals the desired pose

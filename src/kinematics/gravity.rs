@@ -183,9 +183,7 @@ mod tests {
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
-    fn trical() -> Tool {
-        Tool { tcp: [0.04, 0.0, 0.13, 0.0, 0.0, 0.0], mass: 1.7, com: Vector3::new(0.030, 0.0, 0.064) }
-    }
+    use crate::kinematics::thesis::trical_tool as trical;
 
     fn models() -> Vec<(RobotModel, Tool)> {
         let mut tilted = ur10();

@@ -11,6 +11,7 @@ pub mod ik_numeric;
 pub mod model;
 pub mod param_set;
 pub mod params;
+pub mod thesis;
 
 pub use chain::{Chain, JointState, Rows, Trace};
 pub use compensate::{Compensated, Compensator, Seed};
