@@ -7,6 +7,7 @@
 // four arrays read worse than the formulas they implement.
 #![allow(clippy::needless_range_loop)]
 
+pub mod cell;
 pub mod cli;
 pub mod domain;
 pub mod kinematics;

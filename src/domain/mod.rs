@@ -3,6 +3,7 @@
 //! Parse, don't validate: every `to_*` conversion returns a checked SI value or a [`DomainError`]
 //! naming the field path and the reason.
 
+pub mod cell;
 pub mod param_set;
 pub mod pose;
 pub mod robot;

@@ -1,0 +1,117 @@
+//! The measurements of one robot cell, in SI units: the robot, an optional base guess, the
+//! artefact, and sessions of measurements taken with one tool each. Parsed from and written to
+//! cell files by [`crate::domain::cell`]; consumed by identification, validation and the simulator.
+
+use nalgebra::Vector3;
+
+use crate::kinematics::{Frame, RobotModel, Tool};
+use crate::metrology::BallTriangle;
+
+/// What a session is for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Purpose {
+    Identification,
+    Validation,
+}
+
+impl Purpose {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Purpose::Identification => "identification",
+            Purpose::Validation => "validation",
+        }
+    }
+}
+
+/// The instrument that produced a session's measurements.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Instrument {
+    /// Closed loop on the artefact's balls: each measurement is a ball index.
+    TriCal,
+    /// A laser tracker (or any 3D/6D instrument): each measurement is a position, maybe a pose.
+    LaserTracker,
+}
+
+impl Instrument {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Instrument::TriCal => "trical",
+            Instrument::LaserTracker => "laser_tracker",
+        }
+    }
+}
+
+/// What was observed at a configuration.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Observation {
+    /// The TCP sat on the centre of ball k (1-based) of the artefact.
+    Ball(usize),
+    /// The TCP position in {W}, m.
+    Position(Vector3<f64>),
+    /// The TCP pose in {W}.
+    Pose(Frame),
+}
+
+/// One measurement.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Measurement {
+    /// Joint readings, rad.
+    pub q: Vec<f64>,
+    pub observation: Observation,
+    pub temperature_c: Option<f64>,
+    pub time_s: Option<f64>,
+    /// Per-joint direction of the last motion (−1, 0, +1).
+    pub approach: Option<Vec<i8>>,
+    /// TriCal indicator readings left after centring (dx, dy, dz), m.
+    pub indicators: Option<[f64; 3]>,
+}
+
+/// A set of measurements taken with one tool.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Session {
+    pub name: String,
+    pub purpose: Purpose,
+    pub instrument: Instrument,
+    pub tool: Tool,
+    /// The TCP in `tool` is only a guess (e.g. a reflector nest never measured): identify it.
+    pub identify_tcp: bool,
+    pub measurements: Vec<Measurement>,
+}
+
+/// The artefact: three balls on a plate.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Artefact {
+    pub triangle: BallTriangle,
+    /// Ball diameter, m.
+    pub ball_diameter: f64,
+}
+
+/// One robot cell's data.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Cell {
+    pub model: RobotModel,
+    /// T_0^W as χ (m, rad), when known approximately.
+    pub base_guess: Option<[f64; 6]>,
+    pub artefact: Option<Artefact>,
+    pub sessions: Vec<Session>,
+}
+
+impl Cell {
+    pub fn session(&self, name: &str) -> Option<&Session> {
+        self.sessions.iter().find(|s| s.name == name)
+    }
+
+    /// Sessions of one purpose, in file order.
+    pub fn sessions_for(&self, purpose: Purpose) -> impl Iterator<Item = &Session> {
+        self.sessions.iter().filter(move |s| s.purpose == purpose)
+    }
+
+    /// The observed TCP position of a measurement in {W} (ball centre or measured position).
+    pub fn observed_position(&self, m: &Measurement) -> Option<Vector3<f64>> {
+        match &m.observation {
+            Observation::Ball(k) => self.artefact.as_ref().and_then(|a| a.triangle.ball(*k)),
+            Observation::Position(p) => Some(*p),
+            Observation::Pose(f) => Some(f.t),
+        }
+    }
+}

@@ -1,0 +1,400 @@
+//! Cell files — one JSON document, the contract shared by the CLI, the service, tests and benches:
+//!
+//! ```text
+//! { "robot": {"preset": "irb120"} | { …custom model… },
+//!   "base_guess": {"x_mm": …, "y_mm": …, "z_mm": …, "a_deg": …, "b_deg": …, "c_deg": …},   (optional)
+//!   "artefact": {"kind": "ball_triangle", "distances_mm": {"d12": …, "d13": …, "d23": …}, "ball_diameter_mm": 12.7},
+//!   "sessions": [
+//!     { "name": "trical-1", "purpose": "identification", "instrument": "trical",
+//!       "tool": {"tcp_mm": [x, y, z], "mass_kg": 1.7, "com_mm": [30, 0, 64]},
+//!       "measurements": [ {"joints_deg": [...], "ball": 1, "temperature_c": 22.0, "time_s": 0.0,
+//!                          "approach": [1, -1, 1, 1, 1, -1]}, … ] },
+//!     { "name": "tracker-1", "purpose": "validation", "instrument": "laser_tracker", "tool": { … },
+//!       "measurements": [ {"joints_deg": [...], "position_mm": [x, y, z]}, … ] } ] }
+//! ```
+//!
+//! A measurement is ball-constrained (`ball`, 1-based) or a measured `position_mm` in {W},
+//! optionally a full pose (`rotation_deg`, ZY'X''). Errors name the session, the measurement index
+//! and the field: `sessions[0] "trical-1" measurements[12].ball: …`.
+
+use std::collections::HashSet;
+
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use super::robot::{RobotSpec, ToolSpec};
+use super::{DEG, DomainError, MM, finite, from_json, joints_deg, to_deg};
+use crate::cell::{Artefact, Cell, Instrument, Measurement, Observation, Purpose, Session};
+use crate::kinematics::frame::{rot_zyx, zyx_from_rot};
+use crate::kinematics::Frame;
+use crate::metrology::{ArtefactError, BallTriangle};
+
+/// A pose vector in file units.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseXyzAbc {
+    pub x_mm: f64,
+    pub y_mm: f64,
+    pub z_mm: f64,
+    pub a_deg: f64,
+    pub b_deg: f64,
+    pub c_deg: f64,
+}
+
+impl PoseXyzAbc {
+    pub fn to_si(&self, path: &str) -> Result<[f64; 6], DomainError> {
+        let v = [self.x_mm, self.y_mm, self.z_mm, self.a_deg, self.b_deg, self.c_deg];
+        let names = ["x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg"];
+        let mut out = [0.0; 6];
+        for k in 0..6 {
+            out[k] = finite(v[k], &format!("{path}.{}", names[k]))? * if k < 3 { MM } else { DEG };
+        }
+        Ok(out)
+    }
+
+    pub fn from_si(chi: &[f64; 6]) -> Self {
+        Self { x_mm: chi[0] / MM, y_mm: chi[1] / MM, z_mm: chi[2] / MM, a_deg: chi[3] / DEG, b_deg: chi[4] / DEG, c_deg: chi[5] / DEG }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Distances {
+    pub d12: f64,
+    pub d13: f64,
+    pub d23: f64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ArtefactKind {
+    BallTriangle,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ArtefactSpec {
+    pub kind: ArtefactKind,
+    pub distances_mm: Distances,
+    pub ball_diameter_mm: f64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PurposeSpec {
+    Identification,
+    Validation,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum InstrumentSpec {
+    Trical,
+    LaserTracker,
+}
+
+#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeasurementSpec {
+    pub joints_deg: Vec<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ball: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position_mm: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rotation_deg: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub temperature_c: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time_s: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub approach: Option<Vec<i8>>,
+    /// TriCal indicator readings after centring, mm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub indicators_mm: Option<[f64; 3]>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SessionSpec {
+    pub name: String,
+    pub purpose: PurposeSpec,
+    pub instrument: InstrumentSpec,
+    pub tool: ToolSpec,
+    /// The tool's TCP is a guess to be identified (e.g. an unmeasured reflector nest).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub identify_tcp: bool,
+    pub measurements: Vec<MeasurementSpec>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CellFile {
+    pub robot: Value,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub base_guess: Option<PoseXyzAbc>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub artefact: Option<ArtefactSpec>,
+    pub sessions: Vec<SessionSpec>,
+}
+
+/// Parse and validate a cell file.
+pub fn parse_cell(text: &str) -> Result<Cell, DomainError> {
+    from_json::<CellFile>(text)?.to_cell()
+}
+
+/// Serialise a cell (pretty JSON, deterministic).
+pub fn cell_to_json(cell: &Cell) -> String {
+    serde_json::to_string_pretty(&CellFile::from_cell(cell)).expect("cell serialises")
+}
+
+impl CellFile {
+    pub fn to_cell(&self) -> Result<Cell, DomainError> {
+        let model = RobotSpec::from_json_value(&self.robot).and_then(|r| r.to_model()).map_err(|e| e.within("robot"))?;
+        let base_guess = self.base_guess.as_ref().map(|b| b.to_si("base_guess")).transpose()?;
+        let artefact = match &self.artefact {
+            None => None,
+            Some(a) => {
+                let d = &a.distances_mm;
+                let triangle = BallTriangle::from_distances(d.d12 * MM, d.d13 * MM, d.d23 * MM).map_err(|e| match e {
+                    ArtefactError::Distance { field, reason } => {
+                        DomainError::new(format!("artefact.distances_mm.{field}"), reason)
+                    }
+                    other => DomainError::new("artefact.distances_mm", other.to_string()),
+                })?;
+                let diameter = finite(a.ball_diameter_mm, "artefact.ball_diameter_mm")?;
+                if diameter <= 0.0 {
+                    return Err(DomainError::new("artefact.ball_diameter_mm", "must be positive"));
+                }
+                Some(Artefact { triangle, ball_diameter: diameter * MM })
+            }
+        };
+        let mut names = HashSet::new();
+        let mut sessions = Vec::with_capacity(self.sessions.len());
+        for (si, s) in self.sessions.iter().enumerate() {
+            let at = format!("sessions[{si}] \"{}\"", s.name);
+            if s.name.trim().is_empty() {
+                return Err(DomainError::new(format!("sessions[{si}].name"), "must not be empty"));
+            }
+            if !names.insert(s.name.clone()) {
+                return Err(DomainError::new(format!("{at}.name"), "another session has this name"));
+            }
+            let tool = s.tool.to_tool().map_err(|e| e.within(&format!("{at}.tool")))?;
+            let instrument = match s.instrument {
+                InstrumentSpec::Trical => Instrument::TriCal,
+                InstrumentSpec::LaserTracker => Instrument::LaserTracker,
+            };
+            if instrument == Instrument::TriCal && artefact.is_none() {
+                return Err(DomainError::new(format!("{at}.instrument"), "a trical session needs the cell's artefact"));
+            }
+            let mut measurements = Vec::with_capacity(s.measurements.len());
+            for (mi, m) in s.measurements.iter().enumerate() {
+                let mp = format!("{at}.measurements[{mi}]");
+                measurements.push(measurement(m, &model, instrument, artefact.as_ref()).map_err(|e| e.within(&mp))?);
+            }
+            sessions.push(Session {
+                name: s.name.clone(),
+                purpose: match s.purpose {
+                    PurposeSpec::Identification => Purpose::Identification,
+                    PurposeSpec::Validation => Purpose::Validation,
+                },
+                instrument,
+                tool,
+                identify_tcp: s.identify_tcp,
+                measurements,
+            });
+        }
+        Ok(Cell { model, base_guess, artefact, sessions })
+    }
+
+    pub fn from_cell(c: &Cell) -> CellFile {
+        CellFile {
+            robot: RobotSpec::from_model(&c.model).to_json_value(),
+            base_guess: c.base_guess.as_ref().map(PoseXyzAbc::from_si),
+            artefact: c.artefact.as_ref().map(|a| ArtefactSpec {
+                kind: ArtefactKind::BallTriangle,
+                distances_mm: Distances { d12: a.triangle.d12 / MM, d13: a.triangle.d13 / MM, d23: a.triangle.d23 / MM },
+                ball_diameter_mm: a.ball_diameter / MM,
+            }),
+            sessions: c
+                .sessions
+                .iter()
+                .map(|s| SessionSpec {
+                    name: s.name.clone(),
+                    purpose: match s.purpose {
+                        Purpose::Identification => PurposeSpec::Identification,
+                        Purpose::Validation => PurposeSpec::Validation,
+                    },
+                    instrument: match s.instrument {
+                        Instrument::TriCal => InstrumentSpec::Trical,
+                        Instrument::LaserTracker => InstrumentSpec::LaserTracker,
+                    },
+                    tool: ToolSpec::from_tool(&s.tool),
+                    identify_tcp: s.identify_tcp,
+                    measurements: s.measurements.iter().map(measurement_spec).collect(),
+                })
+                .collect(),
+        }
+    }
+}
+
+fn measurement(
+    m: &MeasurementSpec,
+    model: &crate::kinematics::RobotModel,
+    instrument: Instrument,
+    artefact: Option<&Artefact>,
+) -> Result<Measurement, DomainError> {
+    let q = joints_deg(&m.joints_deg, model.dof(), "joints_deg")?;
+    for (j, &v) in q.iter().enumerate() {
+        if !model.within_limits(j, v) {
+            let [lo, hi] = model.links[j].limits;
+            return Err(DomainError::new(
+                format!("joints_deg[{j}]"),
+                format!("{:.4}° is outside joint {}'s limits [{:.1}°, {:.1}°]", v / DEG, j + 1, lo / DEG, hi / DEG),
+            ));
+        }
+    }
+    let observation = match (m.ball, m.position_mm, m.rotation_deg) {
+        (Some(_), Some(_), _) => return Err(DomainError::new("ball", "give ball or position_mm, not both")),
+        (Some(k), None, None) => {
+            if instrument != Instrument::TriCal {
+                return Err(DomainError::new("ball", "ball-constrained measurements belong to a trical session"));
+            }
+            let a = artefact.ok_or_else(|| DomainError::new("ball", "the cell has no artefact"))?;
+            if a.triangle.ball(k).is_none() {
+                return Err(DomainError::new("ball", format!("ball {k} is not on the artefact (balls 1, 2, 3)")));
+            }
+            Observation::Ball(k)
+        }
+        (Some(_), None, Some(_)) => return Err(DomainError::new("rotation_deg", "only a measured position can carry a rotation")),
+        (None, Some(p), rot) => {
+            if instrument == Instrument::TriCal {
+                return Err(DomainError::new("position_mm", "a trical session measures balls: give ball"));
+            }
+            let t = super::vec3_mm(p, "position_mm")?;
+            match rot {
+                None => Observation::Position(t),
+                Some(r) => {
+                    for (i, v) in r.iter().enumerate() {
+                        finite(*v, &format!("rotation_deg[{i}]"))?;
+                    }
+                    Observation::Pose(Frame::new(rot_zyx(r[0] * DEG, r[1] * DEG, r[2] * DEG), t))
+                }
+            }
+        }
+        (None, None, _) => return Err(DomainError::new("ball", "a measurement needs ball or position_mm")),
+    };
+    let temperature_c = m.temperature_c.map(|t| finite(t, "temperature_c")).transpose()?;
+    if let Some(t) = temperature_c
+        && !(-50.0..=150.0).contains(&t)
+    {
+        return Err(DomainError::new("temperature_c", format!("{t} °C is not a plausible robot temperature")));
+    }
+    let time_s = m.time_s.map(|t| finite(t, "time_s")).transpose()?;
+    if let Some(a) = &m.approach {
+        if a.len() != model.dof() {
+            return Err(DomainError::new("approach", format!("expected {} values, got {}", model.dof(), a.len())));
+        }
+        if let Some(i) = a.iter().position(|v| !(-1..=1).contains(v)) {
+            return Err(DomainError::new(format!("approach[{i}]"), "must be -1, 0 or 1"));
+        }
+    }
+    let indicators = match m.indicators_mm {
+        None => None,
+        Some(d) => {
+            if instrument != Instrument::TriCal {
+                return Err(DomainError::new("indicators_mm", "only a trical measurement has indicator readings"));
+            }
+            let v = super::vec3_mm(d, "indicators_mm")?;
+            Some([v.x, v.y, v.z])
+        }
+    };
+    Ok(Measurement { q, observation, temperature_c, time_s, approach: m.approach.clone(), indicators })
+}
+
+fn measurement_spec(m: &Measurement) -> MeasurementSpec {
+    let (ball, position_mm, rotation_deg) = match &m.observation {
+        Observation::Ball(k) => (Some(*k), None, None),
+        Observation::Position(p) => (None, Some([p.x / MM, p.y / MM, p.z / MM]), None),
+        Observation::Pose(f) => {
+            let [a, b, c] = zyx_from_rot(&f.r);
+            (None, Some([f.t.x / MM, f.t.y / MM, f.t.z / MM]), Some([a / DEG, b / DEG, c / DEG]))
+        }
+    };
+    MeasurementSpec {
+        joints_deg: to_deg(&m.q),
+        ball,
+        position_mm,
+        rotation_deg,
+        temperature_c: m.temperature_c,
+        time_s: m.time_s,
+        approach: m.approach.clone(),
+        indicators_mm: m.indicators.map(|d| [d[0] / MM, d[1] / MM, d[2] / MM]),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    fn good() -> Value {
+        json!({
+            "robot": {"preset": "irb120"},
+            "base_guess": {"x_mm": 160.0, "y_mm": -255.0, "z_mm": -220.0, "a_deg": 91.6, "b_deg": 0.5, "c_deg": -1.4},
+            "artefact": {"kind": "ball_triangle", "distances_mm": {"d12": 300.0, "d13": 300.0, "d23": 300.0}, "ball_diameter_mm": 12.7},
+            "sessions": [
+                {"name": "trical-1", "purpose": "identification", "instrument": "trical",
+                 "tool": {"tcp_mm": [40, 0, 130], "mass_kg": 1.7, "com_mm": [30, 0, 64]},
+                 "measurements": [{"joints_deg": [0, 10, 20, 0, 30, 0], "ball": 2, "temperature_c": 22.0, "time_s": 0.0, "approach": [1, -1, 1, 1, 1, -1]}]},
+                {"name": "tracker-1", "purpose": "validation", "instrument": "laser_tracker",
+                 "tool": {"tcp_mm": [40, 0, 130]},
+                 "measurements": [{"joints_deg": [0, 10, 20, 0, 30, 0], "position_mm": [1, 2, 3]},
+                                  {"joints_deg": [0, 10, 20, 0, 30, 0], "position_mm": [1, 2, 3], "rotation_deg": [10, 20, 30]}]}]
+        })
+    }
+
+    #[test]
+    fn a_cell_round_trips() {
+        let cell = CellFile::from_cell(&from_json::<CellFile>(&good().to_string()).unwrap().to_cell().unwrap());
+        let text = serde_json::to_string_pretty(&cell).unwrap();
+        let back = parse_cell(&text).unwrap();
+        assert_eq!(cell_to_json(&back), text);
+        assert_eq!(back.sessions[0].measurements[0].observation, Observation::Ball(2));
+        assert!(matches!(back.sessions[1].measurements[1].observation, Observation::Pose(_)));
+        assert!((back.base_guess.unwrap()[3] - 91.6 * DEG).abs() < 1e-15);
+    }
+
+    /// Each promised error, with the session, measurement index and field in its path.
+    #[test]
+    fn bad_cells_name_session_measurement_and_field() {
+        let check = |edit: &dyn Fn(&mut Value), path: &str, needle: &str| {
+            let mut v = good();
+            edit(&mut v);
+            let e = parse_cell(&v.to_string()).unwrap_err();
+            assert_eq!(e.path, path, "{e}");
+            assert!(e.reason.contains(needle), "{e}");
+        };
+        let m0 = "sessions[0] \"trical-1\".measurements[0]";
+        check(&|v| v["sessions"][0]["measurements"][0]["joints_deg"] = json!([0, 1, 2]), &format!("{m0}.joints_deg"), "expected 6");
+        check(&|v| v["sessions"][0]["measurements"][0]["joints_deg"][4] = json!(150.0), &format!("{m0}.joints_deg[4]"), "outside");
+        check(&|v| v["sessions"][0]["measurements"][0]["ball"] = json!(4), &format!("{m0}.ball"), "not on the artefact");
+        check(&|v| v["sessions"][0]["measurements"][0]["approach"] = json!([1, 2, 1, 1, 1, 1]), &format!("{m0}.approach[1]"), "-1, 0 or 1");
+        check(&|v| v["sessions"][0]["measurements"][0]["temperature_c"] = json!(900.0), &format!("{m0}.temperature_c"), "plausible");
+        check(&|v| v["sessions"][1]["measurements"][0]["ball"] = json!(1), "sessions[1] \"tracker-1\".measurements[0].ball", "not both");
+        check(&|v| v["sessions"][1]["name"] = json!("trical-1"), "sessions[1] \"trical-1\".name", "another session");
+        check(&|v| v["artefact"]["distances_mm"]["d23"] = json!(700.0), "artefact.distances_mm", "impossible");
+        check(&|v| v["artefact"]["distances_mm"]["d12"] = json!(-1.0), "artefact.distances_mm.d12", "positive");
+        check(&|v| v["sessions"][0]["tool"]["mass_kg"] = json!(-2.0), "sessions[0] \"trical-1\".tool.mass_kg", "negative");
+        // Unknown keys and JSON-level errors carry serde's path.
+        let mut v = good();
+        v["sessions"][0]["measurements"][0]["colour"] = json!("red");
+        let e = parse_cell(&v.to_string()).unwrap_err();
+        assert_eq!(e.path, "sessions[0].measurements[0].colour");
+        assert!(e.reason.contains("colour"), "{e}");
+        let mut v = good();
+        v["sessions"][0]["measurements"][0]["joints_deg"][1] = json!("NaN");
+        let e = parse_cell(&v.to_string()).unwrap_err();
+        assert_eq!(e.path, "sessions[0].measurements[0].joints_deg[1]", "{e}");
+    }
+}
