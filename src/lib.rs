@@ -11,4 +11,6 @@ pub mod cell;
 pub mod cli;
 pub mod domain;
 pub mod kinematics;
+pub mod import;
 pub mod metrology;
+pub mod sim;

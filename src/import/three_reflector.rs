@@ -1,0 +1,1 @@
+//! Three-reflector format: a joints file plus one positions file per reflector.

@@ -1,0 +1,1 @@
+//! UR10 laser-tracker data set of ../shared/datasets/ur10-ipa.

@@ -1,0 +1,6 @@
+//! The virtual cell: a "true" robot with unmodelled effects, the instruments that measure it, and
+//! pose generation (product code: the service reuses it for pose plans). Pure math, SI units,
+//! deterministic for a seed.
+
+pub mod collision;
+pub mod poses;

@@ -1,0 +1,1 @@
+//! Measurement pose generation (thesis §4.1, digest §8).
