@@ -10,7 +10,7 @@
 pub mod cell;
 pub mod cli;
 pub mod domain;
-pub mod kinematics;
 pub mod import;
+pub mod kinematics;
 pub mod metrology;
 pub mod sim;

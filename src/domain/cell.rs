@@ -25,8 +25,8 @@ use serde_json::Value;
 use super::robot::{RobotSpec, ToolSpec};
 use super::{DEG, DomainError, MM, finite, from_json, joints_deg, to_deg};
 use crate::cell::{Artefact, Cell, Instrument, Measurement, Observation, Purpose, Session};
-use crate::kinematics::frame::{rot_zyx, zyx_from_rot};
 use crate::kinematics::Frame;
+use crate::kinematics::frame::{rot_zyx, zyx_from_rot};
 use crate::metrology::{ArtefactError, BallTriangle};
 
 /// A pose vector in file units.
@@ -53,7 +53,14 @@ impl PoseXyzAbc {
     }
 
     pub fn from_si(chi: &[f64; 6]) -> Self {
-        Self { x_mm: chi[0] / MM, y_mm: chi[1] / MM, z_mm: chi[2] / MM, a_deg: chi[3] / DEG, b_deg: chi[4] / DEG, c_deg: chi[5] / DEG }
+        Self {
+            x_mm: chi[0] / MM,
+            y_mm: chi[1] / MM,
+            z_mm: chi[2] / MM,
+            a_deg: chi[3] / DEG,
+            b_deg: chi[4] / DEG,
+            c_deg: chi[5] / DEG,
+        }
     }
 }
 
@@ -150,18 +157,20 @@ pub fn cell_to_json(cell: &Cell) -> String {
 
 impl CellFile {
     pub fn to_cell(&self) -> Result<Cell, DomainError> {
-        let model = RobotSpec::from_json_value(&self.robot).and_then(|r| r.to_model()).map_err(|e| e.within("robot"))?;
+        let model =
+            RobotSpec::from_json_value(&self.robot).and_then(|r| r.to_model()).map_err(|e| e.within("robot"))?;
         let base_guess = self.base_guess.as_ref().map(|b| b.to_si("base_guess")).transpose()?;
         let artefact = match &self.artefact {
             None => None,
             Some(a) => {
                 let d = &a.distances_mm;
-                let triangle = BallTriangle::from_distances(d.d12 * MM, d.d13 * MM, d.d23 * MM).map_err(|e| match e {
-                    ArtefactError::Distance { field, reason } => {
-                        DomainError::new(format!("artefact.distances_mm.{field}"), reason)
-                    }
-                    other => DomainError::new("artefact.distances_mm", other.to_string()),
-                })?;
+                let triangle =
+                    BallTriangle::from_distances(d.d12 * MM, d.d13 * MM, d.d23 * MM).map_err(|e| match e {
+                        ArtefactError::Distance { field, reason } => {
+                            DomainError::new(format!("artefact.distances_mm.{field}"), reason)
+                        }
+                        other => DomainError::new("artefact.distances_mm", other.to_string()),
+                    })?;
                 let diameter = finite(a.ball_diameter_mm, "artefact.ball_diameter_mm")?;
                 if diameter <= 0.0 {
                     return Err(DomainError::new("artefact.ball_diameter_mm", "must be positive"));
@@ -213,7 +222,11 @@ impl CellFile {
             base_guess: c.base_guess.as_ref().map(PoseXyzAbc::from_si),
             artefact: c.artefact.as_ref().map(|a| ArtefactSpec {
                 kind: ArtefactKind::BallTriangle,
-                distances_mm: Distances { d12: a.triangle.d12 / MM, d13: a.triangle.d13 / MM, d23: a.triangle.d23 / MM },
+                distances_mm: Distances {
+                    d12: a.triangle.d12 / MM,
+                    d13: a.triangle.d13 / MM,
+                    d23: a.triangle.d23 / MM,
+                },
                 ball_diameter_mm: a.ball_diameter / MM,
             }),
             sessions: c
@@ -266,7 +279,9 @@ fn measurement(
             }
             Observation::Ball(k)
         }
-        (Some(_), None, Some(_)) => return Err(DomainError::new("rotation_deg", "only a measured position can carry a rotation")),
+        (Some(_), None, Some(_)) => {
+            return Err(DomainError::new("rotation_deg", "only a measured position can carry a rotation"));
+        }
         (None, Some(p), rot) => {
             if instrument == Instrument::TriCal {
                 return Err(DomainError::new("position_mm", "a trical session measures balls: give ball"));
@@ -376,16 +391,44 @@ mod tests {
             assert!(e.reason.contains(needle), "{e}");
         };
         let m0 = "sessions[0] \"trical-1\".measurements[0]";
-        check(&|v| v["sessions"][0]["measurements"][0]["joints_deg"] = json!([0, 1, 2]), &format!("{m0}.joints_deg"), "expected 6");
-        check(&|v| v["sessions"][0]["measurements"][0]["joints_deg"][4] = json!(150.0), &format!("{m0}.joints_deg[4]"), "outside");
-        check(&|v| v["sessions"][0]["measurements"][0]["ball"] = json!(4), &format!("{m0}.ball"), "not on the artefact");
-        check(&|v| v["sessions"][0]["measurements"][0]["approach"] = json!([1, 2, 1, 1, 1, 1]), &format!("{m0}.approach[1]"), "-1, 0 or 1");
-        check(&|v| v["sessions"][0]["measurements"][0]["temperature_c"] = json!(900.0), &format!("{m0}.temperature_c"), "plausible");
-        check(&|v| v["sessions"][1]["measurements"][0]["ball"] = json!(1), "sessions[1] \"tracker-1\".measurements[0].ball", "not both");
+        check(
+            &|v| v["sessions"][0]["measurements"][0]["joints_deg"] = json!([0, 1, 2]),
+            &format!("{m0}.joints_deg"),
+            "expected 6",
+        );
+        check(
+            &|v| v["sessions"][0]["measurements"][0]["joints_deg"][4] = json!(150.0),
+            &format!("{m0}.joints_deg[4]"),
+            "outside",
+        );
+        check(
+            &|v| v["sessions"][0]["measurements"][0]["ball"] = json!(4),
+            &format!("{m0}.ball"),
+            "not on the artefact",
+        );
+        check(
+            &|v| v["sessions"][0]["measurements"][0]["approach"] = json!([1, 2, 1, 1, 1, 1]),
+            &format!("{m0}.approach[1]"),
+            "-1, 0 or 1",
+        );
+        check(
+            &|v| v["sessions"][0]["measurements"][0]["temperature_c"] = json!(900.0),
+            &format!("{m0}.temperature_c"),
+            "plausible",
+        );
+        check(
+            &|v| v["sessions"][1]["measurements"][0]["ball"] = json!(1),
+            "sessions[1] \"tracker-1\".measurements[0].ball",
+            "not both",
+        );
         check(&|v| v["sessions"][1]["name"] = json!("trical-1"), "sessions[1] \"trical-1\".name", "another session");
         check(&|v| v["artefact"]["distances_mm"]["d23"] = json!(700.0), "artefact.distances_mm", "impossible");
         check(&|v| v["artefact"]["distances_mm"]["d12"] = json!(-1.0), "artefact.distances_mm.d12", "positive");
-        check(&|v| v["sessions"][0]["tool"]["mass_kg"] = json!(-2.0), "sessions[0] \"trical-1\".tool.mass_kg", "negative");
+        check(
+            &|v| v["sessions"][0]["tool"]["mass_kg"] = json!(-2.0),
+            "sessions[0] \"trical-1\".tool.mass_kg",
+            "negative",
+        );
         // Unknown keys and JSON-level errors carry serde's path.
         let mut v = good();
         v["sessions"][0]["measurements"][0]["colour"] = json!("red");

@@ -112,13 +112,24 @@ impl ParameterSetFile {
         let mut seen = HashSet::new();
         for (i, e) in self.parameters.iter().enumerate() {
             let path = |f: &str| format!("parameters[{i}].{f}");
-            let Some(idx) = set.layout.find(&e.name) else {
-                let reason = match Param::parse(&e.name) {
-                    Some(_) => format!("'{}' is not a parameter of robot '{}'", e.name, set.model.name),
-                    None => format!("unknown parameter name '{}'", e.name),
-                };
-                return Err(DomainError::new(path("name"), reason));
+            let idx = match (set.layout.find(&e.name), Param::parse(&e.name)) {
+                (Some(idx), _) => idx,
+                // An effect term (cyclic, backlash, coupling, cubic compliance, thermal) joins the set.
+                (None, Some(p)) if set.layout.admits(p) => set.extend(&[p])[0],
+                (None, Some(_)) => {
+                    return Err(DomainError::new(
+                        path("name"),
+                        format!("'{}' is not a parameter of robot '{}'", e.name, set.model.name),
+                    ));
+                }
+                (None, None) => {
+                    return Err(DomainError::new(path("name"), format!("unknown parameter name '{}'", e.name)));
+                }
             };
+            if doc.std.len() < set.values.len() {
+                doc.std.resize(set.values.len(), None);
+                doc.status.resize(set.values.len(), None);
+            }
             if !seen.insert(idx) {
                 return Err(DomainError::new(path("name"), format!("'{}' is listed twice", e.name)));
             }
@@ -216,6 +227,8 @@ mod tests {
         assert_eq!(e.path, "parameters[1].name");
         let e = doc(json!([{"name": "beta3", "value": 0.0}]));
         assert!(e.reason.contains("not a parameter"), "{e}");
+        let e = doc(json!([{"name": "cyc7_h1_sin", "value": 0.0}]));
+        assert!(e.reason.contains("not a parameter"), "{e}");
         let e = doc(json!([{"name": "a2", "value": 270.1, "unit": "m"}]));
         assert_eq!(e.path, "parameters[0].unit");
         let e = doc(json!([{"name": "a2", "value": 270.1, "nominal": 280.0}]));
@@ -228,6 +241,21 @@ mod tests {
         assert!(e.reason.contains("parametres"));
         let e = ParameterSetDoc::from_json(r#"{"robot": {"name": "x", "joints": []}}"#).unwrap_err();
         assert_eq!(e.path, "robot.joints");
+    }
+
+    #[test]
+    fn effect_terms_join_the_set_and_round_trip() {
+        let text = json!({"robot": {"preset": "irb120"}, "parameters": [
+            {"name": "cyc2_h1_sin", "value": 0.01, "unit": "deg"},
+            {"name": "coupling5_6", "value": 0.001},
+            {"name": "thermal_alpha", "value": 23.0, "unit": "ppm/K"}]})
+        .to_string();
+        let d = ParameterSetDoc::from_json(&text).unwrap();
+        assert_eq!(d.set.values.len(), 46);
+        assert!((d.set.value(Param::Thermal).unwrap() - 23e-6).abs() < 1e-18);
+        let back = ParameterSetDoc::from_json(&d.to_json_pretty()).unwrap();
+        assert_eq!(back.set.layout, d.set.layout);
+        assert_eq!(back.set.values, d.set.values);
     }
 
     #[test]

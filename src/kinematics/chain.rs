@@ -10,9 +10,10 @@ use nalgebra::{Matrix3, Vector3};
 
 use super::frame::{Frame, rot_zyx};
 use super::model::{MAX_JOINTS, RobotModel};
-use super::params::{JointTerm, Param, ParamLayout};
+use super::params::{JointTerm, Param, ParamLayout, REFERENCE_TEMPERATURE_C};
 
-/// Joint readings and the gravity holding torques at them, for one configuration.
+/// Everything logged with one configuration that the model can depend on: joint readings, the
+/// gravity holding torques at them, the approach direction of each joint and the temperature.
 /// Torques are an input because they are computed once from the nominal model (§4.2.1 step 1).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct JointState {
@@ -20,12 +21,21 @@ pub struct JointState {
     pub q: [f64; MAX_JOINTS],
     /// Holding torques τ(q), N·m (zero when compliance is not modelled).
     pub tau: [f64; MAX_JOINTS],
+    /// Direction of each joint's last motion (−1, 0, +1; 0 when unknown).
+    pub approach: [f64; MAX_JOINTS],
+    /// Robot temperature, °C (the reference temperature when unknown).
+    pub temperature_c: f64,
 }
 
 impl JointState {
-    /// A state from joint readings; torques zero.
+    /// A state from joint readings; torques zero, approach unknown, reference temperature.
     pub fn new(q: &[f64]) -> Self {
-        let mut s = Self { q: [0.0; MAX_JOINTS], tau: [0.0; MAX_JOINTS] };
+        let mut s = Self {
+            q: [0.0; MAX_JOINTS],
+            tau: [0.0; MAX_JOINTS],
+            approach: [0.0; MAX_JOINTS],
+            temperature_c: REFERENCE_TEMPERATURE_C,
+        };
         s.q[..q.len()].copy_from_slice(q);
         s
     }
@@ -141,6 +151,10 @@ pub struct Chain {
     tool_chi: [f64; 6],
     tool: Frame,
     compliance: [f64; MAX_JOINTS],
+    /// Joint-angle terms other than linear compliance: (joint, term, value).
+    terms: Vec<(usize, JointTerm, f64)>,
+    /// Thermal expansion coefficient of the link lengths, 1/K.
+    thermal: f64,
 }
 
 impl Chain {
@@ -166,6 +180,8 @@ impl Chain {
             tool_chi: [0.0; 6],
             tool: Frame::identity(),
             compliance: [0.0; MAX_JOINTS],
+            terms: Vec::new(),
+            thermal: 0.0,
         };
         for (p, &v) in layout.params().iter().zip(values) {
             match *p {
@@ -175,8 +191,10 @@ impl Chain {
                 Param::Theta(j) => chain.rows[j].theta = v,
                 Param::Beta(j) => beta[j] = Some(v),
                 Param::Joint(j, JointTerm::Compliance) => chain.compliance[j] = v,
+                Param::Joint(j, term) => chain.terms.push((j, term, v)),
                 Param::Base(k) => chain.base_chi[k] = v,
                 Param::Tool(k) => chain.tool_chi[k] = v,
+                Param::Thermal => chain.thermal = v,
             }
         }
         for j in 0..n {
@@ -232,33 +250,91 @@ impl Chain {
         c
     }
 
-    /// The DH joint angles θ_j = q_j + offset_j + c_j·τ_j.
+    /// The DH joint angles θ_j = q_j + offset_j + c_j·τ_j + Σ (joint terms of j).
     #[inline]
     pub fn joint_angles(&self, s: &JointState) -> [f64; MAX_JOINTS] {
         let mut th = [0.0; MAX_JOINTS];
         for j in 0..self.n {
             th[j] = s.q[j] + self.rows[j].theta + self.compliance[j] * s.tau[j];
         }
+        for &(j, term, v) in &self.terms {
+            th[j] += v * basis(term, j, s);
+        }
         th
+    }
+
+    /// ∂θ_i/∂q_k (row i, column k): the identity plus what the joint terms add. `dtau` is
+    /// ∂τ/∂q (only read when a term depends on the torques).
+    pub fn angle_jacobian(
+        &self,
+        s: &JointState,
+        dtau: &[[f64; MAX_JOINTS]; MAX_JOINTS],
+    ) -> [[f64; MAX_JOINTS]; MAX_JOINTS] {
+        let mut d = [[0.0; MAX_JOINTS]; MAX_JOINTS];
+        for i in 0..self.n {
+            d[i][i] = 1.0;
+            if self.compliance[i] != 0.0 {
+                for k in 0..self.n {
+                    d[i][k] += self.compliance[i] * dtau[i][k];
+                }
+            }
+        }
+        for &(j, term, v) in &self.terms {
+            match term {
+                JointTerm::Compliance => unreachable!("linear compliance is kept apart"),
+                JointTerm::ComplianceCubic => {
+                    let w = 3.0 * v * s.tau[j] * s.tau[j];
+                    for k in 0..self.n {
+                        d[j][k] += w * dtau[j][k];
+                    }
+                }
+                JointTerm::Cyclic { harmonic, cosine } => {
+                    let h = harmonic as f64;
+                    let (sn, cs) = (h * s.q[j]).sin_cos();
+                    d[j][j] += v * h * if cosine { -sn } else { cs };
+                }
+                JointTerm::Backlash => {}
+                JointTerm::Coupling { from } => d[j][from] += v,
+            }
+        }
+        d
+    }
+
+    /// Whether θ depends on the gravity torques (so callers must supply τ and, for IK, ∂τ/∂q).
+    pub fn uses_torques(&self) -> bool {
+        self.compliance.iter().any(|&c| c != 0.0)
+            || self.terms.iter().any(|&(_, t, v)| t == JointTerm::ComplianceCubic && v != 0.0)
+    }
+
+    /// Length scale 1 + α·(T − 20 °C) of a state.
+    #[inline]
+    pub fn length_scale(&self, s: &JointState) -> f64 {
+        1.0 + self.thermal * (s.temperature_c - REFERENCE_TEMPERATURE_C)
     }
 
     /// T_T^W at a configuration.
     pub fn fk(&self, s: &JointState) -> Frame {
-        self.fk_theta(&self.joint_angles(s))
+        self.fk_theta_scaled(&self.joint_angles(s), self.length_scale(s))
     }
 
-    /// TCP pose from DH joint angles θ (offsets and deflections already applied).
+    /// TCP pose from DH joint angles θ (offsets and deflections already applied), at the
+    /// reference temperature.
     pub fn fk_theta(&self, theta: &[f64; MAX_JOINTS]) -> Frame {
+        self.fk_theta_scaled(theta, 1.0)
+    }
+
+    /// TCP pose from DH joint angles with every link length scaled by `scale`.
+    pub fn fk_theta_scaled(&self, theta: &[f64; MAX_JOINTS], scale: f64) -> Frame {
         let mut ax = Axes::from_matrix(&self.base.r);
         let mut o = self.base.t;
         for j in 0..self.n {
             let r = &self.rows[j];
-            o += ax.x * r.a;
+            o += ax.x * (r.a * scale);
             ax.rot_x(r.ca, r.sa);
             if r.has_beta {
                 ax.rot_y(r.cb, r.sb);
             }
-            o += ax.z * r.d;
+            o += ax.z * (r.d * scale);
             let (s, c) = theta[j].sin_cos();
             ax.rot_z(c, s);
         }
@@ -266,8 +342,14 @@ impl Chain {
         flange.compose(&self.tool)
     }
 
-    /// Forward kinematics recording the world line of every elementary motion.
+    /// Forward kinematics recording the world line of every elementary motion (reference
+    /// temperature).
     pub fn trace(&self, theta: &[f64; MAX_JOINTS]) -> Trace {
+        self.trace_scaled(theta, 1.0)
+    }
+
+    /// [`Self::trace`] with every link length scaled by `scale`.
+    pub fn trace_scaled(&self, theta: &[f64; MAX_JOINTS], scale: f64) -> Trace {
         let z0 = Vector3::zeros();
         let mut t = Trace {
             n: self.n,
@@ -287,14 +369,14 @@ impl Chain {
             let r = &self.rows[j];
             t.x_prev[j] = ax.x;
             t.o_prev[j] = o;
-            o += ax.x * r.a;
+            o += ax.x * (r.a * scale);
             ax.rot_x(r.ca, r.sa);
             t.y_beta[j] = ax.y;
             t.o_beta[j] = o;
             if r.has_beta {
                 ax.rot_y(r.cb, r.sb);
             }
-            o += ax.z * r.d;
+            o += ax.z * (r.d * scale);
             t.z[j] = ax.z;
             t.o[j] = o;
             let (s, c) = theta[j].sin_cos();
@@ -324,7 +406,8 @@ impl Chain {
     /// a tall stacked matrix directly. Returns the TCP frame.
     pub fn jacobian_into(&self, s: &JointState, layout: &ParamLayout, rows: Rows, out: &mut [f64], ld: usize) -> Frame {
         let theta = self.joint_angles(s);
-        let t = self.trace(&theta);
+        let scale = self.length_scale(s);
+        let t = self.trace_scaled(&theta, scale);
         let p = t.tcp.t;
         let nr = rows as usize;
         let m = layout.len();
@@ -334,11 +417,20 @@ impl Chain {
         for (c, param) in layout.params().iter().enumerate() {
             let col: [f64; 6] = match *param {
                 Param::Alpha(j) => rot_col(&t.x_prev[j], &t.o_prev[j], &p),
-                Param::A(j) => trans_col(&t.x_prev[j]),
+                Param::A(j) => trans_col(&(t.x_prev[j] * scale)),
                 Param::Beta(j) => rot_col(&t.y_beta[j], &t.o_beta[j], &p),
                 Param::Theta(j) => rot_col(&t.z[j], &t.o[j], &p),
-                Param::D(j) => trans_col(&t.z[j]),
-                Param::Joint(j, JointTerm::Compliance) => scale(rot_col(&t.z[j], &t.o[j], &p), s.tau[j]),
+                Param::D(j) => trans_col(&(t.z[j] * scale)),
+                Param::Joint(j, term) => times(rot_col(&t.z[j], &t.o[j], &p), basis(term, j, s)),
+                Param::Thermal => {
+                    // ∂p/∂α = (T − 20)·Σ_j (a_j·x_{j−1} + d_j·z_j): every length grows together.
+                    let dt = s.temperature_c - REFERENCE_TEMPERATURE_C;
+                    let mut v = Vector3::zeros();
+                    for j in 0..self.n {
+                        v += t.x_prev[j] * self.rows[j].a + t.z[j] * self.rows[j].d;
+                    }
+                    trans_col(&(v * dt))
+                }
                 Param::Base(k) => {
                     let origin = self.base.t;
                     match k {
@@ -385,8 +477,23 @@ fn trans_col(u: &Vector3<f64>) -> [f64; 6] {
     [u.x, u.y, u.z, 0.0, 0.0, 0.0]
 }
 
+/// φ of a joint term at a state: what its value multiplies to give Δθ_j.
+#[inline]
+pub fn basis(term: JointTerm, j: usize, s: &JointState) -> f64 {
+    match term {
+        JointTerm::Compliance => s.tau[j],
+        JointTerm::ComplianceCubic => s.tau[j] * s.tau[j] * s.tau[j],
+        JointTerm::Cyclic { harmonic, cosine } => {
+            let a = harmonic as f64 * s.q[j];
+            if cosine { a.cos() } else { a.sin() }
+        }
+        JointTerm::Backlash => s.approach[j],
+        JointTerm::Coupling { from } => s.q[from],
+    }
+}
+
 #[inline(always)]
-fn scale(mut c: [f64; 6], k: f64) -> [f64; 6] {
+fn times(mut c: [f64; 6], k: f64) -> [f64; 6] {
     for v in &mut c {
         *v *= k;
     }
@@ -401,8 +508,8 @@ mod tests {
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
-    /// FK as the literal product of 4×4-style elementary transforms (eq. 3.2, 3.10): an
-    /// independent second implementation.
+    /// FK as the literal product of elementary transforms (eq. 3.2, 3.10), every effect term
+    /// written out from its definition: an independent second implementation.
     fn fk_reference(model: &RobotModel, layout: &ParamLayout, values: &[f64], s: &JointState) -> Frame {
         let get = |p: Param| layout.index_of(p).map(|i| values[i]);
         let tx = |a: f64| Frame::new(Matrix3::identity(), Vector3::new(a, 0.0, 0.0));
@@ -415,31 +522,61 @@ mod tests {
             }
             c
         };
+        let grow = 1.0 + get(Param::Thermal).unwrap_or(0.0) * (s.temperature_c - 20.0);
         let mut t = Frame::from_xyzabc(&chi(Param::Base));
         for j in 0..model.dof() {
-            let th = s.q[j]
-                + get(Param::Theta(j)).unwrap()
-                + get(Param::Joint(j, JointTerm::Compliance)).unwrap() * s.tau[j];
-            t = t.compose(&r(rot_x(get(Param::Alpha(j)).unwrap()))).compose(&tx(get(Param::A(j)).unwrap()));
+            let mut th = s.q[j] + get(Param::Theta(j)).unwrap();
+            for (i, p) in layout.params().iter().enumerate() {
+                let v = values[i];
+                th += match *p {
+                    Param::Joint(k, JointTerm::Compliance) if k == j => v * s.tau[j],
+                    Param::Joint(k, JointTerm::ComplianceCubic) if k == j => v * s.tau[j].powi(3),
+                    Param::Joint(k, JointTerm::Cyclic { harmonic, cosine }) if k == j => {
+                        let a = harmonic as f64 * s.q[j];
+                        v * if cosine { a.cos() } else { a.sin() }
+                    }
+                    Param::Joint(k, JointTerm::Backlash) if k == j => v * s.approach[j],
+                    Param::Joint(k, JointTerm::Coupling { from }) if k == j => v * s.q[from],
+                    _ => 0.0,
+                };
+            }
+            t = t.compose(&r(rot_x(get(Param::Alpha(j)).unwrap()))).compose(&tx(get(Param::A(j)).unwrap() * grow));
             if let Some(b) = get(Param::Beta(j)) {
                 t = t.compose(&r(rot_y(b)));
             }
-            t = t.compose(&r(rot_z(th))).compose(&tz(get(Param::D(j)).unwrap()));
+            t = t.compose(&r(rot_z(th))).compose(&tz(get(Param::D(j)).unwrap() * grow));
         }
         t.compose(&Frame::from_xyzabc(&chi(Param::Tool)))
     }
 
+    /// The full layout plus one of every effect term.
+    fn extended_layout(model: &RobotModel) -> ParamLayout {
+        let mut l = ParamLayout::full(model);
+        l.extend(&[
+            Param::Joint(1, JointTerm::ComplianceCubic),
+            Param::Joint(1, JointTerm::Cyclic { harmonic: 1, cosine: false }),
+            Param::Joint(1, JointTerm::Cyclic { harmonic: 2, cosine: true }),
+            Param::Joint(2, JointTerm::Cyclic { harmonic: 17, cosine: false }),
+            Param::Joint(1, JointTerm::Backlash),
+            Param::Joint(5, JointTerm::Coupling { from: 4 }),
+            Param::Thermal,
+        ]);
+        l
+    }
+
     fn random_values(model: &RobotModel, layout: &ParamLayout, rng: &mut ChaCha8Rng) -> Vec<f64> {
-        let nominal =
-            crate::kinematics::ParameterSet::nominal(model.clone(), crate::kinematics::Tool::flange(), [0.0; 6]);
+        let nominal = layout.nominal_values(model, &crate::kinematics::Tool::flange(), &[0.0; 6]);
         layout
             .params()
             .iter()
-            .zip(&nominal.nominal)
+            .zip(&nominal)
             .map(|(p, &v)| match p.unit() {
                 crate::kinematics::params::Unit::Mm => v + rng.random_range(-0.05..0.05),
                 crate::kinematics::params::Unit::Deg => v + rng.random_range(-0.3..0.3),
                 crate::kinematics::params::Unit::DegPerNm => rng.random_range(-1e-3..1e-3),
+                crate::kinematics::params::Unit::DegPerNm3 => rng.random_range(-1e-7..1e-7),
+                crate::kinematics::params::Unit::Ratio => rng.random_range(-1e-2..1e-2),
+                crate::kinematics::params::Unit::PpmPerK => rng.random_range(-5e-5..5e-5),
             })
             .collect()
     }
@@ -447,14 +584,19 @@ mod tests {
     fn random_state(model: &RobotModel, rng: &mut ChaCha8Rng) -> JointState {
         let q: Vec<f64> = model.links.iter().map(|l| rng.random_range(l.limits[0]..l.limits[1])).collect();
         let tau: Vec<f64> = (0..model.dof()).map(|_| rng.random_range(-30.0..30.0)).collect();
-        JointState::with_torques(&q, &tau)
+        let mut s = JointState::with_torques(&q, &tau);
+        for a in s.approach.iter_mut().take(model.dof()) {
+            *a = rng.random_range(-1..=1) as f64;
+        }
+        s.temperature_c = rng.random_range(15.0..35.0);
+        s
     }
 
     #[test]
     fn fk_matches_the_literal_matrix_product() {
         let mut rng = ChaCha8Rng::seed_from_u64(7);
         for model in [irb120(), ur10()] {
-            let layout = ParamLayout::full(&model);
+            let layout = extended_layout(&model);
             for _ in 0..200 {
                 let mut values = random_values(&model, &layout, &mut rng);
                 for k in 0..6 {
@@ -467,19 +609,20 @@ mod tests {
                 let b = fk_reference(&model, &layout, &values, &s);
                 assert!((a.t - b.t).norm() < 1e-14, "{}", (a.t - b.t).norm());
                 assert!((a.r - b.r).abs().max() < 1e-14);
-                let tr = chain.trace(&chain.joint_angles(&s));
+                let tr = chain.trace_scaled(&chain.joint_angles(&s), chain.length_scale(&s));
                 assert!((tr.tcp.t - a.t).norm() < 1e-15);
             }
         }
     }
 
     /// The identification Jacobian against central differences: ≥ 100 random configurations and
-    /// parameter vectors, every column, relative error ≤ 1e-6.
+    /// parameter vectors, every column (effect terms and thermal scale included), relative error
+    /// ≤ 1e-6.
     #[test]
     fn identification_jacobian_matches_central_differences() {
         let mut rng = ChaCha8Rng::seed_from_u64(11);
         for model in [irb120(), ur10()] {
-            let layout = ParamLayout::full(&model);
+            let layout = extended_layout(&model);
             let m = layout.len();
             let mut worst: f64 = 0.0;
             for _ in 0..120 {
@@ -494,7 +637,9 @@ mod tests {
                 let f0 = chain.jacobian_into(&s, &layout, Rows::Pose, &mut jac, 6);
                 assert!((f0.t - chain.fk(&s).t).norm() < 1e-15);
                 for c in 0..m {
-                    let h = 1e-6;
+                    // A step that moves the TCP by ~1 µm whatever the column's unit.
+                    let colmax = jac[c * 6..c * 6 + 6].iter().fold(0.0f64, |a, v| a.max(v.abs()));
+                    let h = 1e-6 / colmax.max(1.0);
                     let mut vp = values.clone();
                     vp[c] += h;
                     let mut vm = values.clone();
@@ -521,6 +666,66 @@ mod tests {
                 }
             }
             assert!(worst < 1e-6);
+        }
+    }
+}
+
+#[cfg(test)]
+mod angle_jacobian_tests {
+    use super::*;
+    use crate::kinematics::model::irb120;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// ∂θ/∂q against central differences of θ(q), with τ(q) = a smooth test function so the
+    /// torque-driven terms are exercised.
+    #[test]
+    fn angle_jacobian_matches_differences() {
+        let model = irb120();
+        let mut layout = ParamLayout::full(&model);
+        layout.extend(&[
+            Param::Joint(1, JointTerm::ComplianceCubic),
+            Param::Joint(1, JointTerm::Cyclic { harmonic: 2, cosine: false }),
+            Param::Joint(3, JointTerm::Cyclic { harmonic: 17, cosine: true }),
+            Param::Joint(5, JointTerm::Coupling { from: 4 }),
+            Param::Joint(2, JointTerm::Backlash),
+        ]);
+        let mut values = layout.nominal_values(&model, &crate::kinematics::Tool::flange(), &[0.0; 6]);
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        for (p, v) in layout.params().iter().zip(values.iter_mut()) {
+            if let Param::Joint(..) = p {
+                *v = rng.random_range(-1e-3..1e-3);
+            }
+        }
+        let chain = Chain::new(&model, &layout, &values);
+        // τ_i(q) = Σ_k w_ik sin(q_k): known derivative.
+        let w: Vec<Vec<f64>> = (0..6).map(|_| (0..6).map(|_| rng.random_range(-20.0..20.0)).collect()).collect();
+        let tau = |q: &[f64]| -> Vec<f64> { (0..6).map(|i| (0..6).map(|k| w[i][k] * q[k].sin()).sum()).collect() };
+        for _ in 0..50 {
+            let q: Vec<f64> = (0..6).map(|_| rng.random_range(-2.0..2.0)).collect();
+            let mut dtau = [[0.0; MAX_JOINTS]; MAX_JOINTS];
+            for i in 0..6 {
+                for k in 0..6 {
+                    dtau[i][k] = w[i][k] * q[k].cos();
+                }
+            }
+            let s = JointState::with_torques(&q, &tau(&q));
+            let d = chain.angle_jacobian(&s, &dtau);
+            for k in 0..6 {
+                let h = 1e-6;
+                let mut qp = q.clone();
+                qp[k] += h;
+                let mut qm = q.clone();
+                qm[k] -= h;
+                let tp = chain
+                    .joint_angles(&JointState { approach: s.approach, ..JointState::with_torques(&qp, &tau(&qp)) });
+                let tm = chain
+                    .joint_angles(&JointState { approach: s.approach, ..JointState::with_torques(&qm, &tau(&qm)) });
+                for i in 0..6 {
+                    let fd = (tp[i] - tm[i]) / (2.0 * h);
+                    assert!((d[i][k] - fd).abs() < 1e-8 * (1.0 + fd.abs()), "dθ{i}/dq{k}: {} vs {fd}", d[i][k]);
+                }
+            }
         }
     }
 }

@@ -70,6 +70,19 @@ pub fn solve(
     seed: &[f64],
     opts: &IkOptions,
 ) -> Result<IkSolution, IkError> {
+    solve_in(chain, gravity, target, seed, &JointState::new(&[]), opts)
+}
+
+/// [`solve`] under given conditions: the approach directions and temperature of `conditions`
+/// apply to every iterate (its joints and torques are ignored).
+pub fn solve_in(
+    chain: &Chain,
+    gravity: &GravityModel,
+    target: &Frame,
+    seed: &[f64],
+    conditions: &JointState,
+    opts: &IkOptions,
+) -> Result<IkSolution, IkError> {
     let n = chain.dof();
     if target.t.iter().chain(target.r.iter()).any(|v| !v.is_finite()) {
         return Err(IkError::InvalidTarget("non-finite pose".into()));
@@ -79,8 +92,7 @@ pub fn solve(
     }
     let mut q = [0.0; MAX_JOINTS];
     q[..n].copy_from_slice(&seed[..n]);
-    let compliant = chain.compliance().iter().any(|&c| c != 0.0);
-    let c = chain.compliance();
+    let compliant = chain.uses_torques();
 
     // The last accepted point: joints, error, merit, Jacobian.
     let mut best_q = q;
@@ -96,7 +108,8 @@ pub fn solve(
         } else {
             ([0.0; MAX_JOINTS], [[0.0; MAX_JOINTS]; MAX_JOINTS])
         };
-        let trace = chain.trace(&chain.joint_angles(&JointState { q, tau }));
+        let state = JointState { q, tau, ..*conditions };
+        let trace = chain.trace_scaled(&chain.joint_angles(&state), chain.length_scale(&state));
         let dp = target.t - trace.tcp.t;
         let dr = rotation_vector(&(target.r * trace.tcp.r.transpose()));
         let (ep, er) = (dp.norm(), dr.norm());
@@ -109,16 +122,15 @@ pub fn solve(
             best = (ep, er, merit);
             best_e = Vector6::new(dp.x, dp.y, dp.z, dr.x, dr.y, dr.z);
             let jt = chain.joint_jacobian(&trace);
-            // J_q[:, k] = J_θ[:, k] + Σ_i J_θ[:, i]·c_i·∂τ_i/∂q_k
+            // J_q[:, k] = Σ_i J_θ[:, i]·∂θ_i/∂q_k
+            let d = chain.angle_jacobian(&state, &dtau);
             for k in 0..n {
-                best_j[k] = jt[k];
-                if compliant {
-                    for i in 0..n {
-                        let w = c[i] * dtau[i][k];
-                        if w != 0.0 {
-                            for r in 0..6 {
-                                best_j[k][r] += jt[i][r] * w;
-                            }
+                best_j[k] = [0.0; 6];
+                for i in 0..n {
+                    let w = d[i][k];
+                    if w != 0.0 {
+                        for r in 0..6 {
+                            best_j[k][r] += jt[i][r] * w;
                         }
                     }
                 }

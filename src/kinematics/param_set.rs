@@ -40,6 +40,17 @@ impl ParameterSet {
         self.layout.index_of(p).map(|i| self.nominal[i])
     }
 
+    /// Attach further parameters (effect terms) with nominal and value zero; returns their
+    /// indices. Parameters already present keep their values.
+    pub fn extend(&mut self, extra: &[Param]) -> Vec<usize> {
+        let before = self.layout.len();
+        let idx = self.layout.extend(extra);
+        let added = self.layout.len() - before;
+        self.nominal.extend(std::iter::repeat_n(0.0, added));
+        self.values.extend(std::iter::repeat_n(0.0, added));
+        idx
+    }
+
     /// Set a parameter's value; false when the model has no such parameter.
     pub fn set(&mut self, p: Param, v: f64) -> bool {
         match self.layout.index_of(p) {

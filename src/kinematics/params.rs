@@ -17,11 +17,20 @@ use super::model::{RobotModel, Tool};
 /// The six components of a pose vector χ = (x, y, z, a, b, c).
 pub const POSE_COMPONENTS: [&str; 6] = ["x", "y", "z", "a", "b", "c"];
 
-/// What a joint-angle parameter multiplies.
+/// What a joint-angle parameter multiplies: Δθ_j = value · φ(sample).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum JointTerm {
-    /// Linear gear compliance: Δθ_j = c_j · τ_j(q), τ the static holding torque (§3.6.2).
+    /// Linear gear compliance: φ = τ_j(q), the static holding torque (§3.6.2).
     Compliance,
+    /// Cubic (hardening/softening) compliance: φ = τ_j³.
+    ComplianceCubic,
+    /// Cyclic error of harmonic h (eccentricity h = 1, 2; gear mesh e.g. 17):
+    /// φ = sin(h·q_j), or cos(h·q_j) when `cosine`.
+    Cyclic { harmonic: u8, cosine: bool },
+    /// Backlash: φ = the logged approach direction of joint j (−1, 0, +1).
+    Backlash,
+    /// Coupling from another joint: φ = q_from (e.g. axis 5 → 6 on a wrist with coupled gears).
+    Coupling { from: usize },
 }
 
 /// One scalar parameter of the model. Joint indices are 0-based internally; names are Craig's.
@@ -43,7 +52,13 @@ pub enum Param {
     Base(usize),
     /// Component k of T_T^6: `tool_x` …
     Tool(usize),
+    /// Thermal expansion coefficient of the link lengths (every a and d scales by
+    /// 1 + α·(T − 20 °C)): `thermal_alpha`.
+    Thermal,
 }
+
+/// Reference temperature of the nominal link lengths (ISO 1), °C.
+pub const REFERENCE_TEMPERATURE_C: f64 = 20.0;
 
 /// File/wire unit of a parameter.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -51,6 +66,12 @@ pub enum Unit {
     Mm,
     Deg,
     DegPerNm,
+    /// deg/(N·m)³, for cubic compliance.
+    DegPerNm3,
+    /// A plain ratio (rad per rad).
+    Ratio,
+    /// Parts per million per kelvin (µm/(m·K)).
+    PpmPerK,
 }
 
 impl Unit {
@@ -59,6 +80,9 @@ impl Unit {
             Unit::Mm => "mm",
             Unit::Deg => "deg",
             Unit::DegPerNm => "deg/(N·m)",
+            Unit::DegPerNm3 => "deg/(N·m)³",
+            Unit::Ratio => "rad/rad",
+            Unit::PpmPerK => "ppm/K",
         }
     }
 
@@ -68,6 +92,9 @@ impl Unit {
             "mm" => Some(Unit::Mm),
             "deg" => Some(Unit::Deg),
             "deg/(N·m)" | "deg/(N*m)" | "deg/Nm" | "deg/(Nm)" => Some(Unit::DegPerNm),
+            "deg/(N·m)³" | "deg/(N*m)^3" | "deg/Nm3" => Some(Unit::DegPerNm3),
+            "rad/rad" | "deg/deg" | "1" => Some(Unit::Ratio),
+            "ppm/K" | "um/(m*K)" | "µm/(m·K)" => Some(Unit::PpmPerK),
             _ => None,
         }
     }
@@ -76,7 +103,9 @@ impl Unit {
     pub fn to_si(self) -> f64 {
         match self {
             Unit::Mm => 1e-3,
-            Unit::Deg | Unit::DegPerNm => std::f64::consts::PI / 180.0,
+            Unit::Deg | Unit::DegPerNm | Unit::DegPerNm3 => std::f64::consts::PI / 180.0,
+            Unit::Ratio => 1.0,
+            Unit::PpmPerK => 1e-6,
         }
     }
 }
@@ -87,6 +116,10 @@ impl Param {
             Param::A(_) | Param::D(_) => Unit::Mm,
             Param::Alpha(_) | Param::Theta(_) | Param::Beta(_) => Unit::Deg,
             Param::Joint(_, JointTerm::Compliance) => Unit::DegPerNm,
+            Param::Joint(_, JointTerm::ComplianceCubic) => Unit::DegPerNm3,
+            Param::Joint(_, JointTerm::Cyclic { .. } | JointTerm::Backlash) => Unit::Deg,
+            Param::Joint(_, JointTerm::Coupling { .. }) => Unit::Ratio,
+            Param::Thermal => Unit::PpmPerK,
             Param::Base(k) | Param::Tool(k) => {
                 if k < 3 {
                     Unit::Mm
@@ -106,6 +139,41 @@ impl Param {
         if let Some(k) = name.strip_prefix("tool_") {
             return POSE_COMPONENTS.iter().position(|c| *c == k).map(Param::Tool);
         }
+        if name == "thermal_alpha" {
+            return Some(Param::Thermal);
+        }
+        if let Some(rest) = name.strip_prefix("cyc") {
+            // cyc{j}_h{h}_sin | cyc{j}_h{h}_cos
+            let mut parts = rest.split('_');
+            let j = index1(parts.next()?)?;
+            let h: u8 = parts.next()?.strip_prefix('h').and_then(parse_index)?.try_into().ok()?;
+            let cosine = match parts.next()? {
+                "sin" => false,
+                "cos" => true,
+                _ => return None,
+            };
+            if parts.next().is_some() || h == 0 {
+                return None;
+            }
+            return Some(Param::Joint(j, JointTerm::Cyclic { harmonic: h, cosine }));
+        }
+        if let Some(rest) = name.strip_prefix("backlash") {
+            return Some(Param::Joint(index1(rest)?, JointTerm::Backlash));
+        }
+        if let Some(rest) = name.strip_prefix("coupling") {
+            // coupling{from}_{to}: Δθ_to = ε·q_from
+            let (from, to) = rest.split_once('_')?;
+            let (from, to) = (index1(from)?, index1(to)?);
+            if from == to {
+                return None;
+            }
+            return Some(Param::Joint(to, JointTerm::Coupling { from }));
+        }
+        if let Some(rest) = name.strip_prefix('c')
+            && let Some(j) = rest.strip_suffix("_cubic")
+        {
+            return Some(Param::Joint(index1(j)?, JointTerm::ComplianceCubic));
+        }
         let split = name.find(|c: char| c.is_ascii_digit())?;
         let (stem, digits) = name.split_at(split);
         if digits.len() > 1 && digits.starts_with('0') {
@@ -124,6 +192,19 @@ impl Param {
     }
 }
 
+/// A decimal index without a leading zero.
+fn parse_index(s: &str) -> Option<usize> {
+    if s.is_empty() || (s.len() > 1 && s.starts_with('0')) || !s.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    s.parse().ok()
+}
+
+/// A 1-based joint number in a name → 0-based index.
+fn index1(s: &str) -> Option<usize> {
+    parse_index(s).filter(|&i| i >= 1).map(|i| i - 1)
+}
+
 impl fmt::Display for Param {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
@@ -133,6 +214,13 @@ impl fmt::Display for Param {
             Param::Theta(j) => write!(f, "theta{}", j + 1),
             Param::Beta(j) => write!(f, "beta{j}"),
             Param::Joint(j, JointTerm::Compliance) => write!(f, "c{}", j + 1),
+            Param::Joint(j, JointTerm::ComplianceCubic) => write!(f, "c{}_cubic", j + 1),
+            Param::Joint(j, JointTerm::Cyclic { harmonic, cosine }) => {
+                write!(f, "cyc{}_h{harmonic}_{}", j + 1, if cosine { "cos" } else { "sin" })
+            }
+            Param::Joint(j, JointTerm::Backlash) => write!(f, "backlash{}", j + 1),
+            Param::Joint(j, JointTerm::Coupling { from }) => write!(f, "coupling{}_{}", from + 1, j + 1),
+            Param::Thermal => f.write_str("thermal_alpha"),
             Param::Base(k) => write!(f, "base_{}", POSE_COMPONENTS[k]),
             Param::Tool(k) => write!(f, "tool_{}", POSE_COMPONENTS[k]),
         }
@@ -183,6 +271,16 @@ impl ParamLayout {
         self.params.iter().position(|&x| x == p)
     }
 
+    /// Whether a parameter outside the base layout (an effect term) fits this robot.
+    pub fn admits(&self, p: Param) -> bool {
+        match p {
+            Param::Joint(j, JointTerm::Coupling { from }) => j < self.dof && from < self.dof,
+            Param::Joint(j, _) => j < self.dof,
+            Param::Thermal => true,
+            _ => self.index_of(p).is_some(),
+        }
+    }
+
     /// Look a name up; `None` when this robot has no such parameter.
     pub fn find(&self, name: &str) -> Option<usize> {
         Param::parse(name).and_then(|p| self.index_of(p))
@@ -199,7 +297,7 @@ impl ParamLayout {
                 Param::D(j) => model.links[j].d,
                 Param::Theta(j) => model.links[j].theta,
                 Param::Beta(j) => model.links[j].beta.unwrap_or(0.0),
-                Param::Joint(_, JointTerm::Compliance) => 0.0,
+                Param::Joint(..) | Param::Thermal => 0.0,
                 Param::Base(k) => base[k],
                 Param::Tool(k) => tool.tcp[k],
             })
@@ -208,7 +306,11 @@ impl ParamLayout {
 
     /// Append a further parameter block (e.g. extra joint terms for the diagnosis).
     /// Returns the index of each added parameter; parameters already present are not duplicated.
+    /// Panics on a parameter this robot cannot have (a joint beyond its dof).
     pub fn extend(&mut self, extra: &[Param]) -> Vec<usize> {
+        for p in extra {
+            assert!(self.admits(*p), "{p} is not a parameter of a {}-joint robot", self.dof);
+        }
         extra
             .iter()
             .map(|&p| match self.index_of(p) {
@@ -250,7 +352,41 @@ mod tests {
                 assert_eq!(l.find(&p.to_string()), Some(i));
             }
         }
-        for bad in ["d0", "theta0", "c0", "alpha", "alpha01", "gamma1", "base_q", "tool_", "a1x"] {
+        let mut ext = ParamLayout::full(&irb120());
+        let extra = [
+            Param::Joint(1, JointTerm::ComplianceCubic),
+            Param::Joint(1, JointTerm::Cyclic { harmonic: 17, cosine: true }),
+            Param::Joint(2, JointTerm::Cyclic { harmonic: 1, cosine: false }),
+            Param::Joint(1, JointTerm::Backlash),
+            Param::Joint(5, JointTerm::Coupling { from: 4 }),
+            Param::Thermal,
+        ];
+        ext.extend(&extra);
+        let names: Vec<String> = extra.iter().map(|p| p.to_string()).collect();
+        assert_eq!(names, ["c2_cubic", "cyc2_h17_cos", "cyc3_h1_sin", "backlash2", "coupling5_6", "thermal_alpha"]);
+        for p in extra {
+            assert_eq!(Param::parse(&p.to_string()), Some(p));
+            assert!(ext.find(&p.to_string()).is_some());
+        }
+        for bad in [
+            "d0",
+            "theta0",
+            "c0",
+            "alpha",
+            "alpha01",
+            "gamma1",
+            "base_q",
+            "tool_",
+            "a1x",
+            "cyc2_h0_sin",
+            "cyc2_h1",
+            "cyc0_h1_sin",
+            "coupling5_5",
+            "coupling5",
+            "backlash0",
+            "c_cubic",
+            "thermal",
+        ] {
             assert_eq!(Param::parse(bad), None, "{bad}");
         }
         assert_eq!(ParamLayout::full(&irb120()).find("beta3"), None);
