@@ -342,6 +342,31 @@ impl Chain {
         flange.compose(&self.tool)
     }
 
+    /// T_T^W with rigid deformations inserted inside rows: `(row, D)` applies D right after
+    /// that row's Rx(α)·Tx(a) — at the distal end of the previous link, in its axes — before the
+    /// row's β and joint rotation. The simulator uses it for effects no model parameter can
+    /// express (a link bending under load).
+    pub fn fk_deformed(&self, s: &JointState, deformations: &[(usize, Frame)]) -> Frame {
+        let theta = self.joint_angles(s);
+        let scale = self.length_scale(s);
+        let mut f = self.base;
+        for j in 0..self.n {
+            let r = &self.rows[j];
+            let rx = Matrix3::new(1.0, 0.0, 0.0, 0.0, r.ca, -r.sa, 0.0, r.sa, r.ca);
+            f = f.compose(&Frame::new(rx, Vector3::new(r.a * scale, 0.0, 0.0)));
+            for (_, d) in deformations.iter().filter(|(row, _)| *row == j) {
+                f = f.compose(d);
+            }
+            let ry = Matrix3::new(r.cb, 0.0, r.sb, 0.0, 1.0, 0.0, -r.sb, 0.0, r.cb);
+            let (sn, cs) = theta[j].sin_cos();
+            let rz = Matrix3::new(cs, -sn, 0.0, sn, cs, 0.0, 0.0, 0.0, 1.0);
+            let rot = if r.has_beta { ry * rz } else { rz };
+            // [Ry(β)]·Rz(θ)·Tz(d): the translation is the rotated z axis times d.
+            f = f.compose(&Frame::new(rot, rot * Vector3::new(0.0, 0.0, r.d * scale)));
+        }
+        f.compose(&self.tool)
+    }
+
     /// Forward kinematics recording the world line of every elementary motion (reference
     /// temperature).
     pub fn trace(&self, theta: &[f64; MAX_JOINTS]) -> Trace {
@@ -611,6 +636,8 @@ mod tests {
                 assert!((a.r - b.r).abs().max() < 1e-14);
                 let tr = chain.trace_scaled(&chain.joint_angles(&s), chain.length_scale(&s));
                 assert!((tr.tcp.t - a.t).norm() < 1e-15);
+                let d = chain.fk_deformed(&s, &[]);
+                assert!((d.t - a.t).norm() < 1e-14 && (d.r - a.r).abs().max() < 1e-14);
             }
         }
     }

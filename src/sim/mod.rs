@@ -3,4 +3,8 @@
 //! deterministic for a seed.
 
 pub mod collision;
+pub mod effects;
+pub mod instruments;
+pub mod measure;
 pub mod poses;
+pub mod truth;

@@ -1,0 +1,326 @@
+//! Simulated measuring runs: the true robot measured by the TriCal on the artefact's balls and
+//! by a laser tracker on reflector nests, along a list of planned configurations.
+//!
+//! TriCal (§7): the robot goes to the planned joints, the indicators are read, the TCP is moved
+//! until it sits within ε of the ball centre, and the joints are recorded. Simulated as: the
+//! physical TCP ends at c_k + u (u uniform in the ε-ball) with the orientation it had at the
+//! planned joints; the recorded joints are those at which the *true* model puts the TCP at
+//! c_k + u + r, r the robot's non-repeatable offset. Tracker: the robot stops at the planned
+//! joints (recorded as commanded); the reflector is physically at FK_true(q) − r and the tracker
+//! reads that plus its own noise. Times advance 25 s per TriCal measurement (thesis §2.3) and
+//! 10 s per tracker measurement; the temperature follows [`Effects::temperature_at`]; each joint's
+//! approach direction is the sign of its last move.
+
+use nalgebra::Vector3;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+use super::effects::Effects;
+use super::instruments::Noise;
+use super::truth::{Truth, TruthSolveError};
+use crate::cell::{Artefact, Cell, Instrument, Measurement, Observation, Purpose, Session};
+use crate::kinematics::{Frame, RobotModel, Tool};
+use crate::metrology::TriCal;
+
+/// A planned TriCal measurement: joints and the ball (1-based).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BallPose {
+    pub q: [f64; 6],
+    pub ball: usize,
+}
+
+/// A planned tracker measurement: joints and the reflector nest (0-based index into the tools).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NestPose {
+    pub q: [f64; 6],
+    pub nest: usize,
+}
+
+/// The fixed parts of a virtual cell.
+#[derive(Clone, Debug)]
+pub struct Rig<'a> {
+    /// The nominal model written to the cell file (what the controller knows).
+    pub model: &'a RobotModel,
+    /// T_0^W as the controller knows it (the cell file's base guess).
+    pub base_guess: [f64; 6],
+    pub artefact: &'a Artefact,
+    /// The TriCal tool used for identification.
+    pub trical: &'a Tool,
+    /// One tool per reflector nest, for validation.
+    pub nests: &'a [Tool],
+    /// Laser tracker position in the robot base frame {0}, m.
+    pub tracker_in_base: Vector3<f64>,
+    pub noise: Noise,
+    /// Record the TriCal indicator readings left after centring.
+    pub record_indicators: bool,
+}
+
+/// What really happened at one measurement (for scoring and tests).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MeasurementTruth {
+    /// Where the true model puts the TCP at the recorded joints, {W}: the best any model can do.
+    pub model_position: Vector3<f64>,
+    /// Where the TCP physically was (model position minus the repeatability offset).
+    pub physical_position: Vector3<f64>,
+    /// TriCal: the centring offset u of the physical TCP from the ball centre.
+    pub centring_offset: Option<Vector3<f64>>,
+}
+
+/// The truth behind each session's measurements, in the cell's order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RunTruth {
+    pub sessions: Vec<(String, Vec<MeasurementTruth>)>,
+}
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MeasureError {
+    #[error("ball {0} is not on the artefact")]
+    Ball(usize),
+    #[error("nest {0} does not exist")]
+    Nest(usize),
+    #[error("measurement {index} of {session}: {source}")]
+    Solve { session: String, index: usize, source: TruthSolveError },
+}
+
+/// Seconds per TriCal measurement (centring loop included, thesis §2.3) and per tracker reading.
+pub const TRICAL_SECONDS: f64 = 25.0;
+pub const TRACKER_SECONDS: f64 = 10.0;
+
+/// Simulate the TriCal run on `balls` then the tracker run on `nests`, starting from `home`.
+pub fn measure(
+    truth: &Truth,
+    rig: &Rig<'_>,
+    home: &[f64; 6],
+    balls: &[BallPose],
+    nests: &[NestPose],
+    seed: u64,
+) -> Result<(Cell, RunTruth), MeasureError> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    rng.set_stream(0x6d65_6173); // "meas": independent of the planner's stream
+    let effects: &Effects = &truth.effects;
+    let trical = TriCal::default();
+    let mut prev = *home;
+    let mut t = 0.0;
+    let mut run = RunTruth::default();
+
+    // TriCal identification run.
+    let robot = truth.robot(rig.trical);
+    let mut id = Vec::with_capacity(balls.len());
+    let mut id_truth = Vec::with_capacity(balls.len());
+    for (i, p) in balls.iter().enumerate() {
+        let centre = rig.artefact.triangle.ball(p.ball).ok_or(MeasureError::Ball(p.ball))?;
+        let approach = approach(&prev, &p.q);
+        let temp = effects.temperature_at(t);
+        let r_true = robot.tcp(&robot.state(&p.q, &approach, temp)).r;
+        let u = rig.noise.centring_offset(&mut rng);
+        let r = rig.noise.repeatability_offset(&mut rng);
+        let target = Frame::new(r_true, centre + u + r);
+        let q = robot.solve(&target, &p.q, &approach, temp).map_err(|source| MeasureError::Solve {
+            session: "trical-1".into(),
+            index: i,
+            source,
+        })?;
+        let indicators = if rig.record_indicators {
+            // The ball centre seen from the physical TCP, in the TriCal (tool) frame.
+            let b = r_true.transpose() * (-u);
+            trical.readings(&(trical.zero_centre + b)).ok()
+        } else {
+            None
+        };
+        let mut qa = [0.0; 6];
+        qa.copy_from_slice(&q[..6]);
+        id.push(Measurement {
+            q: qa.to_vec(),
+            observation: Observation::Ball(p.ball),
+            temperature_c: Some(temp),
+            time_s: Some(t),
+            approach: Some(approach.iter().map(|&a| a as i8).collect()),
+            indicators,
+        });
+        id_truth.push(MeasurementTruth {
+            model_position: centre + u + r,
+            physical_position: centre + u,
+            centring_offset: Some(u),
+        });
+        prev = qa;
+        t += TRICAL_SECONDS;
+    }
+    let mut sessions = vec![Session {
+        name: "trical-1".into(),
+        purpose: Purpose::Identification,
+        instrument: Instrument::TriCal,
+        tool: rig.trical.clone(),
+        identify_tcp: false,
+        measurements: id,
+    }];
+    run.sessions.push(("trical-1".into(), id_truth));
+
+    // Laser-tracker validation run: one session per reflector nest, in measuring order within each.
+    let base = truth.set.pose_of(crate::kinematics::Param::Base);
+    let tracker_w = Frame::from_xyzabc(&base).transform_point(&rig.tracker_in_base);
+    let robots: Vec<_> = rig.nests.iter().map(|n| truth.robot(n)).collect();
+    let mut per_nest: Vec<(Vec<Measurement>, Vec<MeasurementTruth>)> = vec![(Vec::new(), Vec::new()); rig.nests.len()];
+    for p in nests {
+        let robot = robots.get(p.nest).ok_or(MeasureError::Nest(p.nest))?;
+        let approach = approach(&prev, &p.q);
+        let temp = effects.temperature_at(t);
+        let fk = robot.tcp(&robot.state(&p.q, &approach, temp)).t;
+        let physical = fk - rig.noise.repeatability_offset(&mut rng);
+        let reading = physical + rig.noise.tracker_error(&mut rng, (physical - tracker_w).norm());
+        per_nest[p.nest].0.push(Measurement {
+            q: p.q.to_vec(),
+            observation: Observation::Position(reading),
+            temperature_c: Some(temp),
+            time_s: Some(t),
+            approach: Some(approach.iter().map(|&a| a as i8).collect()),
+            indicators: None,
+        });
+        per_nest[p.nest].1.push(MeasurementTruth {
+            model_position: fk,
+            physical_position: physical,
+            centring_offset: None,
+        });
+        prev = p.q;
+        t += TRACKER_SECONDS;
+    }
+    for (k, (ms, tr)) in per_nest.into_iter().enumerate() {
+        if ms.is_empty() {
+            continue;
+        }
+        let name = format!("tracker-n{}", k + 1);
+        sessions.push(Session {
+            name: name.clone(),
+            purpose: Purpose::Validation,
+            instrument: Instrument::LaserTracker,
+            tool: rig.nests[k].clone(),
+            identify_tcp: false,
+            measurements: ms,
+        });
+        run.sessions.push((name, tr));
+    }
+    let cell = Cell {
+        model: rig.model.clone(),
+        base_guess: Some(rig.base_guess),
+        artefact: Some(rig.artefact.clone()),
+        sessions,
+    };
+    Ok((cell, run))
+}
+
+/// Sign of each joint's move from `from` to `to`.
+fn approach(from: &[f64; 6], to: &[f64; 6]) -> [f64; 6] {
+    let mut a = [0.0; 6];
+    for j in 0..6 {
+        let d = to[j] - from[j];
+        a[j] = if d > 0.0 {
+            1.0
+        } else if d < 0.0 {
+            -1.0
+        } else {
+            0.0
+        };
+    }
+    a
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kinematics::frame::{rot_x, rot_z};
+    use crate::kinematics::model::irb120;
+    use crate::kinematics::thesis::{TABLE_5_1_NOMINAL_BASE, irb120_table_5_1, trical_tool};
+    use crate::kinematics::{AnalyticIk, Branch, ParameterSet};
+    use crate::metrology::BallTriangle;
+
+    fn rig_parts() -> (RobotModel, [f64; 6], Artefact, Tool, Vec<Tool>) {
+        let b = TABLE_5_1_NOMINAL_BASE;
+        let base = [b[0] * 1e-3, b[1] * 1e-3, b[2] * 1e-3, b[3].to_radians(), b[4].to_radians(), b[5].to_radians()];
+        let artefact =
+            Artefact { triangle: BallTriangle::from_distances(0.3, 0.3, 0.3).unwrap(), ball_diameter: 0.0127 };
+        let nest = Tool { tcp: [0.0, 0.06, 0.08, 0.0, 0.0, 0.0], ..trical_tool() };
+        (irb120(), base, artefact, trical_tool(), vec![nest])
+    }
+
+    /// TriCal straight above each ball (tool z down), several spins, on the nominal model.
+    fn planned(model: &RobotModel, base: [f64; 6], artefact: &Artefact, tool: &Tool) -> Vec<BallPose> {
+        let chain = ParameterSet::nominal(model.clone(), tool.clone(), base).nominal_chain();
+        let ik = AnalyticIk::new(model, chain.base(), chain.tool()).unwrap();
+        let mut out = Vec::new();
+        for ball in 1..=3 {
+            for spin in [0.0f64, 0.5, 1.0, 2.0] {
+                let target =
+                    Frame::new(rot_z(spin) * rot_x(std::f64::consts::PI), artefact.triangle.ball(ball).unwrap());
+                if let Some(q) = Branch::ALL.iter().find_map(|&b| ik.solve(&target, b).ok()) {
+                    out.push(BallPose { q, ball });
+                }
+            }
+        }
+        assert!(out.len() >= 6);
+        out
+    }
+
+    #[test]
+    fn recorded_joints_put_the_true_tcp_on_the_ball() {
+        let (model, base, artefact, tool, nests) = rig_parts();
+        let balls = planned(&model, base, &artefact, &tool);
+        let nest_poses: Vec<NestPose> = balls.iter().map(|p| NestPose { q: p.q, nest: 0 }).collect();
+        for (noise, spec) in
+            [(Noise::none(), ""), (Noise::default(), ""), (Noise::default(), "backlash,thermal,link_bending,tool_mass")]
+        {
+            let truth = Truth::new(irb120_table_5_1(trical_tool()), Effects::parse(spec, 6).unwrap());
+            let rig = Rig {
+                model: &model,
+                base_guess: base,
+                artefact: &artefact,
+                trical: &tool,
+                nests: &nests,
+                tracker_in_base: Vector3::new(3.0, 0.5, 0.8),
+                noise: noise.clone(),
+                record_indicators: true,
+            };
+            let (cell, run) = measure(&truth, &rig, &[0.0, 0.0, 0.0, 0.0, 0.5, 0.0], &balls, &nest_poses, 4).unwrap();
+            let robot = truth.robot(&tool);
+            for (m, mt) in cell.sessions[0].measurements.iter().zip(&run.sessions[0].1) {
+                let approach: Vec<f64> = m.approach.as_ref().unwrap().iter().map(|&a| a as f64).collect();
+                let fk = robot.tcp(&robot.state(&m.q, &approach, m.temperature_c.unwrap())).t;
+                let centre = cell.observed_position(m).unwrap();
+                assert!((fk - mt.model_position).norm() < 1e-12);
+                assert!((mt.physical_position - centre).norm() <= noise.epsilon + 1e-15);
+                if noise.epsilon == 0.0 && noise.repeatability == 0.0 {
+                    assert!((fk - centre).norm() < 1e-12);
+                }
+                // Indicator readings decode to the centring offset (trilateration, tool frame).
+                let d = m.indicators.unwrap();
+                let off = TriCal::default().offset(d).unwrap();
+                let r = robot.tcp(&robot.state(&m.q, &approach, m.temperature_c.unwrap())).r;
+                assert!((r * off + mt.centring_offset.unwrap()).norm() < 1e-9);
+            }
+            // The tracker read the nest near its true position.
+            for (m, mt) in cell.sessions[1].measurements.iter().zip(&run.sessions[1].1) {
+                let p = cell.observed_position(m).unwrap();
+                assert!((p - mt.model_position).norm() < if noise.tracker_sigma == 0.0 { 1e-15 } else { 2e-4 });
+            }
+        }
+    }
+
+    #[test]
+    fn same_seed_same_bytes() {
+        let (model, base, artefact, tool, nests) = rig_parts();
+        let balls = planned(&model, base, &artefact, &tool);
+        let truth = Truth::new(irb120_table_5_1(trical_tool()), Effects::default());
+        let rig = Rig {
+            model: &model,
+            base_guess: base,
+            artefact: &artefact,
+            trical: &tool,
+            nests: &nests,
+            tracker_in_base: Vector3::new(3.0, 0.5, 0.8),
+            noise: Noise::default(),
+            record_indicators: false,
+        };
+        let run =
+            |seed| crate::domain::cell::cell_to_json(&measure(&truth, &rig, &[0.0; 6], &balls, &[], seed).unwrap().0);
+        assert_eq!(run(1), run(1));
+        assert_ne!(run(1), run(2));
+    }
+}
