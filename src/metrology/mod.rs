@@ -3,6 +3,7 @@
 //! cell, and both the identification and the simulator use it.)
 
 pub mod artefact;
+pub mod registration;
 pub mod trical;
 
 pub use artefact::{ArtefactError, BallTriangle};
