@@ -1,1 +1,214 @@
-//! Three-reflector format: a joints file plus one positions file per reflector.
+//! Three-reflector format: a joints file plus one positions file per reflector, for a laser
+//! tracker following several reflectors (nests) fixed on the robot's last link.
+//!
+//! - The **joints file** holds one pose per line: the joint values in **degrees**,
+//!   whitespace-separated, as many as the robot has joints.
+//! - Each **positions file** holds one line per pose, line-aligned with the joints file:
+//!   `x y z` in **mm** in the tracker frame, the position of that file's reflector at that pose.
+//!   A line `nan nan nan` (any case) or a single `-` means the reflector was not visible at that
+//!   pose: that measurement is skipped for that reflector only.
+//! - In every file, blank lines and lines starting with `#` are comments. They do not count as
+//!   poses: pose i is the i-th non-comment line of each file, so all files must hold the same
+//!   number of pose lines.
+//! - Numbers use a decimal point.
+//!
+//! Each reflector becomes one laser-tracker session, `reflector-1`, `reflector-2`, … in the order
+//! the files are given, with its measurements in file (measuring) order. Where a reflector sits on
+//! the flange is unknown, so its tool has a zero TCP (and no payload) with `identify_tcp` set. The
+//! cell has no base guess and no artefact.
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::Vector3;
+
+use super::{ImportError, Imported, line_list, read_text};
+use crate::cell::{Cell, Instrument, Measurement, Observation, Purpose, Session};
+use crate::kinematics::{RobotModel, Tool};
+
+const DEG: f64 = std::f64::consts::PI / 180.0;
+const MM: f64 = 1e-3;
+
+/// Import a joints file and one positions file per reflector for `model`, every session with
+/// `purpose`.
+pub fn import(
+    joints: &Path,
+    positions: &[PathBuf],
+    model: RobotModel,
+    purpose: Purpose,
+) -> Result<Imported, ImportError> {
+    model.validate()?;
+    if positions.is_empty() {
+        return Err(ImportError::Input("give at least one reflector positions file".into()));
+    }
+    let joint_text = read_text(joints)?;
+    let joint_lines = pose_lines(&joint_text);
+    let poses: Vec<Vec<f64>> =
+        joint_lines.iter().map(|(line, text)| joint_values(joints, *line, text, &model)).collect::<Result<_, _>>()?;
+
+    let mut notes = vec![format!(
+        "{} poses of {} joints from {}, {} reflector file(s)",
+        poses.len(),
+        model.dof(),
+        joints.display(),
+        positions.len()
+    )];
+    let mut sessions = Vec::with_capacity(positions.len());
+    for (k, path) in positions.iter().enumerate() {
+        let name = format!("reflector-{}", k + 1);
+        let text = read_text(path)?;
+        let lines = pose_lines(&text);
+        if lines.len() != poses.len() {
+            return Err(ImportError::PoseCount {
+                file: joints.to_path_buf(),
+                count: poses.len(),
+                other: path.clone(),
+                other_count: lines.len(),
+            });
+        }
+        let mut measurements = Vec::with_capacity(lines.len());
+        let mut hidden = Vec::new();
+        for ((line, text), q) in lines.iter().zip(&poses) {
+            match position(path, *line, text)? {
+                None => hidden.push(*line),
+                Some(p) => measurements.push(Measurement {
+                    q: q.clone(),
+                    observation: Observation::Position(p),
+                    temperature_c: None,
+                    time_s: None,
+                    approach: None,
+                    indicators: None,
+                }),
+            }
+        }
+        let mut note = format!("{name}: {} measurements from {}", measurements.len(), path.display());
+        if !hidden.is_empty() {
+            note.push_str(&format!(
+                "; not visible at {} pose(s) (line(s) {}), skipped",
+                hidden.len(),
+                line_list(&hidden)
+            ));
+        }
+        notes.push(note);
+        sessions.push(Session {
+            name,
+            purpose,
+            instrument: Instrument::LaserTracker,
+            tool: Tool::flange(),
+            identify_tcp: true,
+            measurements,
+        });
+    }
+    Ok(Imported { cell: Cell { model, base_guess: None, artefact: None, sessions }, notes })
+}
+
+/// The pose lines of a file with their 1-based line numbers: comments (`#`) and blank lines out.
+fn pose_lines(text: &str) -> Vec<(u64, &str)> {
+    text.lines()
+        .enumerate()
+        .map(|(i, l)| (i as u64 + 1, l.trim()))
+        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
+        .collect()
+}
+
+/// A finite number written with a decimal point.
+fn number(field: &str) -> Result<f64, String> {
+    match field.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(_) => Err(format!("'{field}' is not a finite number")),
+        Err(_) => Err(format!("'{field}' is not a number")),
+    }
+}
+
+/// One joints line → q in rad, within the robot's limits.
+fn joint_values(path: &Path, line: u64, text: &str, model: &RobotModel) -> Result<Vec<f64>, ImportError> {
+    let fields: Vec<&str> = text.split_whitespace().collect();
+    if fields.len() != model.dof() {
+        return Err(ImportError::line(
+            path,
+            line,
+            format!("expected {} joint values, got {}", model.dof(), fields.len()),
+        ));
+    }
+    let mut q = Vec::with_capacity(fields.len());
+    for (j, f) in fields.iter().enumerate() {
+        let column = format!("joint {}", j + 1);
+        let deg = number(f).map_err(|reason| ImportError::value(path, line, &column, reason))?;
+        let rad = deg * DEG;
+        if !model.within_limits(j, rad) {
+            let [lo, hi] = model.links[j].limits;
+            return Err(ImportError::value(
+                path,
+                line,
+                &column,
+                format!("{deg}° is outside joint {}'s limits [{:.1}°, {:.1}°]", j + 1, lo / DEG, hi / DEG),
+            ));
+        }
+        q.push(rad);
+    }
+    Ok(q)
+}
+
+/// One positions line → the reflector position in m, or `None` when it was not visible.
+fn position(path: &Path, line: u64, text: &str) -> Result<Option<Vector3<f64>>, ImportError> {
+    let fields: Vec<&str> = text.split_whitespace().collect();
+    if fields == ["-"] || (fields.len() == 3 && fields.iter().all(|f| f.eq_ignore_ascii_case("nan"))) {
+        return Ok(None);
+    }
+    if fields.len() != 3 {
+        return Err(ImportError::line(
+            path,
+            line,
+            format!("expected x y z (3 values, or `nan nan nan` / `-` when not visible), got {}", fields.len()),
+        ));
+    }
+    let mut p = [0.0; 3];
+    for (i, (f, axis)) in fields.iter().zip(["x", "y", "z"]).enumerate() {
+        p[i] = number(f).map_err(|reason| ImportError::value(path, line, axis, reason))?;
+    }
+    Ok(Some(Vector3::from(p) * MM))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kinematics::model::irb120;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// Positions printed in mm with full precision come back exactly, in metres.
+        #[test]
+        fn positions_read_back(p in prop::array::uniform3(-5e3_f64..5e3)) {
+            let line = format!("{}\t{} {}", p[0], p[1], p[2]);
+            let back = position(Path::new("r.txt"), 1, &line).unwrap().unwrap();
+            prop_assert_eq!(back, Vector3::from(p) * MM);
+        }
+
+        /// Arbitrary lines give a value or an error, never a panic.
+        #[test]
+        fn arbitrary_lines_never_panic(line in "\\PC{0,40}") {
+            let _ = position(Path::new("r.txt"), 1, &line);
+            let _ = joint_values(Path::new("j.txt"), 1, &line, &irb120());
+        }
+    }
+
+    #[test]
+    fn comments_and_blank_lines_are_not_poses() {
+        let lines = pose_lines("# header\n\n1 2 3\r\n  # indented comment\n   \n4 5 6\n");
+        assert_eq!(lines, vec![(3, "1 2 3"), (6, "4 5 6")]);
+    }
+
+    #[test]
+    fn hidden_reflectors_and_bad_positions() {
+        let p = Path::new("r1.txt");
+        assert_eq!(position(p, 1, "nan nan nan").unwrap(), None);
+        assert_eq!(position(p, 1, "NaN NAN nan").unwrap(), None);
+        assert_eq!(position(p, 1, "-").unwrap(), None);
+        assert_eq!(position(p, 1, "1000 -250.5 3e2").unwrap(), Some(Vector3::new(1.0, -0.2505, 0.3)));
+        let e = position(p, 4, "1 nan 3").unwrap_err();
+        assert_eq!(e.to_string(), "r1.txt line 4, column y: 'nan' is not a finite number");
+        let e = position(p, 5, "1,5 2 3").unwrap_err();
+        assert_eq!(e.to_string(), "r1.txt line 5, column x: '1,5' is not a number");
+        let e = position(p, 6, "1 2").unwrap_err();
+        assert!(e.to_string().starts_with("r1.txt line 6: expected x y z"), "{e}");
+    }
+}
