@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use clap::{Args, Parser, Subcommand};
 use serde_json::{Value, json};
 
+use crate::cell::Purpose;
 use crate::domain::pose::{Choice, Target, frame_from_parts, position_mm};
 use crate::domain::{
     CompensationResult, DEG, DomainError, MM, ParameterSetDoc, PoseOut, RobotSpec, TargetSpec, ToolSpec, from_json,
@@ -35,6 +36,50 @@ pub enum Command {
     Compensate(CompensateArgs),
     /// Write the nominal parameter set of a robot and tool (a starting point for custom models).
     Nominal(NominalArgs),
+    /// Convert a real data set into a cell file.
+    #[command(subcommand)]
+    Import(ImportCommand),
+}
+
+#[derive(Subcommand, Debug)]
+pub enum ImportCommand {
+    /// The UR10 laser-tracker data set (../shared/datasets/ur10-ipa): one session per series.
+    Ur10Ipa(Ur10IpaArgs),
+    /// A joints file (deg, one pose a line) and one positions file per tracker reflector (mm).
+    ThreeReflector(ThreeReflectorArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct Ur10IpaArgs {
+    /// A series folder, optionally with its purpose: PATH[:identification|:validation]. Repeatable.
+    #[arg(long, required = true)]
+    pub series: Vec<String>,
+    /// Mass of the probe on the flange, kg (not in the data set; drives the gravity torques).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub tool_mass_kg: f64,
+    /// Centre of mass of the probe in the flange frame, mm (default: at the TCP).
+    #[arg(long, allow_hyphen_values = true)]
+    pub tool_com_mm: Option<String>,
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct ThreeReflectorArgs {
+    /// Joints file: one pose per line, joint values in degrees, whitespace-separated.
+    #[arg(long)]
+    pub joints: PathBuf,
+    /// One positions file per reflector (x y z mm per line, line-aligned with the joints). Repeatable.
+    #[arg(long, required = true)]
+    pub positions: Vec<PathBuf>,
+    /// A preset (irb120, ur10) or a robot JSON file.
+    #[arg(long)]
+    pub robot: String,
+    /// identification or validation.
+    #[arg(long, default_value = "identification")]
+    pub purpose: String,
+    #[arg(long)]
+    pub out: PathBuf,
 }
 
 /// Which model to evaluate.
@@ -156,7 +201,54 @@ pub fn run(cli: Cli) -> Result<String, CliError> {
         Command::Ik(a) => ik(a),
         Command::Compensate(a) => compensate(a),
         Command::Nominal(a) => nominal(a),
+        Command::Import(ImportCommand::Ur10Ipa(a)) => import_ur10(a),
+        Command::Import(ImportCommand::ThreeReflector(a)) => import_three(a),
     }
+}
+
+fn purpose(arg: &str, s: &str) -> Result<Purpose, CliError> {
+    match s {
+        "identification" => Ok(Purpose::Identification),
+        "validation" => Ok(Purpose::Validation),
+        other => Err(CliError::arg(arg, format!("'{other}' is not a purpose (identification, validation)"))),
+    }
+}
+
+fn write_imported(out: &Path, imported: crate::import::Imported) -> Result<String, CliError> {
+    let n: usize = imported.cell.sessions.iter().map(|s| s.measurements.len()).sum();
+    let text = crate::domain::cell::cell_to_json(&imported.cell);
+    fs::write(out, format!("{text}\n")).map_err(|e| CliError(format!("{}: cannot write: {e}", out.display())))?;
+    let mut report = format!("wrote {} ({} sessions, {n} measurements)", out.display(), imported.cell.sessions.len());
+    for note in imported.notes {
+        report.push_str(&format!("\nnote: {note}"));
+    }
+    Ok(report)
+}
+
+fn import_ur10(a: Ur10IpaArgs) -> Result<String, CliError> {
+    let mut series = Vec::new();
+    for s in &a.series {
+        let (path, p) = match s.rsplit_once(':') {
+            Some((path, p)) if p == "identification" || p == "validation" => (path, purpose("--series", p)?),
+            _ => (s.as_str(), Purpose::Identification),
+        };
+        series.push((PathBuf::from(path), p));
+    }
+    let opts = crate::import::ur10_ipa::Ur10Options {
+        purpose: Purpose::Identification,
+        tool_mass_kg: a.tool_mass_kg,
+        tool_com_mm: a.tool_com_mm.as_deref().map(|s| three("--tool-com-mm", s)).transpose()?,
+    };
+    let imported = crate::import::ur10_ipa::import_cell(&series, &opts).map_err(|e| CliError(e.to_string()))?;
+    write_imported(&a.out, imported)
+}
+
+fn import_three(a: ThreeReflectorArgs) -> Result<String, CliError> {
+    let model = robot_model("--robot", &a.robot)?;
+    let p = purpose("--purpose", &a.purpose)?;
+    let imported = crate::import::three_reflector::import(&a.joints, &a.positions, model, p)
+        .map_err(|e| CliError(e.to_string()))?;
+    write_imported(&a.out, imported)
 }
 
 fn read(path: &Path) -> Result<String, CliError> {

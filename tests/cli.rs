@@ -124,3 +124,19 @@ fn compensate_writes_joints_and_fake_poses() {
     let (ok, _, err) = robocal(&["compensate", "--params", bad.to_str().unwrap(), "--targets", tp.to_str().unwrap()]);
     assert!(!ok && err.contains("parameters[0].name"), "{err}");
 }
+
+#[test]
+fn import_writes_a_valid_cell() {
+    let series = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/datasets/ur10-ipa/Series_D");
+    let out = std::env::temp_dir().join(format!("robocal-cli-{}-d.json", std::process::id()));
+    let o = Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(["import", "ur10-ipa", "--series", &format!("{series}:validation"), "--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let cell = robocal::domain::cell::parse_cell(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(cell.sessions[0].measurements.len(), 632);
+    assert_eq!(cell.sessions[0].purpose, robocal::cell::Purpose::Validation);
+    let (ok, _, err) = robocal(&["import", "ur10-ipa", "--series", "/nonexistent/Series_Q", "--out", "/tmp/x.json"]);
+    assert!(!ok && err.contains("/nonexistent/Series_Q"), "{err}");
+}
