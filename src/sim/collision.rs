@@ -10,12 +10,12 @@
 //! - no two non-adjacent parts come closer than [`Clearances::parts`] (see
 //!   [`CollisionModel::irb120`] for the pairs);
 //! - every part except the base column stays [`Clearances::table`] above the table;
-//! - no part except the tool's contact zone comes within [`Clearances::plate`] of the plate prism.
+//! - no part comes within [`Clearances::plate`] of the plate prism.
 //!
 //! The checks report the first violation in that order (pairs in their listed order), with its
-//! penetration depth. Nothing checks the balls and their rods: the tool's contact zone is meant to
-//! touch them, and the rest of the robot is kept off the plate, 50 mm below the ball centres (a
-//! link passing through another ball's rod is therefore not caught).
+//! penetration depth. The balls and their rods are not modelled: the tool's contact zone holds a
+//! ball when measuring, and everything else is kept off the plate they stand on (a link passing
+//! through another ball's rod is therefore not caught).
 
 use std::fmt;
 
@@ -257,8 +257,7 @@ pub enum Part {
     Wrist,
     /// Capsule k of the tool body.
     Tool(usize),
-    /// The tool's contact zone around the TCP: checked against the robot and the table, not
-    /// against the artefact (it touches a ball and its rod when measuring).
+    /// The tool's contact zone around the TCP (see [`ToolShape::contact`]).
     ToolContact,
 }
 
@@ -365,10 +364,11 @@ impl Default for LinkRadii {
 /// A tool's collision shape in the flange frame.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ToolShape {
-    /// The tool body: checked against the robot, the table and the artefact plate.
+    /// The tool body.
     pub body: Vec<Capsule>,
-    /// The zone around the TCP that touches the measured object (a ball of the artefact):
-    /// checked against the robot and the table only.
+    /// The zone around the TCP that closes on the measured ball. Checked like the body against
+    /// the robot, the table and the plate; the ball and its rod, which it touches by design, are
+    /// not modelled.
     pub contact: Option<Capsule>,
 }
 
@@ -407,7 +407,7 @@ pub const PATH_STEP: f64 = std::f64::consts::PI / 180.0;
 
 impl CollisionModel {
     /// A general model: `pairs` index into `parts`. The base column (if any) is exempt from the
-    /// table check, the tool contact zone (if any) from the plate check.
+    /// table check.
     pub fn new(
         chain: Chain,
         parts: Vec<PartShape>,
@@ -436,10 +436,11 @@ impl CollisionModel {
     ///
     /// Pairs checked (everything not sharing a joint or a rigid body): base column against
     /// elbow, forearm, wrist and tool; upper arm against wrist and tool; elbow against wrist and
-    /// tool; forearm against tool ("tool": each body capsule and the contact zone). Left out as adjacent: base column–upper arm (axis 2),
-    /// upper arm–elbow and upper arm–forearm (axis 3: the forearm axis is only 70 mm from it,
-    /// less than the two radii, so they touch by construction; axis 3's limits keep them apart),
-    /// elbow–forearm (one casting), forearm–wrist (axis 5), wrist–tool (the flange).
+    /// tool; forearm against tool ("tool": each body capsule and the contact zone). Left out as
+    /// adjacent: base column–upper arm (axis 2), upper arm–elbow and upper arm–forearm (axis 3:
+    /// the forearm axis is only 70 mm from it, less than the two radii, so they touch by
+    /// construction; axis 3's limits keep them apart), elbow–forearm (one casting),
+    /// forearm–wrist (axis 5), wrist–tool (the flange).
     pub fn irb120(
         set: &ParameterSet,
         radii: &LinkRadii,
@@ -557,9 +558,6 @@ impl CollisionModel {
         }
         if let Some(plate) = &self.plate {
             for (s, c) in self.parts.iter().zip(placed) {
-                if s.part == Part::ToolContact {
-                    continue;
-                }
                 // Above the top face by more than the margin: cannot touch (the common case).
                 if c.a.z.min(c.b.z) - c.radius >= plate.top + cl.plate {
                     continue;
