@@ -39,6 +39,50 @@ pub enum Command {
     /// Convert a real data set into a cell file.
     #[command(subcommand)]
     Import(ImportCommand),
+    /// Simulate the virtual cell: plan the TriCal and tracker runs, measure a true robot, write the cell file.
+    Simulate(SimulateArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct SimulateArgs {
+    /// Seed of the pose plans and of every noise draw: the same seed gives byte-identical files.
+    #[arg(long)]
+    pub seed: u64,
+    /// Unmodelled effects of the true robot, e.g. cyclic:j=2:h=1:amp_deg=0.01,backlash,thermal
+    /// (see sim/effects.rs for the list, keys and defaults).
+    #[arg(long, default_value = "")]
+    pub effects: String,
+    /// TriCal poses per ball.
+    #[arg(long, default_value_t = 120)]
+    pub id_per_ball: usize,
+    /// Laser-tracker validation poses.
+    #[arg(long, default_value_t = 506)]
+    pub validation: usize,
+    /// The true parameter set (or a truth file from --truth-out); default: thesis Table 5.1.
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
+    /// TriCal centring tolerance ε, mm.
+    #[arg(long, default_value_t = 0.010, allow_hyphen_values = true)]
+    pub epsilon_mm: f64,
+    /// Robot repeatability (ISO 9283 RP), mm.
+    #[arg(long, default_value_t = 0.010, allow_hyphen_values = true)]
+    pub repeatability_mm: f64,
+    /// Laser-tracker noise, 1σ per axis: µm + µm per metre of range.
+    #[arg(long, default_value_t = 16.0, allow_hyphen_values = true)]
+    pub tracker_sigma_um: f64,
+    #[arg(long, default_value_t = 0.8, allow_hyphen_values = true)]
+    pub tracker_sigma_um_per_m: f64,
+    /// No noise at all (ε, repeatability and tracker set to zero).
+    #[arg(long)]
+    pub no_noise: bool,
+    /// Record the TriCal indicator readings left after centring.
+    #[arg(long)]
+    pub indicators: bool,
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Write the truth (true parameters, effects, per-measurement true positions) here.
+    #[arg(long)]
+    pub truth_out: Option<PathBuf>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -203,7 +247,72 @@ pub fn run(cli: Cli) -> Result<String, CliError> {
         Command::Nominal(a) => nominal(a),
         Command::Import(ImportCommand::Ur10Ipa(a)) => import_ur10(a),
         Command::Import(ImportCommand::ThreeReflector(a)) => import_three(a),
+        Command::Simulate(a) => simulate(a),
     }
+}
+
+fn simulate(a: SimulateArgs) -> Result<String, CliError> {
+    use crate::sim::{effects::Effects, instruments::Noise, simulate::SimulateOptions};
+    let mut opts =
+        SimulateOptions { seed: a.seed, id_per_ball: a.id_per_ball, validation: a.validation, ..Default::default() };
+    let dof = opts.layout.robot.dof();
+    let effects = Effects::parse(&a.effects, dof).map_err(|e| CliError::arg("--effects", e))?;
+    if let Some(p) = &a.truth {
+        let parsed = crate::domain::truth::parse_truth(&read(p)?).map_err(|e| CliError::file(p, e))?;
+        let mut truth = parsed.truth;
+        if !effects.is_empty() {
+            if !truth.effects.is_empty() {
+                return Err(CliError::arg("--effects", "the truth file carries its own effects; edit them there"));
+            }
+            truth = crate::sim::truth::Truth::new(truth.set, effects.clone());
+        }
+        opts.truth = Some(truth);
+    }
+    opts.effects = effects;
+    for (arg, v) in [
+        ("--epsilon-mm", a.epsilon_mm),
+        ("--repeatability-mm", a.repeatability_mm),
+        ("--tracker-sigma-um", a.tracker_sigma_um),
+        ("--tracker-sigma-um-per-m", a.tracker_sigma_um_per_m),
+    ] {
+        if !v.is_finite() || v < 0.0 {
+            return Err(CliError::arg(arg, "must be a non-negative number"));
+        }
+    }
+    opts.noise = if a.no_noise {
+        Noise::none()
+    } else {
+        Noise {
+            epsilon: a.epsilon_mm * MM,
+            repeatability: a.repeatability_mm * MM,
+            tracker_sigma: a.tracker_sigma_um * 1e-6,
+            tracker_sigma_per_m: a.tracker_sigma_um_per_m * 1e-6,
+        }
+    };
+    opts.record_indicators = a.indicators;
+    if a.id_per_ball == 0 {
+        return Err(CliError::arg("--id-per-ball", "must be at least 1"));
+    }
+    let sim = crate::sim::simulate::simulate(&opts).map_err(|e| CliError(e.to_string()))?;
+    let text = crate::domain::cell::cell_to_json(&sim.cell);
+    fs::write(&a.out, format!("{text}\n")).map_err(|e| CliError(format!("{}: cannot write: {e}", a.out.display())))?;
+    let mut report = format!(
+        "wrote {} ({} sessions, {} measurements)",
+        a.out.display(),
+        sim.cell.sessions.len(),
+        sim.cell.sessions.iter().map(|s| s.measurements.len()).sum::<usize>()
+    );
+    if let Some(p) = &a.truth_out {
+        let spec = crate::domain::truth::SimulationSpec {
+            seed: a.seed,
+            noise: crate::domain::truth::NoiseSpec::from_noise(&opts.noise),
+            tracker_position_mm: [opts.layout.tracker.x / MM, opts.layout.tracker.y / MM, opts.layout.tracker.z / MM],
+        };
+        let t = crate::domain::truth::truth_to_json(&sim.truth, Some((&spec, &sim.run)));
+        fs::write(p, format!("{t}\n")).map_err(|e| CliError(format!("{}: cannot write: {e}", p.display())))?;
+        report.push_str(&format!("\nwrote {}", p.display()));
+    }
+    Ok(report)
 }
 
 fn purpose(arg: &str, s: &str) -> Result<Purpose, CliError> {

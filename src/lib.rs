@@ -14,3 +14,4 @@ pub mod import;
 pub mod kinematics;
 pub mod metrology;
 pub mod sim;
+pub mod validate;

@@ -140,3 +140,40 @@ fn import_writes_a_valid_cell() {
     let (ok, _, err) = robocal(&["import", "ur10-ipa", "--series", "/nonexistent/Series_Q", "--out", "/tmp/x.json"]);
     assert!(!ok && err.contains("/nonexistent/Series_Q"), "{err}");
 }
+
+#[test]
+fn simulate_is_deterministic_and_names_bad_effects() {
+    let dir = std::env::temp_dir().join(format!("robocal-sim-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = |n: &str| dir.join(n).to_str().unwrap().to_string();
+    let args = |o: &str| {
+        vec![
+            "simulate",
+            "--seed",
+            "7",
+            "--id-per-ball",
+            "10",
+            "--validation",
+            "20",
+            "--effects",
+            "cyclic:j=3:h=2,thermal",
+            "--out",
+            o,
+        ]
+        .into_iter()
+        .map(String::from)
+        .collect::<Vec<_>>()
+    };
+    for o in [out("a.json"), out("b.json")] {
+        let a = args(&o);
+        let (ok, _, err) = robocal(&a.iter().map(|s| s.as_str()).collect::<Vec<_>>());
+        assert!(ok, "{err}");
+    }
+    assert!(std::fs::read(out("a.json")).unwrap() == std::fs::read(out("b.json")).unwrap());
+    let cell = robocal::domain::cell::parse_cell(&std::fs::read_to_string(out("a.json")).unwrap()).unwrap();
+    assert_eq!(cell.sessions[0].measurements.len(), 30);
+    let (ok, _, err) = robocal(&["simulate", "--seed", "1", "--effects", "cyclic:j=9", "--out", &out("c.json")]);
+    assert!(!ok && err.contains("--effects") && err.contains("joint number"), "{err}");
+    let (ok, _, err) = robocal(&["simulate", "--seed", "1", "--epsilon-mm", "-1", "--out", &out("c.json")]);
+    assert!(!ok && err.contains("--epsilon-mm"), "{err}");
+}

@@ -7,6 +7,7 @@ pub mod cell;
 pub mod param_set;
 pub mod pose;
 pub mod robot;
+pub mod truth;
 
 use std::fmt;
 

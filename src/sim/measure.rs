@@ -160,6 +160,8 @@ pub fn measure(
     let tracker_w = Frame::from_xyzabc(&base).transform_point(&rig.tracker_in_base);
     let robots: Vec<_> = rig.nests.iter().map(|n| truth.robot(n)).collect();
     let mut per_nest: Vec<(Vec<Measurement>, Vec<MeasurementTruth>)> = vec![(Vec::new(), Vec::new()); rig.nests.len()];
+    // Between the runs the TriCal's reflectors are fitted and the robot goes home.
+    prev = *home;
     for p in nests {
         let robot = robots.get(p.nest).ok_or(MeasureError::Nest(p.nest))?;
         let approach = approach(&prev, &p.q);

@@ -7,4 +7,5 @@ pub mod effects;
 pub mod instruments;
 pub mod measure;
 pub mod poses;
+pub mod simulate;
 pub mod truth;

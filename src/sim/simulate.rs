@@ -1,0 +1,96 @@
+//! `robocal simulate`: plan the measuring runs of the virtual cell, measure the true robot along
+//! them, and return the cell file and the truth behind it.
+
+use super::effects::Effects;
+use super::instruments::Noise;
+use super::measure::{BallPose, MeasureError, NestPose, Rig, RunTruth, measure};
+use super::poses::{CellLayout, PlanError, plan_identification, plan_validation};
+use super::truth::Truth;
+use crate::cell::Cell;
+use crate::kinematics::Tool;
+use crate::kinematics::thesis::irb120_table_5_1;
+
+/// Everything a simulation depends on. `Default` is the thesis's cell and robot with default
+/// noise, no effects, 120 poses per ball and 506 validation poses.
+#[derive(Clone, Debug)]
+pub struct SimulateOptions {
+    pub seed: u64,
+    pub layout: CellLayout,
+    /// The truth; `None` = the thesis's identified IRB 120 (Table 5.1) with `effects` attached.
+    pub truth: Option<Truth>,
+    pub effects: Effects,
+    pub id_per_ball: usize,
+    pub validation: usize,
+    pub noise: Noise,
+    pub record_indicators: bool,
+}
+
+impl Default for SimulateOptions {
+    fn default() -> Self {
+        Self {
+            seed: 1,
+            layout: CellLayout::default(),
+            truth: None,
+            effects: Effects::default(),
+            id_per_ball: 120,
+            validation: 506,
+            noise: Noise::default(),
+            record_indicators: false,
+        }
+    }
+}
+
+/// A simulated cell and its truth.
+#[derive(Clone, Debug)]
+pub struct Simulated {
+    pub cell: Cell,
+    pub truth: Truth,
+    pub run: RunTruth,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum SimulateError {
+    #[error("planning: {0}")]
+    Plan(#[from] PlanError),
+    #[error("measuring: {0}")]
+    Measure(#[from] MeasureError),
+    #[error("truth: {0}")]
+    Truth(String),
+}
+
+pub fn simulate(opts: &SimulateOptions) -> Result<Simulated, SimulateError> {
+    let layout = &opts.layout;
+    let truth = match &opts.truth {
+        Some(t) => {
+            if t.set.model.links.len() != layout.robot.links.len() || t.set.model.preset != layout.robot.preset {
+                return Err(SimulateError::Truth(format!(
+                    "the cell layout is built for robot '{}', the truth is robot '{}'",
+                    layout.robot.name, t.set.model.name
+                )));
+            }
+            t.clone()
+        }
+        None => Truth::new(irb120_table_5_1(layout.tool.clone()), opts.effects.clone()),
+    };
+    let balls: Vec<BallPose> = plan_identification(layout, opts.id_per_ball, opts.seed)?
+        .iter()
+        .map(|p| BallPose { q: p.q, ball: p.ball.expect("identification poses have a ball") })
+        .collect();
+    let nests: Vec<NestPose> = plan_validation(layout, opts.validation, opts.seed)?
+        .iter()
+        .map(|p| NestPose { q: p.q, nest: p.nest.expect("validation poses have a nest") })
+        .collect();
+    let nest_tools: Vec<Tool> = layout.nests.iter().map(|n| n.tool.clone()).collect();
+    let rig = Rig {
+        model: &layout.robot,
+        base_guess: layout.base,
+        artefact: &layout.artefact,
+        trical: &layout.tool,
+        nests: &nest_tools,
+        tracker_in_base: layout.tracker,
+        noise: opts.noise.clone(),
+        record_indicators: opts.record_indicators,
+    };
+    let (cell, run) = measure(&truth, &rig, &layout.home, &balls, &nests, opts.seed)?;
+    Ok(Simulated { cell, truth, run })
+}

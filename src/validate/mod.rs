@@ -1,0 +1,6 @@
+//! Validation statistics (thesis §5.4, digest §9): error magnitudes of a model against measured
+//! or true positions.
+
+pub mod stats;
+
+pub use stats::ErrorStats;
