@@ -10,6 +10,7 @@
 pub mod cell;
 pub mod cli;
 pub mod domain;
+pub mod identify;
 pub mod import;
 pub mod kinematics;
 pub mod metrology;

@@ -1,0 +1,1 @@
+//! DETMAX pose selection (Mitchell 1974; thesis §4.2.5).

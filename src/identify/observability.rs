@@ -1,0 +1,1 @@
+//! Observability indices O1–O5 (digest §6).

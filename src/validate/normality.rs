@@ -1,0 +1,1 @@
+//! Shapiro–Wilk normality test with Royston's p-value.

@@ -1,0 +1,1 @@
+//! Simple linear regression with the correlation coefficient.

@@ -1,0 +1,1 @@
+//! Validation of a parameter set on a cell's sessions.
