@@ -1,1 +1,307 @@
-//! Validation of a parameter set on a cell's sessions.
+//! Validation of a parameter set on a cell's sessions (thesis §5.4, digest §9, Tables 5.2–5.4):
+//! the error of every selected measurement for the calibrated model and for the nominal model,
+//! their summary statistics, per-axis statistics in {W}, Shapiro–Wilk tests and the regressions
+//! of the error on the distance to the base and to the calibration zone.
+//!
+//! Rules, per measurement (SI units throughout):
+//! - error = reference position − model position, in {W};
+//! - the reference is the measured position (ball centre for TriCal, the reading for a tracker)
+//!   or, in a virtual cell, the true robot's position at the recorded joints (`RunTruth`);
+//! - the model position uses the session's tool: the parameter set's own tool parameters
+//!   (`tool_x` … `tool_c`, possibly identified) when the session's tool is the set's tool (same
+//!   TCP, mass and centre of mass), otherwise the session's declared TCP;
+//! - joint state: readings, gravity torques of the set's robot carrying the session's tool, the
+//!   measurement's approach directions and temperature (20 °C when not logged);
+//! - the nominal model is the same with the set's nominal values (nominal base, declared tool);
+//! - distances (the regressions' abscissae) are those of the reference position, to the
+//!   calibrated base origin (T_0^W translation) and to the artefact's ball centroid; the nominal
+//!   model's regressions use the same abscissae.
+//!
+//! Any session of the cell can be validated on: scoring a set on its own identification data is
+//! legitimate (the identification residual), but it is not a validation. The report lists each
+//! session's purpose so a front end can flag it.
+
+use nalgebra::Vector3;
+
+use super::normality::{ShapiroWilk, shapiro_wilk};
+use super::regression::{LinearFit, linear_fit};
+use super::stats::ErrorStats;
+use crate::cell::{Cell, Observation, Purpose, Session};
+use crate::kinematics::frame::rotation_angle;
+use crate::kinematics::{Chain, GravityModel, JointState, MAX_JOINTS, ParameterSet};
+use crate::sim::measure::RunTruth;
+
+/// What the model positions are scored against.
+#[derive(Clone, Copy, Debug)]
+pub enum Reference<'a> {
+    /// The cell's observations (ball centres, tracker readings): what a real cell offers.
+    Measured,
+    /// The true robot's positions at the recorded joints (virtual cell): the best any model can
+    /// do, free of instrument noise and robot repeatability.
+    Truth(&'a RunTruth),
+}
+
+/// Statistics of the signed error along one axis of {W}, m.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AxisStats {
+    pub mean: f64,
+    /// Sample standard deviation (n − 1).
+    pub std: f64,
+    pub min: f64,
+    pub max: f64,
+    /// `None` for fewer than 3 or more than 5000 values, or all equal.
+    pub shapiro: Option<ShapiroWilk>,
+}
+
+/// One model's errors over the selected measurements.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelErrors {
+    /// |error|, m.
+    pub position: ErrorStats,
+    /// Orientation error, rad: over the measurements that observed a full pose (n tells how
+    /// many); `None` when none did or the reference is the truth.
+    pub orientation: Option<ErrorStats>,
+    /// x, y, z of {W}.
+    pub per_axis: [AxisStats; 3],
+    /// Shapiro–Wilk on |error|.
+    pub shapiro: Option<ShapiroWilk>,
+    /// |error| against the reference position's distance to the base origin.
+    pub vs_base_distance: Option<LinearFit>,
+    /// |error| against the distance to the calibration-zone centre (the artefact's ball
+    /// centroid); `None` without an artefact.
+    pub vs_zone_distance: Option<LinearFit>,
+}
+
+/// One measurement's errors.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Residual {
+    pub session: String,
+    /// Index of the measurement within its session (0-based).
+    pub index: usize,
+    /// Reference − calibrated model, {W}, m.
+    pub error: Vector3<f64>,
+    /// Reference − nominal model, {W}, m.
+    pub nominal_error: Vector3<f64>,
+    /// Angle of R_ref·R_modelᵀ, rad (pose observations against the measured reference only).
+    pub orientation_error: Option<f64>,
+    pub nominal_orientation_error: Option<f64>,
+    /// Distance of the reference position to the base origin, m.
+    pub distance_to_base: f64,
+    /// Distance of the reference position to the ball centroid, m.
+    pub distance_to_zone: Option<f64>,
+}
+
+/// The validation of one parameter set on selected sessions.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ValidationReport {
+    /// The selected sessions, in the caller's order.
+    pub sessions: Vec<String>,
+    /// The purpose of each selected session (an identification session scores the fit, not the
+    /// model's validity).
+    pub purposes: Vec<Purpose>,
+    /// Scored against the truth (`true`) or against the measurements.
+    pub against_truth: bool,
+    pub calibrated: ModelErrors,
+    pub nominal: ModelErrors,
+    /// One per measurement, sessions in selection order, measurements in file order.
+    pub residuals: Vec<Residual>,
+}
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ValidateError {
+    #[error("no session selected for validation")]
+    NoSession,
+    #[error("unknown session '{0}'")]
+    UnknownSession(String),
+    #[error("session '{0}' is selected twice")]
+    DuplicateSession(String),
+    #[error("the selected sessions hold no measurement")]
+    NoMeasurement,
+    #[error(
+        "the parameter set is for robot '{set}' ({set_dof} joints), the cell's robot is '{cell}' ({cell_dof} joints)"
+    )]
+    RobotMismatch { set: String, set_dof: usize, cell: String, cell_dof: usize },
+    #[error("measurement {index} of session '{session}' has {got} joint values, the robot has {dof}")]
+    JointCount { session: String, index: usize, got: usize, dof: usize },
+    #[error("measurement {index} of session '{session}' observes ball {ball}, which the cell's artefact does not have")]
+    NoBall { session: String, index: usize, ball: usize },
+    #[error("the truth has no session '{0}'")]
+    TruthMissing(String),
+    #[error("the truth of session '{session}' has {truth} measurements, the cell has {cell}")]
+    TruthCount { session: String, truth: usize, cell: usize },
+    #[error("measurement {index} of session '{session}' gives a non-finite error")]
+    NotFinite { session: String, index: usize },
+}
+
+/// The names of the cell's validation sessions, in file order: the default selection.
+pub fn validation_sessions(cell: &Cell) -> Vec<String> {
+    cell.sessions_for(Purpose::Validation).map(|s| s.name.clone()).collect()
+}
+
+/// Validate `set` on the named sessions of `cell` against `reference`.
+pub fn validate(
+    set: &ParameterSet,
+    cell: &Cell,
+    sessions: &[String],
+    reference: Reference<'_>,
+) -> Result<ValidationReport, ValidateError> {
+    if sessions.is_empty() {
+        return Err(ValidateError::NoSession);
+    }
+    let dof = set.dof();
+    let presets_differ = matches!((set.model.preset, cell.model.preset), (Some(a), Some(b)) if a != b);
+    if dof != cell.model.dof() || presets_differ {
+        return Err(ValidateError::RobotMismatch {
+            set: set.model.name.clone(),
+            set_dof: dof,
+            cell: cell.model.name.clone(),
+            cell_dof: cell.model.dof(),
+        });
+    }
+    let mut selected: Vec<&Session> = Vec::with_capacity(sessions.len());
+    for name in sessions {
+        let s = cell.session(name).ok_or_else(|| ValidateError::UnknownSession(name.clone()))?;
+        if selected.iter().any(|t| t.name == *name) {
+            return Err(ValidateError::DuplicateSession(name.clone()));
+        }
+        selected.push(s);
+    }
+
+    let base_origin = set.chain().base().t;
+    let zone = cell.artefact.as_ref().map(|a| a.triangle.centroid());
+    let mut residuals = Vec::new();
+    for session in &selected {
+        let truth = match reference {
+            Reference::Measured => None,
+            Reference::Truth(run) => {
+                let (_, t) = run
+                    .sessions
+                    .iter()
+                    .find(|(n, _)| *n == session.name)
+                    .ok_or_else(|| ValidateError::TruthMissing(session.name.clone()))?;
+                if t.len() != session.measurements.len() {
+                    return Err(ValidateError::TruthCount {
+                        session: session.name.clone(),
+                        truth: t.len(),
+                        cell: session.measurements.len(),
+                    });
+                }
+                Some(t)
+            }
+        };
+        let (cal_chain, nom_chain) = session_chains(set, session);
+        let gravity = GravityModel::new(&set.model, &session.tool);
+        for (index, m) in session.measurements.iter().enumerate() {
+            if m.q.len() != dof {
+                return Err(ValidateError::JointCount { session: session.name.clone(), index, got: m.q.len(), dof });
+            }
+            let state = joint_state(&gravity, &m.q, m.approach.as_deref(), m.temperature_c, dof);
+            let cal = cal_chain.fk(&state);
+            let nom = nom_chain.fk(&state);
+            let (reference_position, reference_rotation) = match truth {
+                Some(t) => (t[index].model_position, None),
+                None => match &m.observation {
+                    Observation::Pose(f) => (f.t, Some(f.r)),
+                    Observation::Position(p) => (*p, None),
+                    Observation::Ball(k) => {
+                        let c = cell.artefact.as_ref().and_then(|a| a.triangle.ball(*k));
+                        (
+                            c.ok_or_else(|| ValidateError::NoBall { session: session.name.clone(), index, ball: *k })?,
+                            None,
+                        )
+                    }
+                },
+            };
+            let error = reference_position - cal.t;
+            let nominal_error = reference_position - nom.t;
+            if !(error.iter().chain(nominal_error.iter()).all(|v| v.is_finite())) {
+                return Err(ValidateError::NotFinite { session: session.name.clone(), index });
+            }
+            residuals.push(Residual {
+                session: session.name.clone(),
+                index,
+                error,
+                nominal_error,
+                orientation_error: reference_rotation.map(|r| rotation_angle(&(r * cal.r.transpose()))),
+                nominal_orientation_error: reference_rotation.map(|r| rotation_angle(&(r * nom.r.transpose()))),
+                distance_to_base: (reference_position - base_origin).norm(),
+                distance_to_zone: zone.map(|z| (reference_position - z).norm()),
+            });
+        }
+    }
+    if residuals.is_empty() {
+        return Err(ValidateError::NoMeasurement);
+    }
+    Ok(ValidationReport {
+        sessions: selected.iter().map(|s| s.name.clone()).collect(),
+        purposes: selected.iter().map(|s| s.purpose).collect(),
+        against_truth: matches!(reference, Reference::Truth(_)),
+        calibrated: model_errors(&residuals, |r| (r.error, r.orientation_error)),
+        nominal: model_errors(&residuals, |r| (r.nominal_error, r.nominal_orientation_error)),
+        residuals,
+    })
+}
+
+/// The logged state: readings, gravity torques, approach directions, temperature.
+fn joint_state(
+    gravity: &GravityModel,
+    q: &[f64],
+    approach: Option<&[i8]>,
+    temperature_c: Option<f64>,
+    dof: usize,
+) -> JointState {
+    let tau = gravity.torques(q);
+    let mut s = JointState::with_torques(q, &tau[..dof]);
+    if let Some(a) = approach {
+        for (k, v) in a.iter().take(dof.min(MAX_JOINTS)).enumerate() {
+            s.approach[k] = f64::from(*v);
+        }
+    }
+    if let Some(t) = temperature_c {
+        s.temperature_c = t;
+    }
+    s
+}
+
+/// Statistics of one model's errors; `pick` selects its error vector and orientation error.
+fn model_errors(residuals: &[Residual], pick: impl Fn(&Residual) -> (Vector3<f64>, Option<f64>)) -> ModelErrors {
+    let errors: Vec<Vector3<f64>> = residuals.iter().map(|r| pick(r).0).collect();
+    let norms: Vec<f64> = errors.iter().map(|e| e.norm()).collect();
+    let angles: Vec<f64> = residuals.iter().filter_map(|r| pick(r).1).collect();
+    let base: Vec<f64> = residuals.iter().map(|r| r.distance_to_base).collect();
+    let zone: Option<Vec<f64>> = residuals.iter().map(|r| r.distance_to_zone).collect();
+    let axis = |k: usize| {
+        let v: Vec<f64> = errors.iter().map(|e| e[k]).collect();
+        let s = ErrorStats::of(&v).expect("validate() checked every error is finite and there is one");
+        AxisStats {
+            mean: s.mean,
+            std: s.std,
+            min: v.iter().copied().fold(f64::INFINITY, f64::min),
+            max: s.max,
+            shapiro: shapiro_wilk(&v).ok(),
+        }
+    };
+    ModelErrors {
+        position: ErrorStats::of(&norms).expect("validate() checked every error is finite and there is one"),
+        orientation: ErrorStats::of(&angles),
+        per_axis: [axis(0), axis(1), axis(2)],
+        shapiro: shapiro_wilk(&norms).ok(),
+        vs_base_distance: linear_fit(&base, &norms),
+        vs_zone_distance: zone.and_then(|z| linear_fit(&z, &norms)),
+    }
+}
+
+/// The calibrated and nominal chains for a session's measurements: the set's own tool parameters
+/// when the session's tool is the set's tool, otherwise the session's declared TCP on the set's
+/// (calibrated or nominal) base.
+pub fn session_chains(set: &ParameterSet, session: &Session) -> (Chain, Chain) {
+    let (calibrated, nominal) = (set.chain(), set.nominal_chain());
+    if session.tool == set.tool {
+        (calibrated, nominal)
+    } else {
+        (
+            calibrated.with_base_tool(calibrated.base_pose(), session.tool.tcp),
+            nominal.with_base_tool(nominal.base_pose(), session.tool.tcp),
+        )
+    }
+}
