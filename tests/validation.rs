@@ -4,6 +4,7 @@
 
 use nalgebra::{DMatrix, DVector};
 use robocal::cell::{Cell, Observation, Purpose};
+use robocal::domain::validation::report_to_json;
 use robocal::kinematics::frame::{rot_x, rot_z};
 use robocal::kinematics::model::{irb120, ur10};
 use robocal::kinematics::thesis::TABLE_5_1_NOMINAL_BASE;
@@ -257,6 +258,35 @@ fn bad_selections_are_named() {
         validate(set, &cell, &v, Reference::Measured).unwrap_err(),
         ValidateError::JointCount { session: v[0].clone(), index: 2, got: 5, dof: 6 }
     );
+}
+
+/// The JSON: mm and mrad with the unit in the names, calibrated fields at the top level, the
+/// nominal ones under `nominal`, residuals on request.
+#[test]
+fn json_report_is_in_millimetres() {
+    let sim = sim();
+    let v = validation_sessions(&sim.cell);
+    let report = validate(&sim.truth.set, &sim.cell, &v, Reference::Measured).unwrap();
+    let j = report_to_json(&report, true);
+    let num = |v: &serde_json::Value| v.as_f64().unwrap();
+    assert_eq!(j["sessions"], serde_json::json!(v));
+    assert_eq!(j["reference"], "measured");
+    assert_eq!(j["n"], 50);
+    assert!((num(&j["mean_mm"]) - report.calibrated.position.mean * 1e3).abs() < 1e-12);
+    assert!((num(&j["nominal"]["max_mm"]) - report.nominal.position.max * 1e3).abs() < 1e-12);
+    assert!((num(&j["per_axis"]["z"]["std_mm"]) - report.calibrated.per_axis[2].std * 1e3).abs() < 1e-12);
+    assert_eq!(num(&j["per_axis"]["y"]["shapiro_p"]), report.calibrated.per_axis[1].shapiro.unwrap().p_value);
+    assert_eq!(num(&j["shapiro"]["w"]), report.calibrated.shapiro.unwrap().w);
+    let fit = report.nominal.vs_zone_distance.unwrap();
+    assert_eq!(num(&j["nominal"]["vs_zone_distance"]["r"]), fit.r);
+    assert!((num(&j["nominal"]["vs_zone_distance"]["intercept_mm"]) - fit.intercept * 1e3).abs() < 1e-12);
+    assert!(j["orientation"].is_null());
+    let rows = j["residuals"].as_array().unwrap();
+    assert_eq!(rows.len(), 50);
+    let e = report.residuals[7].error * 1e3;
+    assert_eq!(rows[7]["error_mm"], serde_json::json!([e.x, e.y, e.z]));
+    assert!((num(&rows[7]["error_norm_mm"]) - e.norm()).abs() < 1e-12);
+    assert!(report_to_json(&report, false).get("residuals").is_none());
 }
 
 /// Approach directions and temperatures reach the model's effect terms.

@@ -8,6 +8,7 @@ pub mod param_set;
 pub mod pose;
 pub mod robot;
 pub mod truth;
+pub mod validation;
 
 use std::fmt;
 

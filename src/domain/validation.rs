@@ -1,0 +1,219 @@
+//! The validation report on the wire: millimetres for positions and distances, milliradians for
+//! orientation errors, the unit in every field name. Flat summary fields for the calibrated model
+//! at the top level (what a reader compares with the thesis's Table 5.2), the same fields for the
+//! nominal model under `nominal`, and optionally one row per measurement.
+
+use serde::Serialize;
+
+use super::MM;
+use crate::validate::normality::ShapiroWilk;
+use crate::validate::regression::LinearFit;
+use crate::validate::report::{AxisStats, ModelErrors, Residual, ValidationReport};
+use crate::validate::stats::ErrorStats;
+
+/// Milliradians → radians.
+pub const MRAD: f64 = 1e-3;
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ValidationOut {
+    pub sessions: Vec<String>,
+    /// "identification" or "validation", per session.
+    pub purposes: Vec<&'static str>,
+    /// "measured" or "truth".
+    pub reference: &'static str,
+    #[serde(flatten)]
+    pub calibrated: ModelErrorsOut,
+    pub nominal: ModelErrorsOut,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub residuals: Option<Vec<ResidualOut>>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ModelErrorsOut {
+    pub n: usize,
+    pub mean_mm: f64,
+    pub median_mm: f64,
+    pub std_mm: f64,
+    pub rms_mm: f64,
+    pub p95_mm: f64,
+    pub max_mm: f64,
+    pub orientation: Option<OrientationOut>,
+    pub per_axis: PerAxisOut,
+    pub shapiro: Option<ShapiroOut>,
+    pub vs_base_distance: Option<FitOut>,
+    pub vs_zone_distance: Option<FitOut>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct OrientationOut {
+    pub n: usize,
+    pub mean_mrad: f64,
+    pub median_mrad: f64,
+    pub std_mrad: f64,
+    pub rms_mrad: f64,
+    pub p95_mrad: f64,
+    pub max_mrad: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PerAxisOut {
+    pub x: AxisOut,
+    pub y: AxisOut,
+    pub z: AxisOut,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct AxisOut {
+    pub mean_mm: f64,
+    pub std_mm: f64,
+    pub min_mm: f64,
+    pub max_mm: f64,
+    pub shapiro_w: Option<f64>,
+    pub shapiro_p: Option<f64>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ShapiroOut {
+    pub w: f64,
+    pub p: f64,
+}
+
+/// |error| = slope·distance + intercept.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FitOut {
+    pub n: usize,
+    pub slope_mm_per_mm: f64,
+    pub slope_stderr_mm_per_mm: f64,
+    pub intercept_mm: f64,
+    pub r: f64,
+    pub r2: f64,
+    /// Two-sided p-value of a zero slope.
+    pub p: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ResidualOut {
+    pub session: String,
+    pub index: usize,
+    /// Reference − calibrated model, {W}.
+    pub error_mm: [f64; 3],
+    pub error_norm_mm: f64,
+    /// Reference − nominal model, {W}.
+    pub nominal_error_mm: [f64; 3],
+    pub nominal_error_norm_mm: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub orientation_error_mrad: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nominal_orientation_error_mrad: Option<f64>,
+    pub distance_to_base_mm: f64,
+    pub distance_to_zone_mm: Option<f64>,
+}
+
+impl ValidationOut {
+    pub fn from_report(r: &ValidationReport, include_residuals: bool) -> Self {
+        Self {
+            sessions: r.sessions.clone(),
+            purposes: r.purposes.iter().map(|p| p.as_str()).collect(),
+            reference: if r.against_truth { "truth" } else { "measured" },
+            calibrated: ModelErrorsOut::from_errors(&r.calibrated),
+            nominal: ModelErrorsOut::from_errors(&r.nominal),
+            residuals: include_residuals.then(|| r.residuals.iter().map(ResidualOut::from_residual).collect()),
+        }
+    }
+}
+
+impl ModelErrorsOut {
+    pub fn from_errors(e: &ModelErrors) -> Self {
+        let p = &e.position;
+        Self {
+            n: p.n,
+            mean_mm: p.mean / MM,
+            median_mm: p.median / MM,
+            std_mm: p.std / MM,
+            rms_mm: p.rms / MM,
+            p95_mm: p.p95 / MM,
+            max_mm: p.max / MM,
+            orientation: e.orientation.as_ref().map(OrientationOut::from_stats),
+            per_axis: PerAxisOut {
+                x: AxisOut::from_axis(&e.per_axis[0]),
+                y: AxisOut::from_axis(&e.per_axis[1]),
+                z: AxisOut::from_axis(&e.per_axis[2]),
+            },
+            shapiro: e.shapiro.as_ref().map(ShapiroOut::from_test),
+            vs_base_distance: e.vs_base_distance.as_ref().map(FitOut::from_fit),
+            vs_zone_distance: e.vs_zone_distance.as_ref().map(FitOut::from_fit),
+        }
+    }
+}
+
+impl OrientationOut {
+    fn from_stats(s: &ErrorStats) -> Self {
+        Self {
+            n: s.n,
+            mean_mrad: s.mean / MRAD,
+            median_mrad: s.median / MRAD,
+            std_mrad: s.std / MRAD,
+            rms_mrad: s.rms / MRAD,
+            p95_mrad: s.p95 / MRAD,
+            max_mrad: s.max / MRAD,
+        }
+    }
+}
+
+impl AxisOut {
+    fn from_axis(a: &AxisStats) -> Self {
+        Self {
+            mean_mm: a.mean / MM,
+            std_mm: a.std / MM,
+            min_mm: a.min / MM,
+            max_mm: a.max / MM,
+            shapiro_w: a.shapiro.map(|s| s.w),
+            shapiro_p: a.shapiro.map(|s| s.p_value),
+        }
+    }
+}
+
+impl ShapiroOut {
+    fn from_test(s: &ShapiroWilk) -> Self {
+        Self { w: s.w, p: s.p_value }
+    }
+}
+
+impl FitOut {
+    /// Both axes are lengths, so the slope is unit-free and only the intercept scales.
+    fn from_fit(f: &LinearFit) -> Self {
+        Self {
+            n: f.n,
+            slope_mm_per_mm: f.slope,
+            slope_stderr_mm_per_mm: f.slope_stderr,
+            intercept_mm: f.intercept / MM,
+            r: f.r,
+            r2: f.r2,
+            p: f.p_value,
+        }
+    }
+}
+
+impl ResidualOut {
+    fn from_residual(r: &Residual) -> Self {
+        let mm = |v: &nalgebra::Vector3<f64>| [v.x / MM, v.y / MM, v.z / MM];
+        Self {
+            session: r.session.clone(),
+            index: r.index,
+            error_mm: mm(&r.error),
+            error_norm_mm: r.error.norm() / MM,
+            nominal_error_mm: mm(&r.nominal_error),
+            nominal_error_norm_mm: r.nominal_error.norm() / MM,
+            orientation_error_mrad: r.orientation_error.map(|a| a / MRAD),
+            nominal_orientation_error_mrad: r.nominal_orientation_error.map(|a| a / MRAD),
+            distance_to_base_mm: r.distance_to_base / MM,
+            distance_to_zone_mm: r.distance_to_zone.map(|d| d / MM),
+        }
+    }
+}
+
+/// The report as the CLI prints it.
+pub fn report_to_json(report: &ValidationReport, include_residuals: bool) -> serde_json::Value {
+    serde_json::to_value(ValidationOut::from_report(report, include_residuals))
+        .expect("the validation report has only string keys and numbers")
+}
