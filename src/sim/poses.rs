@@ -186,10 +186,27 @@ impl Default for IdentificationOptions {
     }
 }
 
+/// How validation configurations are drawn.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum ValidationSampling {
+    /// The thesis's way (§4.1.4): a TCP position uniform in a box around the robot, a nest drawn
+    /// at random and turned to face the tracker, uniform spin about the beam, one of the valid
+    /// inverse-kinematics branches at random.
+    #[default]
+    Cartesian,
+    /// Joint values uniform inside the (shrunk) limits: harsher, with more configurations at
+    /// the edge of the workspace than the thesis measured.
+    Joint,
+}
+
 /// Validation planning settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ValidationOptions {
     pub count: usize,
+    pub sampling: ValidationSampling,
+    /// Cartesian sampling: half-width of the box in x and y of {0} and its z range, m.
+    pub box_half_width: f64,
+    pub box_z: [f64; 2],
     /// Joint limits are shrunk by this much on both sides when sampling, rad.
     pub joint_margin: f64,
     /// The plan fails after `count · attempts_per_pose` configurations drawn.
@@ -200,7 +217,14 @@ impl Default for ValidationOptions {
     /// 506 poses (§4.1, setup 2), 5° inside the limits, up to 200 draws per wanted pose (the
     /// thesis cell needs about 9).
     fn default() -> Self {
-        Self { count: 506, joint_margin: 5.0 * DEG, attempts_per_pose: 200 }
+        Self {
+            count: 506,
+            sampling: ValidationSampling::default(),
+            box_half_width: 0.70,
+            box_z: [-0.10, 1.00],
+            joint_margin: 5.0 * DEG,
+            attempts_per_pose: 200,
+        }
     }
 }
 
@@ -498,7 +522,16 @@ impl PlanningCell {
                 return Err(PlanError::Validation { found: st.accepted, wanted: opts.count, attempts: st.attempts });
             }
             st.attempts += 1;
-            let q: [f64; 6] = std::array::from_fn(|j| rng.random_range(ranges[j][0]..ranges[j][1]));
+            let q = match opts.sampling {
+                ValidationSampling::Joint => std::array::from_fn(|j| rng.random_range(ranges[j][0]..ranges[j][1])),
+                ValidationSampling::Cartesian => match self.draw_cartesian(opts, &mut rng) {
+                    Ok(q) => q,
+                    Err(r) => {
+                        st.count(&r);
+                        continue;
+                    }
+                },
+            };
             match self.validation_nest(&q) {
                 Err(r) => st.count(&r),
                 Ok(nest) => {
@@ -513,6 +546,45 @@ impl PlanningCell {
             }
         }
         Ok(Plan { poses, stats: vec![st] })
+    }
+
+    /// One Cartesian validation draw (§4.1.4): the measuring tool's TCP uniform in the box (in
+    /// {0}), a random nest whose opening points from the TCP at the tracker, uniform spin about
+    /// that direction, a random valid branch. The nest sits a few centimetres from the TCP, so
+    /// it faces the tracker within a few degrees; [`Self::validation_check`] decides.
+    fn draw_cartesian<R: Rng>(&self, opts: &ValidationOptions, rng: &mut R) -> Result<[f64; 6], Reject> {
+        let w = opts.box_half_width;
+        let p0 = Vector3::new(
+            rng.random_range(-w..w),
+            rng.random_range(-w..w),
+            rng.random_range(opts.box_z[0]..opts.box_z[1]),
+        );
+        let p = self.chain.base().transform_point(&p0);
+        let nest = &self.layout.nests[rng.random_range(0..self.layout.nests.len())];
+        let spin = rng.random::<f64>() * TAU;
+        let to = self.tracker - p;
+        let d = to.try_normalize(1e-9).ok_or(Reject::Unreachable)?;
+        let align = nalgebra::Rotation3::rotation_between(&nest.opening, &d).unwrap_or_else(|| {
+            nalgebra::Rotation3::from_axis_angle(
+                &nalgebra::Unit::new_normalize(nest.opening.cross(&Vector3::z()) + 1e-3 * Vector3::x()),
+                PI,
+            )
+        });
+        let r_flange = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_unchecked(d), spin) * align;
+        let tool = self.chain.tool();
+        let target = Frame::new(r_flange.matrix() * tool.r, p);
+        let mut solutions = [[0.0; 6]; 8];
+        let mut n = 0;
+        for b in Branch::ALL {
+            if let Ok(q) = self.ik.solve(&target, b) {
+                solutions[n] = q;
+                n += 1;
+            }
+        }
+        if n == 0 {
+            return Err(Reject::Unreachable);
+        }
+        Ok(solutions[rng.random_range(0..n)])
     }
 
     /// Path-check a measuring sequence from home: `Err((i, e))` when the move into pose i fails.
