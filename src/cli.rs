@@ -41,6 +41,65 @@ pub enum Command {
     Import(ImportCommand),
     /// Simulate the virtual cell: plan the TriCal and tracker runs, measure a true robot, write the cell file.
     Simulate(SimulateArgs),
+    /// Identify the robot's parameters from a cell's measurements.
+    Identify(IdentifyArgs),
+    /// Validate a parameter set on a cell's sessions: error statistics of the calibrated and nominal models.
+    Validate(ValidateArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct ValidateArgs {
+    /// The parameter-set file.
+    pub params: PathBuf,
+    /// The cell file.
+    pub cell: PathBuf,
+    /// Session to validate on (repeatable; default: every validation session).
+    #[arg(long)]
+    pub session: Vec<String>,
+    /// Score against the true positions of a simulated cell (its --truth-out file) instead of the readings.
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
+    /// Include the per-measurement residuals.
+    #[arg(long)]
+    pub residuals: bool,
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+pub struct IdentifyArgs {
+    /// The cell file.
+    pub cell: PathBuf,
+    /// Sessions to identify from (comma-separated names); default: every identification session.
+    #[arg(long)]
+    pub sessions: Option<String>,
+    /// Pose selection: `detmax` picks --n measurements maximising --index.
+    #[arg(long)]
+    pub select: Option<String>,
+    #[arg(long)]
+    pub n: Option<usize>,
+    /// Observability index DETMAX maximises: O1 (default) … O5.
+    #[arg(long, default_value = "O1")]
+    pub index: String,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Model options: +beta,-compliance,+cyc2_h1,+backlash2,+coupling5_6,+c2_cubic,+thermal_alpha.
+    #[arg(long, default_value = "", allow_hyphen_values = true)]
+    pub model: String,
+    /// Parameters held at their nominal values (comma-separated names, e.g. a2,tool_x).
+    #[arg(long)]
+    pub fix: Option<String>,
+    /// Refuse fits whose column-scaled κ(J) exceeds this.
+    #[arg(long, default_value_t = 1000.0)]
+    pub kappa_limit: f64,
+    /// Huber loss threshold in robust standard deviations (e.g. 2.5); default plain least squares.
+    #[arg(long)]
+    pub huber: Option<f64>,
+    /// Length weighting orientation residuals of full-pose measurements, mm per rad.
+    #[arg(long, default_value_t = 100.0)]
+    pub rotation_weight_mm: f64,
+    #[arg(long)]
+    pub out: PathBuf,
 }
 
 #[derive(Args, Debug)]
@@ -248,7 +307,100 @@ pub fn run(cli: Cli) -> Result<String, CliError> {
         Command::Import(ImportCommand::Ur10Ipa(a)) => import_ur10(a),
         Command::Import(ImportCommand::ThreeReflector(a)) => import_three(a),
         Command::Simulate(a) => simulate(a),
+        Command::Identify(a) => identify(a),
+        Command::Validate(a) => validate(a),
     }
+}
+
+fn validate(a: ValidateArgs) -> Result<String, CliError> {
+    use crate::validate::report::{Reference, validate, validation_sessions};
+    let doc = ParameterSetDoc::from_json(&read(&a.params)?).map_err(|e| CliError::file(&a.params, e))?;
+    let cell = load_cell(&a.cell)?;
+    let sessions = if a.session.is_empty() { validation_sessions(&cell) } else { a.session.clone() };
+    let parsed = match &a.truth {
+        Some(p) => {
+            let t = crate::domain::truth::parse_truth(&read(p)?).map_err(|e| CliError::file(p, e))?;
+            Some(t.run.ok_or_else(|| {
+                CliError::arg("--truth", "the file has no per-measurement truth (write it with simulate --truth-out)")
+            })?)
+        }
+        None => None,
+    };
+    let reference = match &parsed {
+        Some(run) => Reference::Truth(run),
+        None => Reference::Measured,
+    };
+    let report = validate(&doc.set, &cell, &sessions, reference).map_err(|e| CliError::arg("--session", e))?;
+    let v = crate::domain::validation::report_to_json(&report, a.residuals);
+    write_or_return(&a.out, serde_json::to_string_pretty(&v).expect("json"))
+}
+
+fn load_cell(path: &Path) -> Result<crate::cell::Cell, CliError> {
+    crate::domain::cell::parse_cell(&read(path)?).map_err(|e| CliError::file(path, e))
+}
+
+fn list(s: &Option<String>) -> Vec<String> {
+    s.as_deref()
+        .map(|s| s.split(',').map(|x| x.trim().to_string()).filter(|x| !x.is_empty()).collect())
+        .unwrap_or_default()
+}
+
+fn identify(a: IdentifyArgs) -> Result<String, CliError> {
+    use crate::identify::{IdentifyOptions, ModelOptions, SolverOptions};
+    let cell = load_cell(&a.cell)?;
+    let mut opts = IdentifyOptions {
+        model: ModelOptions::parse(&a.model, cell.model.dof()).map_err(|e| CliError::arg("--model", e))?,
+        fixed: list(&a.fix),
+        kappa_limit: a.kappa_limit,
+        solver: SolverOptions { huber: a.huber, ..Default::default() },
+        rotation_weight: a.rotation_weight_mm * MM,
+        ..Default::default()
+    };
+    if a.kappa_limit.is_nan() || a.kappa_limit <= 1.0 {
+        return Err(CliError::arg("--kappa-limit", "must be above 1"));
+    }
+    if a.huber.is_some_and(|k| !k.is_finite() || k <= 0.0) {
+        return Err(CliError::arg("--huber", "must be a positive threshold"));
+    }
+    if !a.rotation_weight_mm.is_finite() || a.rotation_weight_mm <= 0.0 {
+        return Err(CliError::arg("--rotation-weight-mm", "must be positive"));
+    }
+    opts.selection.sessions = list(&a.sessions);
+    let selection = match a.select.as_deref() {
+        None => {
+            if a.n.is_some() {
+                return Err(CliError::arg("--n", "needs --select detmax"));
+            }
+            None
+        }
+        Some("detmax") => {
+            let n = a.n.ok_or_else(|| CliError::arg("--n", "--select detmax needs --n"))?;
+            let index = crate::identify::observability::Index::parse(&a.index)
+                .ok_or_else(|| CliError::arg("--index", format!("'{}' is not O1…O5", a.index)))?;
+            let (subset, info) =
+                crate::identify::select_detmax(&cell, &opts, n, index, a.seed).map_err(|e| CliError(e.to_string()))?;
+            opts.selection.subset = subset;
+            Some(info)
+        }
+        Some(other) => return Err(CliError::arg("--select", format!("'{other}' is not a selection method (detmax)"))),
+    };
+    let id = crate::identify::identify(&cell, &opts).map_err(|e| CliError(e.to_string()))?;
+    let sessions: Vec<String> = id.problem.tools.iter().flat_map(|t| t.sessions.clone()).collect();
+    let doc = crate::domain::identification::identification_doc(&id, &sessions, selection);
+    let q = &id.quality;
+    fs::write(&a.out, format!("{}\n", doc.to_json_pretty()))
+        .map_err(|e| CliError(format!("{}: cannot write: {e}", a.out.display())))?;
+    Ok(format!(
+        "wrote {}: {} parameters identified from {} measurements in {} iterations; κ {:.1} (scaled) / {:.1} (SI), O1 {:.4}, residual RMS {:.4} mm",
+        a.out.display(),
+        id.free_names.len(),
+        q.n_configs,
+        id.iterations,
+        q.kappa_scaled,
+        q.kappa,
+        q.observability.o1,
+        q.rms_residual / MM
+    ))
 }
 
 fn simulate(a: SimulateArgs) -> Result<String, CliError> {

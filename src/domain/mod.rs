@@ -4,6 +4,7 @@
 //! naming the field path and the reason.
 
 pub mod cell;
+pub mod identification;
 pub mod param_set;
 pub mod pose;
 pub mod robot;

@@ -1,0 +1,373 @@
+//! The identification problem: which measurements, which parameters, and the stacked residual and
+//! Jacobian (eq. 4.12–4.15) of a parameter vector.
+//!
+//! Parameters form one global vector: the robot's (geometry, β, compliance, effect terms, base —
+//! the [`ParamLayout`] without its tool entries) followed by six per distinct tool (x, y, z, a, b,
+//! c of T_T^6). Sessions measured with the same tool share its block; every measurement is
+//! evaluated with the chain of its own tool.
+//!
+//! Rows per measurement: 3 for a ball or a position, 6 for a full pose — the rotation rows are the
+//! world rotation vector of R_meas·R_modelᵀ times a length (`rotation_weight`, m/rad) so position
+//! and orientation residuals share one unit. A TriCal measurement with indicator readings has its
+//! target moved from the ball centre by the trilaterated offset, turned into {W} with the model's
+//! tool orientation.
+
+use faer::Mat;
+use nalgebra::Vector3;
+
+use crate::cell::{Cell, Measurement, Observation, Purpose, Session};
+use crate::kinematics::frame::rotation_vector;
+use crate::kinematics::params::REFERENCE_TEMPERATURE_C;
+use crate::kinematics::{Chain, Frame, GravityModel, JointState, Param, ParamLayout, RobotModel, Rows, Tool};
+use crate::metrology::TriCal;
+
+/// One parameter of the global vector.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum GlobalParam {
+    /// A robot parameter: index into the problem's [`ParamLayout`].
+    Robot(usize),
+    /// Component k of tool t's T_T^6.
+    Tool { tool: usize, k: usize },
+}
+
+/// A distinct tool and the sessions that used it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ToolBlock {
+    pub tool: Tool,
+    /// Names of the sessions measured with it.
+    pub sessions: Vec<String>,
+    /// Its TCP is only a guess and should be identified.
+    pub identify_tcp: bool,
+    /// Whether any of its measurements is a full pose.
+    pub has_orientation: bool,
+}
+
+/// What a measurement is compared with.
+#[derive(Clone, Debug)]
+enum Target {
+    Point(Vector3<f64>),
+    /// A ball centre corrected by the TriCal's trilaterated offset (tool frame).
+    Ball {
+        centre: Vector3<f64>,
+        offset: Vector3<f64>,
+    },
+    Pose(Frame),
+}
+
+/// One measurement prepared for the solver.
+#[derive(Clone, Debug)]
+pub struct Obs {
+    /// Index of the session in the cell and of the measurement in it.
+    pub session: usize,
+    pub index: usize,
+    pub tool: usize,
+    pub state: JointState,
+    target: Target,
+    /// First row in the stacked residual.
+    pub row: usize,
+    pub rows: usize,
+}
+
+/// Which measurements enter the problem.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MeasurementSelection {
+    /// Session names; empty = every identification session.
+    pub sessions: Vec<String>,
+    /// A subset of measurements as (session name, index); empty = all of the chosen sessions.
+    pub subset: Vec<(String, usize)>,
+}
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ProblemError {
+    #[error("no session named '{0}' in the cell")]
+    UnknownSession(String),
+    #[error(
+        "session '{0}' is a validation session; identify with identification sessions (or name it explicitly with --sessions)"
+    )]
+    WrongPurpose(String),
+    #[error("measurement {index} of session '{session}' does not exist")]
+    UnknownMeasurement { session: String, index: usize },
+    #[error("no measurements to identify from")]
+    Empty,
+    #[error("a ball measurement needs the cell's artefact")]
+    NoArtefact,
+}
+
+/// The identification problem of a cell.
+#[derive(Clone, Debug)]
+pub struct Problem {
+    pub model: RobotModel,
+    pub layout: ParamLayout,
+    pub tools: Vec<ToolBlock>,
+    pub params: Vec<GlobalParam>,
+    /// Nominal value of every global parameter (SI).
+    pub nominal: Vec<f64>,
+    pub obs: Vec<Obs>,
+    pub n_rows: usize,
+    /// m per rad for rotation residual rows.
+    pub rotation_weight: f64,
+    /// Session names, in cell order.
+    pub session_names: Vec<String>,
+}
+
+impl Problem {
+    /// Build the problem of `cell` with the robot parameter layout `layout` (the full layout plus any
+    /// effect terms). Base nominal = `base`.
+    pub fn new(
+        cell: &Cell,
+        layout: ParamLayout,
+        base: [f64; 6],
+        selection: &MeasurementSelection,
+        rotation_weight: f64,
+    ) -> Result<Problem, ProblemError> {
+        let model = cell.model.clone();
+        // Sessions.
+        let chosen: Vec<usize> = if selection.sessions.is_empty() {
+            (0..cell.sessions.len()).filter(|&i| cell.sessions[i].purpose == Purpose::Identification).collect()
+        } else {
+            selection
+                .sessions
+                .iter()
+                .map(|n| {
+                    cell.sessions
+                        .iter()
+                        .position(|s| &s.name == n)
+                        .ok_or_else(|| ProblemError::UnknownSession(n.clone()))
+                })
+                .collect::<Result<_, _>>()?
+        };
+        // Measurements.
+        let mut picks: Vec<(usize, usize)> = Vec::new();
+        if selection.subset.is_empty() {
+            for &s in &chosen {
+                picks.extend((0..cell.sessions[s].measurements.len()).map(|i| (s, i)));
+            }
+        } else {
+            for (name, i) in &selection.subset {
+                let s = cell
+                    .sessions
+                    .iter()
+                    .position(|s| &s.name == name)
+                    .ok_or_else(|| ProblemError::UnknownSession(name.clone()))?;
+                if *i >= cell.sessions[s].measurements.len() {
+                    return Err(ProblemError::UnknownMeasurement { session: name.clone(), index: *i });
+                }
+                picks.push((s, *i));
+            }
+        }
+        if picks.is_empty() {
+            return Err(ProblemError::Empty);
+        }
+        // Distinct tools.
+        let mut tools: Vec<ToolBlock> = Vec::new();
+        let mut session_tool = vec![usize::MAX; cell.sessions.len()];
+        for &(s, _) in &picks {
+            if session_tool[s] != usize::MAX {
+                continue;
+            }
+            let sess: &Session = &cell.sessions[s];
+            let t = match tools.iter().position(|b| b.tool == sess.tool) {
+                Some(t) => t,
+                None => {
+                    tools.push(ToolBlock {
+                        tool: sess.tool.clone(),
+                        sessions: Vec::new(),
+                        identify_tcp: false,
+                        has_orientation: false,
+                    });
+                    tools.len() - 1
+                }
+            };
+            tools[t].sessions.push(sess.name.clone());
+            tools[t].identify_tcp |= sess.identify_tcp;
+            session_tool[s] = t;
+        }
+        // Global parameters.
+        let mut params = Vec::new();
+        let mut nominal = Vec::new();
+        let robot_nominal = layout.nominal_values(&model, &tools[0].tool, &base);
+        for (i, p) in layout.params().iter().enumerate() {
+            if !matches!(p, Param::Tool(_)) {
+                params.push(GlobalParam::Robot(i));
+                nominal.push(robot_nominal[i]);
+            }
+        }
+        for (t, b) in tools.iter().enumerate() {
+            for k in 0..6 {
+                params.push(GlobalParam::Tool { tool: t, k });
+                nominal.push(b.tool.tcp[k]);
+            }
+        }
+        // Observations.
+        let gravity: Vec<GravityModel> = tools.iter().map(|b| GravityModel::new(&model, &b.tool)).collect();
+        let trical = TriCal::default();
+        let mut obs = Vec::with_capacity(picks.len());
+        let mut row = 0;
+        for (s, i) in picks {
+            let m: &Measurement = &cell.sessions[s].measurements[i];
+            let t = session_tool[s];
+            let tau = gravity[t].torques(&m.q);
+            let mut state = JointState::with_torques(&m.q, &tau[..model.dof()]);
+            if let Some(a) = &m.approach {
+                for (j, &v) in a.iter().enumerate() {
+                    state.approach[j] = v as f64;
+                }
+            }
+            state.temperature_c = m.temperature_c.unwrap_or(REFERENCE_TEMPERATURE_C);
+            let target = match (&m.observation, &m.indicators) {
+                (Observation::Ball(k), ind) => {
+                    let centre =
+                        cell.artefact.as_ref().and_then(|a| a.triangle.ball(*k)).ok_or(ProblemError::NoArtefact)?;
+                    match ind.and_then(|d| trical.offset(d).ok()) {
+                        Some(offset) => Target::Ball { centre, offset },
+                        None => Target::Point(centre),
+                    }
+                }
+                (Observation::Position(p), _) => Target::Point(*p),
+                (Observation::Pose(f), _) => {
+                    tools[t].has_orientation = true;
+                    Target::Pose(*f)
+                }
+            };
+            let rows = if matches!(target, Target::Pose(_)) { 6 } else { 3 };
+            obs.push(Obs { session: s, index: i, tool: t, state, target, row, rows });
+            row += rows;
+        }
+        Ok(Problem {
+            model,
+            layout,
+            tools,
+            params,
+            nominal,
+            obs,
+            n_rows: row,
+            rotation_weight,
+            session_names: cell.sessions.iter().map(|s| s.name.clone()).collect(),
+        })
+    }
+
+    pub fn n_params(&self) -> usize {
+        self.params.len()
+    }
+
+    /// Global index of a robot parameter, if present.
+    pub fn robot_index(&self, p: Param) -> Option<usize> {
+        let li = self.layout.index_of(p)?;
+        self.params.iter().position(|g| *g == GlobalParam::Robot(li))
+    }
+
+    /// Human name of a global parameter: the layout name, or `tool_x` for the first tool and
+    /// `tool2_x`, `tool3_x` … for the others.
+    pub fn name(&self, g: usize) -> String {
+        match self.params[g] {
+            GlobalParam::Robot(i) => self.layout.params()[i].to_string(),
+            GlobalParam::Tool { tool, k } => {
+                let c = crate::kinematics::params::POSE_COMPONENTS[k];
+                if tool == 0 { format!("tool_{c}") } else { format!("tool{}_{c}", tool + 1) }
+            }
+        }
+    }
+
+    /// The layout-ordered robot values with tool `t`'s block in the tool slots.
+    pub fn layout_values(&self, x: &[f64], t: usize) -> Vec<f64> {
+        let mut v = vec![0.0; self.layout.len()];
+        for (g, p) in self.params.iter().enumerate() {
+            match *p {
+                GlobalParam::Robot(i) => v[i] = x[g],
+                GlobalParam::Tool { tool, k } if tool == t => {
+                    let i = self.layout.index_of(Param::Tool(k)).expect("the layout has tool entries");
+                    v[i] = x[g];
+                }
+                _ => {}
+            }
+        }
+        v
+    }
+
+    /// One chain per tool at `x`.
+    pub fn chains(&self, x: &[f64]) -> Vec<Chain> {
+        (0..self.tools.len()).map(|t| Chain::new(&self.model, &self.layout, &self.layout_values(x, t))).collect()
+    }
+
+    /// Residual (target − model) of every row at `x`.
+    pub fn residual(&self, x: &[f64], out: &mut [f64]) {
+        let chains = self.chains(x);
+        for o in &self.obs {
+            let f = chains[o.tool].fk(&o.state);
+            self.write_residual(o, &f, &mut out[o.row..o.row + o.rows]);
+        }
+    }
+
+    fn write_residual(&self, o: &Obs, f: &Frame, out: &mut [f64]) {
+        let target = match &o.target {
+            Target::Point(p) => *p,
+            Target::Ball { centre, offset } => centre - f.r * offset,
+            Target::Pose(p) => p.t,
+        };
+        let d = target - f.t;
+        out[..3].copy_from_slice(d.as_slice());
+        if let Target::Pose(p) = &o.target {
+            let w = rotation_vector(&(p.r * f.r.transpose())) * self.rotation_weight;
+            out[3..6].copy_from_slice(w.as_slice());
+        }
+    }
+
+    /// Residual and Jacobian of the free parameters (`free[c]` = global index of column c) at `x`.
+    /// ∂(residual)/∂ρ = −∂(model)/∂ρ; we return J = ∂(model)/∂ρ so that Δρ solves J·Δρ ≈ r.
+    pub fn linearise(&self, x: &[f64], free: &[usize], jac: &mut Mat<f64>, res: &mut [f64]) {
+        let chains = self.chains(x);
+        let m = self.layout.len();
+        // Column of each layout entry for each tool.
+        let mut col_of = vec![vec![None; m]; self.tools.len()];
+        for (c, &g) in free.iter().enumerate() {
+            match self.params[g] {
+                GlobalParam::Robot(i) => {
+                    for t in 0..self.tools.len() {
+                        col_of[t][i] = Some(c);
+                    }
+                }
+                GlobalParam::Tool { tool, k } => {
+                    let i = self.layout.index_of(Param::Tool(k)).expect("tool entries");
+                    col_of[tool][i] = Some(c);
+                }
+            }
+        }
+        let mut buf = vec![0.0; 6 * m];
+        for o in &self.obs {
+            let rows = if o.rows == 6 { Rows::Pose } else { Rows::Position };
+            let f = chains[o.tool].jacobian_into(&o.state, &self.layout, rows, &mut buf, 6);
+            self.write_residual(o, &f, &mut res[o.row..o.row + o.rows]);
+            for (i, c) in col_of[o.tool].iter().enumerate() {
+                if let Some(c) = *c {
+                    for r in 0..o.rows {
+                        let w = if r >= 3 { self.rotation_weight } else { 1.0 };
+                        jac[(o.row + r, c)] = buf[i * 6 + r] * w;
+                    }
+                }
+            }
+        }
+    }
+
+    /// The Jacobian block of one observation (rows × free), e.g. for DETMAX pools.
+    pub fn block(&self, chains: &[Chain], o: &Obs, free: &[usize]) -> Vec<f64> {
+        let m = self.layout.len();
+        let mut buf = vec![0.0; 6 * m];
+        let rows = if o.rows == 6 { Rows::Pose } else { Rows::Position };
+        chains[o.tool].jacobian_into(&o.state, &self.layout, rows, &mut buf, 6);
+        let mut out = vec![0.0; o.rows * free.len()];
+        for (c, &g) in free.iter().enumerate() {
+            let i = match self.params[g] {
+                GlobalParam::Robot(i) => Some(i),
+                GlobalParam::Tool { tool, k } if tool == o.tool => self.layout.index_of(Param::Tool(k)),
+                _ => None,
+            };
+            if let Some(i) = i {
+                for r in 0..o.rows {
+                    let w = if r >= 3 { self.rotation_weight } else { 1.0 };
+                    out[r * free.len() + c] = buf[i * 6 + r] * w;
+                }
+            }
+        }
+        out
+    }
+}

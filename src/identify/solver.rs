@@ -1,0 +1,202 @@
+//! Iterative linearised least squares (thesis §4.2.1, eq. 4.12–4.21) with Levenberg–Marquardt
+//! damping whenever a Gauss–Newton step does not lower the cost.
+//!
+//! Each step solves min ‖J_s·y − r‖² (+ λ‖y‖²) by QR with column pivoting on the column-scaled
+//! Jacobian J_s = J·D⁻¹ (unit columns; the damped system is the QR of [J_s; √λ·I]), then
+//! Δρ = D⁻¹·y. Stops when the scaled step (the change it makes to the model, in metres) is below
+//! `step_tol` or the relative cost change below `cost_tol`. An optional Huber loss re-weights whole
+//! measurements (iteratively reweighted least squares) and reports the ones it down-weighted.
+
+use faer::Mat;
+use faer::linalg::solvers::SolveLstsq;
+
+use super::problem::Problem;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SolverOptions {
+    pub max_iterations: usize,
+    /// Converged when the largest scaled step component is at most this (m).
+    pub step_tol: f64,
+    /// …or when an accepted step lowers the cost by less than this fraction.
+    pub cost_tol: f64,
+    /// Huber threshold in robust standard deviations per axis; `None` = plain least squares.
+    pub huber: Option<f64>,
+}
+
+impl Default for SolverOptions {
+    fn default() -> Self {
+        Self { max_iterations: 100, step_tol: 1e-13, cost_tol: 1e-12, huber: None }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SolveError {
+    #[error("diverged at iteration {iteration}: {reason}")]
+    Diverged { iteration: usize, reason: String },
+    #[error(
+        "no convergence in {iterations} iterations (last scaled step {step_m:.3e} m, relative cost change {cost_change:.3e})"
+    )]
+    IterationLimit { iterations: usize, step_m: f64, cost_change: f64 },
+}
+
+/// A converged fit.
+#[derive(Clone, Debug)]
+pub struct Fit {
+    /// Global parameter vector.
+    pub x: Vec<f64>,
+    pub iterations: usize,
+    /// Final (weighted) residual and Jacobian of the free parameters, unscaled (SI).
+    pub residual: Vec<f64>,
+    pub jacobian: Mat<f64>,
+    /// Robust weight of each observation (1 = full weight).
+    pub weights: Vec<f64>,
+    pub cost: f64,
+}
+
+/// Fit the free parameters `free` (global indices) from `x0`.
+pub fn solve(problem: &Problem, free: &[usize], x0: &[f64], opts: &SolverOptions) -> Result<Fit, SolveError> {
+    let n = problem.n_rows;
+    let m = free.len();
+    let mut x = x0.to_vec();
+    let mut jac = Mat::<f64>::zeros(n, m);
+    let mut res = vec![0.0; n];
+    let mut trial_res = vec![0.0; n];
+    let mut weights = vec![1.0; problem.obs.len()];
+    let mut lambda = 0.0f64;
+    let mut last_step = f64::INFINITY;
+    let mut last_change = f64::INFINITY;
+
+    for iteration in 1..=opts.max_iterations {
+        problem.linearise(&x, free, &mut jac, &mut res);
+        if let Some(k) = opts.huber {
+            weights = huber_weights(problem, &res, k);
+        }
+        let cost = weighted_cost(problem, &res, &weights);
+        if !cost.is_finite() {
+            return Err(SolveError::Diverged { iteration, reason: "the cost is not finite".into() });
+        }
+        // Column scaling of the weighted Jacobian.
+        let mut js = Mat::<f64>::zeros(n, m);
+        let mut rhs = vec![0.0; n];
+        for o in 0..problem.obs.len() {
+            let ob = &problem.obs[o];
+            let w = weights[o].sqrt();
+            for r in ob.row..ob.row + ob.rows {
+                rhs[r] = res[r] * w;
+                for c in 0..m {
+                    js[(r, c)] = jac[(r, c)] * w;
+                }
+            }
+        }
+        let mut scale = vec![0.0; m];
+        for c in 0..m {
+            let s = (0..n).map(|r| js[(r, c)].powi(2)).sum::<f64>().sqrt();
+            scale[c] = if s > 0.0 { s } else { 1.0 };
+            for r in 0..n {
+                js[(r, c)] /= scale[c];
+            }
+        }
+        // Try steps until one lowers the cost.
+        loop {
+            let y = if lambda == 0.0 { lstsq(&js, &rhs) } else { damped_lstsq(&js, &rhs, lambda) };
+            if y.iter().any(|v| !v.is_finite()) {
+                return Err(SolveError::Diverged { iteration, reason: "the least-squares step is not finite".into() });
+            }
+            let mut xt = x.clone();
+            for c in 0..m {
+                xt[free[c]] += y[c] / scale[c];
+            }
+            problem.residual(&xt, &mut trial_res);
+            let trial = weighted_cost(problem, &trial_res, &weights);
+            let step = y.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            if trial.is_finite() && trial <= cost {
+                x = xt;
+                last_step = step;
+                last_change = if cost > 0.0 { (cost - trial) / cost } else { 0.0 };
+                lambda = if lambda > 1e-9 { lambda / 10.0 } else { 0.0 };
+                break;
+            }
+            // No decrease: a step this small means we are at the minimum already.
+            if step <= opts.step_tol {
+                last_step = step;
+                last_change = 0.0;
+                break;
+            }
+            lambda = if lambda == 0.0 { 1e-6 } else { lambda * 10.0 };
+            if lambda > 1e10 {
+                return Err(SolveError::Diverged {
+                    iteration,
+                    reason: format!("no damped step lowers the cost (λ = {lambda:.1e}, cost {cost:.3e} m²)"),
+                });
+            }
+        }
+        if last_step <= opts.step_tol || last_change <= opts.cost_tol {
+            // Final linearisation at the solution for the quality report.
+            problem.linearise(&x, free, &mut jac, &mut res);
+            if let Some(k) = opts.huber {
+                weights = huber_weights(problem, &res, k);
+            }
+            for o in 0..problem.obs.len() {
+                let ob = &problem.obs[o];
+                let w = weights[o].sqrt();
+                for r in ob.row..ob.row + ob.rows {
+                    res[r] *= w;
+                    for c in 0..m {
+                        jac[(r, c)] *= w;
+                    }
+                }
+            }
+            let cost = res.iter().map(|v| v * v).sum();
+            return Ok(Fit { x, iterations: iteration, residual: res, jacobian: jac, weights, cost });
+        }
+    }
+    Err(SolveError::IterationLimit { iterations: opts.max_iterations, step_m: last_step, cost_change: last_change })
+}
+
+fn weighted_cost(problem: &Problem, res: &[f64], weights: &[f64]) -> f64 {
+    problem
+        .obs
+        .iter()
+        .zip(weights)
+        .map(|(o, w)| w * res[o.row..o.row + o.rows].iter().map(|v| v * v).sum::<f64>())
+        .sum()
+}
+
+/// Huber weights per observation on its residual norm per axis, against a robust scale (MAD of
+/// all residual components).
+fn huber_weights(problem: &Problem, res: &[f64], k: f64) -> Vec<f64> {
+    let mut abs: Vec<f64> = res.iter().map(|v| v.abs()).collect();
+    abs.sort_by(f64::total_cmp);
+    let sigma = 1.4826 * abs[abs.len() / 2];
+    problem
+        .obs
+        .iter()
+        .map(|o| {
+            let a = (res[o.row..o.row + o.rows].iter().map(|v| v * v).sum::<f64>() / o.rows as f64).sqrt();
+            if sigma <= 0.0 || a <= k * sigma { 1.0 } else { k * sigma / a }
+        })
+        .collect()
+}
+
+fn lstsq(a: &Mat<f64>, b: &[f64]) -> Vec<f64> {
+    let mut rhs = Mat::<f64>::zeros(b.len(), 1);
+    for (i, v) in b.iter().enumerate() {
+        rhs[(i, 0)] = *v;
+    }
+    let x = a.col_piv_qr().solve_lstsq(&rhs);
+    (0..a.ncols()).map(|i| x[(i, 0)]).collect()
+}
+
+fn damped_lstsq(a: &Mat<f64>, b: &[f64], lambda: f64) -> Vec<f64> {
+    let (n, m) = (a.nrows(), a.ncols());
+    let mut aug = Mat::<f64>::zeros(n + m, m);
+    for c in 0..m {
+        for r in 0..n {
+            aug[(r, c)] = a[(r, c)];
+        }
+        aug[(n + c, c)] = lambda.sqrt();
+    }
+    let mut rhs = vec![0.0; n + m];
+    rhs[..n].copy_from_slice(b);
+    lstsq(&aug, &rhs)
+}
