@@ -45,6 +45,47 @@ pub enum Command {
     Identify(IdentifyArgs),
     /// Validate a parameter set on a cell's sessions: error statistics of the calibrated and nominal models.
     Validate(ValidateArgs),
+    /// The thesis's Algorithm 5.1: DETMAX-optimised sets of each size, each identified and validated.
+    Study(StudyArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct StudyArgs {
+    /// The cell file (identification sessions form the pool; validation sessions score each fit).
+    pub cell: PathBuf,
+    /// Set sizes: `20..100` (every n), `20..100:10` (step 10) or `20,50,75`.
+    #[arg(long, default_value = "20..100")]
+    pub sizes: String,
+    /// DETMAX-optimised sets per size.
+    #[arg(long, default_value_t = 30)]
+    pub sets: usize,
+    /// Observability index DETMAX maximises: O1 (default) … O5.
+    #[arg(long, default_value = "O1")]
+    pub index: String,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Pool sessions (comma-separated); default: every identification session.
+    #[arg(long)]
+    pub sessions: Option<String>,
+    /// Validation sessions (comma-separated); default: every validation session.
+    #[arg(long)]
+    pub validation: Option<String>,
+    /// Model options, as for identify.
+    #[arg(long, default_value = "", allow_hyphen_values = true)]
+    pub model: String,
+    /// Refuse fits whose column-scaled κ(J) exceeds this (refused fits are counted, not scored).
+    #[arg(long, default_value_t = 1000.0)]
+    pub kappa_limit: f64,
+    /// Worker threads; default: the machine's available parallelism.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Polish each DETMAX result to exchange-optimality (default: the thesis's DETMAX alone, whose
+    /// random starts end in different local optima).
+    #[arg(long)]
+    pub polish: bool,
+    /// Write every identification's result and the per-size quartiles as JSON here.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -309,6 +350,7 @@ pub fn run(cli: Cli) -> Result<String, CliError> {
         Command::Simulate(a) => simulate(a),
         Command::Identify(a) => identify(a),
         Command::Validate(a) => validate(a),
+        Command::Study(a) => study(a),
     }
 }
 
@@ -401,6 +443,102 @@ fn identify(a: IdentifyArgs) -> Result<String, CliError> {
         q.observability.o1,
         q.rms_residual / MM
     ))
+}
+
+fn study(a: StudyArgs) -> Result<String, CliError> {
+    use crate::identify::study::{StudyOptions, parse_sizes, study};
+    use crate::identify::{IdentifyOptions, ModelOptions};
+    let cell = load_cell(&a.cell)?;
+    let sizes = parse_sizes(&a.sizes).map_err(|e| CliError::arg("--sizes", e))?;
+    if a.sets == 0 {
+        return Err(CliError::arg("--sets", "must be at least 1"));
+    }
+    if a.kappa_limit.is_nan() || a.kappa_limit <= 1.0 {
+        return Err(CliError::arg("--kappa-limit", "must be above 1"));
+    }
+    let index = crate::identify::observability::Index::parse(&a.index)
+        .ok_or_else(|| CliError::arg("--index", format!("'{}' is not O1…O5", a.index)))?;
+    let threads = match a.threads {
+        Some(0) => return Err(CliError::arg("--threads", "must be at least 1")),
+        Some(t) => t,
+        None => std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
+    };
+    let mut identify = IdentifyOptions {
+        model: ModelOptions::parse(&a.model, cell.model.dof()).map_err(|e| CliError::arg("--model", e))?,
+        kappa_limit: a.kappa_limit,
+        ..Default::default()
+    };
+    identify.selection.sessions = list(&a.sessions);
+    let opts = StudyOptions {
+        sizes,
+        sets: a.sets,
+        index,
+        polish: a.polish,
+        seed: a.seed,
+        threads,
+        validation: list(&a.validation),
+        identify,
+    };
+    let started = std::time::Instant::now();
+    let st = study(&cell, &opts).map_err(|e| CliError(e.to_string()))?;
+    let elapsed = started.elapsed().as_secs_f64();
+    let mm = |q: &[f64; 5]| q.map(|v| v / MM);
+    if let Some(out) = &a.out {
+        let rows: Vec<serde_json::Value> = st
+            .rows
+            .iter()
+            .map(|r| {
+                serde_json::json!({
+                    "n": r.n, "succeeded": r.succeeded, "refused": r.failed,
+                    "mean_mm_quartiles": mm(&r.mean), "std_mm_quartiles": mm(&r.std), "max_mm_quartiles": mm(&r.max),
+                })
+            })
+            .collect();
+        let runs: Vec<serde_json::Value> = st
+            .runs
+            .iter()
+            .map(|r| {
+                let finite = |v: f64| if v.is_finite() { serde_json::json!(v) } else { serde_json::Value::Null };
+                serde_json::json!({
+                    "n": r.n, "set": r.set, "seed": r.seed, "mean_mm": finite(r.mean / MM), "std_mm": finite(r.std / MM),
+                    "max_mm": finite(r.max / MM), "kappa_si": finite(r.kappa), "o1_si": finite(r.o1), "refused": r.error,
+                })
+            })
+            .collect();
+        let doc = serde_json::json!({
+            "pool": st.pool, "validation_sessions": st.validation, "sets": a.sets, "index": index.name(),
+            "polish": a.polish, "seed": a.seed, "quartiles": "min, q1, median, q3, max over the sets of each size", "rows": rows, "runs": runs,
+        });
+        fs::write(out, format!("{}\n", serde_json::to_string_pretty(&doc).expect("json")))
+            .map_err(|e| CliError(format!("{}: cannot write: {e}", out.display())))?;
+    }
+    let mut text = format!(
+        "{} identifications ({} sizes × {} DETMAX-optimised sets from a pool of {}), validated on {}, in {:.1} s on {} threads\n",
+        st.runs.len(),
+        st.rows.len(),
+        a.sets,
+        st.pool,
+        st.validation.join(", "),
+        elapsed,
+        threads
+    );
+    text.push_str("quartiles over the sets (min / q1 / median / q3 / max), mm\n");
+    text.push_str(&format!("{:>4} {:>7}  {:<36}  {:<36}  {:<36}\n", "n", "refused", "mean", "std", "max"));
+    let fmt = |q: &[f64; 5]| q.iter().map(|v| format!("{:.3}", v / MM)).collect::<Vec<_>>().join(" ");
+    for r in &st.rows {
+        text.push_str(&format!(
+            "{:>4} {:>7}  {:<36}  {:<36}  {:<36}\n",
+            r.n,
+            r.failed,
+            fmt(&r.mean),
+            fmt(&r.std),
+            fmt(&r.max)
+        ));
+    }
+    if let Some(out) = &a.out {
+        text.push_str(&format!("wrote {}", out.display()));
+    }
+    Ok(text.trim_end().to_string())
 }
 
 fn simulate(a: SimulateArgs) -> Result<String, CliError> {

@@ -177,3 +177,76 @@ fn simulate_is_deterministic_and_names_bad_effects() {
     let (ok, _, err) = robocal(&["simulate", "--seed", "1", "--epsilon-mm", "-1", "--out", &out("c.json")]);
     assert!(!ok && err.contains("--epsilon-mm"), "{err}");
 }
+
+/// simulate → identify (DETMAX 75) → validate → study, through the binary: the identified values
+/// land near the thesis's Table 5.1 (the simulator's truth) within their reported uncertainty, the
+/// validation JSON carries the statistics in mm, and bad options name themselves.
+#[test]
+fn simulate_identify_validate_study() {
+    let dir = std::env::temp_dir().join(format!("robocal-cli-id-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = |n: &str| dir.join(n).to_string_lossy().to_string();
+    let (cell, params) = (path("cell.json"), path("params.json"));
+    let out =
+        Command::new(env!("CARGO_BIN_EXE_robocal")).args(["simulate", "--seed", "2", "--out", &cell]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+
+    let out = Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(["identify", &cell, "--select", "detmax", "--n", "75", "--seed", "3", "--out", &params])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let doc: Value = serde_json::from_str(&std::fs::read_to_string(&params).unwrap()).unwrap();
+    let ps = doc["parameters"].as_array().unwrap();
+    let identified: Vec<&Value> = ps.iter().filter(|p| p["status"] == "identified").collect();
+    assert_eq!(identified.len(), 31);
+    // Table 5.1 (the truth): a2 270.146 mm, d4 302.296 mm, c3 −5.522e-3 °/(N·m).
+    for (name, truth) in [("a2", 270.146), ("d4", 302.296), ("c3", -5.522e-3)] {
+        let p = ps.iter().find(|p| p["name"] == name).unwrap();
+        let (v, sd) = (p["value"].as_f64().unwrap(), p["std"].as_f64().unwrap());
+        assert!((v - truth).abs() <= 5.0 * sd, "{name}: {v} ± {sd} vs {truth}");
+    }
+    assert!(ps.iter().any(|p| p["status"] == "c1: no gravity torque on axis 1"));
+    assert_eq!(doc["quality"]["selection"]["n"], 75);
+    assert!(doc["quality"]["kappa_si"].as_f64().unwrap() > 1.0);
+
+    let (ok, v, err) = robocal(&["validate", &params, &cell]);
+    assert!(ok, "{err}");
+    let mean = v["mean_mm"].as_f64().unwrap();
+    let nominal = v["nominal"]["mean_mm"].as_f64().unwrap();
+    assert!(mean < 0.1 && nominal > 1.0, "calibrated {mean} mm, nominal {nominal} mm");
+    for k in ["median_mm", "std_mm", "rms_mm", "p95_mm", "max_mm"] {
+        assert!(v[k].as_f64().unwrap() > 0.0, "{k}");
+    }
+    for axis in ["x", "y", "z"] {
+        assert!(v["per_axis"][axis]["std_mm"].as_f64().unwrap() > 0.0, "{axis}");
+    }
+
+    let study = path("study.json");
+    let out = Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(["study", &cell, "--sizes", "20,75", "--sets", "3", "--out", &study])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let st: Value = serde_json::from_str(&std::fs::read_to_string(&study).unwrap()).unwrap();
+    assert_eq!(st["rows"].as_array().unwrap().len(), 2);
+    assert_eq!(st["runs"].as_array().unwrap().len(), 6);
+    for row in st["rows"].as_array().unwrap() {
+        assert_eq!(row["refused"], 0);
+        let q = nums(&row["mean_mm_quartiles"]);
+        assert!(q.windows(2).all(|w| w[0] <= w[1]) && q[0] > 0.0, "{q:?}");
+    }
+
+    for (args, name) in [
+        (vec!["identify", &cell, "--n", "75", "--out", &params], "--n"),
+        (vec!["identify", &cell, "--select", "random", "--out", &params], "--select"),
+        (vec!["identify", &cell, "--kappa-limit", "0.5", "--out", &params], "--kappa-limit"),
+        (vec!["identify", &cell, "--model", "+warp", "--out", &params], "--model"),
+        (vec!["validate", &params, &cell, "--session", "nope"], "--session"),
+        (vec!["study", &cell, "--sizes", "30..20"], "--sizes"),
+        (vec!["study", &cell, "--sets", "0"], "--sets"),
+    ] {
+        let (ok, _, err) = robocal(&args);
+        assert!(!ok && err.contains(name), "{args:?}: {err}");
+    }
+}

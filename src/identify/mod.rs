@@ -8,6 +8,7 @@ pub mod observability;
 pub mod problem;
 pub mod quality;
 pub mod solver;
+pub mod study;
 
 use std::collections::HashMap;
 
@@ -237,6 +238,69 @@ pub fn prepare(cell: &Cell, opts: &IdentifyOptions) -> Result<Prepared, Identify
     Ok(Prepared { problem, x0, free, status, base })
 }
 
+/// The candidate pool for DETMAX: every measurement of the chosen sessions, as its Jacobian
+/// block on the identifiable parameters at the starting point (SI units, as the thesis computes
+/// O1). Build once, select many times (the study draws thousands of sets from one pool).
+pub struct DetmaxPool {
+    blocks: Vec<detmax::Block>,
+    members: Vec<(String, usize)>,
+    m: usize,
+}
+
+impl DetmaxPool {
+    pub fn new(cell: &Cell, opts: &IdentifyOptions) -> Result<DetmaxPool, IdentifyError> {
+        let mut pool_opts = opts.clone();
+        pool_opts.selection.subset.clear();
+        let p = prepare(cell, &pool_opts)?;
+        let chains = p.problem.chains(&p.x0);
+        let blocks = p
+            .problem
+            .obs
+            .iter()
+            .map(|o| detmax::Block { rows: o.rows, data: p.problem.block(&chains, o, &p.free) })
+            .collect();
+        let members = p.problem.obs.iter().map(|o| (p.problem.session_names[o.session].clone(), o.index)).collect();
+        Ok(DetmaxPool { blocks, members, m: p.free.len() })
+    }
+
+    /// Candidates in the pool.
+    pub fn len(&self) -> usize {
+        self.blocks.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.blocks.is_empty()
+    }
+
+    /// `n` measurements maximising `index` from a random start drawn with `seed`: the subset
+    /// (session, index) and a description for the quality report.
+    pub fn select(
+        &self,
+        n: usize,
+        index: observability::Index,
+        seed: u64,
+    ) -> Result<(Vec<(String, usize)>, serde_json::Value), IdentifyError> {
+        self.select_with(&detmax::DetmaxOptions { index, seed, ..detmax::DetmaxOptions::new(n) })
+    }
+
+    /// As [`Self::select`] with every DETMAX option (e.g. `polish: false`, the thesis's DETMAX
+    /// alone, whose random starts end in different local optima).
+    pub fn select_with(
+        &self,
+        o: &detmax::DetmaxOptions,
+    ) -> Result<(Vec<(String, usize)>, serde_json::Value), IdentifyError> {
+        let (n, index, seed) = (o.n, o.index, o.seed);
+        let d = detmax::detmax(&self.blocks, self.m, o).map_err(|e| IdentifyError::Option(format!("DETMAX: {e}")))?;
+        let subset = d.selected.iter().map(|&i| self.members[i].clone()).collect();
+        let info = serde_json::json!({
+            "method": "detmax", "n": n, "index": index.name(), "seed": seed, "pool": self.blocks.len(),
+            "index_initial": d.index_initial, "index_final": d.index_final, "exchanges": d.exchanges,
+            "polish": o.polish, "polish_exchanges": d.polish_exchanges, "converged": d.converged,
+        });
+        Ok((subset, info))
+    }
+}
+
 /// DETMAX selection of `n` measurements from the chosen sessions (the pool), maximising `index`
 /// on the Jacobian blocks of the identifiable parameters at the starting point. Returns the
 /// subset (session, index) and a description for the quality report.
@@ -247,32 +311,7 @@ pub fn select_detmax(
     index: observability::Index,
     seed: u64,
 ) -> Result<(Vec<(String, usize)>, serde_json::Value), IdentifyError> {
-    let mut pool_opts = opts.clone();
-    pool_opts.selection.subset.clear();
-    let p = prepare(cell, &pool_opts)?;
-    let chains = p.problem.chains(&p.x0);
-    let pool: Vec<detmax::Block> = p
-        .problem
-        .obs
-        .iter()
-        .map(|o| detmax::Block { rows: o.rows, data: p.problem.block(&chains, o, &p.free) })
-        .collect();
-    let d =
-        detmax::detmax(&pool, p.free.len(), &detmax::DetmaxOptions { index, seed, ..detmax::DetmaxOptions::new(n) })
-            .map_err(|e| IdentifyError::Option(format!("DETMAX: {e}")))?;
-    let subset = d
-        .selected
-        .iter()
-        .map(|&i| {
-            let o = &p.problem.obs[i];
-            (p.problem.session_names[o.session].clone(), o.index)
-        })
-        .collect();
-    let info = serde_json::json!({
-        "method": "detmax", "n": n, "index": index.name(), "seed": seed, "pool": pool.len(),
-        "index_initial": d.index_initial, "index_final": d.index_final, "exchanges": d.exchanges, "polish_exchanges": d.polish_exchanges, "converged": d.converged,
-    });
-    Ok((subset, info))
+    DetmaxPool::new(cell, opts)?.select(n, index, seed)
 }
 
 /// Identify a cell's robot.
