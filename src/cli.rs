@@ -164,6 +164,11 @@ pub struct SimulateArgs {
     /// TriCal centring tolerance ε, mm.
     #[arg(long, default_value_t = 0.010, allow_hyphen_values = true)]
     pub epsilon_mm: f64,
+    /// How auto-centring is simulated: `loop` (the §7 procedure: corrections on the controller's
+    /// nominal model until the reading is within ε) or `uniform-ball` (the TCP uniform in the
+    /// ε-ball plus an independent repeatability offset; more pessimistic).
+    #[arg(long, default_value = "loop")]
+    pub centring: String,
     /// Robot repeatability (ISO 9283 RP), mm.
     #[arg(long, default_value_t = 0.010, allow_hyphen_values = true)]
     pub repeatability_mm: f64,
@@ -573,6 +578,8 @@ fn simulate(a: SimulateArgs) -> Result<String, CliError> {
         Noise::none()
     } else {
         Noise {
+            centring: crate::sim::instruments::Centring::parse(&a.centring)
+                .ok_or_else(|| CliError::arg("--centring", format!("'{}' is not loop or uniform-ball", a.centring)))?,
             epsilon: a.epsilon_mm * MM,
             repeatability: a.repeatability_mm * MM,
             tracker_sigma: a.tracker_sigma_um * 1e-6,

@@ -174,3 +174,22 @@ fn centring_loop_leaves_pair_errors_at_the_repeatability() {
         assert!(rms < 0.75 * noise.epsilon / 5f64.sqrt());
     }
 }
+
+/// The shortcut centring model (`--centring uniform-ball`): pair errors of ε/√5 (uniform in the
+/// ε-ball) and σ_RP (independent repeatability) per axis.
+#[test]
+fn uniform_ball_centring_leaves_the_pessimistic_pair_errors() {
+    let noise = Noise { centring: robocal::sim::instruments::Centring::UniformBall, ..Noise::default() };
+    let sim = run(3, "", noise.clone());
+    let want = ((noise.epsilon * noise.epsilon / 5.0) + noise.repeatability_sigma().powi(2)).sqrt();
+    let (session, (_, truths)) = sim.cell.sessions.iter().zip(&sim.run.sessions).next().unwrap();
+    let mut sq = 0.0;
+    for (m, t) in session.measurements.iter().zip(truths) {
+        let e = t.model_position - sim.cell.observed_position(m).unwrap();
+        assert!(t.centring_offset.unwrap().norm() <= noise.epsilon + 1e-15);
+        sq += e.norm_squared();
+    }
+    let rms = (sq / (3.0 * session.measurements.len() as f64)).sqrt();
+    println!("uniform-ball: pair error rms {:.2} µm per axis (expected {:.2})", rms * 1e6, want * 1e6);
+    assert!((rms / want - 1.0).abs() < 0.08, "{rms:e} vs {want:e}");
+}

@@ -18,15 +18,23 @@ use crate::sim::truth::Truth;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct NoiseSpec {
+    /// `loop` or `uniform-ball` (see `robocal simulate --centring`); absent in older files: loop.
+    #[serde(default = "default_centring")]
+    pub centring: String,
     pub epsilon_mm: f64,
     pub repeatability_mm: f64,
     pub tracker_sigma_um: f64,
     pub tracker_sigma_um_per_m: f64,
 }
 
+fn default_centring() -> String {
+    "loop".into()
+}
+
 impl NoiseSpec {
     pub fn from_noise(n: &Noise) -> Self {
         Self {
+            centring: n.centring.name().into(),
             epsilon_mm: n.epsilon / MM,
             repeatability_mm: n.repeatability / MM,
             tracker_sigma_um: n.tracker_sigma * 1e6,

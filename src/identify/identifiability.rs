@@ -90,11 +90,11 @@ pub fn select(problem: &Problem, jac: &Mat<f64>, fixed: &HashMap<usize, String>)
         v.iter_mut().for_each(|x| *x /= norm);
         for _ in 0..2 {
             for b in &basis {
-                let d: f64 = v.iter().zip(b).map(|(a, b)| a * b).sum();
+                let d = dot(&v, b);
                 v.iter_mut().zip(b).for_each(|(a, b)| *a -= d * b);
             }
         }
-        let rest = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let rest = dot(&v, &v).sqrt();
         if rest < DEPENDENCE_TOL {
             status[g] = Status::Fixed(dependence_reason(problem, jac, g, &kept));
             continue;
@@ -105,6 +105,20 @@ pub fn select(problem: &Problem, jac: &Mat<f64>, fixed: &HashMap<usize, String>)
     }
     kept.sort_unstable();
     (kept, status)
+}
+
+/// Dot product with four independent partial sums, so that the compiler can vectorise it (a
+/// single running sum fixes the order of the additions and forbids SIMD).
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut acc = [0.0; 4];
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let tail: f64 = ca.remainder().iter().zip(cb.remainder()).map(|(x, y)| x * y).sum();
+    for (x, y) in ca.zip(cb) {
+        for k in 0..4 {
+            acc[k] += x[k] * y[k];
+        }
+    }
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
 /// Why a parameter has no effect on these measurements.

@@ -332,17 +332,27 @@ impl Problem {
                 }
             }
         }
-        let mut buf = vec![0.0; 6 * m];
+        // Per tool, the (layout entry, output column) pairs to compute: the free ones only.
+        let wanted: Vec<Vec<(usize, usize)>> = col_of
+            .iter()
+            .map(|cols| cols.iter().enumerate().filter_map(|(i, c)| c.map(|c| (i, c))).collect())
+            .collect();
+        let mut buf = vec![0.0; 6 * free.len().max(1)];
         for o in &self.obs {
             let rows = if o.rows == 6 { Rows::Pose } else { Rows::Position };
-            let f = chains[o.tool].jacobian_into(&o.state, &self.layout, rows, &mut buf, 6);
+            let f = chains[o.tool].jacobian_columns_into(
+                &o.state,
+                &self.layout,
+                rows,
+                wanted[o.tool].iter().copied(),
+                &mut buf,
+                6,
+            );
             self.write_residual(o, &f, &mut res[o.row..o.row + o.rows]);
-            for (i, c) in col_of[o.tool].iter().enumerate() {
-                if let Some(c) = *c {
-                    for r in 0..o.rows {
-                        let w = if r >= 3 { self.rotation_weight } else { 1.0 };
-                        jac[(o.row + r, c)] = buf[i * 6 + r] * w;
-                    }
+            for &(_, c) in &wanted[o.tool] {
+                for r in 0..o.rows {
+                    let w = if r >= 3 { self.rotation_weight } else { 1.0 };
+                    jac[(o.row + r, c)] = buf[c * 6 + r] * w;
                 }
             }
         }

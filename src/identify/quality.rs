@@ -37,20 +37,30 @@ impl Quality {
     pub fn of(fit: &Fit, n_configs: usize, obs_rows: &[(usize, usize)]) -> Quality {
         let j = &fit.jacobian;
         let (n, m) = (j.nrows(), j.ncols());
-        let svd = j.thin_svd().expect("SVD of the Jacobian");
-        let s: Vec<f64> = (0..m).map(|i| svd.S().column_vector()[i]).collect();
+        // J = Q·R with Q orthonormal: J and R have the same singular values and right singular
+        // vectors, and the same column norms, so both SVDs run on the m×m R instead of the tall
+        // n×m J (the two tall SVDs were half of a 5,000-pose identification).
+        let r = if n >= m {
+            let qr = j.qr();
+            let r = qr.thin_R();
+            Mat::<f64>::from_fn(m, m, |a, b| if a <= b { r[(a, b)] } else { 0.0 })
+        } else {
+            j.clone()
+        };
+        let svd = r.thin_svd().expect("SVD of the Jacobian");
+        let s: Vec<f64> = (0..m).map(|i| if i < svd.S().dim() { svd.S().column_vector()[i] } else { 0.0 }).collect();
         let v = svd.V();
         let kappa = s[0] / s[m - 1];
-        // Scaled columns.
-        let mut js = j.clone();
+        // Scaled columns (unit norm).
+        let mut js = r.clone();
         for c in 0..m {
-            let norm = (0..n).map(|r| js[(r, c)].powi(2)).sum::<f64>().sqrt().max(f64::MIN_POSITIVE);
-            for r in 0..n {
+            let norm = (0..js.nrows()).map(|r| js[(r, c)].powi(2)).sum::<f64>().sqrt().max(f64::MIN_POSITIVE);
+            for r in 0..js.nrows() {
                 js[(r, c)] /= norm;
             }
         }
         let svs = js.thin_svd().expect("SVD of the scaled Jacobian");
-        let ss: Vec<f64> = (0..m).map(|i| svs.S().column_vector()[i]).collect();
+        let ss: Vec<f64> = (0..m).map(|i| if i < svs.S().dim() { svs.S().column_vector()[i] } else { 0.0 }).collect();
         let kappa_scaled = ss[0] / ss[m - 1];
         let vs = svs.V();
         let mut weakest: Vec<(usize, f64)> = (0..m).map(|c| (c, vs[(c, m - 1)])).collect();

@@ -5,9 +5,42 @@ use rand::Rng;
 use rand::distr::Distribution;
 use rand_distr::StandardNormal;
 
+/// How the TriCal's auto-centring is simulated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Centring {
+    /// The loop of §7 itself: corrections computed on the controller's nominal model, a fresh
+    /// non-repeatable offset at every stop, stop when the reading is within ε. The recorded
+    /// pair's error comes out at about the repeatability (see [`crate::sim::measure`]).
+    #[default]
+    Loop,
+    /// The shortcut: the physical TCP uniform in the ε-ball, the recorded joints those at which
+    /// the true model puts the TCP there plus an independent repeatability offset. More
+    /// pessimistic: pair errors of ε/√5 ⊕ σ_RP per axis (5.3 µm at the defaults).
+    UniformBall,
+}
+
+impl Centring {
+    pub fn parse(s: &str) -> Option<Centring> {
+        match s {
+            "loop" => Some(Centring::Loop),
+            "uniform-ball" => Some(Centring::UniformBall),
+            _ => None,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Centring::Loop => "loop",
+            Centring::UniformBall => "uniform-ball",
+        }
+    }
+}
+
 /// Noise settings. All lengths in metres.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Noise {
+    /// How auto-centring is simulated.
+    pub centring: Centring,
     /// TriCal auto-centring tolerance ε: the TCP ends uniformly inside a ball of this radius
     /// around the ball centre (§7: ε = 10 µm, the robot's repeatability).
     pub epsilon: f64,
@@ -22,14 +55,26 @@ pub struct Noise {
 
 impl Default for Noise {
     fn default() -> Self {
-        Self { epsilon: 10e-6, repeatability: 10e-6, tracker_sigma: 16e-6, tracker_sigma_per_m: 0.8e-6 }
+        Self {
+            centring: Centring::Loop,
+            epsilon: 10e-6,
+            repeatability: 10e-6,
+            tracker_sigma: 16e-6,
+            tracker_sigma_per_m: 0.8e-6,
+        }
     }
 }
 
 impl Noise {
     /// No noise at all: every recorded value exact.
     pub fn none() -> Self {
-        Self { epsilon: 0.0, repeatability: 0.0, tracker_sigma: 0.0, tracker_sigma_per_m: 0.0 }
+        Self {
+            centring: Centring::Loop,
+            epsilon: 0.0,
+            repeatability: 0.0,
+            tracker_sigma: 0.0,
+            tracker_sigma_per_m: 0.0,
+        }
     }
 
     /// Per-axis σ of the repeatability offset: for an isotropic 3-D Gaussian the distance has

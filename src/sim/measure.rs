@@ -21,7 +21,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::effects::Effects;
-use super::instruments::Noise;
+use super::instruments::{Centring, Noise};
 use super::truth::{Truth, TruthSolveError};
 use crate::cell::{Artefact, Cell, Instrument, Measurement, Observation, Purpose, Session};
 use crate::kinematics::{Frame, ParameterSet, RobotModel, Tool};
@@ -129,45 +129,58 @@ pub fn measure(
         let temp = effects.temperature_at(t);
         let r_true = robot.tcp(&robot.state(&p.q, &approach, temp)).r;
         let fail = |source| MeasureError::Solve { session: "trical-1".into(), index: i, source };
-        // First approach: the physical TCP lands within the initial-deviation box of the ball.
-        let o0 = Vector3::from_fn(|_, _| rng.random_range(-INITIAL_DEVIATION..=INITIAL_DEVIATION));
-        let mut eta = -rig.noise.repeatability_offset(&mut rng);
-        let q0 = robot.solve(&Frame::new(r_true, centre + o0 - eta), &p.q, &approach, temp).map_err(fail)?;
-        let mut q = [0.0; 6];
-        q.copy_from_slice(&q0[..6]);
-        let mut moves = 0;
-        let (fk, u) = loop {
-            let f = robot.tcp(&robot.state(&q, &approach, temp));
-            let u = f.t + eta - centre;
-            // ε = 0 (a noise-free study): centre to 1 pm.
-            if u.norm() <= rig.noise.epsilon.max(1e-12) {
-                break (f, u);
+        let (q, fk, u) = match rig.noise.centring {
+            Centring::UniformBall => {
+                let u = rig.noise.centring_offset(&mut rng);
+                let r = rig.noise.repeatability_offset(&mut rng);
+                let q = robot.solve(&Frame::new(r_true, centre + u + r), &p.q, &approach, temp).map_err(fail)?;
+                let mut qa = [0.0; 6];
+                qa.copy_from_slice(&q[..6]);
+                (qa, robot.tcp(&robot.state(&qa, &approach, temp)), u)
             }
-            if moves == MAX_CENTRING_MOVES {
-                return Err(MeasureError::Centring {
-                    session: "trical-1".into(),
-                    index: i,
-                    iterations: moves,
-                    reading_mm: u.norm() * 1e3,
-                });
+            Centring::Loop => {
+                // First approach: the physical TCP lands within the initial-deviation box of the ball.
+                let o0 = Vector3::from_fn(|_, _| rng.random_range(-INITIAL_DEVIATION..=INITIAL_DEVIATION));
+                let mut eta = -rig.noise.repeatability_offset(&mut rng);
+                let q0 = robot.solve(&Frame::new(r_true, centre + o0 - eta), &p.q, &approach, temp).map_err(fail)?;
+                let mut q = [0.0; 6];
+                q.copy_from_slice(&q0[..6]);
+                let mut moves = 0;
+                let (fk, u) = loop {
+                    let f = robot.tcp(&robot.state(&q, &approach, temp));
+                    let u = f.t + eta - centre;
+                    // ε = 0 (a noise-free study): centre to 1 pm.
+                    if u.norm() <= rig.noise.epsilon.max(1e-12) {
+                        break (f, u);
+                    }
+                    if moves == MAX_CENTRING_MOVES {
+                        return Err(MeasureError::Centring {
+                            session: "trical-1".into(),
+                            index: i,
+                            iterations: moves,
+                            reading_mm: u.norm() * 1e3,
+                        });
+                    }
+                    // The indicators read u in the TriCal frame; the controller moves its tool frame by
+                    // −reading, computed on its own nominal model (one Newton step of its joint Jacobian
+                    // is exact to far below a nanometre for sub-millimetre moves).
+                    let reading = f.r.transpose() * u;
+                    let tr = nominal.trace(&nominal.joint_angles(&crate::kinematics::JointState::new(&q)));
+                    let step = tr.tcp.r * -reading;
+                    let jt = nominal.joint_jacobian(&tr);
+                    let e = nalgebra::Vector6::new(step.x, step.y, step.z, 0.0, 0.0, 0.0);
+                    let dq = nalgebra::Matrix6::from_fn(|r, k| jt[k][r])
+                        .lu()
+                        .solve(&e)
+                        .ok_or_else(|| fail(TruthSolveError { residual_mm: u.norm() * 1e3, iterations: moves }))?;
+                    for k in 0..6 {
+                        q[k] += dq[k];
+                    }
+                    eta = -rig.noise.repeatability_offset(&mut rng);
+                    moves += 1;
+                };
+                (q, fk, u)
             }
-            // The indicators read u in the TriCal frame; the controller moves its tool frame by
-            // −reading, computed on its own nominal model (one Newton step of its joint Jacobian
-            // is exact to far below a nanometre for sub-millimetre moves).
-            let reading = f.r.transpose() * u;
-            let tr = nominal.trace(&nominal.joint_angles(&crate::kinematics::JointState::new(&q)));
-            let step = tr.tcp.r * -reading;
-            let jt = nominal.joint_jacobian(&tr);
-            let e = nalgebra::Vector6::new(step.x, step.y, step.z, 0.0, 0.0, 0.0);
-            let dq = nalgebra::Matrix6::from_fn(|r, k| jt[k][r])
-                .lu()
-                .solve(&e)
-                .ok_or_else(|| fail(TruthSolveError { residual_mm: u.norm() * 1e3, iterations: moves }))?;
-            for k in 0..6 {
-                q[k] += dq[k];
-            }
-            eta = -rig.noise.repeatability_offset(&mut rng);
-            moves += 1;
         };
         let indicators = if rig.record_indicators {
             // The ball centre seen from the physical TCP, in the TriCal (tool) frame.
