@@ -47,6 +47,9 @@ pub enum Command {
     Validate(ValidateArgs),
     /// The thesis's Algorithm 5.1: DETMAX-optimised sets of each size, each identified and validated.
     Study(StudyArgs),
+    /// Held-out errors on real data: k-fold cross-validation, few-pose identifications tested on a
+    /// disjoint half, and transfer to other sessions with base and tools refitted.
+    Crossval(CrossvalArgs),
 }
 
 #[derive(Args, Debug)]
@@ -139,8 +142,68 @@ pub struct IdentifyArgs {
     /// Length weighting orientation residuals of full-pose measurements, mm per rad.
     #[arg(long, default_value_t = 100.0)]
     pub rotation_weight_mm: f64,
+    /// Start from this parameter set (e.g. a calibration made in another set-up): its robot
+    /// parameters and its tool's TCP are the starting point, and fixed parameters keep its values.
+    /// The base comes from the cell (base guess or registration).
+    #[arg(long)]
+    pub start: Option<PathBuf>,
+    /// Free only these parameters (comma-separated names, or the groups `base` and `tool`);
+    /// `--start calibrated.json --only base,tool` re-registers a calibrated robot in a new cell.
+    #[arg(long)]
+    pub only: Option<String>,
     #[arg(long)]
     pub out: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct CrossvalArgs {
+    /// The cell file.
+    pub cell: PathBuf,
+    /// The session whose measurements are split into identification and test sets.
+    #[arg(long)]
+    pub session: String,
+    /// Folds of the k-fold cross-validation (0: skip).
+    #[arg(long, default_value_t = 5)]
+    pub folds: usize,
+    /// Identification sizes of the few-poses scheme (comma-separated; each draw identifies on n poses
+    /// of one random half of the session and tests on the other half).
+    #[arg(long, default_value = "")]
+    pub sizes: String,
+    /// Draws per size.
+    #[arg(long, default_value_t = 10)]
+    pub draws: usize,
+    /// Sessions to transfer the whole-session model to, refitting only base and tools there.
+    #[arg(long)]
+    pub transfer: Option<String>,
+    /// Base or tool parameters kept at the identified values in the transfer refit (comma-separated,
+    /// e.g. `tool_z` when a transfer session's tool orientations barely vary).
+    #[arg(long)]
+    pub transfer_fix: Option<String>,
+    /// κ limit of the transfer refits (default: --kappa-limit). Base and tools are nuisance
+    /// parameters there; the κ of each refit is reported beside its errors.
+    #[arg(long)]
+    pub transfer_kappa_limit: Option<f64>,
+    /// A model to evaluate, as identify's --model (repeatable; `--model=` is the default model).
+    /// Default: `-compliance` (geometry) and the default model (geometry + compliance).
+    #[arg(long, allow_hyphen_values = true)]
+    pub model: Vec<String>,
+    /// Parameters held at their nominal values in every model (comma-separated).
+    #[arg(long)]
+    pub fix: Option<String>,
+    /// Refuse fits whose column-scaled κ(J) exceeds this.
+    #[arg(long, default_value_t = 1000.0)]
+    pub kappa_limit: f64,
+    /// Length weighting orientation residuals of full-pose measurements, mm per rad.
+    #[arg(long, default_value_t = 100.0)]
+    pub rotation_weight_mm: f64,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Worker threads; default: the machine's available parallelism.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Write the full result as JSON here.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -356,6 +419,7 @@ pub fn run(cli: Cli) -> Result<String, CliError> {
         Command::Identify(a) => identify(a),
         Command::Validate(a) => validate(a),
         Command::Study(a) => study(a),
+        Command::Crossval(a) => crossval(a),
     }
 }
 
@@ -401,8 +465,13 @@ fn identify(a: IdentifyArgs) -> Result<String, CliError> {
         kappa_limit: a.kappa_limit,
         solver: SolverOptions { huber: a.huber, ..Default::default() },
         rotation_weight: a.rotation_weight_mm * MM,
+        only: list(&a.only),
         ..Default::default()
     };
+    if let Some(p) = &a.start {
+        let doc = ParameterSetDoc::from_json(&read(p)?).map_err(|e| CliError::file(p, e))?;
+        opts.start = Some(doc.set);
+    }
     if a.kappa_limit.is_nan() || a.kappa_limit <= 1.0 {
         return Err(CliError::arg("--kappa-limit", "must be above 1"));
     }
@@ -539,6 +608,180 @@ fn study(a: StudyArgs) -> Result<String, CliError> {
             fmt(&r.std),
             fmt(&r.max)
         ));
+    }
+    if let Some(out) = &a.out {
+        text.push_str(&format!("wrote {}", out.display()));
+    }
+    Ok(text.trim_end().to_string())
+}
+
+fn crossval(a: CrossvalArgs) -> Result<String, CliError> {
+    use crate::identify::crossval::{CrossvalOptions, HeldOut, Variant, crossval};
+    use crate::identify::{IdentifyOptions, ModelOptions};
+    let cell = load_cell(&a.cell)?;
+    if a.kappa_limit.is_nan() || a.kappa_limit <= 1.0 {
+        return Err(CliError::arg("--kappa-limit", "must be above 1"));
+    }
+    if !a.rotation_weight_mm.is_finite() || a.rotation_weight_mm <= 0.0 {
+        return Err(CliError::arg("--rotation-weight-mm", "must be positive"));
+    }
+    let sizes = if a.sizes.trim().is_empty() {
+        Vec::new()
+    } else {
+        crate::identify::study::parse_sizes(&a.sizes).map_err(|e| CliError::arg("--sizes", e))?
+    };
+    let threads = match a.threads {
+        Some(0) => return Err(CliError::arg("--threads", "must be at least 1")),
+        Some(t) => t,
+        None => std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
+    };
+    let base = IdentifyOptions {
+        fixed: list(&a.fix),
+        kappa_limit: a.kappa_limit,
+        rotation_weight: a.rotation_weight_mm * MM,
+        ..Default::default()
+    };
+    let specs = if a.model.is_empty() { vec!["-compliance".to_string(), String::new()] } else { a.model.clone() };
+    let mut variants = Vec::new();
+    for spec in &specs {
+        let model = ModelOptions::parse(spec, cell.model.dof()).map_err(|e| CliError::arg("--model", e))?;
+        let name = if spec.is_empty() { "default".to_string() } else { spec.clone() };
+        variants.push(Variant { name, options: IdentifyOptions { model, ..base.clone() } });
+    }
+    let opts = CrossvalOptions {
+        session: a.session.clone(),
+        folds: a.folds,
+        sizes,
+        draws: a.draws,
+        transfer: list(&a.transfer),
+        transfer_fixed: list(&a.transfer_fix),
+        transfer_kappa_limit: a.transfer_kappa_limit,
+        variants,
+        before: base.clone(),
+        seed: a.seed,
+        threads,
+    };
+    let started = std::time::Instant::now();
+    if a.transfer_kappa_limit.is_some_and(|k| k.is_nan() || k <= 1.0) {
+        return Err(CliError::arg("--transfer-kappa-limit", "must be above 1"));
+    }
+    let cv = crossval(&cell, &opts).map_err(|e| CliError(e.to_string()))?;
+    let elapsed = started.elapsed().as_secs_f64();
+
+    let held = |h: &HeldOut| {
+        let p = &h.position;
+        json!({
+            "n": p.n, "mean_mm": p.mean / MM, "median_mm": p.median / MM, "std_mm": p.std / MM,
+            "rms_mm": p.rms / MM, "p95_mm": p.p95 / MM, "max_mm": p.max / MM,
+            "orientation": h.orientation.map(|o| json!({
+                "mean_mrad": o.mean * 1e3, "median_mrad": o.median * 1e3, "p95_mrad": o.p95 * 1e3, "max_mrad": o.max * 1e3,
+            })),
+        })
+    };
+    let outcome = |r: &Result<HeldOut, String>| match r {
+        Ok(h) => held(h),
+        Err(e) => json!({ "refused": e }),
+    };
+    let q_mm =
+        |q: Option<[f64; 5]>, scale: f64| q.map(|q| q.map(|v| v * scale)).map(|q| json!(q)).unwrap_or(Value::Null);
+    let doc = json!({
+        "session": cv.session, "measurements": cv.measurements, "seed": a.seed, "folds": a.folds, "draws": a.draws,
+        "kfold": cv.folds.iter().map(|f| json!({
+            "model": f.variant, "parameters_identified": f.identified,
+            "pooled": f.pooled.as_ref().map(held), "per_fold": f.per_fold.iter().map(outcome).collect::<Vec<_>>(),
+        })).collect::<Vec<_>>(),
+        "sizes": cv.sizes.iter().map(|s| json!({
+            "model": s.variant, "n": s.n,
+            "refused": s.draws.iter().filter(|d| d.is_err()).count(),
+            "mean_mm_over_draws": s.mean(|h| h.position.mean).map(|v| v / MM),
+            "mean_mm_quartiles": q_mm(s.quartiles(|h| h.position.mean), 1.0 / MM),
+            "median_mm_quartiles": q_mm(s.quartiles(|h| h.position.median), 1.0 / MM),
+            "orientation_mean_mrad_quartiles": q_mm(
+                if s.draws.iter().all(|d| d.as_ref().is_ok_and(|h| h.orientation.is_some())) {
+                    s.quartiles(|h| h.orientation.map_or(f64::NAN, |o| o.mean))
+                } else { None }, 1e3),
+            "draws": s.draws.iter().map(outcome).collect::<Vec<_>>(),
+        })).collect::<Vec<_>>(),
+        "transfer": cv.transfer.iter().map(|t| json!({
+            "model": t.variant, "session": t.session, "errors": outcome(&t.errors), "kappa_scaled": t.kappa_scaled,
+        })).collect::<Vec<_>>(),
+        "quartiles": "min, q1, median, q3, max over the draws",
+    });
+    if let Some(out) = &a.out {
+        fs::write(out, format!("{}\n", serde_json::to_string_pretty(&doc).expect("json")))
+            .map_err(|e| CliError(format!("{}: cannot write: {e}", out.display())))?;
+    }
+
+    // The tables, mm and mrad.
+    let mut text =
+        format!("session {} ({} measurements), {:.1} s on {} threads\n", cv.session, cv.measurements, elapsed, threads);
+    let row = |h: &HeldOut| {
+        let p = &h.position;
+        let o = h.orientation.map_or("      —".to_string(), |o| format!("{:7.3}", o.mean * 1e3));
+        format!("{:7.3} {:7.3} {:7.3} {:7.3} {}", p.mean / MM, p.median / MM, p.p95 / MM, p.max / MM, o)
+    };
+    if !cv.folds.is_empty() {
+        text.push_str(&format!("\n{}-fold cross-validation, pooled held-out errors (mm; orientation mrad)\n", a.folds));
+        text.push_str(&format!(
+            "{:<24} {:>6} {:>7} {:>7} {:>7} {:>7} {:>7}\n",
+            "model", "params", "mean", "median", "p95", "max", "ori"
+        ));
+        for f in &cv.folds {
+            let r = match (&f.pooled, f.per_fold.iter().find_map(|r| r.as_ref().err())) {
+                (Some(h), _) => row(h),
+                (None, Some(e)) => format!("refused: {e}"),
+                (None, None) => "—".into(),
+            };
+            text.push_str(&format!("{:<24} {:>6} {}\n", f.variant, f.identified, r));
+        }
+    }
+    if !cv.sizes.is_empty() {
+        text.push_str(&format!(
+            "\nfew poses: identify on n poses of a random half, test on the other half; over {} draws: mean, [min, max] of each draw's mean, median of the medians (mm); orientation mean (mrad)\n",
+            a.draws
+        ));
+        text.push_str(&format!(
+            "{:<24} {:>5} {:>7} {:>17} {:>7} {:>7} {:>7}\n",
+            "model", "n", "mean", "[min, max]", "median", "ori", "refused"
+        ));
+        for s in &cv.sizes {
+            let dash = || "      —".to_string();
+            let f3 = |v: Option<f64>| v.map_or_else(dash, |v| format!("{v:7.3}"));
+            let q = s.quartiles(|h| h.position.mean);
+            let range = q.map_or_else(|| "—".to_string(), |q| format!("[{:.3}, {:.3}]", q[0] / MM, q[4] / MM));
+            let ori = if s.draws.iter().all(|d| d.as_ref().is_ok_and(|h| h.orientation.is_some())) {
+                s.mean(|h| h.orientation.map_or(f64::NAN, |o| o.mean) * 1e3)
+            } else {
+                None
+            };
+            text.push_str(&format!(
+                "{:<24} {:>5} {} {:>17} {} {} {:>7}\n",
+                s.variant,
+                s.n,
+                f3(s.mean(|h| h.position.mean / MM)),
+                range,
+                f3(s.quartiles(|h| h.position.median / MM).map(|q| q[2])),
+                f3(ori),
+                s.draws.iter().filter(|d| d.is_err()).count()
+            ));
+        }
+    }
+    if !cv.transfer.is_empty() {
+        text.push_str(&format!(
+            "\ntransfer: identified on all of {}, base and tools refitted on each session (mm; orientation mrad)\n",
+            cv.session
+        ));
+        text.push_str(&format!(
+            "{:<24} {:<12} {:>7} {:>7} {:>7} {:>7} {:>7} {:>8}\n",
+            "model", "session", "mean", "median", "p95", "max", "ori", "κ refit"
+        ));
+        for t in &cv.transfer {
+            let r = match &t.errors {
+                Ok(h) => format!("{} {:>8.0}", row(h), t.kappa_scaled.unwrap_or(f64::NAN)),
+                Err(e) => format!("refused: {e}"),
+            };
+            text.push_str(&format!("{:<24} {:<12} {}\n", t.variant, t.session, r));
+        }
     }
     if let Some(out) = &a.out {
         text.push_str(&format!("wrote {}", out.display()));

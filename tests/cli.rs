@@ -237,6 +237,26 @@ fn simulate_identify_validate_study() {
         assert!(q.windows(2).all(|w| w[0] <= w[1]) && q[0] > 0.0, "{q:?}");
     }
 
+    // Cross-validation on the TriCal session, transfer to the tracker session (base refitted).
+    let cv = path("cv.json");
+    let out = Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(["crossval", &cell, "--session", "trical-1", "--folds", "3", "--sizes", "60", "--draws", "2"])
+        .args(["--transfer", "tracker-n1", "--out", &cv])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let cvd: Value = serde_json::from_str(&std::fs::read_to_string(&cv).unwrap()).unwrap();
+    let kfold = cvd["kfold"].as_array().unwrap();
+    assert_eq!(kfold.len(), 3, "before, geometry, geometry + compliance");
+    assert_eq!(kfold[0]["model"], "before");
+    let held = |k: &Value| k["pooled"]["mean_mm"].as_f64().unwrap();
+    assert!(held(&kfold[0]) > 0.3 && held(&kfold[2]) < 0.02, "{kfold:?}");
+    assert_eq!(kfold[2]["pooled"]["n"], 360);
+    assert_eq!(cvd["sizes"].as_array().unwrap().len(), 3);
+    let t = &cvd["transfer"][2];
+    assert_eq!(t["session"], "tracker-n1");
+    assert!(t["errors"]["mean_mm"].as_f64().unwrap() < 0.1, "{t}");
+
     for (args, name) in [
         (vec!["identify", &cell, "--n", "75", "--out", &params], "--n"),
         (vec!["identify", &cell, "--select", "random", "--out", &params], "--select"),
@@ -245,6 +265,11 @@ fn simulate_identify_validate_study() {
         (vec!["validate", &params, &cell, "--session", "nope"], "--session"),
         (vec!["study", &cell, "--sizes", "30..20"], "--sizes"),
         (vec!["study", &cell, "--sets", "0"], "--sets"),
+        (vec!["identify", &cell, "--only", "bass", "--out", &params], "'bass'"),
+        (vec!["identify", &cell, "--start", "/nonexistent.json", "--out", &params], "/nonexistent.json"),
+        (vec!["crossval", &cell, "--session", "nope"], "no session named 'nope'"),
+        (vec!["crossval", &cell, "--session", "trical-1", "--sizes", "x"], "--sizes"),
+        (vec!["crossval", &cell, "--session", "trical-1", "--transfer-kappa-limit", "0"], "--transfer-kappa-limit"),
     ] {
         let (ok, _, err) = robocal(&args);
         assert!(!ok && err.contains(name), "{args:?}: {err}");

@@ -34,8 +34,13 @@ impl Status {
 /// A column whose component outside the kept span is below this (unit-norm columns) is dependent.
 pub const DEPENDENCE_TOL: f64 = 1e-7;
 
-/// A column whose norm is below this fraction of the median column norm has no effect.
-pub const ZERO_COLUMN: f64 = 1e-10;
+/// A column whose norm is below this fraction of the median column norm has no effect. Such a
+/// column is rounding noise, not a direction: the lever of θ6 when the TCP sits on axis 6 (a UR10
+/// probe 4e-10 m off the axis in its file) is computed as the difference of two positions of a
+/// metre, so its direction carries relative errors of 1e-16 m / 4e-10 m — above
+/// [`DEPENDENCE_TOL`] — and unit scaling would let it pass as independent of the tool's x and y.
+/// At 1e-8 of the typical column, a parameter would need κ ≥ 1e8 to be identified anyway.
+pub const ZERO_COLUMN: f64 = 1e-8;
 
 /// Priority class of a global parameter (lower = kept first).
 fn priority(problem: &Problem, g: usize) -> (u8, i64) {
@@ -131,6 +136,9 @@ fn no_effect_reason(problem: &Problem, g: usize) -> String {
             }
             Param::Joint(j, JointTerm::Backlash) => format!("{name}: no approach direction logged for axis {}", j + 1),
             Param::Thermal => format!("{name}: no temperature change in the data"),
+            Param::Theta(j) if j + 1 == problem.model.dof() && !problem.tools.iter().any(|t| t.has_orientation) => {
+                format!("{name}: no effect, the TCP lies on axis {} and orientation is not measured", j + 1)
+            }
             _ => format!("{name}: no effect on the measured quantities"),
         },
         GlobalParam::Tool { tool, k } if k >= 3 && !problem.tools[tool].has_orientation => {

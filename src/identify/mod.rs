@@ -2,6 +2,7 @@
 //! cell's measurements — least squares on faer with Levenberg–Marquardt damping, automatic
 //! identifiability, conditioning and observability, honest uncertainties, DETMAX pose selection.
 
+pub mod crossval;
 pub mod detmax;
 pub mod identifiability;
 pub mod observability;
@@ -16,7 +17,7 @@ use faer::Mat;
 
 use crate::cell::Cell;
 use crate::kinematics::{JointTerm, Param, ParamLayout, ParameterSet, Tool};
-use crate::metrology::registration::{RegistrationError, estimate_base};
+use crate::metrology::registration::{RegistrationError, estimate_base_of};
 pub use identifiability::Status;
 pub use problem::{GlobalParam, MeasurementSelection, Problem, ProblemError};
 pub use quality::Quality;
@@ -103,6 +104,16 @@ pub struct IdentifyOptions {
     pub solver: SolverOptions,
     /// Metres per radian for orientation residual rows.
     pub rotation_weight: f64,
+    /// Start from this parameter set instead of the nominal model: every robot parameter it has
+    /// (base excepted) and the TCP of a tool equal to its declared tool take its values, and
+    /// parameters held fixed stay at them. The base always comes from the cell (its guess or a
+    /// registration): a new setup is what re-identifying from a calibrated set is for.
+    pub start: Option<ParameterSet>,
+    /// When non-empty, only these parameters are free; every other one is fixed (at its start
+    /// value). Items are parameter names (`a2`, `tool2_x`) or the groups `base` (base_x … base_c)
+    /// and `tool` (every tool's six). `["base", "tool"]` re-registers a calibrated robot in a new
+    /// cell, or gives the "before calibration" reference of a cell without a base guess.
+    pub only: Vec<String>,
 }
 
 impl Default for IdentifyOptions {
@@ -114,6 +125,8 @@ impl Default for IdentifyOptions {
             kappa_limit: 1000.0,
             solver: SolverOptions::default(),
             rotation_weight: 0.1,
+            start: None,
+            only: Vec::new(),
         }
     }
 }
@@ -192,10 +205,31 @@ pub fn prepare(cell: &Cell, opts: &IdentifyOptions) -> Result<Prepared, Identify
     layout.extend(&opts.model.extra);
     let base = match cell.base_guess {
         Some(b) => b,
-        None => estimate_base(cell)?.0,
+        None => estimate_base_of(cell, &opts.selection.picks(cell)?)?.0,
     };
     let problem = Problem::new(cell, layout, base, &opts.selection, opts.rotation_weight)?;
-    let x0 = problem.nominal.clone();
+    let mut x0 = problem.nominal.clone();
+    if let Some(start) = &opts.start {
+        if start.model.dof() != dof || start.model.preset != cell.model.preset {
+            return Err(IdentifyError::Option(format!(
+                "the start parameter set is for robot '{}', the cell's robot is '{}'",
+                start.model.name, cell.model.name
+            )));
+        }
+        for (g, gp) in problem.params.iter().enumerate() {
+            let v = match *gp {
+                GlobalParam::Robot(i) => match problem.layout.params()[i] {
+                    Param::Base(_) => None,
+                    p => start.value(p),
+                },
+                GlobalParam::Tool { tool, k } if problem.tools[tool].tool == start.tool => start.value(Param::Tool(k)),
+                GlobalParam::Tool { .. } => None,
+            };
+            if let Some(v) = v {
+                x0[g] = v;
+            }
+        }
+    }
 
     // Parameters fixed by the model options, the user and the sessions' declarations.
     let mut fixed: HashMap<usize, String> = HashMap::new();
@@ -219,11 +253,37 @@ pub fn prepare(cell: &Cell, opts: &IdentifyOptions) -> Result<Prepared, Identify
             }
         }
     }
+    if !opts.only.is_empty() {
+        let mut keep = vec![false; problem.n_params()];
+        for item in &opts.only {
+            let hits: Vec<usize> = (0..problem.n_params())
+                .filter(|&g| match (item.as_str(), problem.params[g]) {
+                    ("base", GlobalParam::Robot(i)) => matches!(problem.layout.params()[i], Param::Base(_)),
+                    ("tool", GlobalParam::Tool { .. }) => true,
+                    (name, _) => problem.name(g) == name,
+                })
+                .collect();
+            if hits.is_empty() {
+                return Err(IdentifyError::Option(format!(
+                    "--only: '{item}' is neither a parameter of this problem nor a group (base, tool)"
+                )));
+            }
+            hits.into_iter().for_each(|g| keep[g] = true);
+        }
+        for (g, k) in keep.iter().enumerate() {
+            if !k {
+                let name = problem.name(g);
+                let at = if opts.start.is_some() { "its start value" } else { "nominal" };
+                fixed.entry(g).or_insert_with(|| format!("{name}: fixed at {at}, not in --only"));
+            }
+        }
+    }
     for f in &opts.fixed {
         let g = (0..problem.n_params())
             .find(|&g| &problem.name(g) == f)
             .ok_or_else(|| IdentifyError::Option(format!("--fix: '{f}' is not a parameter of this problem")))?;
-        fixed.insert(g, format!("{f}: fixed by the user"));
+        let at = if opts.start.is_some() { "at its start value" } else { "at nominal" };
+        fixed.insert(g, format!("{f}: fixed by the user ({at})"));
     }
 
     // Identifiability at the starting point.

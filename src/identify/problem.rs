@@ -77,6 +77,49 @@ pub struct MeasurementSelection {
     pub subset: Vec<(String, usize)>,
 }
 
+impl MeasurementSelection {
+    /// The selected measurements as (session index, measurement index), in selection order.
+    pub fn picks(&self, cell: &Cell) -> Result<Vec<(usize, usize)>, ProblemError> {
+        // Sessions.
+        let chosen: Vec<usize> = if self.sessions.is_empty() {
+            (0..cell.sessions.len()).filter(|&i| cell.sessions[i].purpose == Purpose::Identification).collect()
+        } else {
+            self.sessions
+                .iter()
+                .map(|n| {
+                    cell.sessions
+                        .iter()
+                        .position(|s| &s.name == n)
+                        .ok_or_else(|| ProblemError::UnknownSession(n.clone()))
+                })
+                .collect::<Result<_, _>>()?
+        };
+        // Measurements.
+        let mut picks: Vec<(usize, usize)> = Vec::new();
+        if self.subset.is_empty() {
+            for &s in &chosen {
+                picks.extend((0..cell.sessions[s].measurements.len()).map(|i| (s, i)));
+            }
+        } else {
+            for (name, i) in &self.subset {
+                let s = cell
+                    .sessions
+                    .iter()
+                    .position(|s| &s.name == name)
+                    .ok_or_else(|| ProblemError::UnknownSession(name.clone()))?;
+                if *i >= cell.sessions[s].measurements.len() {
+                    return Err(ProblemError::UnknownMeasurement { session: name.clone(), index: *i });
+                }
+                picks.push((s, *i));
+            }
+        }
+        if picks.is_empty() {
+            return Err(ProblemError::Empty);
+        }
+        Ok(picks)
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ProblemError {
     #[error("no session named '{0}' in the cell")]
@@ -121,43 +164,7 @@ impl Problem {
         rotation_weight: f64,
     ) -> Result<Problem, ProblemError> {
         let model = cell.model.clone();
-        // Sessions.
-        let chosen: Vec<usize> = if selection.sessions.is_empty() {
-            (0..cell.sessions.len()).filter(|&i| cell.sessions[i].purpose == Purpose::Identification).collect()
-        } else {
-            selection
-                .sessions
-                .iter()
-                .map(|n| {
-                    cell.sessions
-                        .iter()
-                        .position(|s| &s.name == n)
-                        .ok_or_else(|| ProblemError::UnknownSession(n.clone()))
-                })
-                .collect::<Result<_, _>>()?
-        };
-        // Measurements.
-        let mut picks: Vec<(usize, usize)> = Vec::new();
-        if selection.subset.is_empty() {
-            for &s in &chosen {
-                picks.extend((0..cell.sessions[s].measurements.len()).map(|i| (s, i)));
-            }
-        } else {
-            for (name, i) in &selection.subset {
-                let s = cell
-                    .sessions
-                    .iter()
-                    .position(|s| &s.name == name)
-                    .ok_or_else(|| ProblemError::UnknownSession(name.clone()))?;
-                if *i >= cell.sessions[s].measurements.len() {
-                    return Err(ProblemError::UnknownMeasurement { session: name.clone(), index: *i });
-                }
-                picks.push((s, *i));
-            }
-        }
-        if picks.is_empty() {
-            return Err(ProblemError::Empty);
-        }
+        let picks = selection.picks(cell)?;
         // Distinct tools.
         let mut tools: Vec<ToolBlock> = Vec::new();
         let mut session_tool = vec![usize::MAX; cell.sessions.len()];

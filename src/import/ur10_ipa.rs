@@ -203,7 +203,42 @@ pub fn import_cell(series: &[(PathBuf, Purpose)], opts: &Ur10Options) -> Result<
         sessions.push(session);
         notes.append(&mut n);
     }
+    notes.extend(frame_notes(&sessions));
     Ok(Imported { cell: Cell { model: ur10(), base_guess: None, artefact: None, sessions }, notes })
+}
+
+/// A cell has one world frame, but a tracker moved between measuring days puts each series in its
+/// own. Register each session's positions on the nominal model separately and say which
+/// sessions' frames differ from the first's by more than a nominal model can explain (50 mm or
+/// 2°, against the nominal UR10's few millimetres): those must be scored with their base refitted
+/// (`robocal crossval --transfer`, or `identify --start … --only base,tool`), not validated in the
+/// first session's frame.
+fn frame_notes(sessions: &[Session]) -> Vec<String> {
+    use crate::metrology::registration::estimate_base;
+    let frames: Vec<Option<Frame>> = sessions
+        .iter()
+        .map(|s| {
+            let one = Cell { model: ur10(), base_guess: None, artefact: None, sessions: vec![s.clone()] };
+            estimate_base(&one).ok().map(|(x, _)| Frame::from_xyzabc(&x))
+        })
+        .collect();
+    let Some(Some(first)) = frames.first() else { return Vec::new() };
+    let mut notes = Vec::new();
+    for (s, f) in sessions.iter().zip(&frames).skip(1) {
+        let Some(f) = f else { continue };
+        let (d, angle) = first.distance(f);
+        if d > 0.05 || angle > 2.0 * DEG {
+            notes.push(format!(
+                "{}: measured in another tracker frame than {} (the robot base registers {:.0} mm and {:.1}° apart): \
+                 validate it with its base refitted (crossval --transfer, or identify --start … --only base,tool)",
+                s.name,
+                sessions[0].name,
+                d / MM,
+                angle / DEG
+            ));
+        }
+    }
+    notes
 }
 
 /// The transform of a `Trafo_TM_F_init.txt` file (m), with the rotation block projected onto SO(3).

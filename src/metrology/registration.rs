@@ -5,7 +5,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 use crate::cell::Cell;
-use crate::kinematics::{Frame, JointState, ParameterSet, RobotModel};
+use crate::kinematics::{Frame, JointState, ParameterSet};
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RegistrationError {
@@ -55,24 +55,30 @@ pub fn register(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> Result<(Frame, f64), 
 /// registered onto the observed positions (ball centres or measured positions).
 /// Returns χ (m, rad) and the RMS residual (m).
 pub fn estimate_base(cell: &Cell) -> Result<([f64; 6], f64), RegistrationError> {
-    let (a, b) = pairs(&cell.model, cell);
-    let (f, rms) = register(&a, &b)?;
-    Ok((f.to_xyzabc(), rms))
+    let picks: Vec<(usize, usize)> =
+        cell.sessions.iter().enumerate().flat_map(|(s, x)| (0..x.measurements.len()).map(move |i| (s, i))).collect();
+    estimate_base_of(cell, &picks)
 }
 
-fn pairs(model: &RobotModel, cell: &Cell) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
-    let mut a = Vec::new();
-    let mut b = Vec::new();
-    for s in &cell.sessions {
-        let chain = ParameterSet::nominal(model.clone(), s.tool.clone(), [0.0; 6]).nominal_chain();
-        for m in &s.measurements {
-            if let Some(p) = cell.observed_position(m) {
-                a.push(chain.fk(&JointState::new(&m.q)).t);
-                b.push(p);
-            }
+/// As [`estimate_base`] on the given measurements only, (session index, measurement index): the
+/// ones an identification uses. Sessions measured in different instrument frames (a tracker
+/// moved between days) must not be registered together.
+pub fn estimate_base_of(cell: &Cell, picks: &[(usize, usize)]) -> Result<([f64; 6], f64), RegistrationError> {
+    let chains: Vec<_> = cell
+        .sessions
+        .iter()
+        .map(|s| ParameterSet::nominal(cell.model.clone(), s.tool.clone(), [0.0; 6]).nominal_chain())
+        .collect();
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for &(s, i) in picks {
+        let m = &cell.sessions[s].measurements[i];
+        if let Some(p) = cell.observed_position(m) {
+            a.push(chains[s].fk(&JointState::new(&m.q)).t);
+            b.push(p);
         }
     }
-    (a, b)
+    let (f, rms) = register(&a, &b)?;
+    Ok((f.to_xyzabc(), rms))
 }
 
 #[cfg(test)]

@@ -1,0 +1,151 @@
+//! Calibration of a real robot (issue 4, item 8): the UR10 of `../shared/datasets/ur10-ipa/`
+//! (Landgraf et al., IEEE CASE 2021, MIT licence), 6D laser-tracker poses in the tracker's own
+//! frame, no hidden answers. Reference figures: an independent careful fit on exactly these data
+//! (issue 4): nominal 0.90 mm mean; geometric calibration 0.437 mm mean (median 0.41, p95 0.85)
+//! under 5-fold cross-validation on series C; 0.47 / 0.45 / 0.44 mm with 50 / 100 / 200 poses;
+//! orientation about 0.9 mrad; transfer to series B with base and probe refitted: geometry 0.83,
+//! geometry + compliance 0.45 mm. robocal must match or beat each within 0.01 mm. The full
+//! tables (all sizes, 10 draws, series D) are in BENCHMARKS.md; this test runs the parts that
+//! fit the default test budget.
+
+use std::path::PathBuf;
+
+use robocal::cell::{Cell, Observation, Purpose};
+use robocal::identify::crossval::{CrossvalOptions, Variant, crossval};
+use robocal::identify::{IdentifyOptions, ModelOptions, identify};
+use robocal::import::ur10_ipa::{Ur10Options, import_cell};
+
+const MM: f64 = 1e-3;
+
+fn series(letter: &str) -> PathBuf {
+    [env!("CARGO_MANIFEST_DIR"), "..", "shared", "datasets", "ur10-ipa", &format!("Series_{letter}")].iter().collect()
+}
+
+fn cell() -> Cell {
+    import_cell(&[(series("C"), Purpose::Identification), (series("B"), Purpose::Validation)], &Ur10Options::default())
+        .unwrap()
+        .cell
+}
+
+fn geometry() -> Variant {
+    Variant {
+        name: "geometry".into(),
+        options: IdentifyOptions {
+            model: ModelOptions { compliance: false, ..Default::default() },
+            ..Default::default()
+        },
+    }
+}
+
+fn compliance() -> Variant {
+    Variant { name: "geometry+compliance".into(), options: IdentifyOptions::default() }
+}
+
+fn options(variants: Vec<Variant>) -> CrossvalOptions {
+    CrossvalOptions {
+        session: "series-C".into(),
+        folds: 0,
+        sizes: Vec::new(),
+        draws: 0,
+        transfer: Vec::new(),
+        transfer_fixed: Vec::new(),
+        transfer_kappa_limit: None,
+        variants,
+        before: IdentifyOptions::default(),
+        seed: 1,
+        threads: 2,
+    }
+}
+
+/// 5-fold cross-validation on series C: before (nominal, base and probe fitted) 0.90 mm, geometric
+/// calibration 0.437 / 0.41 / 0.85 mm (mean / median / p95), orientation ≈ 0.9 mrad.
+#[test]
+fn five_fold_cross_validation_matches_the_reference() {
+    let cv = crossval(&cell(), &CrossvalOptions { folds: 5, ..options(vec![geometry()]) }).unwrap();
+    assert_eq!(cv.measurements, 2773);
+    let before = cv.folds[0].pooled.as_ref().unwrap();
+    let geo = cv.folds[1].pooled.as_ref().unwrap();
+    assert_eq!(before.position.n, 2773, "every measurement is predicted exactly once");
+    assert_eq!(geo.position.n, 2773);
+    let mm = |v: f64| v / MM;
+    eprintln!(
+        "before {:.4} mm; geometry {:.4} / {:.4} / {:.4} mm, orientation {:.3} mrad",
+        mm(before.position.mean),
+        mm(geo.position.mean),
+        mm(geo.position.median),
+        mm(geo.position.p95),
+        geo.orientation.unwrap().mean * 1e3
+    );
+    // The uncalibrated reference is a figure to reproduce, not to beat.
+    assert!((mm(before.position.mean) - 0.90).abs() <= 0.01, "before: {}", mm(before.position.mean));
+    assert!(mm(geo.position.mean) <= 0.437 + 0.01, "mean {}", mm(geo.position.mean));
+    assert!(mm(geo.position.median) <= 0.41 + 0.01, "median {}", mm(geo.position.median));
+    assert!(mm(geo.position.p95) <= 0.85 + 0.01, "p95 {}", mm(geo.position.p95));
+    let ori = geo.orientation.unwrap().mean * 1e3;
+    assert!(ori <= 0.9 + 0.05, "orientation {ori} mrad");
+    // 30 parameters: the UR10's 24 MDH less the four of joint 1 and d2, d3 (parallel axes 2–4),
+    // plus β of joints 3 and 4, six base, four probe (tool_z and tool_a go with d6 and θ6).
+    assert_eq!(cv.folds[1].identified, 30);
+}
+
+/// Few poses: n poses of one random half identify, the other half tests; the mean over 10 draws
+/// of the held-out mean reaches 0.47 / 0.45 / 0.44 mm with 50 / 100 / 200 poses.
+#[test]
+fn few_poses_reach_the_reference() {
+    let cv = crossval(&cell(), &CrossvalOptions { sizes: vec![50, 100, 200], draws: 10, ..options(vec![geometry()]) })
+        .unwrap();
+    for (n, reference) in [(50, 0.47), (100, 0.45), (200, 0.44)] {
+        let geo = cv.sizes.iter().find(|s| s.variant == "geometry" && s.n == n).unwrap();
+        assert!(geo.draws.iter().all(|d| d.is_ok()), "{:?}", geo.draws);
+        let mean = geo.mean(|h| h.position.mean).unwrap() / MM;
+        eprintln!("{n} poses, 10 draws: {mean:.4} mm (reference {reference})");
+        assert!(mean <= reference + 0.01, "{n} poses: {mean}");
+        // Disjoint halves: the test half holds the other half of the session.
+        assert_eq!(geo.draws[0].as_ref().unwrap().position.n, 2773 - 2773 / 2);
+    }
+    // More poses, smaller error: the model is not over-fitted at 200 poses.
+    let at =
+        |n: usize| cv.sizes.iter().find(|s| s.variant == "geometry" && s.n == n).unwrap().mean(|h| h.position.mean);
+    assert!(at(50) > at(100) && at(100) > at(200));
+}
+
+/// Transfer: calibrate on all of series C, refit only base and probe on series B. Geometry alone
+/// degrades (0.83 mm in the reference); the compliance model transfers (0.45 mm).
+#[test]
+fn compliance_transfers_to_another_series() {
+    let cv = crossval(
+        &cell(),
+        &CrossvalOptions { transfer: vec!["series-B".into()], ..options(vec![geometry(), compliance()]) },
+    )
+    .unwrap();
+    let get =
+        |v: &str| cv.transfer.iter().find(|t| t.variant == v).unwrap().errors.as_ref().unwrap().position.mean / MM;
+    let (before, geo, comp) = (get("before"), get("geometry"), get("geometry+compliance"));
+    eprintln!("series B: before {before:.4}, geometry {geo:.4}, geometry + compliance {comp:.4} mm");
+    assert!(geo <= 0.83 + 0.01, "{geo}");
+    assert!(comp <= 0.45 + 0.01, "{comp}");
+    assert!(comp < geo - 0.3, "compliance must transfer where geometry alone does not");
+    assert!(geo < before);
+}
+
+/// Position-only fits of this probe (0.2 mm off axis 6) lose θ6 to the probe's x and y, and a5 and
+/// d5 to joint 5's other parameters; identifiability says so instead of failing at the solution.
+#[test]
+fn position_only_fit_reports_what_it_cannot_identify() {
+    let mut c = cell();
+    c.sessions.truncate(1);
+    for m in &mut c.sessions[0].measurements {
+        if let Observation::Pose(f) = m.observation {
+            m.observation = Observation::Position(f.t);
+        }
+    }
+    let opts =
+        IdentifyOptions { model: ModelOptions { compliance: false, ..Default::default() }, ..Default::default() };
+    let id = identify(&c, &opts).unwrap();
+    let status = |name: &str| id.status[id.set.layout.find(name).unwrap()].clone();
+    assert_eq!(status("theta6"), "theta6: no effect, the TCP lies on axis 6 and orientation is not measured");
+    assert!(status("a5").starts_with("a5: dependent on"), "{}", status("a5"));
+    assert_eq!(status("tool_a"), "tool_a: orientation not measured");
+    assert!(!id.free_names.iter().any(|n| n == "theta6" || n == "a5"));
+    assert!(id.quality.kappa_scaled < 1000.0);
+}
