@@ -1,6 +1,8 @@
 # syntax=docker/dockerfile:1
 # Build: docker build -t robocal .
-# Run:   docker run --rm -v robocal-data:/data robocal --help
+# Run:   docker run --rm -p 8080:8080 -v robocal-data:/data robocal
+#        (the first time: docker run --rm -v robocal-data:/data robocal token create --name admin --scopes admin)
+# The server binds 0.0.0.0 inside the container, so every /v1 request needs a bearer token.
 
 FROM rust:1.95-slim-bookworm AS build
 WORKDIR /src
@@ -19,5 +21,10 @@ COPY --from=build /src/target/release/robocal /usr/local/bin/robocal
 USER 10001:10001
 WORKDIR /data
 VOLUME ["/data"]
+ENV ROBOCAL_DB=/data/robocal.db \
+    ROBOCAL_BIND=0.0.0.0:8080 \
+    RUST_LOG=info
+EXPOSE 8080
+STOPSIGNAL SIGTERM
 ENTRYPOINT ["/usr/local/bin/robocal"]
-CMD ["--help"]
+CMD ["serve"]

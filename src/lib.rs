@@ -1,7 +1,9 @@
 //! robocal: robot calibration — kinematic models, identification, validation and compensation.
 //!
-//! The pure-math layers (`kinematics`, `metrology`) know nothing of I/O; `domain` converts the
-//! wire and file formats (mm, deg) to and from them, once; `cli` is a thin front end.
+//! The pure-math layers (`kinematics`, `metrology`, `identify`, `validate`, `sim`) know nothing
+//! of I/O; `domain` converts the wire and file formats (mm, deg) to and from them, once; `db`
+//! (SQLite), `jobs` (the persisted queue) and `http` (axum) make the service; `cli` and `server`
+//! are thin front ends over the same calls.
 
 // Numeric kernels index several parallel per-joint arrays with one joint index; iterator zips of
 // four arrays read worse than the formulas they implement.
@@ -9,10 +11,15 @@
 
 pub mod cell;
 pub mod cli;
+pub mod db;
+pub mod demo;
 pub mod domain;
+pub mod http;
 pub mod identify;
 pub mod import;
+pub mod jobs;
 pub mod kinematics;
 pub mod metrology;
+pub mod server;
 pub mod sim;
 pub mod validate;

@@ -17,7 +17,7 @@ use crate::kinematics::ParameterSet;
 use crate::kinematics::model::Tool;
 use crate::kinematics::params::{JointTerm, Param, Unit};
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ParamEntry {
     pub name: String,
@@ -34,9 +34,10 @@ pub struct ParamEntry {
     pub status: Option<String>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ParameterSetFile {
+    #[schema(value_type = Object)]
     pub robot: Value,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tool: Option<ToolSpec>,
@@ -44,6 +45,7 @@ pub struct ParameterSetFile {
     pub parameters: Vec<ParamEntry>,
     /// The identification's quality report, carried along unchanged.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(value_type = Option<Object>)]
     pub quality: Option<Value>,
 }
 

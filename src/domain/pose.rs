@@ -64,7 +64,7 @@ impl PoseSpec {
 }
 
 /// A pose as output: every representation, so no reader has to convert.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct PoseOut {
     pub position_mm: [f64; 3],
     pub rotation_deg: [f64; 3],
@@ -83,7 +83,7 @@ impl PoseOut {
 }
 
 /// One compensation target: a pose with how to choose the solution, or a nominal joint target.
-#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TargetSpec {
     /// Caller's label, echoed back.
@@ -170,7 +170,7 @@ impl TargetSpec {
 }
 
 /// One target's answer (or its own error), as written by `compensate`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct CompensationResult {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub id: Option<String>,

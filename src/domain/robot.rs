@@ -229,7 +229,7 @@ fn model_error(e: ModelError) -> DomainError {
 
 /// A tool: TCP position (and optional ZY'X'' orientation) in the flange frame, payload mass and
 /// centre of mass in the flange frame.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ToolSpec {
     pub tcp_mm: [f64; 3],

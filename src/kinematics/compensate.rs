@@ -116,11 +116,15 @@ impl Compensator {
         let (seed_q, expected) = match seed {
             Seed::Branch(b) => (self.branch_seed(target, b)?.to_vec(), Some(b)),
             Seed::Confdata(c) => {
-                // Whole turns of axes 1, 4, 6 from the confdata, the rest from the refined seed.
-                let turns = self.closed_form()?.solve_confdata(target, c)?;
+                // The branch from cfx; cf1, cf4, cf6 choose the whole turns of axes 1, 4, 6 (the
+                // representative nearest the middle of each requested quadrant). The quadrant is
+                // not enforced: the requested confdata is the nominal model's, and calibration
+                // can move an axis lying within a degree of a quadrant boundary across it. The
+                // answer's `confdata` (the nominal model's of q*) is what to program.
                 let mut q = self.branch_seed(target, c.cfx)?;
-                for j in [0, 3, 5] {
-                    q[j] += ((turns[j] - q[j]) / std::f64::consts::TAU).round() * std::f64::consts::TAU;
+                for (j, cf) in [(0, c.cf1), (3, c.cf4), (5, c.cf6)] {
+                    let centre = (f64::from(cf) + 0.5) * std::f64::consts::FRAC_PI_2;
+                    q[j] += ((centre - q[j]) / std::f64::consts::TAU).round() * std::f64::consts::TAU;
                 }
                 (q.to_vec(), Some(c.cfx))
             }
@@ -277,6 +281,40 @@ mod tests {
         assert!(sliver <= 5, "{sliver} targets with a different controller cfx");
         let mean_shift = shift_mm.iter().sum::<f64>() / shift_mm.len() as f64;
         assert!(mean_shift > 0.5, "fake targets move by millimetres, got {mean_shift} mm");
+    }
+
+    /// Confdata targets whose axis 4 or 6 sits within a fraction of a degree of a quadrant
+    /// boundary: calibration may carry the axis across it. The target is still compensated (the
+    /// quadrant picks the whole turn, not a hard wall), lands within 1 nm, keeps the requested
+    /// turn, and the answer's confdata — what to program — says which quadrant the axis is in.
+    #[test]
+    fn confdata_targets_at_a_quadrant_boundary_are_compensated() {
+        let set = table_5_1();
+        let comp = Compensator::new(&set);
+        let nominal = set.nominal_chain();
+        let ik = AnalyticIk::new(&set.model, nominal.base(), nominal.tool()).unwrap();
+        let (gravity, calibrated) = (set.gravity(), set.chain());
+        let mut crossed = 0;
+        for k in 0..40 {
+            let d = (k as f64 - 20.0) * 0.02_f64.to_radians();
+            let (j, q) = if k % 2 == 0 {
+                (3, [0.4, 0.3, -0.2, std::f64::consts::FRAC_PI_2 + d, 0.8, 0.5])
+            } else {
+                (5, [0.4, 0.3, -0.2, 0.5, 0.8, -std::f64::consts::FRAC_PI_2 + d])
+            };
+            let target = nominal.fk(&JointState::new(&q));
+            let want = ik.confdata(&q);
+            let res = comp.pose(&target, Seed::Confdata(want)).unwrap_or_else(|e| panic!("{e} at {q:?}"));
+            let tau = gravity.torques(res.joints());
+            let (dp, dr) = pose_error(&calibrated.fk(&JointState::with_torques(res.joints(), &tau[..6])), &target);
+            assert!(dp <= 1e-9 && dr <= 1e-6, "{dp} m {dr} rad");
+            assert!((res.q[j] - q[j]).abs() < 2.0_f64.to_radians(), "axis {} turned: {} vs {}", j + 1, res.q[j], q[j]);
+            let got = res.confdata.unwrap();
+            let (w, g) = if j == 3 { (want.cf4, got.cf4) } else { (want.cf6, got.cf6) };
+            assert!((w - g).abs() <= 1, "quadrant {g} vs requested {w}");
+            crossed += usize::from(w != g);
+        }
+        assert!(crossed > 0, "the sweep should carry some axis across its quadrant boundary");
     }
 
     #[test]

@@ -165,6 +165,10 @@ pub enum PlanError {
     Ball { ball: usize, found: usize, wanted: usize, attempts: usize },
     #[error("found only {found} of {wanted} validation poses in {attempts} attempts")]
     Validation { found: usize, wanted: usize, attempts: usize },
+    #[error(
+        "no collision-free move leads to any of the {remaining} configurations left after {sequenced} were sequenced"
+    )]
+    Sequence { sequenced: usize, remaining: usize },
 }
 
 /// Identification planning settings.
@@ -585,6 +589,44 @@ impl PlanningCell {
             return Err(Reject::Unreachable);
         }
         Ok(solutions[rng.random_range(0..n)])
+    }
+
+    /// A measuring order for a set of configurations (e.g. a DETMAX selection whose planned order
+    /// no longer holds once poses were dropped): from home, always move to the nearest remaining
+    /// configuration (largest joint displacement, what a joint move's duration follows) whose joint
+    /// move is collision-free; when none is, slot one in between two sequenced configurations whose
+    /// moves into and out of it are free. Fails, saying how far it got, when neither works.
+    pub fn sequence(&self, mut left: Vec<PlannedPose>) -> Result<Vec<PlannedPose>, PlanError> {
+        let dist = |a: &[f64; 6], b: &[f64; 6]| a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+        let mut out = Vec::with_capacity(left.len());
+        let mut prev = self.layout.home;
+        while !left.is_empty() {
+            let mut order: Vec<usize> = (0..left.len()).collect();
+            order.sort_by(|&a, &b| dist(&prev, &left[a].q).total_cmp(&dist(&prev, &left[b].q)).then(a.cmp(&b)));
+            if let Some(i) = order.into_iter().find(|&i| self.collision.check_path(&prev, &left[i].q).is_ok()) {
+                let p = left.remove(i);
+                prev = p.q;
+                out.push(p);
+                continue;
+            }
+            // Stuck: slot a remaining configuration between two sequenced ones it can be reached
+            // from and left to, then carry on from the end.
+            let home = self.layout.home;
+            let slot = (0..left.len()).find_map(|i| {
+                (0..out.len()).find_map(|k| {
+                    let before = if k == 0 { home } else { out[k - 1].q };
+                    let free = self.collision.check_path(&before, &left[i].q).is_ok()
+                        && self.collision.check_path(&left[i].q, &out[k].q).is_ok();
+                    free.then_some((i, k))
+                })
+            });
+            let Some((i, k)) = slot else {
+                return Err(PlanError::Sequence { sequenced: out.len(), remaining: left.len() });
+            };
+            let p = left.remove(i);
+            out.insert(k, p);
+        }
+        Ok(out)
     }
 
     /// Path-check a measuring sequence from home: `Err((i, e))` when the move into pose i fails.

@@ -1,0 +1,73 @@
+#!/usr/bin/env bash
+# Every resource of the service with curl and jq, against a running `robocal serve`
+# (default http://127.0.0.1:8080; set API, and TOKEN when the server requires one).
+# The measurements come from the virtual cell: `robocal simulate` writes them to a cell file.
+#   cargo run --release -- serve &      then      scripts/api_walkthrough.sh
+set -euo pipefail
+cd "$(dirname "$0")/.."
+API=${API:-http://127.0.0.1:8080}
+AUTH=()
+if [[ -n "${TOKEN:-}" ]]; then AUTH=(-H "Authorization: Bearer $TOKEN"); fi
+J='Content-Type: application/json'
+call() { curl -sS --fail-with-body "${AUTH[@]}" "$@"; }
+wait_job() {  # poll a job until it ends; print it
+  until call "$API/v1/jobs/$1" | jq -e '.state | test("succeeded|failed|cancelled")' >/dev/null; do sleep 0.2; done
+  call "$API/v1/jobs/$1"
+}
+tmp=$(mktemp -d)
+cargo run --quiet --release -- simulate --seed 1 --out "$tmp/sim.json" >/dev/null
+name="cell-$RANDOM$RANDOM"
+
+echo "== a robot (preset or custom table) with a guess of its base in the artefact's frame {W}"
+ROBOT=$(call "$API/v1/robots" -H "$J" -d '{"name": "'"$name"'", "robot": {"preset": "irb120"},
+  "base_guess": {"x_mm": 160.211, "y_mm": -255.727, "z_mm": -220.548, "a_deg": 91.603, "b_deg": 0.496, "c_deg": -1.384}}' | jq -r .id)
+call "$API/v1/robots/$ROBOT" | jq -c '{id, name, dof, parameters}'
+
+echo "== the ball triangle from its three measured distances (the answer has the ball centres in {W})"
+PLATE=$(call "$API/v1/artefacts" -H "$J" -d '{"name": "plate-'"$name"'",
+  "distances_mm": {"d12": 300, "d13": 300, "d23": 300}, "ball_diameter_mm": 12.7}' | jq -r .id)
+call "$API/v1/artefacts/$PLATE" | jq -c .ball_centres_mm
+
+echo "== a pose plan (job): 360 collision-checked TriCal candidates, 75 chosen by DETMAX, 506 tracker poses"
+JOB=$(call "$API/v1/robots/$ROBOT/pose-plans" -H "$J" -d '{"artefact_id": "'"$PLATE"'",
+  "tool": {"tcp_mm": [40, 0, 130], "mass_kg": 1.7, "com_mm": [30, 0, 64]}, "select": {"n": 75}}' | jq -r .id)
+PLAN=$(wait_job "$JOB" | jq -r .result.pose_plan_id)
+call "$API/v1/pose-plans/$PLAN" | jq -c '.plan | {candidates, first: .identification[0], selection: .selection.index_final}'
+
+echo "== sessions and their measurements (JSON here; text/csv works too), idempotent uploads"
+for k in 0 1 2 3; do
+  s=$(jq -c ".sessions[$k] | {name, purpose, instrument, tool}" "$tmp/sim.json")
+  SID=$(call "$API/v1/robots/$ROBOT/sessions" -H "$J" -d "$(jq -c '. + {"artefact_id": "'"$PLATE"'"}' <<<"$s")" | jq -r .id)
+  jq -c "{measurements: .sessions[$k].measurements}" "$tmp/sim.json" > "$tmp/batch.json"
+  call "$API/v1/sessions/$SID/measurements" -H "$J" -H "Idempotency-Key: $name-$k" -d @"$tmp/batch.json" | jq -c .
+done
+call "$API/v1/sessions/$SID/measurements" -H "$J" -H "Idempotency-Key: $name-3" -d @"$tmp/batch.json" -D - -o /dev/null \
+  | grep -i idempotency-replayed
+call "$API/v1/sessions/$SID/measurements?offset=0&limit=2" | jq -c '{total, next_offset, first: .items[0]}'
+
+echo "== identification (job) → an immutable, versioned parameter set; a refused fit says why"
+JOB=$(call "$API/v1/robots/$ROBOT/identifications" -H "$J" -d '{"sessions": ["trical-1"], "kappa_limit": 2}' | jq -r .id)
+wait_job "$JOB" | jq -c '{state, error: .error.title}'
+JOB=$(call "$API/v1/robots/$ROBOT/identifications" -H "$J" -d '{"sessions": ["trical-1"], "select": {"n": 75}}' | jq -r .id)
+SET=$(wait_job "$JOB" | jq -r .result.parameter_set_id)
+
+echo "== validation (job) on the tracker sessions"
+JOB=$(call "$API/v1/parameter-sets/$SET/validations" -H "$J" -d '{"sessions": ["tracker-n1", "tracker-n2", "tracker-n3"]}' | jq -r .id)
+VALIDATION=$(wait_job "$JOB" | jq -r .result.validation_id)
+call "$API/v1/validations/$VALIDATION" | jq -c '.report | {mean_mm, median_mm, std_mm, max_mm, nominal_mean_mm: .nominal.mean_mm}'
+
+echo "== history, explicit activation, export, import"
+call "$API/v1/robots/$ROBOT/parameter-sets" | jq -c '.[] | {version, active, quality, validations: [.validations[].figures.mean_mm]}'
+call -X PUT "$API/v1/robots/$ROBOT/active-parameter-set" -H "$J" -d '{"parameter_set_id": "'"$SET"'"}' | jq -c '{version, active}'
+call "$API/v1/parameter-sets/$SET/export" > "$tmp/params.json" && jq -c '.parameters[1]' "$tmp/params.json"
+call "$API/v1/robots/$ROBOT/parameter-sets" -H "$J" -d @examples/irb120_table_5_1.json | jq -c '{version, active}'
+
+echo "== compensated targets with the active set"
+call "$API/v1/robots/$ROBOT/compensate" -H "$J" -d @examples/targets.json | jq -c '.results[0] | {id, joints_deg, residual_mm}'
+
+echo "== the robot's measurements as a cell file, jobs, errors"
+call "$API/v1/robots/$ROBOT/cell?sessions=trical-1" | jq -c '{robot, sessions: [.sessions[] | {name, n: (.measurements | length)}]}'
+call "$API/v1/jobs?robot_id=$ROBOT&state=failed" | jq -c '[.[] | {kind, error: .error.type}]'
+curl -sS "${AUTH[@]}" "$API/v1/robots/$ROBOT/sessions" -H "$J" -d '{"name": "x", "purpose": "identification",
+  "instrument": "trical", "tool": {"tcp_mm": [0, 0, "?"]}}' | jq -c .
+rm -rf "$tmp"

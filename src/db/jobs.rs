@@ -1,0 +1,218 @@
+//! The persisted job queue. A job is a row; a worker claims the oldest queued one with a single
+//! atomic `UPDATE … RETURNING` (so two workers never take the same job), holds a lease it renews
+//! while the solver runs, and writes the result and the final state in one transaction. Leases
+//! left by a killed server are requeued at start-up: the job runs again from its request.
+
+use std::time::{Duration, SystemTime};
+
+use sqlx::SqlitePool;
+use sqlx::sqlite::SqliteExecutor;
+
+use super::{now, time_text};
+
+/// A job row.
+#[derive(Clone, Debug, PartialEq, sqlx::FromRow)]
+pub struct JobRow {
+    pub id: String,
+    pub kind: String,
+    pub robot_id: String,
+    pub state: String,
+    pub progress: f64,
+    pub request_json: String,
+    pub result_json: Option<String>,
+    pub error_json: Option<String>,
+    pub attempts: i64,
+    pub lease_owner: Option<String>,
+    pub lease_expires_at: Option<String>,
+    pub cancel_requested: bool,
+    pub created_at: String,
+    pub started_at: Option<String>,
+    pub finished_at: Option<String>,
+    pub updated_at: String,
+}
+
+/// States a job can be in.
+pub const STATES: [&str; 5] = ["queued", "running", "succeeded", "failed", "cancelled"];
+
+/// Queue a new job.
+pub async fn insert(
+    db: impl SqliteExecutor<'_>,
+    id: &str,
+    kind: &str,
+    robot_id: &str,
+    request_json: &str,
+) -> Result<(), sqlx::Error> {
+    let t = now();
+    sqlx::query(
+        "INSERT INTO jobs (id, kind, robot_id, state, progress, request_json, created_at, updated_at) \
+         VALUES (?, ?, ?, 'queued', 0, ?, ?, ?)",
+    )
+    .bind(id)
+    .bind(kind)
+    .bind(robot_id)
+    .bind(request_json)
+    .bind(&t)
+    .bind(&t)
+    .execute(db)
+    .await?;
+    Ok(())
+}
+
+pub async fn get(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<JobRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM jobs WHERE id = ?").bind(id).fetch_optional(db).await
+}
+
+/// Jobs, newest first, optionally of one robot and/or one state.
+pub async fn list(
+    db: impl SqliteExecutor<'_>,
+    robot_id: Option<&str>,
+    state: Option<&str>,
+    limit: i64,
+) -> Result<Vec<JobRow>, sqlx::Error> {
+    sqlx::query_as(
+        "SELECT * FROM jobs WHERE (?1 IS NULL OR robot_id = ?1) AND (?2 IS NULL OR state = ?2) \
+         ORDER BY created_at DESC, id DESC LIMIT ?3",
+    )
+    .bind(robot_id)
+    .bind(state)
+    .bind(limit)
+    .fetch_all(db)
+    .await
+}
+
+/// Claim the oldest queued job for `owner` with a lease of `lease`: one atomic statement.
+pub async fn claim(pool: &SqlitePool, owner: &str, lease: Duration) -> Result<Option<JobRow>, sqlx::Error> {
+    let t = now();
+    let until = time_text(SystemTime::now() + lease);
+    sqlx::query_as(
+        "UPDATE jobs SET state = 'running', lease_owner = ?, lease_expires_at = ?, attempts = attempts + 1, \
+             started_at = COALESCE(started_at, ?), updated_at = ?, progress = 0 \
+         WHERE id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY created_at, id LIMIT 1) AND state = 'queued' \
+         RETURNING *",
+    )
+    .bind(owner)
+    .bind(&until)
+    .bind(&t)
+    .bind(&t)
+    .fetch_optional(pool)
+    .await
+}
+
+/// Extend a running job's lease and record its progress; `false` when the job is no longer this
+/// owner's (requeued by another process after the lease expired).
+pub async fn heartbeat(
+    pool: &SqlitePool,
+    id: &str,
+    owner: &str,
+    lease: Duration,
+    progress: f64,
+) -> Result<bool, sqlx::Error> {
+    let r = sqlx::query(
+        "UPDATE jobs SET lease_expires_at = ?, progress = MAX(progress, ?), updated_at = ? \
+         WHERE id = ? AND lease_owner = ? AND state = 'running'",
+    )
+    .bind(time_text(SystemTime::now() + lease))
+    .bind(progress)
+    .bind(now())
+    .bind(id)
+    .bind(owner)
+    .execute(pool)
+    .await?;
+    Ok(r.rows_affected() == 1)
+}
+
+/// Whether cancellation was asked for.
+pub async fn cancel_requested(db: impl SqliteExecutor<'_>, id: &str) -> Result<bool, sqlx::Error> {
+    Ok(sqlx::query_scalar::<_, bool>("SELECT cancel_requested FROM jobs WHERE id = ?")
+        .bind(id)
+        .fetch_optional(db)
+        .await?
+        .unwrap_or(false))
+}
+
+/// Final state of a job this owner holds, inside the caller's transaction (with the result rows).
+/// `false` when the job is no longer held by `owner` (then the caller must roll back).
+pub async fn finish(
+    db: impl SqliteExecutor<'_>,
+    id: &str,
+    owner: &str,
+    state: &str,
+    result_json: Option<&str>,
+    error_json: Option<&str>,
+) -> Result<bool, sqlx::Error> {
+    let t = now();
+    let r = sqlx::query(
+        "UPDATE jobs SET state = ?, result_json = ?, error_json = ?, progress = CASE WHEN ? = 'succeeded' THEN 1 ELSE progress END, \
+             finished_at = ?, updated_at = ?, lease_owner = NULL, lease_expires_at = NULL \
+         WHERE id = ? AND lease_owner = ? AND state = 'running'",
+    )
+    .bind(state)
+    .bind(result_json)
+    .bind(error_json)
+    .bind(state)
+    .bind(&t)
+    .bind(&t)
+    .bind(id)
+    .bind(owner)
+    .execute(db)
+    .await?;
+    Ok(r.rows_affected() == 1)
+}
+
+/// Put a held job back in the queue (graceful shutdown with the solver still running).
+pub async fn release(pool: &SqlitePool, id: &str, owner: &str) -> Result<bool, sqlx::Error> {
+    let r = sqlx::query(
+        "UPDATE jobs SET state = 'queued', lease_owner = NULL, lease_expires_at = NULL, updated_at = ? \
+         WHERE id = ? AND lease_owner = ? AND state = 'running'",
+    )
+    .bind(now())
+    .bind(id)
+    .bind(owner)
+    .execute(pool)
+    .await?;
+    Ok(r.rows_affected() == 1)
+}
+
+/// Requeue running jobs whose lease has expired — at start-up, every running job (`all`): the
+/// process that held them is gone. Returns the number requeued.
+pub async fn requeue_stale(pool: &SqlitePool, all: bool) -> Result<u64, sqlx::Error> {
+    let t = now();
+    let r = sqlx::query(
+        "UPDATE jobs SET state = 'queued', lease_owner = NULL, lease_expires_at = NULL, updated_at = ? \
+         WHERE state = 'running' AND (? OR lease_expires_at IS NULL OR lease_expires_at < ?)",
+    )
+    .bind(&t)
+    .bind(all)
+    .bind(&t)
+    .execute(pool)
+    .await?;
+    Ok(r.rows_affected())
+}
+
+/// Cancel: a queued job ends at once; a running one is flagged and ends when its solver returns
+/// (its result is then discarded). Returns the row after the change, `None` if unknown.
+pub async fn cancel(pool: &SqlitePool, id: &str) -> Result<Option<JobRow>, sqlx::Error> {
+    let t = now();
+    let mut tx = super::begin_write(pool).await?;
+    sqlx::query(
+        "UPDATE jobs SET state = 'cancelled', finished_at = ?, updated_at = ? WHERE id = ? AND state = 'queued'",
+    )
+    .bind(&t)
+    .bind(&t)
+    .bind(id)
+    .execute(&mut *tx)
+    .await?;
+    sqlx::query("UPDATE jobs SET cancel_requested = 1, updated_at = ? WHERE id = ? AND state = 'running'")
+        .bind(&t)
+        .bind(id)
+        .execute(&mut *tx)
+        .await?;
+    let row = get(&mut *tx, id).await?;
+    tx.commit().await?;
+    Ok(row)
+}
+
+/// Job counts by state (for /metrics).
+pub async fn counts(db: impl SqliteExecutor<'_>) -> Result<Vec<(String, i64)>, sqlx::Error> {
+    sqlx::query_as("SELECT state, COUNT(*) FROM jobs GROUP BY state").fetch_all(db).await
+}

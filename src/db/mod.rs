@@ -1,0 +1,69 @@
+//! The SQLite store (sqlx, runtime-checked queries): one module per table group. Documents are
+//! stored as the JSON text of the file formats (mm, deg), so the store and the files share one
+//! contract. Every write that must be all-or-nothing runs in one `BEGIN IMMEDIATE` transaction
+//! (immediate: the write lock is taken up front, so two writers never deadlock upgrading a
+//! read lock).
+
+pub mod jobs;
+pub mod records;
+pub mod tokens;
+
+use std::path::Path;
+use std::str::FromStr;
+use std::time::{Duration, SystemTime};
+
+use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
+pub use sqlx::{Sqlite, SqlitePool, Transaction};
+
+/// The migrations of `migrations/`, embedded at compile time and applied at start-up.
+pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations");
+
+/// Open (creating it if missing) and migrate the database at `path`: WAL, foreign keys on, a
+/// busy timeout so concurrent writers wait instead of failing.
+pub async fn connect(path: &Path) -> Result<SqlitePool, sqlx::Error> {
+    let opts = SqliteConnectOptions::new()
+        .filename(path)
+        .create_if_missing(true)
+        .journal_mode(SqliteJournalMode::Wal)
+        .synchronous(SqliteSynchronous::Normal)
+        .foreign_keys(true)
+        .busy_timeout(Duration::from_secs(10));
+    let pool =
+        SqlitePoolOptions::new().max_connections(8).acquire_timeout(Duration::from_secs(10)).connect_with(opts).await?;
+    MIGRATOR.run(&pool).await?;
+    Ok(pool)
+}
+
+/// A private in-memory database (tests): one connection that is never recycled.
+pub async fn connect_memory() -> Result<SqlitePool, sqlx::Error> {
+    let opts = SqliteConnectOptions::from_str("sqlite::memory:")?.foreign_keys(true);
+    let pool =
+        SqlitePoolOptions::new().max_connections(1).idle_timeout(None).max_lifetime(None).connect_with(opts).await?;
+    MIGRATOR.run(&pool).await?;
+    Ok(pool)
+}
+
+/// A write transaction that holds the write lock from its first statement.
+pub async fn begin_write(pool: &SqlitePool) -> Result<Transaction<'static, Sqlite>, sqlx::Error> {
+    pool.begin_with("BEGIN IMMEDIATE").await
+}
+
+/// Now, RFC 3339 UTC with milliseconds (sorts as text).
+pub fn now() -> String {
+    humantime::format_rfc3339_millis(SystemTime::now()).to_string()
+}
+
+/// `SystemTime` → the stored text form.
+pub fn time_text(t: SystemTime) -> String {
+    humantime::format_rfc3339_millis(t).to_string()
+}
+
+/// A new time-ordered id (UUIDv7).
+pub fn new_id() -> String {
+    uuid::Uuid::now_v7().to_string()
+}
+
+/// Whether an error is a UNIQUE (or primary-key) constraint violation.
+pub fn is_unique_violation(e: &sqlx::Error) -> bool {
+    e.as_database_error().is_some_and(|d| d.is_unique_violation())
+}

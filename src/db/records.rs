@@ -1,0 +1,365 @@
+//! Robots, artefacts, sessions, measurements, parameter sets, validations and pose plans.
+//! Functions take any SQLite executor: the pool for single statements, `&mut *tx` inside a
+//! transaction.
+
+use sqlx::sqlite::SqliteExecutor;
+
+/// A robot row.
+#[derive(Clone, Debug, PartialEq, sqlx::FromRow)]
+pub struct RobotRow {
+    pub id: String,
+    pub name: String,
+    pub model_json: String,
+    pub base_guess_json: Option<String>,
+    pub active_parameter_set_id: Option<String>,
+    pub created_at: String,
+}
+
+pub async fn insert_robot(db: impl SqliteExecutor<'_>, r: &RobotRow) -> Result<(), sqlx::Error> {
+    sqlx::query(
+        "INSERT INTO robots (id, name, model_json, base_guess_json, active_parameter_set_id, created_at) \
+         VALUES (?, ?, ?, ?, ?, ?)",
+    )
+    .bind(&r.id)
+    .bind(&r.name)
+    .bind(&r.model_json)
+    .bind(&r.base_guess_json)
+    .bind(&r.active_parameter_set_id)
+    .bind(&r.created_at)
+    .execute(db)
+    .await?;
+    Ok(())
+}
+
+pub async fn robot(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<RobotRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM robots WHERE id = ?").bind(id).fetch_optional(db).await
+}
+
+pub async fn robots(db: impl SqliteExecutor<'_>) -> Result<Vec<RobotRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM robots ORDER BY created_at, id").fetch_all(db).await
+}
+
+pub async fn set_active_parameter_set(
+    db: impl SqliteExecutor<'_>,
+    robot_id: &str,
+    set_id: &str,
+) -> Result<bool, sqlx::Error> {
+    let r = sqlx::query("UPDATE robots SET active_parameter_set_id = ? WHERE id = ?")
+        .bind(set_id)
+        .bind(robot_id)
+        .execute(db)
+        .await?;
+    Ok(r.rows_affected() == 1)
+}
+
+/// An artefact row.
+#[derive(Clone, Debug, PartialEq, sqlx::FromRow)]
+pub struct ArtefactRow {
+    pub id: String,
+    pub name: String,
+    pub spec_json: String,
+    pub created_at: String,
+}
+
+pub async fn insert_artefact(db: impl SqliteExecutor<'_>, a: &ArtefactRow) -> Result<(), sqlx::Error> {
+    sqlx::query("INSERT INTO artefacts (id, name, spec_json, created_at) VALUES (?, ?, ?, ?)")
+        .bind(&a.id)
+        .bind(&a.name)
+        .bind(&a.spec_json)
+        .bind(&a.created_at)
+        .execute(db)
+        .await?;
+    Ok(())
+}
+
+pub async fn artefact(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<ArtefactRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM artefacts WHERE id = ?").bind(id).fetch_optional(db).await
+}
+
+pub async fn artefacts(db: impl SqliteExecutor<'_>) -> Result<Vec<ArtefactRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM artefacts ORDER BY created_at, id").fetch_all(db).await
+}
+
+/// A session row with its measurement count.
+#[derive(Clone, Debug, PartialEq, sqlx::FromRow)]
+pub struct SessionRow {
+    pub id: String,
+    pub robot_id: String,
+    pub name: String,
+    pub purpose: String,
+    pub instrument: String,
+    pub tool_json: String,
+    pub identify_tcp: bool,
+    pub artefact_id: Option<String>,
+    pub created_at: String,
+    /// Measurements stored (not a column: counted on read).
+    #[sqlx(default)]
+    pub measurements: i64,
+}
+
+const SESSION_COLUMNS: &str = "s.id, s.robot_id, s.name, s.purpose, s.instrument, s.tool_json, s.identify_tcp, \
+     s.artefact_id, s.created_at, (SELECT COUNT(*) FROM measurements m WHERE m.session_id = s.id) AS measurements";
+
+pub async fn insert_session(db: impl SqliteExecutor<'_>, s: &SessionRow) -> Result<(), sqlx::Error> {
+    sqlx::query(
+        "INSERT INTO sessions (id, robot_id, name, purpose, instrument, tool_json, identify_tcp, artefact_id, created_at) \
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+    )
+    .bind(&s.id)
+    .bind(&s.robot_id)
+    .bind(&s.name)
+    .bind(&s.purpose)
+    .bind(&s.instrument)
+    .bind(&s.tool_json)
+    .bind(s.identify_tcp)
+    .bind(&s.artefact_id)
+    .bind(&s.created_at)
+    .execute(db)
+    .await?;
+    Ok(())
+}
+
+pub async fn session(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<SessionRow>, sqlx::Error> {
+    sqlx::query_as(sqlx::AssertSqlSafe(format!("SELECT {SESSION_COLUMNS} FROM sessions s WHERE s.id = ?")))
+        .bind(id)
+        .fetch_optional(db)
+        .await
+}
+
+/// A robot's session by id or by name.
+pub async fn session_of_robot(
+    db: impl SqliteExecutor<'_>,
+    robot_id: &str,
+    id_or_name: &str,
+) -> Result<Option<SessionRow>, sqlx::Error> {
+    sqlx::query_as(sqlx::AssertSqlSafe(format!(
+        "SELECT {SESSION_COLUMNS} FROM sessions s WHERE s.robot_id = ? AND (s.id = ? OR s.name = ?)"
+    )))
+    .bind(robot_id)
+    .bind(id_or_name)
+    .bind(id_or_name)
+    .fetch_optional(db)
+    .await
+}
+
+pub async fn sessions_of_robot(db: impl SqliteExecutor<'_>, robot_id: &str) -> Result<Vec<SessionRow>, sqlx::Error> {
+    sqlx::query_as(sqlx::AssertSqlSafe(format!(
+        "SELECT {SESSION_COLUMNS} FROM sessions s WHERE s.robot_id = ? ORDER BY s.created_at, s.id"
+    )))
+    .bind(robot_id)
+    .fetch_all(db)
+    .await
+}
+
+/// A stored batch of measurements (for idempotent replays).
+#[derive(Clone, Debug, PartialEq, sqlx::FromRow)]
+pub struct BatchRow {
+    pub id: String,
+    pub session_id: String,
+    pub idempotency_key: Option<String>,
+    pub request_hash: String,
+    pub first_seq: i64,
+    pub count: i64,
+    pub created_at: String,
+}
+
+pub async fn batch_by_key(
+    db: impl SqliteExecutor<'_>,
+    session_id: &str,
+    key: &str,
+) -> Result<Option<BatchRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM batches WHERE session_id = ? AND idempotency_key = ?")
+        .bind(session_id)
+        .bind(key)
+        .fetch_optional(db)
+        .await
+}
+
+pub async fn insert_batch(db: impl SqliteExecutor<'_>, b: &BatchRow) -> Result<(), sqlx::Error> {
+    sqlx::query(
+        "INSERT INTO batches (id, session_id, idempotency_key, request_hash, first_seq, count, created_at) \
+         VALUES (?, ?, ?, ?, ?, ?, ?)",
+    )
+    .bind(&b.id)
+    .bind(&b.session_id)
+    .bind(&b.idempotency_key)
+    .bind(&b.request_hash)
+    .bind(b.first_seq)
+    .bind(b.count)
+    .bind(&b.created_at)
+    .execute(db)
+    .await?;
+    Ok(())
+}
+
+/// Measurements stored in a session.
+pub async fn measurement_count(db: impl SqliteExecutor<'_>, session_id: &str) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM measurements WHERE session_id = ?").bind(session_id).fetch_one(db).await
+}
+
+pub async fn insert_measurement(
+    db: impl SqliteExecutor<'_>,
+    session_id: &str,
+    seq: i64,
+    batch_id: &str,
+    spec_json: &str,
+) -> Result<(), sqlx::Error> {
+    sqlx::query("INSERT INTO measurements (session_id, seq, batch_id, spec_json) VALUES (?, ?, ?, ?)")
+        .bind(session_id)
+        .bind(seq)
+        .bind(batch_id)
+        .bind(spec_json)
+        .execute(db)
+        .await?;
+    Ok(())
+}
+
+/// Measurements `offset..offset + limit` of a session, in order: (index, spec JSON).
+pub async fn measurements(
+    db: impl SqliteExecutor<'_>,
+    session_id: &str,
+    offset: i64,
+    limit: i64,
+) -> Result<Vec<(i64, String)>, sqlx::Error> {
+    sqlx::query_as("SELECT seq, spec_json FROM measurements WHERE session_id = ? AND seq >= ? ORDER BY seq LIMIT ?")
+        .bind(session_id)
+        .bind(offset)
+        .bind(limit)
+        .fetch_all(db)
+        .await
+}
+
+/// A parameter-set row.
+#[derive(Clone, Debug, PartialEq, sqlx::FromRow)]
+pub struct ParameterSetRow {
+    pub id: String,
+    pub robot_id: String,
+    pub version: i64,
+    pub doc_json: String,
+    pub sessions_json: String,
+    pub job_id: Option<String>,
+    pub created_at: String,
+}
+
+/// Insert a new version of a robot's parameter set (the next version number is taken inside the
+/// caller's transaction).
+pub async fn insert_parameter_set(
+    tx: &mut sqlx::SqliteConnection,
+    robot_id: &str,
+    doc_json: &str,
+    sessions_json: &str,
+    job_id: Option<&str>,
+) -> Result<ParameterSetRow, sqlx::Error> {
+    let version: i64 =
+        sqlx::query_scalar("SELECT COALESCE(MAX(version), 0) + 1 FROM parameter_sets WHERE robot_id = ?")
+            .bind(robot_id)
+            .fetch_one(&mut *tx)
+            .await?;
+    let row = ParameterSetRow {
+        id: super::new_id(),
+        robot_id: robot_id.to_string(),
+        version,
+        doc_json: doc_json.to_string(),
+        sessions_json: sessions_json.to_string(),
+        job_id: job_id.map(str::to_string),
+        created_at: super::now(),
+    };
+    sqlx::query(
+        "INSERT INTO parameter_sets (id, robot_id, version, doc_json, sessions_json, job_id, created_at) \
+         VALUES (?, ?, ?, ?, ?, ?, ?)",
+    )
+    .bind(&row.id)
+    .bind(&row.robot_id)
+    .bind(row.version)
+    .bind(&row.doc_json)
+    .bind(&row.sessions_json)
+    .bind(&row.job_id)
+    .bind(&row.created_at)
+    .execute(&mut *tx)
+    .await?;
+    Ok(row)
+}
+
+pub async fn parameter_set(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<ParameterSetRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM parameter_sets WHERE id = ?").bind(id).fetch_optional(db).await
+}
+
+/// A robot's parameter sets, newest version first.
+pub async fn parameter_sets_of_robot(
+    db: impl SqliteExecutor<'_>,
+    robot_id: &str,
+) -> Result<Vec<ParameterSetRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM parameter_sets WHERE robot_id = ? ORDER BY version DESC")
+        .bind(robot_id)
+        .fetch_all(db)
+        .await
+}
+
+/// A validation row.
+#[derive(Clone, Debug, PartialEq, sqlx::FromRow)]
+pub struct ValidationRow {
+    pub id: String,
+    pub parameter_set_id: String,
+    pub sessions_json: String,
+    pub report_json: String,
+    pub job_id: Option<String>,
+    pub created_at: String,
+}
+
+pub async fn insert_validation(db: impl SqliteExecutor<'_>, v: &ValidationRow) -> Result<(), sqlx::Error> {
+    sqlx::query(
+        "INSERT INTO validations (id, parameter_set_id, sessions_json, report_json, job_id, created_at) \
+         VALUES (?, ?, ?, ?, ?, ?)",
+    )
+    .bind(&v.id)
+    .bind(&v.parameter_set_id)
+    .bind(&v.sessions_json)
+    .bind(&v.report_json)
+    .bind(&v.job_id)
+    .bind(&v.created_at)
+    .execute(db)
+    .await?;
+    Ok(())
+}
+
+pub async fn validation(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<ValidationRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM validations WHERE id = ?").bind(id).fetch_optional(db).await
+}
+
+/// A parameter set's validations, newest first.
+pub async fn validations_of_set(db: impl SqliteExecutor<'_>, set_id: &str) -> Result<Vec<ValidationRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM validations WHERE parameter_set_id = ? ORDER BY created_at DESC, id DESC")
+        .bind(set_id)
+        .fetch_all(db)
+        .await
+}
+
+/// A pose-plan row.
+#[derive(Clone, Debug, PartialEq, sqlx::FromRow)]
+pub struct PosePlanRow {
+    pub id: String,
+    pub robot_id: String,
+    pub request_json: String,
+    pub result_json: String,
+    pub job_id: Option<String>,
+    pub created_at: String,
+}
+
+pub async fn insert_pose_plan(db: impl SqliteExecutor<'_>, p: &PosePlanRow) -> Result<(), sqlx::Error> {
+    sqlx::query(
+        "INSERT INTO pose_plans (id, robot_id, request_json, result_json, job_id, created_at) VALUES (?, ?, ?, ?, ?, ?)",
+    )
+    .bind(&p.id)
+    .bind(&p.robot_id)
+    .bind(&p.request_json)
+    .bind(&p.result_json)
+    .bind(&p.job_id)
+    .bind(&p.created_at)
+    .execute(db)
+    .await?;
+    Ok(())
+}
+
+pub async fn pose_plan(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<PosePlanRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM pose_plans WHERE id = ?").bind(id).fetch_optional(db).await
+}

@@ -1,0 +1,141 @@
+//! Ball-triangle artefacts: created from the three measured distances, the ball centres in {W}
+//! computed (thesis §2, eq. 4.3–4.7) and returned.
+
+use axum::Json;
+use axum::extract::{Path, State};
+use axum::http::StatusCode;
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+use super::extract::{Authorized, JsonBody, MEASURE, READ};
+use super::{ApiError, AppState};
+use crate::db::{self, records};
+use crate::domain::MM;
+use crate::domain::cell::{ArtefactKind, ArtefactSpec, Distances};
+use crate::metrology::{ArtefactError, BallTriangle};
+
+/// An artefact to create.
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct NewArtefact {
+    /// Unique name, e.g. `plate-A`.
+    pub name: String,
+    /// `ball_triangle` (the only kind).
+    #[serde(default = "ball_triangle")]
+    pub kind: ArtefactKind,
+    /// Measured centre distances, mm.
+    pub distances_mm: Distances,
+    pub ball_diameter_mm: f64,
+}
+
+fn ball_triangle() -> ArtefactKind {
+    ArtefactKind::BallTriangle
+}
+
+/// An artefact with its ball centres in {W} (ball 1 at the origin, ball 2 on +x, ball 3 in the
+/// xy plane with y > 0).
+#[derive(Debug, Serialize, ToSchema)]
+pub struct ArtefactOut {
+    pub id: String,
+    pub name: String,
+    pub kind: ArtefactKind,
+    pub distances_mm: Distances,
+    pub ball_diameter_mm: f64,
+    pub ball_centres_mm: [[f64; 3]; 3],
+    pub created_at: String,
+}
+
+/// Validate an artefact specification (distances form a proper triangle, positive diameter).
+pub fn triangle(spec: &ArtefactSpec) -> Result<BallTriangle, ApiError> {
+    let d = &spec.distances_mm;
+    let t = BallTriangle::from_distances(d.d12 * MM, d.d13 * MM, d.d23 * MM).map_err(|e| match e {
+        ArtefactError::Distance { field, reason } => ApiError::invalid(format!("distances_mm.{field}"), reason),
+        other => ApiError::invalid("distances_mm", other.to_string()),
+    })?;
+    if !spec.ball_diameter_mm.is_finite() || spec.ball_diameter_mm <= 0.0 {
+        return Err(ApiError::invalid("ball_diameter_mm", "must be a positive number"));
+    }
+    Ok(t)
+}
+
+pub fn artefact_out(row: &records::ArtefactRow) -> Result<ArtefactOut, ApiError> {
+    let spec: ArtefactSpec =
+        serde_json::from_str(&row.spec_json).map_err(|e| ApiError::Internal(format!("artefact {}: {e}", row.id)))?;
+    let t = triangle(&spec)?;
+    let c = |k: usize| {
+        let p = t.ball(k).expect("balls 1–3");
+        [p.x / MM, p.y / MM, p.z / MM]
+    };
+    Ok(ArtefactOut {
+        id: row.id.clone(),
+        name: row.name.clone(),
+        kind: spec.kind,
+        distances_mm: spec.distances_mm,
+        ball_diameter_mm: spec.ball_diameter_mm,
+        ball_centres_mm: [c(1), c(2), c(3)],
+        created_at: row.created_at.clone(),
+    })
+}
+
+/// Create an artefact from its three measured distances.
+#[utoipa::path(post, path = "/v1/artefacts", tag = "artefacts",
+    request_body(content = NewArtefact, content_type = "application/json"),
+    responses(
+        (status = 201, description = "Created, with the ball centres", body = ArtefactOut),
+        (status = 409, description = "An artefact with this name exists", body = super::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Impossible or degenerate triangle, bad diameter", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn create(
+    State(state): State<AppState>,
+    _auth: Authorized<MEASURE>,
+    JsonBody(body): JsonBody<NewArtefact>,
+) -> Result<(StatusCode, Json<ArtefactOut>), ApiError> {
+    let name = body.name.trim();
+    if name.is_empty() {
+        return Err(ApiError::invalid("name", "must not be empty"));
+    }
+    let spec =
+        ArtefactSpec { kind: body.kind, distances_mm: body.distances_mm, ball_diameter_mm: body.ball_diameter_mm };
+    triangle(&spec)?;
+    let row = records::ArtefactRow {
+        id: db::new_id(),
+        name: name.to_string(),
+        spec_json: serde_json::to_string(&spec).expect("serialises"),
+        created_at: db::now(),
+    };
+    records::insert_artefact(&state.pool, &row).await.map_err(|e| {
+        if db::is_unique_violation(&e) {
+            ApiError::Conflict { detail: format!("an artefact named '{name}' exists"), field: Some("name".into()) }
+        } else {
+            e.into()
+        }
+    })?;
+    Ok((StatusCode::CREATED, Json(artefact_out(&row)?)))
+}
+
+/// List artefacts.
+#[utoipa::path(get, path = "/v1/artefacts", tag = "artefacts",
+    responses((status = 200, description = "Every artefact, oldest first", body = Vec<ArtefactOut>)),
+    security(("bearer" = [])))]
+pub async fn list(State(state): State<AppState>, _auth: Authorized<READ>) -> Result<Json<Vec<ArtefactOut>>, ApiError> {
+    let rows = records::artefacts(&state.pool).await?;
+    Ok(Json(rows.iter().map(artefact_out).collect::<Result<_, _>>()?))
+}
+
+/// Get an artefact.
+#[utoipa::path(get, path = "/v1/artefacts/{artefact_id}", tag = "artefacts",
+    params(("artefact_id" = String, Path, description = "Artefact id")),
+    responses(
+        (status = 200, description = "The artefact", body = ArtefactOut),
+        (status = 404, description = "Unknown artefact", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn get(
+    State(state): State<AppState>,
+    _auth: Authorized<READ>,
+    Path(artefact_id): Path<String>,
+) -> Result<Json<ArtefactOut>, ApiError> {
+    let row = records::artefact(&state.pool, &artefact_id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("artefact", &artefact_id))?;
+    Ok(Json(artefact_out(&row)?))
+}

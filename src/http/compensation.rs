@@ -1,0 +1,133 @@
+//! Compensation: a batch of targets (TCP pose as `position_mm` + `quaternion` or ZY'X''
+//! `rotation_deg`, with the configuration branch; or nominal `joints_deg` targets) and a tool →
+//! per target the joints to command, the fake pose to program, the residual and iterations, or
+//! that target's own error. Uses the robot's active parameter set unless one is named.
+
+use axum::Json;
+use axum::extract::{Path, State};
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+use super::extract::{Authorized, COMPENSATE, JsonBody};
+use super::robots::find as find_robot;
+use super::{ApiError, AppState};
+use crate::db::records;
+use crate::domain::pose::{Choice, Target};
+use crate::domain::{CompensationResult, ParameterSetDoc, TargetSpec, ToolSpec};
+use crate::kinematics::{Compensator, Param, ParameterSet, Seed, Tool};
+
+/// A batch of targets to compensate.
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CompensationRequest {
+    /// The parameter set to use; default: the robot's active one.
+    #[serde(default)]
+    pub parameter_set_id: Option<String>,
+    /// The tool the targets are for; default: the parameter set's own (identified) tool.
+    #[serde(default)]
+    pub tool: Option<ToolSpec>,
+    pub targets: Vec<TargetSpec>,
+}
+
+/// The compensated batch.
+#[derive(Debug, Serialize, Deserialize, ToSchema)]
+pub struct CompensationOut {
+    pub parameter_set_id: String,
+    pub version: i64,
+    /// One per target, in order: joints_deg, fake_pose, confdata, residual_mm, residual_urad,
+    /// iterations — or error.
+    pub results: Vec<CompensationResult>,
+    /// Targets that could not be compensated.
+    pub failed: usize,
+}
+
+/// The set with another tool: its TCP (nominal and calibrated) and payload.
+pub fn with_tool(set: &ParameterSet, tool: Tool) -> ParameterSet {
+    let mut s = set.clone();
+    for k in 0..6 {
+        if let Some(i) = s.layout.index_of(Param::Tool(k)) {
+            s.values[i] = tool.tcp[k];
+            s.nominal[i] = tool.tcp[k];
+        }
+    }
+    s.tool = tool;
+    s
+}
+
+/// Compensate one validated target.
+pub fn compensate_one(comp: &Compensator, dof: usize, i: usize, t: &TargetSpec) -> CompensationResult {
+    let id = t.id.clone();
+    let target = match t.to_target(dof) {
+        Ok(t) => t,
+        Err(e) => return CompensationResult::failed(id, e.within(&format!("targets[{i}]")).to_string()),
+    };
+    let res = match &target {
+        Target::NominalJoints(q) => comp.joints(q),
+        Target::Pose { pose, choice } => match choice {
+            Choice::Branch(b) => comp.pose(pose, Seed::Branch(*b)),
+            Choice::Confdata(c) => comp.pose(pose, Seed::Confdata(*c)),
+            Choice::Seed(q) => comp.pose(pose, Seed::Joints(q)),
+        },
+    };
+    match res {
+        Ok(c) => CompensationResult::ok(id, &c),
+        Err(e) => CompensationResult::from_ik_error(id, &e),
+    }
+}
+
+/// Compensate a batch of targets.
+#[utoipa::path(post, path = "/v1/robots/{robot_id}/compensate", tag = "compensation",
+    params(("robot_id" = String, Path, description = "Robot id")),
+    request_body(content = CompensationRequest, content_type = "application/json"),
+    responses(
+        (status = 200, description = "One result per target; a target that cannot be reached carries its own error", body = CompensationOut),
+        (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
+        (status = 409, description = "No parameter set named and none active", body = super::Problem, content_type = "application/problem+json"),
+        (status = 413, description = "More targets than the batch limit", body = super::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Unknown set, a set of another robot, invalid tool", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn compensate(
+    State(state): State<AppState>,
+    _auth: Authorized<COMPENSATE>,
+    Path(robot_id): Path<String>,
+    JsonBody(body): JsonBody<CompensationRequest>,
+) -> Result<Json<CompensationOut>, ApiError> {
+    let robot = find_robot(&state, &robot_id).await?;
+    if body.targets.len() > state.config.max_batch {
+        return Err(ApiError::TooLarge {
+            detail: format!("{} targets in one batch; the limit is {}", body.targets.len(), state.config.max_batch),
+            field: Some("targets".into()),
+        });
+    }
+    let set_id = match (&body.parameter_set_id, &robot.active_parameter_set_id) {
+        (Some(id), _) => id.clone(),
+        (None, Some(id)) => id.clone(),
+        (None, None) => {
+            return Err(ApiError::conflict(format!(
+                "robot '{}' has no active parameter set: activate one or name parameter_set_id",
+                robot.name
+            )));
+        }
+    };
+    let row = records::parameter_set(&state.pool, &set_id)
+        .await?
+        .ok_or_else(|| ApiError::invalid("parameter_set_id", format!("no parameter set '{set_id}'")))?;
+    if row.robot_id != robot.id {
+        return Err(ApiError::invalid("parameter_set_id", "the set belongs to another robot"));
+    }
+    let doc = ParameterSetDoc::from_json(&row.doc_json)
+        .map_err(|e| ApiError::Internal(format!("stored set {}: {e}", row.id)))?;
+    let set = match &body.tool {
+        None => doc.set,
+        Some(t) => with_tool(&doc.set, t.to_tool().map_err(|e| ApiError::domain(e, "tool"))?),
+    };
+    let targets = body.targets;
+    let results = tokio::task::spawn_blocking(move || {
+        let comp = Compensator::new(&set);
+        let dof = set.dof();
+        targets.iter().enumerate().map(|(i, t)| compensate_one(&comp, dof, i, t)).collect::<Vec<_>>()
+    })
+    .await?;
+    let failed = results.iter().filter(|r| r.error.is_some()).count();
+    Ok(Json(CompensationOut { parameter_set_id: row.id, version: row.version, results, failed }))
+}

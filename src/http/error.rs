@@ -1,0 +1,171 @@
+//! Errors as `application/problem+json` (RFC 9457): `type`, `title`, `status`, `detail` and the
+//! offending `field`. Bad input is 400 (malformed), 413 (too large), 415 (not JSON/CSV) or 422
+//! (well-formed but invalid: NaN, wrong lengths, joints outside limits, a degenerate artefact, a
+//! session of the wrong purpose); unknown ids 404; conflicts 409. Internal errors are logged with
+//! their context and answered with a bare 500 that echoes nothing.
+
+use axum::http::{HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+use crate::domain::DomainError;
+
+/// A problem document (RFC 9457).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct Problem {
+    /// A URI naming the kind of problem, e.g. `urn:robocal:problem:invalid-value`.
+    #[serde(rename = "type")]
+    pub type_: String,
+    pub title: String,
+    pub status: u16,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub detail: Option<String>,
+    /// The request field at fault, as a path (`measurements[3].joints_deg[1]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub field: Option<String>,
+}
+
+/// What can go wrong answering a request (or running a job).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ApiError {
+    #[error("{detail}")]
+    Malformed { detail: String, field: Option<String> },
+    #[error("{0}")]
+    Unauthorized(String),
+    #[error("{0}")]
+    Forbidden(String),
+    #[error("{what} '{id}' does not exist")]
+    NotFound { what: &'static str, id: String },
+    #[error("{detail}")]
+    Conflict { detail: String, field: Option<String> },
+    #[error("{detail}")]
+    TooLarge { detail: String, field: Option<String> },
+    #[error("{0}")]
+    UnsupportedMediaType(String),
+    #[error("{detail}")]
+    Invalid { detail: String, field: Option<String> },
+    /// Numerical trouble in a job: rank deficiency, κ above the limit, divergence, an
+    /// unreachable pose plan. `kind` is the problem slug.
+    #[error("{detail}")]
+    Numerical { kind: &'static str, title: &'static str, detail: String },
+    #[error("{0}")]
+    Unavailable(String),
+    /// Logged, never echoed.
+    #[error("internal error: {0}")]
+    Internal(String),
+}
+
+impl ApiError {
+    pub fn invalid(field: impl Into<String>, detail: impl Into<String>) -> Self {
+        ApiError::Invalid { detail: detail.into(), field: Some(field.into()) }
+    }
+
+    pub fn malformed(field: Option<String>, detail: impl Into<String>) -> Self {
+        ApiError::Malformed { detail: detail.into(), field }
+    }
+
+    pub fn conflict(detail: impl Into<String>) -> Self {
+        ApiError::Conflict { detail: detail.into(), field: None }
+    }
+
+    pub fn not_found(what: &'static str, id: &str) -> Self {
+        ApiError::NotFound { what, id: id.to_string() }
+    }
+
+    /// A domain validation error under a request-body prefix (`measurements[3]`).
+    pub fn domain(e: DomainError, prefix: &str) -> Self {
+        let e = if prefix.is_empty() { e } else { e.within(prefix) };
+        let field = (!e.path.is_empty()).then(|| e.path.clone());
+        ApiError::Invalid { detail: e.to_string(), field }
+    }
+
+    pub fn status(&self) -> StatusCode {
+        match self {
+            ApiError::Malformed { .. } => StatusCode::BAD_REQUEST,
+            ApiError::Unauthorized(_) => StatusCode::UNAUTHORIZED,
+            ApiError::Forbidden(_) => StatusCode::FORBIDDEN,
+            ApiError::NotFound { .. } => StatusCode::NOT_FOUND,
+            ApiError::Conflict { .. } => StatusCode::CONFLICT,
+            ApiError::TooLarge { .. } => StatusCode::PAYLOAD_TOO_LARGE,
+            ApiError::UnsupportedMediaType(_) => StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            ApiError::Invalid { .. } | ApiError::Numerical { .. } => StatusCode::UNPROCESSABLE_ENTITY,
+            ApiError::Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
+            ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
+        }
+    }
+
+    /// The problem document (an internal error says nothing about itself).
+    pub fn problem(&self) -> Problem {
+        let (slug, title, field) = match self {
+            ApiError::Malformed { field, .. } => ("malformed", "Malformed request", field.clone()),
+            ApiError::Unauthorized(_) => ("unauthorized", "Missing or unknown bearer token", None),
+            ApiError::Forbidden(_) => ("forbidden", "The token lacks the scope", None),
+            ApiError::NotFound { .. } => ("not-found", "Not found", None),
+            ApiError::Conflict { field, .. } => ("conflict", "Conflict", field.clone()),
+            ApiError::TooLarge { field, .. } => ("too-large", "Request too large", field.clone()),
+            ApiError::UnsupportedMediaType(_) => ("unsupported-media-type", "Unsupported media type", None),
+            ApiError::Invalid { field, .. } => ("invalid-value", "Invalid value", field.clone()),
+            ApiError::Numerical { kind, title, .. } => (*kind, *title, None),
+            ApiError::Unavailable(_) => ("unavailable", "Service unavailable", None),
+            ApiError::Internal(_) => ("internal", "Internal error", None),
+        };
+        let detail = match self {
+            ApiError::Internal(_) => None,
+            other => Some(other.to_string()),
+        };
+        Problem {
+            type_: format!("urn:robocal:problem:{slug}"),
+            title: title.to_string(),
+            status: self.status().as_u16(),
+            detail,
+            field,
+        }
+    }
+}
+
+impl From<sqlx::Error> for ApiError {
+    fn from(e: sqlx::Error) -> Self {
+        ApiError::Internal(format!("database: {e}"))
+    }
+}
+
+impl From<tokio::task::JoinError> for ApiError {
+    fn from(e: tokio::task::JoinError) -> Self {
+        ApiError::Internal(format!("worker task: {e}"))
+    }
+}
+
+/// The content type of problem documents.
+pub const PROBLEM_JSON: &str = "application/problem+json";
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        if let ApiError::Internal(msg) = &self {
+            tracing::error!(error = %msg, "internal error");
+        }
+        let status = self.status();
+        let body = serde_json::to_vec(&self.problem()).expect("problem serialises");
+        let mut res = (status, [(header::CONTENT_TYPE, HeaderValue::from_static(PROBLEM_JSON))], body).into_response();
+        if status == StatusCode::UNAUTHORIZED {
+            res.headers_mut().insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
+        }
+        res
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn internal_errors_echo_nothing() {
+        let p = ApiError::Internal("disk full at /secret/path".into()).problem();
+        assert_eq!(p.status, 500);
+        assert!(p.detail.is_none());
+        let p = ApiError::invalid("measurements[2].ball", "ball 4 is not on the artefact").problem();
+        assert_eq!(p.status, 422);
+        assert_eq!(p.field.as_deref(), Some("measurements[2].ball"));
+        assert_eq!(p.type_, "urn:robocal:problem:invalid-value");
+    }
+}

@@ -1,0 +1,62 @@
+//! Identifications (job): identification sessions + model options (+ an optional DETMAX subset)
+//! → a new, immutable parameter set with its quality report, or a failed job whose problem says
+//! why (rank deficiency, κ above the limit, divergence).
+
+use axum::extract::{Path, State};
+use axum::response::Response;
+
+use super::extract::{Authorized, CALIBRATE, JsonBody};
+use super::robots::{find as find_robot, model_of};
+use super::{ApiError, AppState, cells};
+use crate::jobs::requests::IdentificationRequest;
+use crate::jobs::run::{self, IDENTIFICATION};
+
+/// Check that the named sessions exist, have `purpose` and hold measurements; their ids.
+pub async fn checked_sessions(
+    state: &AppState,
+    robot_id: &str,
+    names: &[String],
+    purpose: &str,
+) -> Result<Vec<String>, ApiError> {
+    let sessions = cells::resolve_sessions(&state.pool, robot_id, names, "sessions").await?;
+    for (i, s) in sessions.iter().enumerate() {
+        if s.purpose != purpose {
+            return Err(ApiError::invalid(
+                format!("sessions[{i}]"),
+                format!("session '{}' is a {} session; this needs {purpose} sessions", s.name, s.purpose),
+            ));
+        }
+        if s.measurements == 0 {
+            return Err(ApiError::invalid(
+                format!("sessions[{i}]"),
+                format!("session '{}' has no measurements", s.name),
+            ));
+        }
+    }
+    Ok(sessions.into_iter().map(|s| s.id).collect())
+}
+
+/// Start an identification (a job; its result is a parameter set, activated if asked).
+#[utoipa::path(post, path = "/v1/robots/{robot_id}/identifications", tag = "identifications",
+    params(("robot_id" = String, Path, description = "Robot id")),
+    request_body(content = IdentificationRequest, content_type = "application/json"),
+    responses(
+        (status = 202, description = "Queued; follow the job. A refused fit ends as a failed job whose error names the reason.", body = super::jobs::JobOut),
+        (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Unknown session, a session of the wrong purpose or empty, bad options", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn create(
+    State(state): State<AppState>,
+    _auth: Authorized<CALIBRATE>,
+    Path(robot_id): Path<String>,
+    JsonBody(mut body): JsonBody<IdentificationRequest>,
+) -> Result<Response, ApiError> {
+    let robot = find_robot(&state, &robot_id).await?;
+    let model = model_of(&robot)?;
+    body.sessions = checked_sessions(&state, &robot.id, &body.sessions, "identification").await?;
+    run::identify_options(&body, model.dof(), Vec::new())?;
+    if let Some(s) = &body.select {
+        run::index_of(s, "select")?;
+    }
+    super::jobs::submit(&state, IDENTIFICATION, &robot.id, &body).await
+}

@@ -1,0 +1,161 @@
+//! Jobs: state (queued, running, succeeded, failed, cancelled), progress, timestamps, result or
+//! error; cancel.
+
+use axum::Json;
+use axum::extract::{Path, Query, State};
+use axum::http::{HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+use utoipa::{IntoParams, ToSchema};
+
+use super::extract::{Authorized, CALIBRATE, READ};
+use super::{ApiError, AppState, Problem};
+use crate::db::{self, jobs::JobRow};
+
+/// A background job.
+#[derive(Debug, Serialize, Deserialize, ToSchema)]
+pub struct JobOut {
+    pub id: String,
+    /// `pose_plan`, `identification` or `validation`.
+    pub kind: String,
+    pub robot_id: String,
+    /// `queued`, `running`, `succeeded`, `failed` or `cancelled`.
+    pub state: String,
+    /// 0–1.
+    pub progress: f64,
+    /// The request as stored (sessions resolved to ids).
+    #[schema(value_type = Object)]
+    pub request: Value,
+    /// Where the result lives (`parameter_set_id`, `validation_id`, `pose_plan_id`) and a summary.
+    #[schema(value_type = Option<Object>)]
+    pub result: Option<Value>,
+    /// Why it failed (rank deficiency, κ above the limit, divergence, …).
+    pub error: Option<Problem>,
+    /// Times the job was started (more than 1 after a restart).
+    pub attempts: i64,
+    /// Cancellation was asked for while it ran; it ends as `cancelled` when the solver returns.
+    pub cancel_requested: bool,
+    pub created_at: String,
+    pub started_at: Option<String>,
+    pub finished_at: Option<String>,
+    pub updated_at: String,
+}
+
+pub fn job_out(j: &JobRow) -> Result<JobOut, ApiError> {
+    let parse =
+        |s: &str| serde_json::from_str::<Value>(s).map_err(|e| ApiError::Internal(format!("job {}: {e}", j.id)));
+    Ok(JobOut {
+        id: j.id.clone(),
+        kind: j.kind.clone(),
+        robot_id: j.robot_id.clone(),
+        state: j.state.clone(),
+        progress: j.progress,
+        request: parse(&j.request_json)?,
+        result: j.result_json.as_deref().map(parse).transpose()?,
+        error: j
+            .error_json
+            .as_deref()
+            .map(serde_json::from_str::<Problem>)
+            .transpose()
+            .map_err(|e| ApiError::Internal(format!("job {}: {e}", j.id)))?,
+        attempts: j.attempts,
+        cancel_requested: j.cancel_requested,
+        created_at: j.created_at.clone(),
+        started_at: j.started_at.clone(),
+        finished_at: j.finished_at.clone(),
+        updated_at: j.updated_at.clone(),
+    })
+}
+
+/// Queue a job and answer 202 with it and its `Location`.
+pub async fn submit(
+    state: &AppState,
+    kind: &str,
+    robot_id: &str,
+    request: &impl Serialize,
+) -> Result<Response, ApiError> {
+    let id = db::new_id();
+    let json = serde_json::to_string(request).expect("requests serialise");
+    db::jobs::insert(&state.pool, &id, kind, robot_id, &json).await?;
+    state.wake.notify_one();
+    let row = db::jobs::get(&state.pool, &id).await?.ok_or_else(|| ApiError::Internal("job vanished".into()))?;
+    let mut res = (StatusCode::ACCEPTED, Json(job_out(&row)?)).into_response();
+    res.headers_mut().insert(header::LOCATION, HeaderValue::from_str(&format!("/v1/jobs/{id}")).expect("ascii"));
+    Ok(res)
+}
+
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct JobQuery {
+    pub robot_id: Option<String>,
+    /// `queued`, `running`, `succeeded`, `failed` or `cancelled`.
+    pub state: Option<String>,
+    /// At most this many, newest first (default 100, at most 1000).
+    pub limit: Option<i64>,
+}
+
+/// List jobs, newest first.
+#[utoipa::path(get, path = "/v1/jobs", tag = "jobs", params(JobQuery),
+    responses(
+        (status = 200, description = "Jobs, newest first", body = Vec<JobOut>),
+        (status = 422, description = "Unknown state or bad limit", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn list(
+    State(state): State<AppState>,
+    _auth: Authorized<READ>,
+    Query(q): Query<JobQuery>,
+) -> Result<Json<Vec<JobOut>>, ApiError> {
+    if let Some(s) = &q.state
+        && !db::jobs::STATES.contains(&s.as_str())
+    {
+        return Err(ApiError::invalid("state", format!("'{s}' is not one of {}", db::jobs::STATES.join(", "))));
+    }
+    let limit = q.limit.unwrap_or(100);
+    if !(1..=1000).contains(&limit) {
+        return Err(ApiError::invalid("limit", "must be 1–1000"));
+    }
+    let rows = db::jobs::list(&state.pool, q.robot_id.as_deref(), q.state.as_deref(), limit).await?;
+    Ok(Json(rows.iter().map(job_out).collect::<Result<_, _>>()?))
+}
+
+/// Get a job.
+#[utoipa::path(get, path = "/v1/jobs/{job_id}", tag = "jobs",
+    params(("job_id" = String, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "The job", body = JobOut),
+        (status = 404, description = "Unknown job", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn get(
+    State(state): State<AppState>,
+    _auth: Authorized<READ>,
+    Path(job_id): Path<String>,
+) -> Result<Json<JobOut>, ApiError> {
+    let row = db::jobs::get(&state.pool, &job_id).await?.ok_or_else(|| ApiError::not_found("job", &job_id))?;
+    Ok(Json(job_out(&row)?))
+}
+
+/// Cancel a job: a queued job ends at once; a running one ends as `cancelled` when its solver
+/// returns, its result discarded. A finished job cannot be cancelled (409).
+#[utoipa::path(post, path = "/v1/jobs/{job_id}/cancel", tag = "jobs",
+    params(("job_id" = String, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "Cancelled, or flagged for cancellation", body = JobOut),
+        (status = 404, description = "Unknown job", body = super::Problem, content_type = "application/problem+json"),
+        (status = 409, description = "The job has already finished", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn cancel(
+    State(state): State<AppState>,
+    _auth: Authorized<CALIBRATE>,
+    Path(job_id): Path<String>,
+) -> Result<Json<JobOut>, ApiError> {
+    let before = db::jobs::get(&state.pool, &job_id).await?.ok_or_else(|| ApiError::not_found("job", &job_id))?;
+    if matches!(before.state.as_str(), "succeeded" | "failed" | "cancelled") {
+        return Err(ApiError::conflict(format!("job {job_id} has already ended ({})", before.state)));
+    }
+    let row = db::jobs::cancel(&state.pool, &job_id).await?.ok_or_else(|| ApiError::not_found("job", &job_id))?;
+    if matches!(row.state.as_str(), "succeeded" | "failed") {
+        return Err(ApiError::conflict(format!("job {job_id} ended ({}) before it could be cancelled", row.state)));
+    }
+    Ok(Json(job_out(&row)?))
+}

@@ -1,0 +1,193 @@
+//! The HTTP service: axum routers, one module per resource, errors as problem+json, OpenAPI 3.1
+//! generated from the handlers (utoipa), Prometheus metrics.
+
+pub mod artefacts;
+pub mod cells;
+pub mod client;
+pub mod compensation;
+pub mod error;
+pub mod extract;
+pub mod identifications;
+pub mod jobs;
+pub mod metrics;
+pub mod ops;
+pub mod parameter_sets;
+pub mod plans;
+pub mod robots;
+pub mod sessions;
+pub mod tokens;
+pub mod validations;
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use axum::Router;
+use axum::extract::DefaultBodyLimit;
+use axum::http::StatusCode;
+use sqlx::SqlitePool;
+use tokio::sync::Notify;
+use tower_http::compression::CompressionLayer;
+use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
+use tower_http::timeout::TimeoutLayer;
+use tower_http::trace::TraceLayer;
+use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
+use utoipa::{Modify, OpenApi};
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
+
+pub use error::{ApiError, Problem};
+pub use metrics::Metrics;
+
+/// Service settings.
+#[derive(Clone, Debug)]
+pub struct ServiceConfig {
+    /// Every `/v1` request needs a bearer token with the right scope (always when the server is
+    /// bound to a non-loopback address).
+    pub require_auth: bool,
+    /// Most measurements (or compensation targets) in one request: 413 beyond.
+    pub max_batch: usize,
+    /// Largest request body, bytes: 413 beyond.
+    pub max_body_bytes: usize,
+    /// Requests taking longer are answered 503 (jobs run in the background and are not affected).
+    pub request_timeout: Duration,
+}
+
+impl Default for ServiceConfig {
+    fn default() -> Self {
+        Self {
+            require_auth: false,
+            max_batch: 10_000,
+            max_body_bytes: 32 * 1024 * 1024,
+            request_timeout: Duration::from_secs(60),
+        }
+    }
+}
+
+/// What every handler shares.
+#[derive(Clone)]
+pub struct AppState {
+    pub pool: SqlitePool,
+    pub config: Arc<ServiceConfig>,
+    pub metrics: Arc<Metrics>,
+    /// Wakes the job workers when a job is queued.
+    pub wake: Arc<Notify>,
+    /// The OpenAPI document, served at `/openapi.json`.
+    pub openapi_json: Arc<String>,
+}
+
+impl AppState {
+    pub fn new(pool: SqlitePool, config: ServiceConfig) -> Self {
+        AppState {
+            pool,
+            config: Arc::new(config),
+            metrics: Arc::new(Metrics::new()),
+            wake: Arc::new(Notify::new()),
+            openapi_json: Arc::new(openapi_json()),
+        }
+    }
+}
+
+struct BearerAuth;
+
+impl Modify for BearerAuth {
+    fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
+        let components = openapi.components.get_or_insert_with(Default::default);
+        components.add_security_scheme(
+            "bearer",
+            SecurityScheme::Http(HttpBuilder::new().scheme(HttpAuthScheme::Bearer).bearer_format("opaque").build()),
+        );
+    }
+}
+
+#[derive(OpenApi)]
+#[openapi(
+    info(
+        title = "robocal",
+        description = "Robot calibration service: stores each robot's measurements, identifies a better kinematic \
+model (MDH geometry, Hayati β, gear compliance under gravity), validates it on held-out poses and serves \
+compensated (fake-target) joint targets. Units: millimetres and degrees on the wire, with the unit in the field \
+name. Errors are application/problem+json naming the field. Bearer tokens carry scopes: measure, calibrate, \
+compensate, read, admin (admin implies all); a server bound to loopback accepts requests without a token.",
+        license(name = "MIT")
+    ),
+    modifiers(&BearerAuth),
+    tags(
+        (name = "robots", description = "Robots, their calibration history and active parameter set"),
+        (name = "artefacts", description = "Ball-triangle artefacts"),
+        (name = "sessions", description = "Measuring sessions and their measurements"),
+        (name = "pose-plans", description = "Collision-checked measurement poses (job)"),
+        (name = "identifications", description = "Parameter identification (job)"),
+        (name = "parameter-sets", description = "Immutable, versioned parameter sets"),
+        (name = "validations", description = "Validation statistics (job)"),
+        (name = "compensation", description = "Compensated (fake-target) joint targets"),
+        (name = "jobs", description = "Background jobs"),
+        (name = "tokens", description = "Bearer tokens (admin)"),
+        (name = "ops", description = "Health, readiness, metrics, this document")
+    )
+)]
+struct ApiDoc;
+
+/// Every documented route, without state.
+fn api_router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::with_openapi(ApiDoc::openapi())
+        .routes(routes!(ops::healthz))
+        .routes(routes!(ops::readyz))
+        .routes(routes!(ops::metrics))
+        .routes(routes!(ops::openapi))
+        .routes(routes!(robots::create, robots::list))
+        .routes(routes!(robots::get))
+        .routes(routes!(robots::cell))
+        .routes(routes!(parameter_sets::history, parameter_sets::import))
+        .routes(routes!(parameter_sets::active, parameter_sets::activate))
+        .routes(routes!(parameter_sets::get))
+        .routes(routes!(parameter_sets::export))
+        .routes(routes!(artefacts::create, artefacts::list))
+        .routes(routes!(artefacts::get))
+        .routes(routes!(sessions::create, sessions::list))
+        .routes(routes!(sessions::get))
+        .routes(routes!(sessions::append, sessions::measurements))
+        .routes(routes!(plans::create))
+        .routes(routes!(plans::get))
+        .routes(routes!(identifications::create))
+        .routes(routes!(validations::create))
+        .routes(routes!(validations::get))
+        .routes(routes!(compensation::compensate))
+        .routes(routes!(jobs::list))
+        .routes(routes!(jobs::get))
+        .routes(routes!(jobs::cancel))
+        .routes(routes!(tokens::create, tokens::list))
+        .routes(routes!(tokens::revoke))
+}
+
+/// The OpenAPI document (3.1).
+pub fn openapi() -> utoipa::openapi::OpenApi {
+    api_router().split_for_parts().1
+}
+
+/// The OpenAPI document as committed in `openapi/openapi.json`.
+pub fn openapi_json() -> String {
+    let mut s = openapi().to_pretty_json().expect("the OpenAPI document serialises");
+    s.push('\n');
+    s
+}
+
+/// The application: routes, state and middleware (request ids, tracing, metrics, timeouts, body
+/// limits, compression).
+pub fn app(state: AppState) -> Router {
+    let (router, _) = api_router().split_for_parts();
+    let limit = state.config.max_body_bytes;
+    let timeout = state.config.request_timeout;
+    router
+        .with_state(state.clone())
+        .fallback(ops::not_found)
+        .layer(axum::middleware::from_fn_with_state(state, metrics::track))
+        .layer(DefaultBodyLimit::max(limit))
+        .layer(CompressionLayer::new())
+        .layer(TimeoutLayer::with_status_code(StatusCode::SERVICE_UNAVAILABLE, timeout))
+        .layer(PropagateRequestIdLayer::x_request_id())
+        .layer(TraceLayer::new_for_http().make_span_with(|req: &axum::http::Request<axum::body::Body>| {
+            let rid = req.headers().get("x-request-id").and_then(|v| v.to_str().ok()).unwrap_or("-");
+            tracing::info_span!("http", method = %req.method(), uri = %req.uri(), request_id = %rid)
+        }))
+        .layer(SetRequestIdLayer::x_request_id(MakeRequestUuid))
+}

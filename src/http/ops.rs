@@ -1,0 +1,79 @@
+//! Operations: liveness, readiness, Prometheus metrics, the OpenAPI document.
+
+use axum::Json;
+use axum::extract::State;
+use axum::http::{StatusCode, Uri, header};
+use axum::response::IntoResponse;
+use serde::Serialize;
+use utoipa::ToSchema;
+
+use super::{ApiError, AppState};
+use crate::db;
+
+#[derive(Serialize, ToSchema)]
+pub struct Health {
+    /// `ok`.
+    pub status: String,
+    pub version: String,
+}
+
+/// Liveness: the process answers.
+#[utoipa::path(get, path = "/healthz", tag = "ops",
+    responses((status = 200, description = "The process is alive", body = Health)))]
+pub async fn healthz() -> Json<Health> {
+    Json(Health { status: "ok".into(), version: env!("CARGO_PKG_VERSION").into() })
+}
+
+#[derive(Serialize, ToSchema)]
+pub struct Readiness {
+    /// `ready`.
+    pub status: String,
+    /// Migrations applied to the database.
+    pub migrations: i64,
+}
+
+/// Readiness: the database answers and is migrated.
+#[utoipa::path(get, path = "/readyz", tag = "ops",
+    responses(
+        (status = 200, description = "Ready to serve", body = Readiness),
+        (status = 503, description = "The database is not usable", body = super::Problem, content_type = "application/problem+json")))]
+pub async fn readyz(State(state): State<AppState>) -> Result<Json<Readiness>, ApiError> {
+    let applied: Result<i64, sqlx::Error> =
+        sqlx::query_scalar("SELECT COUNT(*) FROM _sqlx_migrations WHERE success = 1").fetch_one(&state.pool).await;
+    match applied {
+        Ok(n) if n as usize == db::MIGRATOR.iter().count() => {
+            Ok(Json(Readiness { status: "ready".into(), migrations: n }))
+        }
+        Ok(n) => Err(ApiError::Unavailable(format!("{n} of {} migrations applied", db::MIGRATOR.iter().count()))),
+        Err(e) => {
+            tracing::warn!(error = %e, "readiness: database check failed");
+            Err(ApiError::Unavailable("the database does not answer".into()))
+        }
+    }
+}
+
+/// Prometheus metrics (text format): requests by route and status, latency histograms, jobs by
+/// state, solver durations.
+#[utoipa::path(get, path = "/metrics", tag = "ops",
+    responses((status = 200, description = "Prometheus text exposition format", body = String, content_type = "text/plain; version=0.0.4")))]
+pub async fn metrics(State(state): State<AppState>) -> Result<impl IntoResponse, ApiError> {
+    let counts = db::jobs::counts(&state.pool).await?;
+    for s in db::jobs::STATES {
+        let n = counts.iter().find(|(k, _)| k == s).map_or(0, |(_, n)| *n);
+        state.metrics.jobs.with_label_values(&[s]).set(n);
+    }
+    Ok(([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], state.metrics.render()))
+}
+
+/// This OpenAPI 3.1 document.
+#[utoipa::path(get, path = "/openapi.json", tag = "ops",
+    responses((status = 200, description = "The OpenAPI 3.1 document", body = Object)))]
+pub async fn openapi(State(state): State<AppState>) -> impl IntoResponse {
+    ([(header::CONTENT_TYPE, "application/json")], state.openapi_json.as_str().to_string())
+}
+
+/// Unknown paths: a problem document, not an empty 404.
+pub async fn not_found(uri: Uri) -> impl IntoResponse {
+    let e = ApiError::NotFound { what: "route", id: uri.path().to_string() };
+    (StatusCode::NOT_FOUND, e).into_response()
+}

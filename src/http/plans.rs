@@ -1,0 +1,104 @@
+//! Pose plans (job): artefact + tool + counts → a candidate pool of collision-checked TriCal
+//! configurations, an optional DETMAX selection re-sequenced into a collision-free measuring
+//! order, and laser-tracker validation configurations — the joints to measure, in order.
+
+use axum::Json;
+use axum::extract::{Path, State};
+use axum::response::Response;
+use serde::Serialize;
+use serde_json::Value;
+use utoipa::ToSchema;
+
+use super::extract::{Authorized, CALIBRATE, JsonBody, READ};
+use super::robots::{find as find_robot, model_of};
+use super::{ApiError, AppState};
+use crate::db::records;
+use crate::domain::cell::ArtefactSpec;
+use crate::jobs::requests::PosePlanRequest;
+use crate::jobs::run::{self, POSE_PLAN};
+
+/// Largest candidate count per ball and validation count a plan may ask for.
+pub const MAX_PER_BALL: usize = 2000;
+pub const MAX_VALIDATION: usize = 10_000;
+
+/// Start a pose plan (a job; its result is a pose plan).
+#[utoipa::path(post, path = "/v1/robots/{robot_id}/pose-plans", tag = "pose-plans",
+    params(("robot_id" = String, Path, description = "Robot id")),
+    request_body(content = PosePlanRequest, content_type = "application/json"),
+    responses(
+        (status = 202, description = "Queued; follow the job", body = super::jobs::JobOut),
+        (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Unknown artefact, bad counts, a robot without closed-form IK or base guess", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn create(
+    State(state): State<AppState>,
+    _auth: Authorized<CALIBRATE>,
+    Path(robot_id): Path<String>,
+    JsonBody(body): JsonBody<PosePlanRequest>,
+) -> Result<Response, ApiError> {
+    let robot = find_robot(&state, &robot_id).await?;
+    let model = model_of(&robot)?;
+    let row = records::artefact(&state.pool, &body.artefact_id)
+        .await?
+        .ok_or_else(|| ApiError::invalid("artefact_id", format!("no artefact '{}'", body.artefact_id)))?;
+    let artefact: ArtefactSpec = serde_json::from_str(&row.spec_json).map_err(|e| ApiError::Internal(e.to_string()))?;
+    if body.per_ball == 0 || body.per_ball > MAX_PER_BALL {
+        return Err(ApiError::invalid("per_ball", format!("must be 1–{MAX_PER_BALL}")));
+    }
+    if body.validation > MAX_VALIDATION {
+        return Err(ApiError::invalid("validation", format!("must be 0–{MAX_VALIDATION}")));
+    }
+    if let Some(s) = &body.select {
+        run::index_of(s, "select")?;
+        if s.n >= 3 * body.per_ball {
+            return Err(ApiError::invalid(
+                "select.n",
+                format!("must be smaller than the {} candidates", 3 * body.per_ball),
+            ));
+        }
+    }
+    let base = run::robot_base(&robot)?;
+    run::planning_cell(&model, base, &body, &artefact)?;
+    super::jobs::submit(&state, POSE_PLAN, &robot.id, &body).await
+}
+
+/// A pose plan.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct PosePlanOut {
+    pub id: String,
+    pub robot_id: String,
+    pub job_id: Option<String>,
+    pub created_at: String,
+    #[schema(value_type = Object)]
+    pub request: Value,
+    /// `identification`: [{joints_deg, ball, nu_deg}] in measuring order; `validation`:
+    /// [{joints_deg, nest}]; `candidates`; `selection` (DETMAX settings and indices); `nests`
+    /// (the reflector tools, in the flange frame); `home_deg`.
+    #[schema(value_type = Object)]
+    pub plan: Value,
+}
+
+/// Get a pose plan.
+#[utoipa::path(get, path = "/v1/pose-plans/{plan_id}", tag = "pose-plans",
+    params(("plan_id" = String, Path, description = "Pose plan id")),
+    responses(
+        (status = 200, description = "The plan", body = PosePlanOut),
+        (status = 404, description = "Unknown plan", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn get(
+    State(state): State<AppState>,
+    _auth: Authorized<READ>,
+    Path(plan_id): Path<String>,
+) -> Result<Json<PosePlanOut>, ApiError> {
+    let row =
+        records::pose_plan(&state.pool, &plan_id).await?.ok_or_else(|| ApiError::not_found("pose plan", &plan_id))?;
+    let parse = |s: &str| serde_json::from_str::<Value>(s).map_err(|e| ApiError::Internal(e.to_string()));
+    Ok(Json(PosePlanOut {
+        id: row.id,
+        robot_id: row.robot_id,
+        job_id: row.job_id,
+        created_at: row.created_at,
+        request: parse(&row.request_json)?,
+        plan: parse(&row.result_json)?,
+    }))
+}

@@ -1,0 +1,183 @@
+//! Robots: created from a preset or a custom model, listed, read; a robot's measurements exported
+//! as a cell file (the same document `robocal identify` reads).
+
+use axum::Json;
+use axum::extract::{Path, Query, State};
+use axum::http::StatusCode;
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+use utoipa::{IntoParams, ToSchema};
+
+use super::extract::{Authorized, JsonBody, MEASURE, READ};
+use super::{ApiError, AppState, cells};
+use crate::db::{self, records};
+use crate::domain::RobotSpec;
+use crate::domain::cell::PoseXyzAbc;
+use crate::kinematics::{ParamLayout, RobotModel};
+
+/// A robot to create.
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct NewRobot {
+    /// Unique name, e.g. `cell-3-irb120`.
+    pub name: String,
+    /// `{"preset": "irb120"}`, `{"preset": "ur10"}` or a custom joint table (see the README's "Files").
+    #[schema(value_type = Object)]
+    pub robot: Value,
+    /// Guess of the robot base in the cell's world frame T_0^W (ZY'X''); without it identification
+    /// registers the base from the measurements.
+    #[serde(default)]
+    pub base_guess: Option<PoseXyzAbc>,
+}
+
+/// A robot.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct RobotOut {
+    pub id: String,
+    pub name: String,
+    #[schema(value_type = Object)]
+    pub robot: Value,
+    pub base_guess: Option<PoseXyzAbc>,
+    /// Joints.
+    pub dof: usize,
+    /// Parameters of the full model (43 for the IRB 120 with base and tool).
+    pub parameters: usize,
+    /// The parameter set compensation uses, once one is activated.
+    pub active_parameter_set_id: Option<String>,
+    pub created_at: String,
+}
+
+/// The robot's validated model.
+pub fn model_of(row: &records::RobotRow) -> Result<RobotModel, ApiError> {
+    let v: Value =
+        serde_json::from_str(&row.model_json).map_err(|e| ApiError::Internal(format!("robot {}: {e}", row.id)))?;
+    RobotSpec::from_json_value(&v)
+        .and_then(|s| s.to_model())
+        .map_err(|e| ApiError::Internal(format!("robot {}: stored model invalid: {e}", row.id)))
+}
+
+pub fn robot_out(row: &records::RobotRow) -> Result<RobotOut, ApiError> {
+    let model = model_of(row)?;
+    let base_guess = row
+        .base_guess_json
+        .as_deref()
+        .map(serde_json::from_str::<PoseXyzAbc>)
+        .transpose()
+        .map_err(|e| ApiError::Internal(format!("robot {}: base guess: {e}", row.id)))?;
+    Ok(RobotOut {
+        id: row.id.clone(),
+        name: row.name.clone(),
+        robot: serde_json::from_str(&row.model_json).map_err(|e| ApiError::Internal(e.to_string()))?,
+        base_guess,
+        dof: model.dof(),
+        parameters: ParamLayout::full(&model).len(),
+        active_parameter_set_id: row.active_parameter_set_id.clone(),
+        created_at: row.created_at.clone(),
+    })
+}
+
+/// A robot by id, or 404.
+pub async fn find(state: &AppState, id: &str) -> Result<records::RobotRow, ApiError> {
+    records::robot(&state.pool, id).await?.ok_or_else(|| ApiError::not_found("robot", id))
+}
+
+/// Create a robot.
+#[utoipa::path(post, path = "/v1/robots", tag = "robots",
+    request_body(content = NewRobot, content_type = "application/json"),
+    responses(
+        (status = 201, description = "Created", body = RobotOut),
+        (status = 409, description = "A robot with this name exists", body = super::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Invalid model or base guess", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn create(
+    State(state): State<AppState>,
+    _auth: Authorized<MEASURE>,
+    JsonBody(body): JsonBody<NewRobot>,
+) -> Result<(StatusCode, Json<RobotOut>), ApiError> {
+    let name = body.name.trim();
+    if name.is_empty() {
+        return Err(ApiError::invalid("name", "must not be empty"));
+    }
+    let spec = RobotSpec::from_json_value(&body.robot).map_err(|e| ApiError::domain(e, "robot"))?;
+    spec.to_model().map_err(|e| ApiError::domain(e, "robot"))?;
+    if let Some(b) = &body.base_guess {
+        b.to_si("base_guess").map_err(|e| ApiError::domain(e, ""))?;
+    }
+    let row = records::RobotRow {
+        id: db::new_id(),
+        name: name.to_string(),
+        model_json: spec.to_json_value().to_string(),
+        base_guess_json: body.base_guess.as_ref().map(|b| serde_json::to_string(b).expect("serialises")),
+        active_parameter_set_id: None,
+        created_at: db::now(),
+    };
+    records::insert_robot(&state.pool, &row).await.map_err(|e| {
+        if db::is_unique_violation(&e) {
+            ApiError::Conflict { detail: format!("a robot named '{name}' exists"), field: Some("name".into()) }
+        } else {
+            e.into()
+        }
+    })?;
+    Ok((StatusCode::CREATED, Json(robot_out(&row)?)))
+}
+
+/// List robots.
+#[utoipa::path(get, path = "/v1/robots", tag = "robots",
+    responses((status = 200, description = "Every robot, oldest first", body = Vec<RobotOut>)),
+    security(("bearer" = [])))]
+pub async fn list(State(state): State<AppState>, _auth: Authorized<READ>) -> Result<Json<Vec<RobotOut>>, ApiError> {
+    let rows = records::robots(&state.pool).await?;
+    Ok(Json(rows.iter().map(robot_out).collect::<Result<_, _>>()?))
+}
+
+/// Get a robot.
+#[utoipa::path(get, path = "/v1/robots/{robot_id}", tag = "robots",
+    params(("robot_id" = String, Path, description = "Robot id")),
+    responses(
+        (status = 200, description = "The robot", body = RobotOut),
+        (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn get(
+    State(state): State<AppState>,
+    _auth: Authorized<READ>,
+    Path(robot_id): Path<String>,
+) -> Result<Json<RobotOut>, ApiError> {
+    Ok(Json(robot_out(&find(&state, &robot_id).await?)?))
+}
+
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct CellQuery {
+    /// Sessions to include (comma-separated ids or names); default: all of the robot's sessions.
+    pub sessions: Option<String>,
+}
+
+/// Export a robot's measurements as a cell file — the document `robocal identify` reads, so a
+/// calibration can be reproduced offline bit for bit.
+#[utoipa::path(get, path = "/v1/robots/{robot_id}/cell", tag = "robots",
+    params(("robot_id" = String, Path, description = "Robot id"), CellQuery),
+    responses(
+        (status = 200, description = "A cell file (mm, deg)", body = Object),
+        (status = 404, description = "Unknown robot or session", body = super::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Sessions on different artefacts", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn cell(
+    State(state): State<AppState>,
+    _auth: Authorized<READ>,
+    Path(robot_id): Path<String>,
+    Query(q): Query<CellQuery>,
+) -> Result<Json<Value>, ApiError> {
+    let robot = find(&state, &robot_id).await?;
+    let names: Vec<String> = q
+        .sessions
+        .as_deref()
+        .map(|s| s.split(',').map(|x| x.trim().to_string()).filter(|x| !x.is_empty()).collect())
+        .unwrap_or_default();
+    let sessions = if names.is_empty() {
+        records::sessions_of_robot(&state.pool, &robot.id).await?
+    } else {
+        cells::resolve_sessions(&state.pool, &robot.id, &names, "sessions").await?
+    };
+    let file = cells::cell_file(&state.pool, &robot, &sessions).await?;
+    Ok(Json(serde_json::to_value(&file).expect("a cell file serialises")))
+}

@@ -1,0 +1,109 @@
+//! Bearer tokens (admin): create (the secret is shown once), list, revoke. `robocal token create`
+//! makes the first one, since creating tokens over HTTP needs an admin token.
+
+use axum::Json;
+use axum::extract::{Path, State};
+use axum::http::StatusCode;
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+use super::extract::{ADMIN, Authorized, JsonBody};
+use super::{ApiError, AppState};
+use crate::db::tokens::{self, Scope, TokenRow};
+
+/// A token to create.
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct NewToken {
+    /// Who uses it, e.g. `cell-3-pc`.
+    pub name: String,
+    /// Any of `measure`, `calibrate`, `compensate`, `read`, `admin`.
+    pub scopes: Vec<String>,
+}
+
+/// A token (never its secret, except once at creation).
+#[derive(Debug, Serialize, Deserialize, ToSchema)]
+pub struct TokenOut {
+    pub id: String,
+    pub name: String,
+    pub scopes: Vec<String>,
+    pub created_at: String,
+    pub revoked_at: Option<String>,
+    /// The secret: only in the answer to its creation. Send it as `Authorization: Bearer <token>`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub token: Option<String>,
+}
+
+pub fn token_out(t: &TokenRow, secret: Option<String>) -> TokenOut {
+    TokenOut {
+        id: t.id.clone(),
+        name: t.name.clone(),
+        scopes: t.scopes().iter().map(|s| s.as_str().to_string()).collect(),
+        created_at: t.created_at.clone(),
+        revoked_at: t.revoked_at.clone(),
+        token: secret,
+    }
+}
+
+/// Create a token.
+#[utoipa::path(post, path = "/v1/tokens", tag = "tokens",
+    request_body(content = NewToken, content_type = "application/json"),
+    responses(
+        (status = 201, description = "Created; the answer carries the secret, shown only here", body = TokenOut),
+        (status = 422, description = "Empty name or unknown scope", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn create(
+    State(state): State<AppState>,
+    _auth: Authorized<ADMIN>,
+    JsonBody(body): JsonBody<NewToken>,
+) -> Result<(StatusCode, Json<TokenOut>), ApiError> {
+    let name = body.name.trim();
+    if name.is_empty() {
+        return Err(ApiError::invalid("name", "must not be empty"));
+    }
+    let mut scopes: Vec<Scope> = Vec::new();
+    for (i, s) in body.scopes.iter().enumerate() {
+        let sc = Scope::parse(s).ok_or_else(|| {
+            ApiError::invalid(
+                format!("scopes[{i}]"),
+                format!("'{s}' is not a scope (measure, calibrate, compensate, read, admin)"),
+            )
+        })?;
+        if !scopes.contains(&sc) {
+            scopes.push(sc);
+        }
+    }
+    if scopes.is_empty() {
+        return Err(ApiError::invalid("scopes", "give at least one scope"));
+    }
+    scopes.sort();
+    let (row, secret) = tokens::create(&state.pool, name, &scopes).await?;
+    Ok((StatusCode::CREATED, Json(token_out(&row, Some(secret)))))
+}
+
+/// List tokens (without secrets).
+#[utoipa::path(get, path = "/v1/tokens", tag = "tokens",
+    responses((status = 200, description = "Every token, revoked ones included", body = Vec<TokenOut>)),
+    security(("bearer" = [])))]
+pub async fn list(State(state): State<AppState>, _auth: Authorized<ADMIN>) -> Result<Json<Vec<TokenOut>>, ApiError> {
+    Ok(Json(tokens::list(&state.pool).await?.iter().map(|t| token_out(t, None)).collect()))
+}
+
+/// Revoke a token.
+#[utoipa::path(delete, path = "/v1/tokens/{token_id}", tag = "tokens",
+    params(("token_id" = String, Path, description = "Token id")),
+    responses(
+        (status = 204, description = "Revoked"),
+        (status = 404, description = "Unknown or already revoked token", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn revoke(
+    State(state): State<AppState>,
+    _auth: Authorized<ADMIN>,
+    Path(token_id): Path<String>,
+) -> Result<StatusCode, ApiError> {
+    if tokens::revoke(&state.pool, &token_id).await? {
+        Ok(StatusCode::NO_CONTENT)
+    } else {
+        Err(ApiError::not_found("live token", &token_id))
+    }
+}

@@ -1,0 +1,206 @@
+//! Background jobs: rows in the `jobs` table run by a few workers. A worker claims the oldest
+//! queued job atomically, loads its inputs, runs the solver in `spawn_blocking` while renewing
+//! its lease, and writes the result and the final state in one transaction. At start-up every
+//! job left `running` by a previous process is requeued, so a job running when the server was
+//! killed completes after the restart. On graceful shutdown, workers stop claiming; a job still
+//! in the solver after the grace period is put back in the queue, not lost.
+
+pub mod requests;
+pub mod run;
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+use tokio::sync::watch;
+use tokio::task::JoinHandle;
+use tracing::Instrument;
+
+use crate::db;
+use crate::http::{ApiError, AppState};
+
+/// A claimed job's lease; renewed every [`HEARTBEAT`] while it runs.
+pub const LEASE: Duration = Duration::from_secs(60);
+pub const HEARTBEAT: Duration = Duration::from_secs(10);
+/// Idle workers look for work (and for expired leases) at least this often.
+const POLL: Duration = Duration::from_secs(2);
+
+/// The running workers.
+pub struct Workers {
+    handles: Vec<JoinHandle<()>>,
+    stop: watch::Sender<bool>,
+}
+
+impl Workers {
+    /// Requeue the jobs a previous process left running, then start `n` workers.
+    pub async fn start(state: AppState, n: usize, grace: Duration) -> Result<Workers, sqlx::Error> {
+        let requeued = db::jobs::requeue_stale(&state.pool, true).await?;
+        if requeued > 0 {
+            tracing::warn!(requeued, "requeued jobs left running by a previous process");
+        }
+        let (stop, rx) = watch::channel(false);
+        let instance = db::new_id();
+        let handles = (0..n.max(1))
+            .map(|i| {
+                let owner = format!("{instance}/{i}");
+                tokio::spawn(worker(state.clone(), owner, rx.clone(), grace))
+            })
+            .collect();
+        Ok(Workers { handles, stop })
+    }
+
+    /// Stop claiming; wait for the workers (each waits at most the grace period for its solver,
+    /// then requeues its job).
+    pub async fn shutdown(self) {
+        let _ = self.stop.send(true);
+        for h in self.handles {
+            let _ = h.await;
+        }
+    }
+}
+
+async fn worker(state: AppState, owner: String, mut stop: watch::Receiver<bool>, grace: Duration) {
+    let mut last_sweep = Instant::now();
+    loop {
+        if *stop.borrow() {
+            return;
+        }
+        if last_sweep.elapsed() > LEASE {
+            // Another process sharing the database may have died holding a lease.
+            if let Err(e) = db::jobs::requeue_stale(&state.pool, false).await {
+                tracing::warn!(error = %e, "requeueing expired leases");
+            }
+            last_sweep = Instant::now();
+        }
+        match db::jobs::claim(&state.pool, &owner, LEASE).await {
+            Ok(Some(job)) => {
+                let span = tracing::info_span!("job", id = %job.id, kind = %job.kind, attempt = job.attempts);
+                run_one(&state, &owner, job, &mut stop, grace).instrument(span).await
+            }
+            Ok(None) => {
+                tokio::select! {
+                    _ = state.wake.notified() => {}
+                    _ = tokio::time::sleep(POLL) => {}
+                    _ = stop.changed() => {}
+                }
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, "claiming a job");
+                tokio::time::sleep(POLL).await;
+            }
+        }
+    }
+}
+
+/// How a job ended, for the final write.
+enum End {
+    Done(run::Output),
+    Failed(ApiError),
+    /// Shutdown overtook the solver: requeue.
+    Released,
+}
+
+async fn run_one(
+    state: &AppState,
+    owner: &str,
+    job: db::jobs::JobRow,
+    stop: &mut watch::Receiver<bool>,
+    grace: Duration,
+) {
+    tracing::info!("job started");
+    let started = Instant::now();
+    // Progress in thousandths, shared with the blocking solver.
+    let progress = Arc::new(AtomicU64::new(0));
+    let end = match run::load(&state.pool, &job.kind, &job.robot_id, &job.request_json).await {
+        Err(e) => End::Failed(e),
+        Ok(inputs) => {
+            progress.store(50, Ordering::Relaxed);
+            let p = progress.clone();
+            let mut task = tokio::task::spawn_blocking(move || {
+                let report = move |f: f64| {
+                    p.fetch_max((f.clamp(0.0, 1.0) * 1000.0) as u64, Ordering::Relaxed);
+                };
+                run::compute(inputs, &report)
+            });
+            let mut beat = tokio::time::interval(HEARTBEAT);
+            beat.tick().await;
+            let mut stopping: Option<tokio::time::Instant> = None;
+            loop {
+                let deadline =
+                    stopping.map_or_else(|| tokio::time::Instant::now() + Duration::from_secs(3600), |t| t + grace);
+                tokio::select! {
+                    r = &mut task => {
+                        break match r {
+                            Ok(Ok(out)) => End::Done(out),
+                            Ok(Err(e)) => End::Failed(e),
+                            Err(e) => End::Failed(ApiError::Internal(format!("the solver task failed: {e}"))),
+                        };
+                    }
+                    _ = beat.tick() => {
+                        let f = progress.load(Ordering::Relaxed) as f64 / 1000.0;
+                        match db::jobs::heartbeat(&state.pool, &job.id, owner, LEASE, f).await {
+                            Ok(true) => {}
+                            Ok(false) => {
+                                tracing::warn!("lease lost (requeued elsewhere); abandoning the result");
+                                return;
+                            }
+                            Err(e) => tracing::warn!(error = %e, "heartbeat"),
+                        }
+                    }
+                    _ = stop.changed(), if stopping.is_none() => {
+                        stopping = Some(tokio::time::Instant::now());
+                    }
+                    _ = tokio::time::sleep_until(deadline), if stopping.is_some() => {
+                        break End::Released;
+                    }
+                }
+            }
+        }
+    };
+    let elapsed = started.elapsed().as_secs_f64();
+    let outcome = match &end {
+        End::Done(_) => "succeeded",
+        End::Failed(_) => "failed",
+        End::Released => "released",
+    };
+    state.metrics.solver.with_label_values(&[job.kind.as_str(), outcome]).observe(elapsed);
+    if let Err(e) = finish(state, owner, &job, end).await {
+        tracing::error!(error = %e, "writing the job's end; it stays leased and will be requeued");
+    }
+}
+
+async fn finish(state: &AppState, owner: &str, job: &db::jobs::JobRow, end: End) -> Result<(), ApiError> {
+    let cancelled = db::jobs::cancel_requested(&state.pool, &job.id).await?;
+    match end {
+        End::Released => {
+            db::jobs::release(&state.pool, &job.id, owner).await?;
+            tracing::info!("shutdown: job put back in the queue");
+        }
+        _ if cancelled => {
+            db::jobs::finish(&state.pool, &job.id, owner, "cancelled", None, None).await?;
+            tracing::info!("job cancelled; its result was discarded");
+        }
+        End::Failed(e) => {
+            if let ApiError::Internal(m) = &e {
+                tracing::error!(error = %m, "job failed with an internal error");
+            } else {
+                tracing::info!(error = %e, "job failed");
+            }
+            let problem = serde_json::to_string(&e.problem()).expect("problem serialises");
+            db::jobs::finish(&state.pool, &job.id, owner, "failed", None, Some(&problem)).await?;
+        }
+        End::Done(out) => {
+            let mut tx = db::begin_write(&state.pool).await?;
+            let result: Value = run::store(&mut tx, &job.id, &job.robot_id, &job.request_json, out).await?;
+            if db::jobs::finish(&mut *tx, &job.id, owner, "succeeded", Some(&result.to_string()), None).await? {
+                tx.commit().await?;
+                tracing::info!("job succeeded");
+            } else {
+                tx.rollback().await?;
+                tracing::warn!("job no longer held at the end; result discarded");
+            }
+        }
+    }
+    Ok(())
+}

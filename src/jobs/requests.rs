@@ -1,0 +1,114 @@
+//! What a job is asked to do, as posted and as stored in `jobs.request_json` (sessions resolved to
+//! ids at submission, so the stored request runs the same after a restart).
+
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+use crate::domain::ToolSpec;
+
+fn o1() -> String {
+    "O1".into()
+}
+fn one() -> u64 {
+    1
+}
+fn per_ball() -> usize {
+    120
+}
+fn validation_poses() -> usize {
+    506
+}
+fn kappa_limit() -> f64 {
+    1000.0
+}
+fn rotation_weight_mm() -> f64 {
+    100.0
+}
+fn yes() -> bool {
+    true
+}
+
+/// DETMAX selection of `n` measurements maximising an observability index (thesis §4.2.5).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SelectSpec {
+    pub n: usize,
+    /// `O1` (default, the thesis's) … `O5`.
+    #[serde(default = "o1")]
+    pub index: String,
+    /// Seed of the random start.
+    #[serde(default = "one")]
+    pub seed: u64,
+}
+
+/// A pose plan: collision-checked TriCal configurations on the artefact's balls (ν ≤ 50° from
+/// each ball's rod), optionally a DETMAX selection of them re-sequenced into a collision-free
+/// measuring order, and laser-tracker validation configurations over the workspace.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PosePlanRequest {
+    pub artefact_id: String,
+    /// The measuring tool (its TCP is the constrained ball's centre).
+    pub tool: ToolSpec,
+    /// Candidate configurations per ball (default 120: 360 in all, as the thesis).
+    #[serde(default = "per_ball")]
+    pub per_ball: usize,
+    /// Laser-tracker validation configurations (default 506; 0 for none).
+    #[serde(default = "validation_poses")]
+    pub validation: usize,
+    /// Keep only a DETMAX-selected subset of the candidates (e.g. `{"n": 75}`).
+    #[serde(default)]
+    pub select: Option<SelectSpec>,
+    /// Seed of the candidate draws.
+    #[serde(default = "one")]
+    pub seed: u64,
+}
+
+/// An identification: the robot's parameters from identification sessions.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct IdentificationRequest {
+    /// Identification sessions (ids or names), in order.
+    pub sessions: Vec<String>,
+    /// Model options as `robocal identify --model`: `+beta,-compliance,+cyc2_h1,…` (default:
+    /// geometry + β + compliance).
+    #[serde(default)]
+    pub model: String,
+    /// Parameters held at their nominal values.
+    #[serde(default)]
+    pub fix: Vec<String>,
+    /// Refuse fits whose column-scaled κ(J) exceeds this (thesis §4.2.3).
+    #[serde(default = "kappa_limit")]
+    pub kappa_limit: f64,
+    /// Huber loss threshold in robust standard deviations; default plain least squares.
+    #[serde(default)]
+    pub huber: Option<f64>,
+    /// Length weighting orientation residuals of full-pose measurements, mm per rad.
+    #[serde(default = "rotation_weight_mm")]
+    pub rotation_weight_mm: f64,
+    /// Identify from a DETMAX-selected subset of the sessions' measurements.
+    #[serde(default)]
+    pub select: Option<SelectSpec>,
+    /// Make the new parameter set the robot's active one when the job succeeds.
+    #[serde(default)]
+    pub activate: bool,
+}
+
+/// A validation of a parameter set on validation sessions.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ValidationRequest {
+    /// Validation sessions (ids or names) of the parameter set's robot.
+    pub sessions: Vec<String>,
+    /// Keep the per-measurement residuals in the report (default true).
+    #[serde(default = "yes")]
+    pub residuals: bool,
+}
+
+/// A validation job as stored: the request and the set it validates.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ValidationJob {
+    pub parameter_set_id: String,
+    #[serde(flatten)]
+    pub request: ValidationRequest,
+}

@@ -1,0 +1,154 @@
+//! `robocal serve`: one long-running process on an embedded SQLite database. Opens (creating it on
+//! first start) and migrates the database, requeues jobs a killed predecessor left running, starts
+//! the job workers, serves HTTP until SIGTERM or Ctrl-C, then stops accepting, lets running jobs
+//! finish within a grace period and requeues the rest.
+
+use std::future::Future;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use tokio::sync::oneshot;
+
+use crate::db;
+use crate::http::{AppState, ServiceConfig, app};
+use crate::jobs::Workers;
+
+/// How to serve.
+#[derive(Clone, Debug)]
+pub struct ServeOptions {
+    pub db: PathBuf,
+    pub bind: SocketAddr,
+    /// Job workers (solver threads); each runs one job at a time.
+    pub workers: usize,
+    /// Require bearer tokens even on a loopback address (always required on other addresses).
+    pub require_auth: bool,
+    /// How long a shutdown waits for running jobs before requeueing them.
+    pub grace: Duration,
+    pub config: ServiceConfig,
+}
+
+impl ServeOptions {
+    pub fn new(db: PathBuf, bind: SocketAddr) -> Self {
+        Self {
+            db,
+            bind,
+            workers: 1,
+            require_auth: false,
+            grace: Duration::from_secs(10),
+            config: ServiceConfig::default(),
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ServeError {
+    #[error("database {path}: {source}")]
+    Db { path: String, source: sqlx::Error },
+    #[error("cannot listen on {addr}: {source}")]
+    Bind { addr: SocketAddr, source: std::io::Error },
+    #[error("serving: {0}")]
+    Serve(std::io::Error),
+}
+
+/// Resolves on SIGTERM or Ctrl-C.
+pub async fn shutdown_signal() {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let terminate = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let terminate = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => {}
+        _ = terminate => {}
+    }
+    tracing::info!("shutdown signal received");
+}
+
+/// Serve until `shutdown` resolves. `ready` receives the bound address (useful with port 0).
+pub async fn serve(
+    opts: ServeOptions,
+    ready: Option<oneshot::Sender<SocketAddr>>,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> Result<(), ServeError> {
+    let pool =
+        db::connect(&opts.db).await.map_err(|source| ServeError::Db { path: opts.db.display().to_string(), source })?;
+    let require_auth = opts.require_auth || !opts.bind.ip().is_loopback();
+    if require_auth {
+        let live =
+            db::tokens::list(&pool).await.map(|t| t.iter().filter(|t| t.revoked_at.is_none()).count()).unwrap_or(0);
+        if live == 0 {
+            tracing::warn!(
+                "bearer tokens are required but none exists: create one with `robocal token create --db {} --name admin --scopes admin`",
+                opts.db.display()
+            );
+        }
+    }
+    let config = ServiceConfig { require_auth, ..opts.config.clone() };
+    let state = AppState::new(pool.clone(), config);
+    let workers = Workers::start(state.clone(), opts.workers, opts.grace)
+        .await
+        .map_err(|source| ServeError::Db { path: opts.db.display().to_string(), source })?;
+    let listener = tokio::net::TcpListener::bind(opts.bind)
+        .await
+        .map_err(|source| ServeError::Bind { addr: opts.bind, source })?;
+    let addr = listener.local_addr().map_err(ServeError::Serve)?;
+    tracing::info!(%addr, db = %opts.db.display(), require_auth, workers = opts.workers, "robocal serving");
+    if let Some(tx) = ready {
+        let _ = tx.send(addr);
+    }
+    let served = axum::serve(listener, app(state)).with_graceful_shutdown(shutdown).await;
+    workers.shutdown().await;
+    pool.close().await;
+    tracing::info!("stopped");
+    served.map_err(ServeError::Serve)
+}
+
+/// A server running in this process (the demo's default, tests): its address and how to stop it.
+pub struct Running {
+    pub addr: SocketAddr,
+    stop: Option<oneshot::Sender<()>>,
+    handle: tokio::task::JoinHandle<Result<(), ServeError>>,
+}
+
+impl Running {
+    pub fn url(&self) -> String {
+        format!("http://{}", self.addr)
+    }
+
+    /// Graceful shutdown; waits for it.
+    pub async fn stop(mut self) -> Result<(), ServeError> {
+        if let Some(s) = self.stop.take() {
+            let _ = s.send(());
+        }
+        self.handle.await.unwrap_or(Ok(()))
+    }
+}
+
+/// Start a server in this process on `opts.bind` (use port 0 for any free port).
+pub async fn start(opts: ServeOptions) -> Result<Running, ServeError> {
+    let (ready_tx, ready_rx) = oneshot::channel();
+    let (stop_tx, stop_rx) = oneshot::channel::<()>();
+    let handle = tokio::spawn(serve(opts, Some(ready_tx), async {
+        let _ = stop_rx.await;
+    }));
+    match ready_rx.await {
+        Ok(addr) => Ok(Running { addr, stop: Some(stop_tx), handle }),
+        Err(_) => Err(handle.await.map_or_else(
+            |e| ServeError::Serve(std::io::Error::other(e.to_string())),
+            |r| {
+                r.err()
+                    .unwrap_or_else(|| ServeError::Serve(std::io::Error::other("the server stopped before listening")))
+            },
+        )),
+    }
+}

@@ -1,0 +1,130 @@
+//! Helpers for the HTTP tests: the real router on a fresh SQLite database (a file, WAL, as in
+//! production), with or without job workers, and one-line requests.
+
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use axum::Router;
+use axum::body::Body;
+use axum::http::{HeaderMap, Method, Request, StatusCode, header};
+use http_body_util::BodyExt;
+use robocal::http::{AppState, ServiceConfig, app};
+use robocal::jobs::Workers;
+use serde_json::Value;
+use tower::ServiceExt;
+
+pub struct TestApp {
+    pub router: Router,
+    pub state: AppState,
+    pub workers: Option<Workers>,
+    pub dir: PathBuf,
+    pub token: Option<String>,
+}
+
+pub struct Res {
+    pub status: StatusCode,
+    pub headers: HeaderMap,
+    pub body: Value,
+    pub text: String,
+}
+
+/// A fresh directory under the system temp dir.
+pub fn fresh_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("robocal-test-{tag}-{}-{}", std::process::id(), robocal::db::new_id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+impl TestApp {
+    pub async fn new(config: ServiceConfig, workers: bool) -> TestApp {
+        let dir = fresh_dir("http");
+        let pool = robocal::db::connect(&dir.join("robocal.db")).await.unwrap();
+        let state = AppState::new(pool, config);
+        let w =
+            if workers { Some(Workers::start(state.clone(), 1, Duration::from_secs(5)).await.unwrap()) } else { None };
+        TestApp { router: app(state.clone()), state, workers: w, dir, token: None }
+    }
+
+    pub async fn default() -> TestApp {
+        Self::new(ServiceConfig::default(), true).await
+    }
+
+    pub async fn raw(
+        &self,
+        method: Method,
+        path: &str,
+        content_type: Option<&str>,
+        body: Vec<u8>,
+        headers: &[(&str, &str)],
+    ) -> Res {
+        let mut req = Request::builder().method(method).uri(path);
+        if let Some(ct) = content_type {
+            req = req.header(header::CONTENT_TYPE, ct);
+        }
+        if let Some(t) = &self.token {
+            req = req.header(header::AUTHORIZATION, format!("Bearer {t}"));
+        }
+        for (k, v) in headers {
+            req = req.header(*k, *v);
+        }
+        let res = self.router.clone().oneshot(req.body(Body::from(body)).unwrap()).await.unwrap();
+        let status = res.status();
+        let headers = res.headers().clone();
+        let bytes = res.into_body().collect().await.unwrap().to_bytes();
+        let text = String::from_utf8_lossy(&bytes).into_owned();
+        let body = serde_json::from_slice(&bytes).unwrap_or(Value::Null);
+        Res { status, headers, body, text }
+    }
+
+    pub async fn get(&self, path: &str) -> Res {
+        self.raw(Method::GET, path, None, Vec::new(), &[]).await
+    }
+
+    pub async fn post(&self, path: &str, body: &Value) -> Res {
+        self.raw(Method::POST, path, Some("application/json"), serde_json::to_vec(body).unwrap(), &[]).await
+    }
+
+    pub async fn put(&self, path: &str, body: &Value) -> Res {
+        self.raw(Method::PUT, path, Some("application/json"), serde_json::to_vec(body).unwrap(), &[]).await
+    }
+
+    /// Wait for a job to end (the workers must be running); its final representation.
+    pub async fn wait(&self, job: &Value) -> Value {
+        let id = job["id"].as_str().unwrap_or_else(|| panic!("not a job: {job}")).to_string();
+        for _ in 0..6000 {
+            let j = self.get(&format!("/v1/jobs/{id}")).await.body;
+            if matches!(j["state"].as_str(), Some("succeeded" | "failed" | "cancelled")) {
+                return j;
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        panic!("job {id} did not finish");
+    }
+
+    pub async fn stop(mut self) {
+        if let Some(w) = self.workers.take() {
+            w.shutdown().await;
+        }
+        self.state.pool.close().await;
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// An expected problem: status, problem+json content type, and the field when given.
+pub fn assert_problem(r: &Res, status: u16, field: Option<&str>) {
+    assert_eq!(r.status.as_u16(), status, "{}", r.text);
+    assert_eq!(r.headers[header::CONTENT_TYPE], "application/problem+json", "{}", r.text);
+    assert_eq!(r.body["status"], status, "{}", r.text);
+    assert!(r.body["type"].as_str().unwrap().starts_with("urn:robocal:problem:"), "{}", r.text);
+    assert!(r.body["title"].is_string() && r.body["detail"].is_string(), "{}", r.text);
+    if let Some(f) = field {
+        assert_eq!(r.body["field"], f, "{}", r.text);
+    }
+}
+
+/// The thesis's robot position (Table 5.1 nominal base) as a base guess.
+pub fn base_guess() -> Value {
+    serde_json::json!({"x_mm": 160.211, "y_mm": -255.727, "z_mm": -220.548, "a_deg": 91.603, "b_deg": 0.496, "c_deg": -1.384})
+}

@@ -1,0 +1,643 @@
+//! Every endpoint on the real router (`oneshot`) with a fresh SQLite database, error cases
+//! included: 400 malformed, 404 unknown id, 409 conflict, 413 too large, 415 media type, 422
+//! invalid values — never a 500, never a partial write.
+
+mod common;
+
+use axum::http::{Method, StatusCode};
+use common::{TestApp, assert_problem, base_guess};
+use robocal::domain::cell::CellFile;
+use robocal::http::ServiceConfig;
+use robocal::sim::simulate::{SimulateOptions, simulate};
+use serde_json::{Value, json};
+
+async fn robot(app: &TestApp, name: &str) -> String {
+    let r =
+        app.post("/v1/robots", &json!({"name": name, "robot": {"preset": "irb120"}, "base_guess": base_guess()})).await;
+    assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
+    r.body["id"].as_str().unwrap().to_string()
+}
+
+async fn artefact(app: &TestApp, name: &str) -> String {
+    let r = app
+        .post(
+            "/v1/artefacts",
+            &json!({"name": name, "distances_mm": {"d12": 300, "d13": 300, "d23": 300}, "ball_diameter_mm": 12.7}),
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
+    r.body["id"].as_str().unwrap().to_string()
+}
+
+/// A small simulated cell (thesis truth, default noise): 90 TriCal poses, 60 tracker poses.
+fn small_cell(seed: u64) -> CellFile {
+    let s = simulate(&SimulateOptions { seed, id_per_ball: 30, validation: 60, ..Default::default() }).unwrap();
+    CellFile::from_cell(&s.cell)
+}
+
+/// Create the cell's sessions on a robot and upload their measurements; session name → id.
+async fn upload(app: &TestApp, robot_id: &str, artefact_id: &str, cell: &CellFile) -> Vec<(String, String)> {
+    let mut ids = Vec::new();
+    for s in &cell.sessions {
+        let r = app
+            .post(
+                &format!("/v1/robots/{robot_id}/sessions"),
+                &json!({"name": s.name, "purpose": s.purpose, "instrument": s.instrument, "tool": s.tool, "artefact_id": artefact_id}),
+            )
+            .await;
+        assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
+        let sid = r.body["id"].as_str().unwrap().to_string();
+        let r = app.post(&format!("/v1/sessions/{sid}/measurements"), &json!({"measurements": s.measurements})).await;
+        assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
+        assert_eq!(r.body["count"], s.measurements.len());
+        ids.push((s.name.clone(), sid));
+    }
+    ids
+}
+
+#[tokio::test]
+async fn operations_endpoints() {
+    let app = TestApp::default().await;
+    let r = app.get("/healthz").await;
+    assert_eq!(r.status, StatusCode::OK);
+    assert_eq!(r.body["status"], "ok");
+    let r = app.get("/readyz").await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    assert_eq!(r.body["migrations"], 1);
+    // The served OpenAPI document is the committed one.
+    let r = app.get("/openapi.json").await;
+    assert_eq!(r.status, StatusCode::OK);
+    assert_eq!(r.body["openapi"], "3.1.0");
+    let committed = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/openapi/openapi.json")).unwrap();
+    assert_eq!(
+        r.text, committed,
+        "openapi/openapi.json is stale: regenerate with `cargo run -- openapi --out openapi/openapi.json`"
+    );
+    // Unknown routes are problems too; metrics count requests by route template and status.
+    assert_problem(&app.get("/v1/nope").await, 404, None);
+    robot(&app, "m").await;
+    assert_problem(&app.get("/v1/robots/00000000-0000-0000-0000-000000000000").await, 404, None);
+    let r = app.get("/metrics").await;
+    assert_eq!(r.status, StatusCode::OK);
+    assert!(r.headers["content-type"].to_str().unwrap().starts_with("text/plain"));
+    for needle in [
+        r#"robocal_http_requests_total{method="POST",route="/v1/robots",status="201"} 1"#,
+        r#"robocal_http_requests_total{method="GET",route="/v1/robots/{robot_id}",status="404"} 1"#,
+        "robocal_http_request_duration_seconds_bucket",
+        r#"robocal_jobs{state="queued"} 0"#,
+    ] {
+        assert!(r.text.contains(needle), "missing {needle} in\n{}", r.text);
+    }
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn the_openapi_document_matches_the_committed_file() {
+    let committed = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/openapi/openapi.json")).unwrap();
+    assert_eq!(
+        robocal::http::openapi_json(),
+        committed,
+        "openapi/openapi.json is stale: regenerate with `cargo run -- openapi --out openapi/openapi.json`"
+    );
+}
+
+#[tokio::test]
+async fn robots_and_artefacts() {
+    let app = TestApp::default().await;
+    let id = robot(&app, "cell-1").await;
+    let r = app.get(&format!("/v1/robots/{id}")).await;
+    assert_eq!(r.status, StatusCode::OK);
+    assert_eq!(r.body["dof"], 6);
+    assert_eq!(r.body["parameters"], 43);
+    assert_eq!(r.body["robot"], json!({"preset": "irb120"}));
+    assert!(r.body["active_parameter_set_id"].is_null());
+    assert_problem(
+        &app.post("/v1/robots", &json!({"name": "cell-1", "robot": {"preset": "irb120"}})).await,
+        409,
+        Some("name"),
+    );
+    assert_problem(
+        &app.post("/v1/robots", &json!({"name": "x", "robot": {"preset": "irb999"}})).await,
+        422,
+        Some("robot.preset"),
+    );
+    assert_problem(&app.post("/v1/robots", &json!({"name": "x"})).await, 422, None);
+    assert_problem(
+        &app.post("/v1/robots", &json!({"name": "x", "robot": {"preset": "ur10"}, "colour": 1})).await,
+        422,
+        Some("colour"),
+    );
+    assert_problem(
+        &app.post("/v1/robots", &json!({"name": "x", "robot": {"preset": "ur10"}, "base_guess": {"x_mm": 1}})).await,
+        422,
+        Some("base_guess"),
+    );
+    assert_problem(
+        &app.raw(Method::POST, "/v1/robots", Some("application/json"), b"{\"name\": ".to_vec(), &[]).await,
+        400,
+        None,
+    );
+    assert_problem(&app.raw(Method::POST, "/v1/robots", Some("text/plain"), b"{}".to_vec(), &[]).await, 415, None);
+    let custom = json!({"name": "arm", "joints": [
+        {"alpha_deg": 0, "a_mm": 0, "d_mm": 290, "limits_deg": [-165, 165]},
+        {"alpha_deg": -90, "a_mm": 0, "d_mm": 0, "theta_deg": -90, "limits_deg": [-110, 110]},
+        {"alpha_deg": 0, "a_mm": 270, "d_mm": 0, "limits_deg": [120, -110]}]});
+    let r = app.post("/v1/robots", &json!({"name": "custom", "robot": custom})).await;
+    assert_problem(&r, 422, None);
+    assert!(r.body["field"].as_str().unwrap().starts_with("robot.joints[2]"), "{}", r.text);
+    let r = app.get("/v1/robots").await;
+    assert_eq!(r.body.as_array().unwrap().len(), 1, "refused robots were not stored");
+
+    let a = artefact(&app, "plate").await;
+    let r = app.get(&format!("/v1/artefacts/{a}")).await;
+    assert_eq!(r.status, StatusCode::OK);
+    let c = &r.body["ball_centres_mm"];
+    assert_eq!(c[1], json!([300.0, 0.0, 0.0]));
+    assert!((c[2][1].as_f64().unwrap() - 300.0 * 3f64.sqrt() / 2.0).abs() < 1e-9);
+    let bad = |d: Value| json!({"name": "bad", "distances_mm": d, "ball_diameter_mm": 12.7});
+    assert_problem(
+        &app.post("/v1/artefacts", &bad(json!({"d12": 300, "d13": 300, "d23": 700}))).await,
+        422,
+        Some("distances_mm"),
+    );
+    assert_problem(
+        &app.post("/v1/artefacts", &bad(json!({"d12": -1, "d13": 300, "d23": 300}))).await,
+        422,
+        Some("distances_mm.d12"),
+    );
+    let r = app.post("/v1/artefacts", &bad(json!({"d12": 300, "d13": 150, "d23": 150.0001}))).await;
+    assert_problem(&r, 422, Some("distances_mm"));
+    assert!(r.body["detail"].as_str().unwrap().contains("degenerate"), "{}", r.text);
+    assert_problem(
+        &app.post(
+            "/v1/artefacts",
+            &json!({"name": "p2", "distances_mm": {"d12": 300, "d13": 300, "d23": 300}, "ball_diameter_mm": 0}),
+        )
+        .await,
+        422,
+        Some("ball_diameter_mm"),
+    );
+    assert_problem(
+        &app.post(
+            "/v1/artefacts",
+            &json!({"name": "plate", "distances_mm": {"d12": 300, "d13": 300, "d23": 300}, "ball_diameter_mm": 12.7}),
+        )
+        .await,
+        409,
+        Some("name"),
+    );
+    assert_problem(&app.get("/v1/artefacts/none").await, 404, None);
+    assert_eq!(app.get("/v1/artefacts").await.body.as_array().unwrap().len(), 1);
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn sessions_and_measurement_batches() {
+    let app =
+        TestApp::new(ServiceConfig { max_batch: 100, max_body_bytes: 200_000, ..Default::default() }, false).await;
+    let rid = robot(&app, "r").await;
+    let aid = artefact(&app, "a").await;
+    let trical = json!({"tcp_mm": [40, 0, 130], "mass_kg": 1.7, "com_mm": [30, 0, 64]});
+    let sess = |name: &str, inst: &str, art: Option<&str>| {
+        let mut v = json!({"name": name, "purpose": "identification", "instrument": inst, "tool": trical});
+        if let Some(a) = art {
+            v["artefact_id"] = json!(a);
+        }
+        v
+    };
+    let path = format!("/v1/robots/{rid}/sessions");
+    assert_problem(&app.post(&path, &sess("t", "trical", None)).await, 422, Some("artefact_id"));
+    assert_problem(&app.post(&path, &sess("t", "trical", Some("nope"))).await, 422, Some("artefact_id"));
+    let mut bad_tool = sess("t", "trical", Some(&aid));
+    bad_tool["tool"]["mass_kg"] = json!(-1);
+    assert_problem(&app.post(&path, &bad_tool).await, 422, Some("tool.mass_kg"));
+    let r = app.post(&path, &sess("t", "trical", Some(&aid))).await;
+    assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
+    let sid = r.body["id"].as_str().unwrap().to_string();
+    assert_problem(&app.post(&path, &sess("t", "laser_tracker", None)).await, 409, Some("name"));
+    assert_problem(&app.post("/v1/robots/none/sessions", &sess("u", "trical", Some(&aid))).await, 404, None);
+    assert_eq!(app.get(&path).await.body.as_array().unwrap().len(), 1);
+    assert_eq!(app.get(&format!("/v1/sessions/{sid}")).await.body["measurements"], 0);
+    assert_problem(&app.get("/v1/sessions/none").await, 404, None);
+
+    // A batch: all or nothing.
+    let mpath = format!("/v1/sessions/{sid}/measurements");
+    let m = |q4: f64, ball: u64| json!({"joints_deg": [0, 10, 20, 0, q4, 0], "ball": ball});
+    let r = app.post(&mpath, &json!({"measurements": [m(30.0, 1), m(150.0, 2)]})).await;
+    assert_problem(&r, 422, Some("measurements[1].joints_deg[4]"));
+    assert!(r.body["detail"].as_str().unwrap().contains("outside joint 5's limits"), "{}", r.text);
+    assert_problem(
+        &app.post(&mpath, &json!({"measurements": [m(30.0, 1), m(30.0, 4)]})).await,
+        422,
+        Some("measurements[1].ball"),
+    );
+    assert_problem(
+        &app.post(&mpath, &json!({"measurements": [{"joints_deg": [0, 10, 20], "ball": 1}]})).await,
+        422,
+        Some("measurements[0].joints_deg"),
+    );
+    assert_problem(
+        &app.post(&mpath, &json!({"measurements": [{"joints_deg": [0, 10, 20, 0, 30, 0], "position_mm": [1, 2, 3]}]}))
+            .await,
+        422,
+        Some("measurements[0].position_mm"),
+    );
+    assert_problem(
+        &app.post(&mpath, &json!({"measurements": [{"joints_deg": [0, 10, 20, 0, 30, "x"], "ball": 1}]})).await,
+        422,
+        Some("measurements[0].joints_deg[5]"),
+    );
+    let nan = br#"{"measurements": [{"joints_deg": [0, 10, 20, 0, NaN, 0], "ball": 1}]}"#.to_vec();
+    assert_problem(&app.raw(Method::POST, &mpath, Some("application/json"), nan, &[]).await, 400, None);
+    assert_problem(&app.post(&mpath, &json!({"measurements": []})).await, 422, Some("measurements"));
+    assert_eq!(
+        app.get(&format!("/v1/sessions/{sid}")).await.body["measurements"],
+        0,
+        "nothing stored by refused batches"
+    );
+
+    let key = [("idempotency-key", "run-7-batch-1")];
+    let body = serde_json::to_vec(&json!({"measurements": [m(30.0, 1), m(31.0, 2), m(32.0, 3)]})).unwrap();
+    let first = app.raw(Method::POST, &mpath, Some("application/json"), body.clone(), &key).await;
+    assert_eq!(first.status, StatusCode::CREATED, "{}", first.text);
+    assert_eq!(
+        (first.body["first_index"].as_i64(), first.body["count"].as_i64(), first.body["total"].as_i64()),
+        (Some(0), Some(3), Some(3))
+    );
+    let again = app.raw(Method::POST, &mpath, Some("application/json"), body, &key).await;
+    assert_eq!(again.status, StatusCode::CREATED);
+    assert_eq!(again.headers["idempotency-replayed"], "true");
+    assert_eq!(again.body["batch_id"], first.body["batch_id"]);
+    let other = serde_json::to_vec(&json!({"measurements": [m(33.0, 1)]})).unwrap();
+    assert_problem(
+        &app.raw(Method::POST, &mpath, Some("application/json"), other, &key).await,
+        409,
+        Some("Idempotency-Key"),
+    );
+    assert_eq!(app.get(&format!("/v1/sessions/{sid}")).await.body["measurements"], 3, "the retry did not append");
+
+    // CSV, with its own errors.
+    let csv = "q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,ball,temperature_c,approach_1,approach_2,approach_3,approach_4,approach_5,approach_6\n\
+               0,10,20,0,40,0,2,21.5,1,-1,1,1,1,-1\n0,10,20,0,41,0,3,,,,,,,\n";
+    let r = app.raw(Method::POST, &mpath, Some("text/csv"), csv.as_bytes().to_vec(), &[]).await;
+    assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
+    assert_eq!(r.body["first_index"], 3);
+    let r = app
+        .raw(
+            Method::POST,
+            &mpath,
+            Some("text/csv"),
+            b"q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,colour\n0,0,0,0,30,0,red\n".to_vec(),
+            &[],
+        )
+        .await;
+    assert_problem(&r, 422, Some("csv column 'colour'"));
+    let r = app
+        .raw(
+            Method::POST,
+            &mpath,
+            Some("text/csv"),
+            b"q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,ball\n0,0,0,0,30,0,1\n0,0,0,0,3x,0,1\n".to_vec(),
+            &[],
+        )
+        .await;
+    assert_problem(&r, 422, Some("csv line 3, column q5_deg"));
+    let r = app
+        .raw(
+            Method::POST,
+            &mpath,
+            Some("text/csv"),
+            b"q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,ball\n0,0,0,0,30,0,1\n0,0,0,0,30,0,7\n".to_vec(),
+            &[],
+        )
+        .await;
+    assert_problem(&r, 422, Some("csv line 3.ball"));
+    assert_problem(&app.raw(Method::POST, &mpath, Some("text/xml"), b"<m/>".to_vec(), &[]).await, 415, None);
+
+    // Limits: more measurements than the batch limit, a body over the size limit.
+    let many: Vec<Value> = (0..101).map(|i| m(30.0 + i as f64 * 0.1, 1)).collect();
+    assert_problem(&app.post(&mpath, &json!({"measurements": many})).await, 413, Some("measurements"));
+    let huge = format!(
+        "{{\"measurements\": [{}]}}",
+        vec![r#"{"joints_deg": [0, 10, 20, 0, 30, 0], "ball": 1}"#; 5000].join(",")
+    );
+    assert_problem(&app.raw(Method::POST, &mpath, Some("application/json"), huge.into_bytes(), &[]).await, 413, None);
+    assert_eq!(app.get(&format!("/v1/sessions/{sid}")).await.body["measurements"], 5);
+
+    // Paging.
+    let r = app.get(&format!("{mpath}?offset=1&limit=2")).await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    assert_eq!(r.body["total"], 5);
+    assert_eq!(r.body["items"][0]["index"], 1);
+    assert_eq!(r.body["items"][0]["joints_deg"][4], 31.0);
+    assert_eq!(r.body["next_offset"], 3);
+    let r = app.get(&format!("{mpath}?offset=3&limit=10")).await;
+    assert_eq!(r.body["items"].as_array().unwrap().len(), 2);
+    assert_eq!(r.body["items"][0]["approach"], json!([1, -1, 1, 1, 1, -1]));
+    assert!(r.body["next_offset"].is_null());
+    assert_problem(&app.get(&format!("{mpath}?limit=0")).await, 422, Some("limit"));
+    assert_problem(&app.get(&format!("{mpath}?offset=-1")).await, 422, Some("offset"));
+    app.stop().await;
+}
+
+/// The loop: identification, its refusal with the reason, validation, history, activation,
+/// export, import, compensation — and the server's parameter set is the CLI's, bit for bit.
+#[tokio::test]
+async fn identification_validation_and_compensation() {
+    let app = TestApp::default().await;
+    let rid = robot(&app, "cell").await;
+    let aid = artefact(&app, "plate").await;
+    let cell = small_cell(3);
+    let ids = upload(&app, &rid, &aid, &cell).await;
+    let id_of = |n: &str| ids.iter().find(|(k, _)| k == n).unwrap().1.clone();
+
+    // Submission-time checks.
+    let path = format!("/v1/robots/{rid}/identifications");
+    assert_problem(&app.post(&path, &json!({"sessions": ["tracker-n1"]})).await, 422, Some("sessions[0]"));
+    assert_problem(&app.post(&path, &json!({"sessions": ["nope"]})).await, 422, Some("sessions[0]"));
+    assert_problem(&app.post(&path, &json!({"sessions": ["trical-1"], "model": "+warp"})).await, 422, Some("model"));
+    assert_problem(
+        &app.post(&path, &json!({"sessions": ["trical-1"], "kappa_limit": 0.5})).await,
+        422,
+        Some("kappa_limit"),
+    );
+    assert_problem(
+        &app.post(&path, &json!({"sessions": ["trical-1"], "select": {"n": 10, "index": "O9"}})).await,
+        422,
+        Some("select.index"),
+    );
+    assert_problem(&app.post("/v1/robots/none/identifications", &json!({"sessions": ["trical-1"]})).await, 404, None);
+
+    // A refused fit: the job fails with the reason, no parameter set is written.
+    let r = app.post(&path, &json!({"sessions": ["trical-1"], "kappa_limit": 2.0})).await;
+    assert_eq!(r.status, StatusCode::ACCEPTED, "{}", r.text);
+    assert_eq!(r.headers["location"], format!("/v1/jobs/{}", r.body["id"].as_str().unwrap()));
+    let j = app.wait(&r.body).await;
+    assert_eq!(j["state"], "failed", "{j}");
+    assert_eq!(j["error"]["type"], "urn:robocal:problem:ill-conditioned");
+    assert!(j["error"]["detail"].as_str().unwrap().contains("weakest combination"), "{j}");
+    assert!(app.get(&format!("/v1/robots/{rid}/parameter-sets")).await.body.as_array().unwrap().is_empty());
+
+    // The identification.
+    let r = app.post(&path, &json!({"sessions": [id_of("trical-1")]})).await;
+    let j = app.wait(&r.body).await;
+    assert_eq!(j["state"], "succeeded", "{j}");
+    assert_eq!(j["progress"], 1.0);
+    assert_eq!(j["attempts"], 1);
+    assert_eq!(j["result"]["summary"]["identified"], 31);
+    assert_eq!(j["result"]["version"], 1);
+    let set_id = j["result"]["parameter_set_id"].as_str().unwrap().to_string();
+
+    // Bit for bit: the CLI's identification of the exported cell file.
+    let exported = app.get(&format!("/v1/robots/{rid}/cell?sessions=trical-1")).await;
+    assert_eq!(exported.status, StatusCode::OK, "{}", exported.text);
+    let file: CellFile = serde_json::from_value(exported.body.clone()).unwrap();
+    let local = file.to_cell().unwrap();
+    let mut opts = robocal::identify::IdentifyOptions::default();
+    opts.selection.sessions = vec!["trical-1".into()];
+    let id = robocal::identify::identify(&local, &opts).unwrap();
+    let doc = robocal::domain::identification::identification_doc(&id, &["trical-1".to_string()], None);
+    let server_doc = app.get(&format!("/v1/parameter-sets/{set_id}/export")).await;
+    assert_eq!(server_doc.text, doc.to_json_pretty(), "the server's parameter set is the CLI's");
+    // … and the export parses as a parameter-set file.
+    robocal::domain::ParameterSetDoc::from_json(&server_doc.text).unwrap();
+
+    // Compensation needs an active set (or a named one).
+    let cpath = format!("/v1/robots/{rid}/compensate");
+    let targets = json!([
+        {"id": "a", "position_mm": [150, 80, 120], "rotation_deg": [0, 180, 0], "cfx": 0},
+        {"id": "b", "joints_deg": [10, 20, -10, 0, 45, 0]},
+        {"id": "far", "position_mm": [3000, 0, 0], "rotation_deg": [0, 180, 0], "cfx": 0},
+        {"id": "bad", "position_mm": [150, 80, 120], "rotation_deg": [0, 180, 0]}]);
+    assert_problem(&app.post(&cpath, &json!({"targets": targets})).await, 409, None);
+    let r = app.post(&cpath, &json!({"targets": targets, "parameter_set_id": set_id})).await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    assert_eq!(r.body["failed"], 2);
+    let res = r.body["results"].as_array().unwrap();
+    assert!(res[0]["residual_mm"].as_f64().unwrap() < 1e-6 && res[0]["joints_deg"].as_array().unwrap().len() == 6);
+    assert!(res[1]["fake_pose"]["position_mm"].is_array());
+    assert!(res[2]["error"].as_str().unwrap().contains("reach"), "{}", res[2]);
+    assert!(res[3]["error"].as_str().unwrap().starts_with("targets[3].cfx"), "{}", res[3]);
+    assert_problem(
+        &app.post(&cpath, &json!({"targets": [], "parameter_set_id": "none"})).await,
+        422,
+        Some("parameter_set_id"),
+    );
+    assert_problem(
+        &app.post(&cpath, &json!({"targets": [], "parameter_set_id": set_id, "tool": {"tcp_mm": [0, 0, "x"]}})).await,
+        422,
+        None,
+    );
+
+    // Validation.
+    let vpath = format!("/v1/parameter-sets/{set_id}/validations");
+    assert_problem(&app.post(&vpath, &json!({"sessions": ["trical-1"]})).await, 422, Some("sessions[0]"));
+    assert_problem(
+        &app.post("/v1/parameter-sets/none/validations", &json!({"sessions": ["tracker-n1"]})).await,
+        404,
+        None,
+    );
+    let r = app.post(&vpath, &json!({"sessions": ["tracker-n1", "tracker-n2", "tracker-n3"]})).await;
+    let j = app.wait(&r.body).await;
+    assert_eq!(j["state"], "succeeded", "{j}");
+    let vid = j["result"]["validation_id"].as_str().unwrap();
+    let v = app.get(&format!("/v1/validations/{vid}")).await;
+    assert_eq!(v.status, StatusCode::OK);
+    let rep = &v.body["report"];
+    assert_eq!(rep["n"], 60);
+    assert!(rep["mean_mm"].as_f64().unwrap() < 0.1 && rep["nominal"]["mean_mm"].as_f64().unwrap() > 1.0, "{rep}");
+    assert_eq!(rep["residuals"].as_array().unwrap().len(), 60);
+    for k in ["median_mm", "std_mm", "rms_mm", "p95_mm", "max_mm", "per_axis"] {
+        assert!(!rep[k].is_null(), "{k}");
+    }
+    assert_problem(&app.get("/v1/validations/none").await, 404, None);
+
+    // History with validation figures; explicit activation; the active set.
+    let h = app.get(&format!("/v1/robots/{rid}/parameter-sets")).await;
+    let h0 = &h.body[0];
+    assert_eq!((h0["version"].as_i64(), h0["active"].as_bool()), (Some(1), Some(false)));
+    assert_eq!(h0["sessions"], json!(["trical-1"]));
+    assert_eq!(h0["quality"]["identified"], 31);
+    assert_eq!(h0["validations"][0]["figures"]["n"], 60);
+    assert_problem(&app.get(&format!("/v1/robots/{rid}/active-parameter-set")).await, 404, None);
+    let apath = format!("/v1/robots/{rid}/active-parameter-set");
+    assert_problem(&app.put(&apath, &json!({"parameter_set_id": "none"})).await, 422, Some("parameter_set_id"));
+    let r = app.put(&apath, &json!({"parameter_set_id": set_id})).await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    assert_eq!(r.body["active"], true);
+    assert_eq!(app.get(&apath).await.body["id"], set_id);
+    assert_eq!(app.get(&format!("/v1/robots/{rid}")).await.body["active_parameter_set_id"], set_id);
+    let r = app.post(&cpath, &json!({"targets": [{"joints_deg": [10, 20, -10, 0, 45, 0]}]})).await;
+    assert_eq!(r.body["parameter_set_id"], set_id);
+    assert_eq!(r.body["failed"], 0);
+
+    // Import (the thesis's Table 5.1) as version 2; a set of another robot is refused.
+    let table =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/irb120_table_5_1.json")).unwrap();
+    let ipath = format!("/v1/robots/{rid}/parameter-sets");
+    let r = app.raw(Method::POST, &ipath, Some("application/json"), table.into_bytes(), &[]).await;
+    assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
+    assert_eq!(r.body["version"], 2);
+    assert_eq!(r.body["active"], false);
+    assert_problem(
+        &app.post(&ipath, &json!({"robot": {"preset": "ur10"}, "parameters": []})).await,
+        422,
+        Some("robot"),
+    );
+    assert_problem(
+        &app.post(&ipath, &json!({"robot": {"preset": "irb120"}, "parameters": [{"name": "a9", "value": 1}]})).await,
+        422,
+        None,
+    );
+    assert_eq!(app.get(&ipath).await.body.as_array().unwrap().len(), 2);
+    assert_problem(&app.get("/v1/parameter-sets/none").await, 404, None);
+    assert_problem(&app.get("/v1/parameter-sets/none/export").await, 404, None);
+    let g = app.get(&format!("/v1/parameter-sets/{set_id}")).await;
+    assert_eq!(g.body["parameter_set"]["parameters"].as_array().unwrap().len(), 43);
+
+    // Jobs: list and filters.
+    let all = app.get(&format!("/v1/jobs?robot_id={rid}")).await;
+    assert_eq!(all.body.as_array().unwrap().len(), 3);
+    assert_eq!(app.get("/v1/jobs?state=failed").await.body.as_array().unwrap().len(), 1);
+    assert_problem(&app.get("/v1/jobs?state=stuck").await, 422, Some("state"));
+    assert_problem(&app.get("/v1/jobs/none").await, 404, None);
+    let done = all.body[0]["id"].as_str().unwrap();
+    assert_problem(&app.post(&format!("/v1/jobs/{done}/cancel"), &json!({})).await, 409, None);
+    let _ = id_of;
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn pose_plans() {
+    let app = TestApp::default().await;
+    let rid = robot(&app, "r").await;
+    let aid = artefact(&app, "a").await;
+    let tool = json!({"tcp_mm": [40, 0, 130], "mass_kg": 1.7, "com_mm": [30, 0, 64]});
+    let path = format!("/v1/robots/{rid}/pose-plans");
+    assert_problem(&app.post(&path, &json!({"artefact_id": "none", "tool": tool})).await, 422, Some("artefact_id"));
+    assert_problem(
+        &app.post(&path, &json!({"artefact_id": aid, "tool": tool, "per_ball": 0})).await,
+        422,
+        Some("per_ball"),
+    );
+    assert_problem(
+        &app.post(&path, &json!({"artefact_id": aid, "tool": tool, "per_ball": 10, "select": {"n": 30}})).await,
+        422,
+        Some("select.n"),
+    );
+    let ur =
+        app.post("/v1/robots", &json!({"name": "ur", "robot": {"preset": "ur10"}, "base_guess": base_guess()})).await;
+    let ur = ur.body["id"].as_str().unwrap();
+    assert_problem(
+        &app.post(&format!("/v1/robots/{ur}/pose-plans"), &json!({"artefact_id": aid, "tool": tool})).await,
+        422,
+        Some("robot"),
+    );
+    let nob = app.post("/v1/robots", &json!({"name": "nob", "robot": {"preset": "irb120"}})).await;
+    let nob = nob.body["id"].as_str().unwrap();
+    assert_problem(
+        &app.post(&format!("/v1/robots/{nob}/pose-plans"), &json!({"artefact_id": aid, "tool": tool})).await,
+        422,
+        Some("base_guess"),
+    );
+
+    let r = app
+        .post(&path, &json!({"artefact_id": aid, "tool": tool, "per_ball": 20, "validation": 12, "select": {"n": 35, "seed": 4}, "seed": 2}))
+        .await;
+    assert_eq!(r.status, StatusCode::ACCEPTED, "{}", r.text);
+    let j = app.wait(&r.body).await;
+    assert_eq!(j["state"], "succeeded", "{j}");
+    let plan_id = j["result"]["pose_plan_id"].as_str().unwrap();
+    let p = app.get(&format!("/v1/pose-plans/{plan_id}")).await;
+    assert_eq!(p.status, StatusCode::OK);
+    let plan = &p.body["plan"];
+    assert_eq!(plan["candidates"], 60);
+    let id = plan["identification"].as_array().unwrap();
+    assert_eq!(id.len(), 35);
+    assert!(
+        id.iter()
+            .all(|x| x["nu_deg"].as_f64().unwrap() <= 50.0 + 1e-9 && (1..=3).contains(&x["ball"].as_u64().unwrap()))
+    );
+    assert!(plan["selection"]["index_final"].as_f64().unwrap() > plan["selection"]["index_initial"].as_f64().unwrap());
+    assert_eq!(plan["validation"].as_array().unwrap().len(), 12);
+    // The sequence is collision-free from home, as the planner checks it.
+    let layout = robocal::sim::poses::CellLayout::default();
+    let pc = robocal::sim::poses::PlanningCell::new(&layout).unwrap();
+    let poses: Vec<robocal::sim::poses::PlannedPose> = id
+        .iter()
+        .map(|x| {
+            let q: Vec<f64> = serde_json::from_value(x["joints_deg"].clone()).unwrap();
+            robocal::sim::poses::PlannedPose {
+                q: std::array::from_fn(|j| q[j].to_radians()),
+                ball: Some(x["ball"].as_u64().unwrap() as usize),
+                nest: None,
+                nu: None,
+            }
+        })
+        .collect();
+    assert!(pc.check_sequence(&poses).is_ok());
+    assert_problem(&app.get("/v1/pose-plans/none").await, 404, None);
+    app.stop().await;
+}
+
+/// Cancelling: a queued job ends at once (no worker runs here).
+#[tokio::test]
+async fn queued_jobs_cancel() {
+    let app = TestApp::new(ServiceConfig::default(), false).await;
+    let rid = robot(&app, "r").await;
+    let aid = artefact(&app, "a").await;
+    let tool = json!({"tcp_mm": [40, 0, 130]});
+    let r = app.post(&format!("/v1/robots/{rid}/pose-plans"), &json!({"artefact_id": aid, "tool": tool})).await;
+    assert_eq!(r.body["state"], "queued");
+    let id = r.body["id"].as_str().unwrap();
+    let c = app.post(&format!("/v1/jobs/{id}/cancel"), &json!({})).await;
+    assert_eq!(c.status, StatusCode::OK, "{}", c.text);
+    assert_eq!(c.body["state"], "cancelled");
+    assert!(c.body["finished_at"].is_string());
+    assert_problem(&app.post(&format!("/v1/jobs/{id}/cancel"), &json!({})).await, 409, None);
+    assert_problem(&app.post("/v1/jobs/none/cancel", &json!({})).await, 404, None);
+    app.stop().await;
+}
+
+/// Bearer tokens with scopes, stored hashed; required when the server says so.
+#[tokio::test]
+async fn tokens_and_scopes() {
+    let mut app = TestApp::new(ServiceConfig { require_auth: true, ..Default::default() }, false).await;
+    let r = app.get("/v1/robots").await;
+    assert_problem(&r, 401, None);
+    assert_eq!(r.headers["www-authenticate"], "Bearer");
+    assert_eq!(app.get("/healthz").await.status, StatusCode::OK, "health needs no token");
+    let (admin, secret) =
+        robocal::db::tokens::create(&app.state.pool, "admin", &[robocal::db::tokens::Scope::Admin]).await.unwrap();
+    assert_ne!(admin.hash, secret, "only the hash is stored");
+    app.token = Some("rc_wrong".into());
+    assert_problem(&app.get("/v1/robots").await, 401, None);
+    app.token = Some(secret.clone());
+    assert_eq!(app.get("/v1/robots").await.status, StatusCode::OK);
+    let r = app.post("/v1/tokens", &json!({"name": "dashboard", "scopes": ["read"]})).await;
+    assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
+    let reader = r.body["token"].as_str().unwrap().to_string();
+    let reader_id = r.body["id"].as_str().unwrap().to_string();
+    assert_problem(&app.post("/v1/tokens", &json!({"name": "x", "scopes": ["write"]})).await, 422, Some("scopes[0]"));
+    assert_problem(&app.post("/v1/tokens", &json!({"name": "x", "scopes": []})).await, 422, Some("scopes"));
+    let list = app.get("/v1/tokens").await;
+    assert_eq!(list.body.as_array().unwrap().len(), 2);
+    assert!(list.body.as_array().unwrap().iter().all(|t| t.get("token").is_none()), "secrets never listed");
+
+    app.token = Some(reader.clone());
+    assert_eq!(app.get("/v1/robots").await.status, StatusCode::OK);
+    let r = app.post("/v1/robots", &json!({"name": "x", "robot": {"preset": "irb120"}})).await;
+    assert_problem(&r, 403, None);
+    assert!(r.body["detail"].as_str().unwrap().contains("'measure'"), "{}", r.text);
+    assert_problem(&app.get("/v1/tokens").await, 403, None);
+
+    app.token = Some(secret);
+    assert_eq!(
+        app.raw(Method::DELETE, &format!("/v1/tokens/{reader_id}"), None, vec![], &[]).await.status,
+        StatusCode::NO_CONTENT
+    );
+    assert_problem(&app.raw(Method::DELETE, &format!("/v1/tokens/{reader_id}"), None, vec![], &[]).await, 404, None);
+    app.token = Some(reader);
+    assert_problem(&app.get("/v1/robots").await, 401, None);
+    app.stop().await;
+}

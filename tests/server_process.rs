@@ -1,0 +1,159 @@
+//! The real `robocal serve` process over a real socket: graceful shutdown on SIGTERM, and a job
+//! running when the server is killed (SIGKILL) completes after a restart.
+
+mod common;
+
+use std::net::TcpListener;
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use axum::http::Method;
+use robocal::http::client::Client;
+use serde_json::{Value, json};
+
+fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+fn start(db: &Path, port: u16) -> Child {
+    Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(["serve", "--db", db.to_str().unwrap(), "--bind", &format!("127.0.0.1:{port}"), "--grace-s", "1"])
+        .env("RUST_LOG", "warn")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("robocal serve starts")
+}
+
+async fn ready(client: &Client) {
+    let t = Instant::now();
+    while t.elapsed() < Duration::from_secs(60) {
+        if let Ok(a) = client.send(Method::GET, "/readyz", None, &[]).await
+            && a.status.is_success()
+        {
+            return;
+        }
+        tokio::time::sleep(Duration::from_millis(25)).await;
+    }
+    panic!("the server did not become ready");
+}
+
+fn signal(child: &Child, sig: &str) {
+    let ok = Command::new("kill").args([sig, &child.id().to_string()]).status().unwrap().success();
+    assert!(ok, "kill {sig}");
+}
+
+fn wait_exit(child: &mut Child, within: Duration) -> std::process::ExitStatus {
+    let t = Instant::now();
+    loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            return s;
+        }
+        assert!(t.elapsed() < within, "the server did not exit");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+async fn setup(client: &Client) -> (String, String) {
+    let robot: Value = client
+        .post("/v1/robots", &json!({"name": "r", "robot": {"preset": "irb120"}, "base_guess": common::base_guess()}))
+        .await
+        .unwrap();
+    let artefact: Value = client
+        .post(
+            "/v1/artefacts",
+            &json!({"name": "a", "distances_mm": {"d12": 300, "d13": 300, "d23": 300}, "ball_diameter_mm": 12.7}),
+        )
+        .await
+        .unwrap();
+    (robot["id"].as_str().unwrap().into(), artefact["id"].as_str().unwrap().into())
+}
+
+/// Over a real socket: requests, problem documents, and SIGTERM stopping the process cleanly.
+#[tokio::test]
+async fn serves_over_a_socket_and_stops_on_sigterm() {
+    let dir = common::fresh_dir("socket");
+    let db = dir.join("robocal.db");
+    let port = free_port();
+    let mut child = start(&db, port);
+    let client = Client::new(&format!("http://127.0.0.1:{port}"), None).unwrap();
+    ready(&client).await;
+    let (rid, _) = setup(&client).await;
+    let got: Value = client.get(&format!("/v1/robots/{rid}")).await.unwrap();
+    assert_eq!(got["name"], "r");
+    let a = client.send(Method::GET, "/v1/robots/none", None, &[]).await.unwrap();
+    assert_eq!(a.status.as_u16(), 404);
+    assert_eq!(a.headers["content-type"], "application/problem+json");
+    assert!(a.headers.contains_key("x-request-id"));
+    let m = client.send(Method::GET, "/metrics", None, &[]).await.unwrap();
+    assert!(String::from_utf8_lossy(&m.body).contains("robocal_http_requests_total"));
+    signal(&child, "-TERM");
+    let status = wait_exit(&mut child, Duration::from_secs(30));
+    assert!(status.success(), "graceful shutdown exits 0, got {status}");
+    // The database survives, with the robot.
+    let mut child = start(&db, port);
+    ready(&client).await;
+    let got: Value = client.get(&format!("/v1/robots/{rid}")).await.unwrap();
+    assert_eq!(got["id"], rid.as_str());
+    child.kill().unwrap();
+    let _ = child.wait();
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A job running when the server is killed is requeued at the next start and completes.
+#[tokio::test]
+async fn a_job_survives_a_killed_server() {
+    let dir = common::fresh_dir("kill");
+    let db = dir.join("robocal.db");
+    let port = free_port();
+    let mut child = start(&db, port);
+    let client = Client::new(&format!("http://127.0.0.1:{port}"), None).unwrap();
+    ready(&client).await;
+    let (rid, aid) = setup(&client).await;
+    // A pose plan big enough to be caught running: 3 × 1500 candidates, DETMAX, 3000 tracker poses.
+    let job: Value = client
+        .post(
+            &format!("/v1/robots/{rid}/pose-plans"),
+            &json!({"artefact_id": aid, "tool": {"tcp_mm": [40, 0, 130], "mass_kg": 1.7, "com_mm": [30, 0, 64]},
+                    "per_ball": 1500, "validation": 3000, "select": {"n": 75}, "seed": 3}),
+        )
+        .await
+        .unwrap();
+    let id = job["id"].as_str().unwrap().to_string();
+    let t = Instant::now();
+    loop {
+        let j: Value = client.get(&format!("/v1/jobs/{id}")).await.unwrap();
+        match j["state"].as_str().unwrap() {
+            "running" => break,
+            "queued" => {}
+            other => panic!("the job ended ({other}) before it could be killed: make it bigger"),
+        }
+        assert!(t.elapsed() < Duration::from_secs(30), "the job never started");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    child.kill().unwrap(); // SIGKILL: no cleanup of any kind
+    let _ = child.wait();
+
+    let mut child = start(&db, port);
+    ready(&client).await;
+    let t = Instant::now();
+    let done = loop {
+        let j: Value = client.get(&format!("/v1/jobs/{id}")).await.unwrap();
+        if matches!(j["state"].as_str(), Some("succeeded" | "failed" | "cancelled")) {
+            break j;
+        }
+        assert!(t.elapsed() < Duration::from_secs(600), "the requeued job did not finish: {j}");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    };
+    assert_eq!(done["state"], "succeeded", "{done}");
+    assert_eq!(done["attempts"], 2, "claimed once before the kill and once after: {done}");
+    let plan: Value =
+        client.get(&format!("/v1/pose-plans/{}", done["result"]["pose_plan_id"].as_str().unwrap())).await.unwrap();
+    assert_eq!(plan["plan"]["identification"].as_array().unwrap().len(), 75);
+    assert_eq!(plan["plan"]["validation"].as_array().unwrap().len(), 3000);
+    assert_eq!(plan["plan"]["candidates"], 4500);
+    child.kill().unwrap();
+    let _ = child.wait();
+    let _ = std::fs::remove_dir_all(&dir);
+}
