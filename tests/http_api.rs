@@ -337,6 +337,9 @@ async fn sessions_and_measurement_batches() {
     assert!(r.body["next_offset"].is_null());
     assert_problem(&app.get(&format!("{mpath}?limit=0")).await, 422, Some("limit"));
     assert_problem(&app.get(&format!("{mpath}?offset=-1")).await, 422, Some("offset"));
+    // Errors raised before a handler runs (query strings, methods) are problems too.
+    assert_problem(&app.get(&format!("{mpath}?offset=abc")).await, 400, None);
+    assert_problem(&app.raw(Method::DELETE, &mpath, None, vec![], &[]).await, 405, None);
     app.stop().await;
 }
 

@@ -154,6 +154,63 @@ impl IntoResponse for ApiError {
     }
 }
 
+/// Errors produced outside the handlers — a query string or path that does not parse, a method
+/// the route does not have, a request timeout — arrive as plain text or empty bodies; give them
+/// the same problem+json shape as every other error (the text becomes the detail).
+pub async fn problem_fallback(res: Response) -> Response {
+    let status = res.status();
+    let is_problem = res
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.starts_with(PROBLEM_JSON));
+    if !(status.is_client_error() || status.is_server_error()) || is_problem {
+        return res;
+    }
+    let (parts, body) = res.into_parts();
+    let text = axum::body::to_bytes(body, 64 * 1024)
+        .await
+        .map(|b| String::from_utf8_lossy(&b).trim().to_string())
+        .unwrap_or_default();
+    let slug = match status.as_u16() {
+        400 => "malformed",
+        404 => "not-found",
+        405 => "method-not-allowed",
+        406 => "not-acceptable",
+        408 | 503 => "unavailable",
+        413 => "too-large",
+        415 => "unsupported-media-type",
+        422 => "invalid-value",
+        s if s >= 500 => "internal",
+        _ => "client-error",
+    };
+    let title = status.canonical_reason().unwrap_or("Error").to_string();
+    let detail = if status.is_server_error() && status != StatusCode::SERVICE_UNAVAILABLE {
+        None
+    } else if text.is_empty() {
+        Some(match status.as_u16() {
+            503 => "the request took longer than the server's request timeout".to_string(),
+            _ => title.clone(),
+        })
+    } else {
+        Some(text)
+    };
+    let problem =
+        Problem { type_: format!("urn:robocal:problem:{slug}"), title, status: status.as_u16(), detail, field: None };
+    let mut out = (
+        status,
+        [(header::CONTENT_TYPE, HeaderValue::from_static(PROBLEM_JSON))],
+        serde_json::to_vec(&problem).expect("problem serialises"),
+    )
+        .into_response();
+    for (k, v) in parts.headers.iter() {
+        if k != header::CONTENT_TYPE && k != header::CONTENT_LENGTH {
+            out.headers_mut().insert(k.clone(), v.clone());
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
