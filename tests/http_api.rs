@@ -340,6 +340,14 @@ async fn sessions_and_measurement_batches() {
     // Errors raised before a handler runs (query strings, methods) are problems too.
     assert_problem(&app.get(&format!("{mpath}?offset=abc")).await, 400, None);
     assert_problem(&app.raw(Method::DELETE, &mpath, None, vec![], &[]).await, 405, None);
+    // … also when the client accepts gzip: the problem document is what gets compressed.
+    let r = app.raw(Method::GET, &format!("{mpath}?offset=abc"), None, vec![], &[("accept-encoding", "gzip")]).await;
+    assert_eq!(r.status.as_u16(), 400);
+    assert_eq!(r.headers["content-type"], "application/problem+json");
+    assert_eq!(r.headers["content-encoding"], "gzip");
+    // An array of the wrong length is an invalid value (422) at its path, not malformed JSON.
+    let r = app.post(&mpath, &json!({"measurements": [{"joints_deg": [0, 10, 20, 0, 30, 0], "ball": 1, "indicators_mm": [0, 0, 0, 0]}]})).await;
+    assert_problem(&r, 422, Some("measurements[0].indicators_mm"));
     app.stop().await;
 }
 

@@ -107,8 +107,10 @@ pub struct MeasurementSpec {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ball: Option<usize>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(min_items = 3, max_items = 3)]
     pub position_mm: Option<[f64; 3]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(min_items = 3, max_items = 3)]
     pub rotation_deg: Option<[f64; 3]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub temperature_c: Option<f64>,
@@ -118,6 +120,7 @@ pub struct MeasurementSpec {
     pub approach: Option<Vec<i8>>,
     /// TriCal indicator readings after centring, mm.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(min_items = 3, max_items = 3)]
     pub indicators_mm: Option<[f64; 3]>,
 }
 

@@ -66,8 +66,11 @@ impl PoseSpec {
 /// A pose as output: every representation, so no reader has to convert.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct PoseOut {
+    #[schema(min_items = 3, max_items = 3)]
     pub position_mm: [f64; 3],
+    #[schema(min_items = 3, max_items = 3)]
     pub rotation_deg: [f64; 3],
+    #[schema(min_items = 4, max_items = 4)]
     pub quaternion: [f64; 4],
 }
 
@@ -90,16 +93,20 @@ pub struct TargetSpec {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub id: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(min_items = 3, max_items = 3)]
     pub position_mm: Option<[f64; 3]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(min_items = 3, max_items = 3)]
     pub rotation_deg: Option<[f64; 3]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(min_items = 4, max_items = 4)]
     pub quaternion: Option<[f64; 4]>,
     /// Configuration branch, ABB cfx 0–7.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cfx: Option<u8>,
     /// ABB confdata [cf1, cf4, cf6, cfx].
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(min_items = 4, max_items = 4)]
     pub confdata: Option<[i32; 4]>,
     /// Seed joints for robots without a closed-form IK.
     #[serde(default, skip_serializing_if = "Option::is_none")]

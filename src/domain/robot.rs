@@ -232,12 +232,15 @@ fn model_error(e: ModelError) -> DomainError {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ToolSpec {
+    #[schema(min_items = 3, max_items = 3)]
     pub tcp_mm: [f64; 3],
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(min_items = 3, max_items = 3)]
     pub tcp_rotation_deg: Option<[f64; 3]>,
     #[serde(default)]
     pub mass_kg: f64,
     #[serde(default)]
+    #[schema(min_items = 3, max_items = 3)]
     pub com_mm: [f64; 3],
 }
 

@@ -204,7 +204,7 @@ pub async fn problem_fallback(res: Response) -> Response {
     )
         .into_response();
     for (k, v) in parts.headers.iter() {
-        if k != header::CONTENT_TYPE && k != header::CONTENT_LENGTH {
+        if k != header::CONTENT_TYPE && k != header::CONTENT_LENGTH && k != header::CONTENT_ENCODING {
             out.headers_mut().insert(k.clone(), v.clone());
         }
     }

@@ -33,17 +33,16 @@ pub async fn body_bytes<S: Send + Sync>(req: Request, state: &S) -> Result<Bytes
     })
 }
 
-/// Parse JSON bytes into `T`, classifying the error.
+/// Parse JSON bytes into `T`: first as JSON (a syntax error is 400), then into `T` (a value that
+/// does not fit — a wrong type, a missing field, an array of the wrong length — is 422 with the
+/// field's path). Numbers parse to the same f64 either way.
 pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
-    let de = &mut serde_json::Deserializer::from_slice(bytes);
-    serde_path_to_error::deserialize(de).map_err(|e| {
+    let value: serde_json::Value =
+        serde_json::from_slice(bytes).map_err(|e| ApiError::malformed(None, format!("malformed JSON: {e}")))?;
+    serde_path_to_error::deserialize(value).map_err(|e| {
         let path = e.path().to_string();
         let field = (path != ".").then_some(path);
-        let inner = e.into_inner();
-        match inner.classify() {
-            serde_json::error::Category::Data => ApiError::Invalid { detail: inner.to_string(), field },
-            _ => ApiError::malformed(field, format!("malformed JSON: {inner}")),
-        }
+        ApiError::Invalid { detail: e.into_inner().to_string(), field }
     })
 }
 

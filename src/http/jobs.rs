@@ -92,6 +92,7 @@ pub struct JobQuery {
     /// `queued`, `running`, `succeeded`, `failed` or `cancelled`.
     pub state: Option<String>,
     /// At most this many, newest first (default 100, at most 1000).
+    #[param(minimum = 1, maximum = 1000)]
     pub limit: Option<i64>,
 }
 
@@ -106,8 +107,9 @@ pub async fn list(
     _auth: Authorized<READ>,
     Query(q): Query<JobQuery>,
 ) -> Result<Json<Vec<JobOut>>, ApiError> {
-    if let Some(s) = &q.state
-        && !db::jobs::STATES.contains(&s.as_str())
+    let state_filter = q.state.as_deref().filter(|s| !s.is_empty());
+    if let Some(s) = state_filter
+        && !db::jobs::STATES.contains(&s)
     {
         return Err(ApiError::invalid("state", format!("'{s}' is not one of {}", db::jobs::STATES.join(", "))));
     }
@@ -115,7 +117,8 @@ pub async fn list(
     if !(1..=1000).contains(&limit) {
         return Err(ApiError::invalid("limit", "must be 1–1000"));
     }
-    let rows = db::jobs::list(&state.pool, q.robot_id.as_deref(), q.state.as_deref(), limit).await?;
+    let rows =
+        db::jobs::list(&state.pool, q.robot_id.as_deref().filter(|s| !s.is_empty()), state_filter, limit).await?;
     Ok(Json(rows.iter().map(job_out).collect::<Result<_, _>>()?))
 }
 

@@ -161,7 +161,54 @@ fn api_router() -> OpenApiRouter<AppState> {
 
 /// The OpenAPI document (3.1).
 pub fn openapi() -> utoipa::openapi::OpenApi {
-    api_router().split_for_parts().1
+    let mut api = api_router().split_for_parts().1;
+    common_responses(&mut api);
+    api
+}
+
+/// Every `/v1` operation can also answer 400 (a query string or body that does not parse), 401
+/// and 403 (token), 503 (request timeout); those with a body 413 and 415. Documented once here
+/// rather than on each handler.
+fn common_responses(api: &mut utoipa::openapi::OpenApi) {
+    use utoipa::openapi::{ContentBuilder, Ref, RefOr, ResponseBuilder};
+    let problem = |description: &str| {
+        RefOr::T(
+            ResponseBuilder::new()
+                .description(description)
+                .content(
+                    error::PROBLEM_JSON,
+                    ContentBuilder::new().schema(Some(Ref::from_schema_name("Problem"))).build(),
+                )
+                .build(),
+        )
+    };
+    for (path, item) in api.paths.paths.iter_mut() {
+        if !path.starts_with("/v1/") {
+            continue;
+        }
+        let with_body = [item.post.is_some(), item.put.is_some()];
+        for (op, body) in [
+            (&mut item.get, false),
+            (&mut item.post, with_body[0]),
+            (&mut item.put, with_body[1]),
+            (&mut item.delete, false),
+        ] {
+            let Some(op) = op.as_mut() else { continue };
+            let mut add = vec![
+                ("400", "Malformed request (body or query string)"),
+                ("401", "Missing, unknown or revoked bearer token"),
+                ("403", "The token lacks the scope"),
+                ("503", "The request exceeded the server's timeout"),
+            ];
+            if body {
+                add.push(("413", "Request body over the server's limit"));
+                add.push(("415", "Content type not accepted"));
+            }
+            for (code, description) in add {
+                op.responses.responses.entry(code.to_string()).or_insert_with(|| problem(description));
+            }
+        }
+    }
 }
 
 /// The OpenAPI document as committed in `openapi/openapi.json`.
@@ -180,11 +227,14 @@ pub fn app(state: AppState) -> Router {
     router
         .with_state(state.clone())
         .fallback(ops::not_found)
-        .layer(axum::middleware::from_fn_with_state(state, metrics::track))
+        // Innermost first: body limit and timeout, then every error made a problem document
+        // (before compression, so it reads and replaces plain bodies), then metrics (which see
+        // timed-out requests as the 503s they are), compression, request ids and tracing.
         .layer(DefaultBodyLimit::max(limit))
-        .layer(CompressionLayer::new())
         .layer(TimeoutLayer::with_status_code(StatusCode::SERVICE_UNAVAILABLE, timeout))
         .layer(axum::middleware::map_response(error::problem_fallback))
+        .layer(axum::middleware::from_fn_with_state(state, metrics::track))
+        .layer(CompressionLayer::new())
         .layer(PropagateRequestIdLayer::x_request_id())
         .layer(TraceLayer::new_for_http().make_span_with(|req: &axum::http::Request<axum::body::Body>| {
             let rid = req.headers().get("x-request-id").and_then(|v| v.to_str().ok()).unwrap_or("-");

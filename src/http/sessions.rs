@@ -456,8 +456,10 @@ pub async fn append(
 #[into_params(parameter_in = Query)]
 pub struct Page {
     /// Index of the first measurement (default 0).
+    #[param(minimum = 0)]
     pub offset: Option<i64>,
     /// At most this many (default 1000, at most 10000).
+    #[param(minimum = 1, maximum = 10000)]
     pub limit: Option<i64>,
 }
 

@@ -18,6 +18,7 @@ pub struct NewToken {
     /// Who uses it, e.g. `cell-3-pc`.
     pub name: String,
     /// Any of `measure`, `calibrate`, `compensate`, `read`, `admin`.
+    #[schema(min_items = 1)]
     pub scopes: Vec<String>,
 }
 

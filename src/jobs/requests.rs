@@ -32,6 +32,7 @@ fn yes() -> bool {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SelectSpec {
+    #[schema(minimum = 1)]
     pub n: usize,
     /// `O1` (default, the thesis's) … `O5`.
     #[serde(default = "o1")]
@@ -52,9 +53,11 @@ pub struct PosePlanRequest {
     pub tool: ToolSpec,
     /// Candidate configurations per ball (default 120: 360 in all, as the thesis).
     #[serde(default = "per_ball")]
+    #[schema(minimum = 1, maximum = 2000)]
     pub per_ball: usize,
     /// Laser-tracker validation configurations (default 506; 0 for none).
     #[serde(default = "validation_poses")]
+    #[schema(maximum = 10000)]
     pub validation: usize,
     /// Keep only a DETMAX-selected subset of the candidates (e.g. `{"n": 75}`).
     #[serde(default)]
@@ -79,12 +82,14 @@ pub struct IdentificationRequest {
     pub fix: Vec<String>,
     /// Refuse fits whose column-scaled κ(J) exceeds this (thesis §4.2.3).
     #[serde(default = "kappa_limit")]
+    #[schema(exclusive_minimum = 1.0)]
     pub kappa_limit: f64,
     /// Huber loss threshold in robust standard deviations; default plain least squares.
     #[serde(default)]
     pub huber: Option<f64>,
     /// Length weighting orientation residuals of full-pose measurements, mm per rad.
     #[serde(default = "rotation_weight_mm")]
+    #[schema(exclusive_minimum = 0.0)]
     pub rotation_weight_mm: f64,
     /// Identify from a DETMAX-selected subset of the sessions' measurements.
     #[serde(default)]
