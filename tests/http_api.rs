@@ -346,7 +346,12 @@ async fn sessions_and_measurement_batches() {
     assert_eq!(r.headers["content-type"], "application/problem+json");
     assert_eq!(r.headers["content-encoding"], "gzip");
     // An array of the wrong length is an invalid value (422) at its path, not malformed JSON.
-    let r = app.post(&mpath, &json!({"measurements": [{"joints_deg": [0, 10, 20, 0, 30, 0], "ball": 1, "indicators_mm": [0, 0, 0, 0]}]})).await;
+    let r = app
+        .post(
+            &mpath,
+            &json!({"measurements": [{"joints_deg": [0, 10, 20, 0, 30, 0], "ball": 1, "indicators_mm": [0, 0, 0, 0]}]}),
+        )
+        .await;
     assert_problem(&r, 422, Some("measurements[0].indicators_mm"));
     app.stop().await;
 }
