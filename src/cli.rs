@@ -102,7 +102,8 @@ pub enum TokenCommand {
         #[arg(long, env = "ROBOCAL_DB", default_value = "robocal.db")]
         db: PathBuf,
     },
-    /// Revoke a token by id.
+    /// Revoke a token by id (a running server stops accepting it within a second; revoking
+    /// over HTTP, DELETE /v1/tokens/{id}, takes effect at once).
     Revoke {
         #[arg(long, env = "ROBOCAL_DB", default_value = "robocal.db")]
         db: PathBuf,

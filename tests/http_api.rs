@@ -506,6 +506,30 @@ async fn identification_validation_and_compensation() {
         None,
     );
     assert_eq!(app.get(&ipath).await.body.as_array().unwrap().len(), 2);
+    let v2_id = r.body["id"].as_str().unwrap().to_string();
+
+    // Compensation follows every activation at once (the robot and its sets are cached in the
+    // server): by an explicit call…
+    let one = json!({"targets": [{"joints_deg": [10, 20, -10, 0, 45, 0]}]});
+    let joints = |r: &common::Res| r.body["results"][0]["joints_deg"].clone();
+    let with_v1 = app.post(&cpath, &one).await;
+    assert_eq!(with_v1.body["version"], 1);
+    assert_eq!(app.put(&apath, &json!({"parameter_set_id": v2_id})).await.status, StatusCode::OK);
+    let with_v2 = app.post(&cpath, &one).await;
+    assert_eq!((with_v2.body["parameter_set_id"].as_str(), with_v2.body["version"].as_i64()), (Some(&*v2_id), Some(2)));
+    assert_ne!(joints(&with_v1), joints(&with_v2), "another set compensates differently");
+    // … and by an identification job that activates its result.
+    let r = app.post(&path, &json!({"sessions": ["trical-1"], "activate": true})).await;
+    let j = app.wait(&r.body).await;
+    assert_eq!((j["state"].as_str(), j["result"]["version"].as_i64()), (Some("succeeded"), Some(3)), "{j}");
+    let with_v3 = app.post(&cpath, &one).await;
+    assert_eq!(with_v3.body["parameter_set_id"], j["result"]["parameter_set_id"]);
+    assert_eq!(joints(&with_v3), joints(&with_v1), "v3 is v1 identified again from the same data");
+    // Every answer carries the server's own time.
+    let st = with_v3.headers["server-timing"].to_str().unwrap();
+    let ms: f64 = st.strip_prefix("app;dur=").unwrap().parse().unwrap();
+    assert!(ms > 0.0 && ms < 10_000.0, "{st}");
+
     assert_problem(&app.get("/v1/parameter-sets/none").await, 404, None);
     assert_problem(&app.get("/v1/parameter-sets/none/export").await, 404, None);
     let g = app.get(&format!("/v1/parameter-sets/{set_id}")).await;
@@ -513,7 +537,7 @@ async fn identification_validation_and_compensation() {
 
     // Jobs: list and filters.
     let all = app.get(&format!("/v1/jobs?robot_id={rid}")).await;
-    assert_eq!(all.body.as_array().unwrap().len(), 3);
+    assert_eq!(all.body.as_array().unwrap().len(), 4);
     assert_eq!(app.get("/v1/jobs?state=failed").await.body.as_array().unwrap().len(), 1);
     assert_problem(&app.get("/v1/jobs?state=stuck").await, 422, Some("state"));
     assert_problem(&app.get("/v1/jobs/none").await, 404, None);
@@ -654,6 +678,16 @@ async fn tokens_and_scopes() {
     );
     assert_problem(&app.raw(Method::DELETE, &format!("/v1/tokens/{reader_id}"), None, vec![], &[]).await, 404, None);
     app.token = Some(reader);
+    assert_problem(&app.get("/v1/robots").await, 401, None);
+
+    // Revoked from another process (`robocal token revoke` writes the database): the server
+    // trusts a verified token for at most TOKEN_RECHECK.
+    let (cli, cli_secret) =
+        robocal::db::tokens::create(&app.state.pool, "cli", &[robocal::db::tokens::Scope::Read]).await.unwrap();
+    app.token = Some(cli_secret);
+    assert_eq!(app.get("/v1/robots").await.status, StatusCode::OK);
+    assert!(robocal::db::tokens::revoke(&app.state.pool, &cli.id).await.unwrap());
+    tokio::time::sleep(robocal::http::cache::TOKEN_RECHECK + std::time::Duration::from_millis(50)).await;
     assert_problem(&app.get("/v1/robots").await, 401, None);
     app.stop().await;
 }

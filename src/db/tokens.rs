@@ -114,10 +114,12 @@ pub async fn create(
 
 /// The live token with this secret.
 pub async fn by_secret(db: impl SqliteExecutor<'_>, secret: &str) -> Result<Option<TokenRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM tokens WHERE hash = ? AND revoked_at IS NULL")
-        .bind(hash(secret))
-        .fetch_optional(db)
-        .await
+    by_hash(db, &hash(secret)).await
+}
+
+/// The live token whose secret hashes to `hash`.
+pub async fn by_hash(db: impl SqliteExecutor<'_>, hash: &str) -> Result<Option<TokenRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM tokens WHERE hash = ? AND revoked_at IS NULL").bind(hash).fetch_optional(db).await
 }
 
 pub async fn list(db: impl SqliteExecutor<'_>) -> Result<Vec<TokenRow>, sqlx::Error> {

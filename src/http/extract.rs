@@ -1,6 +1,8 @@
 //! Request extractors whose rejections speak problem+json: JSON bodies parsed with the path of the
 //! first field that does not fit, and bearer-token scopes.
 
+use std::sync::Arc;
+
 use axum::body::Bytes;
 use axum::extract::{FromRequest, FromRequestParts, Request};
 use axum::http::{StatusCode, header, request::Parts};
@@ -8,7 +10,7 @@ use serde::de::DeserializeOwned;
 
 use super::AppState;
 use super::error::ApiError;
-use crate::db::tokens::{self, Scope, TokenRow};
+use crate::db::tokens::{Scope, TokenRow};
 
 /// A JSON request body. Syntax errors are 400, values that do not fit the schema are 422 with the
 /// field's path, a body over the limit is 413, another content type 415.
@@ -81,8 +83,9 @@ fn scope_of(s: u8) -> Scope {
 
 /// A request allowed the scope `S`: a live bearer token carrying it (or `admin`), or — when the
 /// server does not require authentication (loopback bind) — no token at all. A token that is
-/// presented is always checked, so a revoked token never works.
-pub struct Authorized<const S: u8>(pub Option<TokenRow>);
+/// presented is always checked (against the store at most a second old, see `cache`), so a
+/// revoked token stops working.
+pub struct Authorized<const S: u8>(pub Option<Arc<TokenRow>>);
 
 impl<const S: u8> FromRequestParts<AppState> for Authorized<S> {
     type Rejection = ApiError;
@@ -105,7 +108,9 @@ impl<const S: u8> FromRequestParts<AppState> for Authorized<S> {
             .map(str::trim)
             .filter(|s| !s.is_empty())
             .ok_or_else(|| ApiError::Unauthorized("the Authorization header must be 'Bearer <token>'".into()))?;
-        let token = tokens::by_secret(&state.pool, secret)
+        let token = state
+            .caches
+            .token(&state.pool, secret)
             .await?
             .ok_or_else(|| ApiError::Unauthorized("unknown or revoked token".into()))?;
         let scopes = token.scopes();

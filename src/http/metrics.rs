@@ -1,9 +1,11 @@
 //! Prometheus metrics: requests by route and status, request latency histograms by route, jobs by
-//! state (read from the store at scrape time), solver durations by job kind.
+//! state (read from the store at scrape time), solver durations by job kind; and a `Server-Timing`
+//! header on every response.
 
 use std::time::Instant;
 
 use axum::extract::{MatchedPath, Request, State};
+use axum::http::{HeaderName, HeaderValue};
 use axum::middleware::Next;
 use axum::response::Response;
 use prometheus::{Encoder, HistogramOpts, HistogramVec, IntCounterVec, IntGaugeVec, Opts, Registry, TextEncoder};
@@ -72,9 +74,18 @@ pub async fn track(State(state): State<AppState>, req: Request, next: Next) -> R
         req.extensions().get::<MatchedPath>().map_or_else(|| "unmatched".to_string(), |m| m.as_str().to_string());
     let method = req.method().as_str().to_string();
     let start = Instant::now();
-    let res = next.run(req).await;
+    let mut res = next.run(req).await;
+    let elapsed = start.elapsed();
     let m = &state.metrics;
-    m.latency.with_label_values(&[route.as_str(), method.as_str()]).observe(start.elapsed().as_secs_f64());
+    m.latency.with_label_values(&[route.as_str(), method.as_str()]).observe(elapsed.as_secs_f64());
     m.requests.with_label_values(&[route.as_str(), method.as_str(), res.status().as_str()]).inc();
+    // W3C Server-Timing: the server's own time (body read, handler, response built), so a client
+    // can tell it from the network's.
+    if let Ok(v) = HeaderValue::from_str(&format!("app;dur={:.3}", elapsed.as_secs_f64() * 1e3)) {
+        res.headers_mut().insert(SERVER_TIMING, v);
+    }
     res
 }
+
+/// The `Server-Timing` response header.
+pub const SERVER_TIMING: HeaderName = HeaderName::from_static("server-timing");

@@ -2,6 +2,7 @@
 //! generated from the handlers (utoipa), Prometheus metrics.
 
 pub mod artefacts;
+pub mod cache;
 pub mod cells;
 pub mod client;
 pub mod compensation;
@@ -73,6 +74,8 @@ pub struct AppState {
     pub wake: Arc<Notify>,
     /// The OpenAPI document, served at `/openapi.json`.
     pub openapi_json: Arc<String>,
+    /// Robots and compiled parameter sets (the compensation hot path).
+    pub caches: Arc<cache::Caches>,
 }
 
 impl AppState {
@@ -83,6 +86,7 @@ impl AppState {
             metrics: Arc::new(Metrics::new()),
             wake: Arc::new(Notify::new()),
             openapi_json: Arc::new(openapi_json()),
+            caches: Arc::new(cache::Caches::new(256)),
         }
     }
 }

@@ -217,6 +217,7 @@ pub async fn active(
     let robot = find_robot(&state, &robot_id).await?;
     let id = robot
         .active_parameter_set_id
+        .clone()
         .ok_or_else(|| ApiError::NotFound { what: "active parameter set of robot", id: robot_id.clone() })?;
     let row = find(&state, &id).await?;
     Ok(Json(set_out(&state, &row, true, true).await?))
@@ -252,5 +253,6 @@ pub async fn activate(
         return Err(ApiError::invalid("parameter_set_id", "the set belongs to another robot"));
     }
     records::set_active_parameter_set(&state.pool, &robot.id, &row.id).await?;
+    state.caches.robot_changed(&robot.id);
     Ok(Json(set_out(&state, &row, true, true).await?))
 }

@@ -77,8 +77,8 @@ pub fn robot_out(row: &records::RobotRow) -> Result<RobotOut, ApiError> {
 }
 
 /// A robot by id, or 404.
-pub async fn find(state: &AppState, id: &str) -> Result<records::RobotRow, ApiError> {
-    records::robot(&state.pool, id).await?.ok_or_else(|| ApiError::not_found("robot", id))
+pub async fn find(state: &AppState, id: &str) -> Result<std::sync::Arc<records::RobotRow>, ApiError> {
+    state.caches.robot(&state.pool, id).await?.ok_or_else(|| ApiError::not_found("robot", id))
 }
 
 /// Create a robot.
@@ -142,7 +142,7 @@ pub async fn get(
     _auth: Authorized<READ>,
     Path(robot_id): Path<String>,
 ) -> Result<Json<RobotOut>, ApiError> {
-    Ok(Json(robot_out(&find(&state, &robot_id).await?)?))
+    Ok(Json(robot_out(&*find(&state, &robot_id).await?)?))
 }
 
 #[derive(Debug, Deserialize, IntoParams)]

@@ -438,9 +438,7 @@ pub async fn append(
         created_at: db::now(),
     };
     records::insert_batch(&mut *tx, &batch).await?;
-    for (i, r) in rows.iter().enumerate() {
-        records::insert_measurement(&mut *tx, &session.id, first + i as i64, &batch.id, r).await?;
-    }
+    records::insert_measurements(&mut tx, &session.id, first, &batch.id, &rows).await?;
     tx.commit().await?;
     let out = BatchOut {
         batch_id: batch.id,

@@ -195,6 +195,8 @@ async fn finish(state: &AppState, owner: &str, job: &db::jobs::JobRow, end: End)
             let result: Value = run::store(&mut tx, &job.id, &job.robot_id, &job.request_json, out).await?;
             if db::jobs::finish(&mut *tx, &job.id, owner, "succeeded", Some(&result.to_string()), None).await? {
                 tx.commit().await?;
+                // An identification may have activated its set.
+                state.caches.robot_changed(&job.robot_id);
                 tracing::info!("job succeeded");
             } else {
                 tx.rollback().await?;
