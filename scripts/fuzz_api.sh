@@ -13,8 +13,9 @@ port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); p
 target/release/robocal serve --db "$dir/fuzz.db" --bind "127.0.0.1:$port" >"$dir/serve.log" 2>&1 &
 server=$!
 trap 'kill $server 2>/dev/null; rm -rf "$dir"' EXIT
-token=$(target/release/robocal token create --db "$dir/fuzz.db" --name fuzz --scopes admin | python3 -c 'import json,sys; print(json.load(sys.stdin)["token"])')
 for _ in $(seq 100); do curl -sf "http://127.0.0.1:$port/readyz" >/dev/null && break; sleep 0.1; done
+# After the server has migrated the new database (two processes must not migrate it at once).
+token=$(target/release/robocal token create --db "$dir/fuzz.db" --name fuzz --scopes admin | python3 -c 'import json,sys; print(json.load(sys.stdin)["token"])')
 # DELETE is excluded: the stateful phase would revoke the fuzzer's own token. The loopback server
 # accepts requests without a token by design, so the authentication checks are left out; and
 # schema-valid requests that break rules a JSON schema cannot state (a triangle whose sides

@@ -1,5 +1,6 @@
 //! The real `robocal serve` process over a real socket: graceful shutdown on SIGTERM, and a job
-//! running when the server is killed (SIGKILL) completes after a restart.
+//! running when the server is killed (SIGKILL) completes after a restart; processes opening a
+//! new database together.
 
 mod common;
 
@@ -156,4 +157,42 @@ async fn a_job_survives_a_killed_server() {
     child.kill().unwrap();
     let _ = child.wait();
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A server and two `robocal token create` started together on a database that does not exist
+/// yet: all three open it (one creates and migrates it, the others wait their turn), the tokens
+/// are both stored, and the server accepts them.
+#[tokio::test]
+async fn processes_opening_a_new_database_together_take_turns() {
+    for round in 0..5 {
+        let dir = common::fresh_dir(&format!("new-db-{round}"));
+        let db = dir.join("new.db");
+        let port = free_port();
+        let mut server = start(&db, port);
+        let create = |name: &str| {
+            Command::new(env!("CARGO_BIN_EXE_robocal"))
+                .args(["token", "create", "--db", db.to_str().unwrap(), "--name", name, "--scopes", "read"])
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap()
+        };
+        let (a, b) = (create("a"), create("b"));
+        let mut secrets = Vec::new();
+        for c in [a, b] {
+            let out = c.wait_with_output().unwrap();
+            assert!(out.status.success(), "round {round}: {}", String::from_utf8_lossy(&out.stderr));
+            let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+            secrets.push(v["token"].as_str().unwrap().to_string());
+        }
+        let url = format!("http://127.0.0.1:{port}");
+        ready(&Client::new(&url, None).unwrap()).await;
+        for s in &secrets {
+            let authed = Client::new(&url, Some(s.clone())).unwrap();
+            let r = authed.send(Method::GET, "/v1/tokens", None, &[]).await.unwrap();
+            assert_eq!(r.status.as_u16(), 403, "round {round}: a live read token, refused only for its scope");
+        }
+        signal(&server, "-TERM");
+        assert!(wait_exit(&mut server, Duration::from_secs(30)).success());
+    }
 }

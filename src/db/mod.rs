@@ -21,17 +21,44 @@ pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations");
 /// Open (creating it if missing) and migrate the database at `path`: WAL, foreign keys on, a
 /// busy timeout so concurrent writers wait instead of failing.
 pub async fn connect(path: &Path) -> Result<SqlitePool, sqlx::Error> {
+    // Switching a new database to WAL needs an exclusive lock that SQLite's busy timeout does not
+    // wait for, so a process opening the file while another creates it can get "database is
+    // locked" at once: retry that for as long as the busy timeout would have waited.
+    let deadline = tokio::time::Instant::now() + BUSY_TIMEOUT;
+    loop {
+        match open_and_migrate(path).await {
+            Err(e) if is_busy(&e) && tokio::time::Instant::now() < deadline => {
+                tokio::time::sleep(Duration::from_millis(25)).await;
+            }
+            r => return r,
+        }
+    }
+}
+
+const BUSY_TIMEOUT: Duration = Duration::from_secs(10);
+
+async fn open_and_migrate(path: &Path) -> Result<SqlitePool, sqlx::Error> {
     let opts = SqliteConnectOptions::new()
         .filename(path)
         .create_if_missing(true)
         .journal_mode(SqliteJournalMode::Wal)
         .synchronous(SqliteSynchronous::Normal)
         .foreign_keys(true)
-        .busy_timeout(Duration::from_secs(10));
-    let pool =
-        SqlitePoolOptions::new().max_connections(8).acquire_timeout(Duration::from_secs(10)).connect_with(opts).await?;
-    MIGRATOR.run(&pool).await?;
+        .busy_timeout(BUSY_TIMEOUT);
+    let pool = SqlitePoolOptions::new().max_connections(8).acquire_timeout(BUSY_TIMEOUT).connect_with(opts).await?;
+    // Migrate holding the write lock, so two processes opening a new database at once (a server
+    // starting while `robocal token create` runs) take turns: the second waits, then finds every
+    // migration applied. sqlx's own migration lock is a no-op on SQLite. (`run_direct` is
+    // sqlx's documented way round `Acquire` lifetimes in spawned futures.)
+    let mut tx = begin_write(&pool).await?;
+    MIGRATOR.run_direct(None, &mut *tx, false).await?;
+    tx.commit().await?;
     Ok(pool)
+}
+
+/// SQLITE_BUSY ("database is locked", primary result code 5).
+fn is_busy(e: &sqlx::Error) -> bool {
+    e.as_database_error().and_then(|d| d.code()).is_some_and(|c| c.parse::<i32>().is_ok_and(|c| c & 0xff == 5))
 }
 
 /// A private in-memory database (tests): one connection that is never recycled.
