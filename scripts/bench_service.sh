@@ -24,15 +24,21 @@ for _ in $(seq 100); do curl -sf "$API/readyz" >/dev/null && break; sleep 0.1; d
 TOKEN=$(target/release/robocal token create --db "$tmp/bench.db" --name bench --scopes compensate | grep -o 'rc_[0-9a-f]*')
 
 median() { sort -n | awk '{a[NR]=$1} END {printf "%.2f", a[int((NR+1)/2)]}'; }
-# curl a request N times: "server median / client median" in ms (Server-Timing: app;dur=…).
-timed() {
-  local n=$1; shift
-  for _ in $(seq "$n"); do
-    curl -s -o "$tmp/out" -D "$tmp/h" -w '%{time_total}\n' "$@" >>"$tmp/client"
-    grep -i '^server-timing' "$tmp/h" | sed 's/.*dur=//' | tr -d '\r' >>"$tmp/server"
-  done
+# One timed curl: its total and the server's Server-Timing (app;dur=…) appended to the samples.
+sample() {
+  curl -s -o "$tmp/out" -D "$tmp/h" -w '%{time_total}\n' "$@" >>"$tmp/client"
+  grep -i '^server-timing' "$tmp/h" | sed 's/.*dur=//' | tr -d '\r' >>"$tmp/server"
+}
+# The samples' medians in ms, and a fresh start.
+report() {
   echo "server $(median <"$tmp/server") ms, client $(awk '{print $1*1000}' "$tmp/client" | median) ms"
   rm -f "$tmp/server" "$tmp/client"
+}
+# The same request N times.
+timed() {
+  local n=$1; shift
+  for _ in $(seq "$n"); do sample "$@"; done
+  report
 }
 
 target/release/robocal simulate --seed 1 --out "$tmp/sim.json" >/dev/null
@@ -60,20 +66,13 @@ for i in range(10000):
 json.dump({"targets": t}, open(sys.argv[1] + "/t10k.json", "w"))
 PY
 
-echo "upload 10,000 measurements, JSON ($(du -h "$tmp/b10k.json" | cut -f1)): $(
-  for i in $(seq 9); do S=$(session "j$i"); echo "$API/v1/sessions/$S/measurements"; done >"$tmp/urls"
-  for u in $(cat "$tmp/urls"); do
-    curl -s -o /dev/null -D "$tmp/h" -w '%{time_total}\n' "$u" -H "$J" -d @"$tmp/b10k.json" >>"$tmp/client"
-    grep -i '^server-timing' "$tmp/h" | sed 's/.*dur=//' | tr -d '\r' >>"$tmp/server"
-  done
-  echo "server $(median <"$tmp/server") ms, client $(awk '{print $1*1000}' "$tmp/client" | median) ms"; rm -f "$tmp/server" "$tmp/client")"
-echo "upload 10,000 measurements, CSV ($(du -h "$tmp/b10k.csv" | cut -f1)): $(
-  for i in $(seq 9); do S=$(session "c$i"); echo "$API/v1/sessions/$S/measurements"; done >"$tmp/urls"
-  for u in $(cat "$tmp/urls"); do
-    curl -s -o /dev/null -D "$tmp/h" -w '%{time_total}\n' "$u" -H 'Content-Type: text/csv' --data-binary @"$tmp/b10k.csv" >>"$tmp/client"
-    grep -i '^server-timing' "$tmp/h" | sed 's/.*dur=//' | tr -d '\r' >>"$tmp/server"
-  done
-  echo "server $(median <"$tmp/server") ms, client $(awk '{print $1*1000}' "$tmp/client" | median) ms"; rm -f "$tmp/server" "$tmp/client")"
+# Uploads: each batch into a new session.
+upload() { # content type, file, session name prefix
+  for i in $(seq 9); do sample "$API/v1/sessions/$(session "$3$i")/measurements" -H "Content-Type: $1" --data-binary @"$2"; done
+  report
+}
+echo "upload 10,000 measurements, JSON ($(du -h "$tmp/b10k.json" | cut -f1)): $(upload application/json "$tmp/b10k.json" j)"
+echo "upload 10,000 measurements, CSV ($(du -h "$tmp/b10k.csv" | cut -f1)): $(upload text/csv "$tmp/b10k.csv" c)"
 
 SID=$(session trical-1)
 curl -s -o /dev/null $API/v1/sessions/$SID/measurements -H "$J" -d @"$tmp/b360.json"

@@ -8,10 +8,9 @@ use clap::{Args, Parser, Subcommand};
 use serde_json::{Value, json};
 
 use crate::cell::Purpose;
-use crate::domain::pose::{Choice, Target, frame_from_parts, position_mm};
+use crate::domain::pose::{compensate_targets, frame_from_parts, position_mm};
 use crate::domain::{
-    CompensationResult, DEG, DomainError, MM, ParameterSetDoc, PoseOut, RobotSpec, TargetSpec, ToolSpec, from_json,
-    joints_deg, to_deg,
+    DEG, DomainError, MM, ParameterSetDoc, PoseOut, RobotSpec, TargetSpec, ToolSpec, from_json, joints_deg, to_deg,
 };
 use crate::kinematics::{AnalyticIk, Branch, Compensator, Confdata, IkError, JointState, ParameterSet, Seed, Tool};
 
@@ -1329,30 +1328,7 @@ fn compensate(a: CompensateArgs) -> Result<String, CliError> {
     let set = doc.set;
     let comp = Compensator::new(&set);
     let dof = set.dof();
-    let results: Vec<CompensationResult> = file
-        .targets
-        .iter()
-        .enumerate()
-        .map(|(i, t)| {
-            let id = t.id.clone();
-            let target = match t.to_target(dof) {
-                Ok(t) => t,
-                Err(e) => return CompensationResult::failed(id, e.within(&format!("targets[{i}]")).to_string()),
-            };
-            let res = match &target {
-                Target::NominalJoints(q) => comp.joints(q),
-                Target::Pose { pose, choice } => match choice {
-                    Choice::Branch(b) => comp.pose(pose, Seed::Branch(*b)),
-                    Choice::Confdata(c) => comp.pose(pose, Seed::Confdata(*c)),
-                    Choice::Seed(q) => comp.pose(pose, Seed::Joints(q)),
-                },
-            };
-            match res {
-                Ok(c) => CompensationResult::ok(id, &c),
-                Err(e) => CompensationResult::from_ik_error(id, &e),
-            }
-        })
-        .collect();
+    let results = compensate_targets(&comp, dof, &file.targets);
     let failed = results.iter().filter(|r| r.error.is_some()).count();
     let text = serde_json::to_string_pretty(&json!({ "results": results, "failed": failed })).expect("json");
     write_or_return(&a.out, text)

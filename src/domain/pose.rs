@@ -1,13 +1,14 @@
 //! Poses and compensation targets on the wire: `position_mm` with either ZY'X'' `rotation_deg`
 //! or a unit `quaternion` (w, x, y, z); a configuration branch as ABB `cfx` or full `confdata`
-//! (cf1, cf4, cf6, cfx); or nominal `joints_deg` targets.
+//! (cf1, cf4, cf6, cfx); or nominal `joints_deg` targets — and their compensation, one target
+//! or a batch.
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use super::{DEG, DomainError, MM, finite, joints_deg, to_deg, vec3_mm};
 use crate::kinematics::frame::{quaternion_from_rot, rot_from_quaternion, rot_zyx, zyx_from_rot};
-use crate::kinematics::{Branch, Compensated, Confdata, Frame, IkError};
+use crate::kinematics::{Branch, Compensated, Compensator, Confdata, Frame, IkError, Seed};
 
 /// A TCP pose in {W}.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -237,10 +238,66 @@ pub fn position_mm(t: &Vector3<f64>) -> [f64; 3] {
     [t.x / MM, t.y / MM, t.z / MM]
 }
 
+/// Compensate one target of a batch (index `i`): its own error, validation or solver, names
+/// `targets[i]`. Shared by the CLI and the service.
+pub fn compensate_target(comp: &Compensator, dof: usize, i: usize, t: &TargetSpec) -> CompensationResult {
+    let id = t.id.clone();
+    let target = match t.to_target(dof) {
+        Ok(t) => t,
+        Err(e) => return CompensationResult::failed(id, e.within(&format!("targets[{i}]")).to_string()),
+    };
+    let res = match &target {
+        Target::NominalJoints(q) => comp.joints(q),
+        Target::Pose { pose, choice } => match choice {
+            Choice::Branch(b) => comp.pose(pose, Seed::Branch(*b)),
+            Choice::Confdata(c) => comp.pose(pose, Seed::Confdata(*c)),
+            Choice::Seed(q) => comp.pose(pose, Seed::Joints(q)),
+        },
+    };
+    match res {
+        Ok(c) => CompensationResult::ok(id, &c),
+        Err(e) => CompensationResult::from_ik_error(id, &e),
+    }
+}
+
+/// Targets per thread below which splitting a batch across cores is not worth a thread.
+const TARGETS_PER_THREAD: usize = 256;
+
+/// Compensate a batch, split across the machine's cores when it is large; results in order.
+pub fn compensate_targets(comp: &Compensator, dof: usize, targets: &[TargetSpec]) -> Vec<CompensationResult> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    compensate_on(comp, dof, targets, cores.min(targets.len() / TARGETS_PER_THREAD).max(1))
+}
+
+/// Compensate a batch on `threads` threads (contiguous chunks); results in order.
+fn compensate_on(comp: &Compensator, dof: usize, targets: &[TargetSpec], threads: usize) -> Vec<CompensationResult> {
+    if threads <= 1 {
+        return targets.iter().enumerate().map(|(i, t)| compensate_target(comp, dof, i, t)).collect();
+    }
+    let chunk = targets.len().div_ceil(threads);
+    std::thread::scope(|s| {
+        let parts: Vec<_> = targets
+            .chunks(chunk)
+            .enumerate()
+            .map(|(c, part)| {
+                s.spawn(move || {
+                    part.iter()
+                        .enumerate()
+                        .map(|(i, t)| compensate_target(comp, dof, c * chunk + i, t))
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        parts.into_iter().flat_map(|p| p.join().expect("a compensation thread panicked")).collect()
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::domain::from_json;
+    use crate::kinematics::Tool;
+    use crate::kinematics::thesis::irb120_table_5_1;
 
     #[test]
     fn poses_parse_in_both_orientation_forms() {
@@ -278,5 +335,45 @@ mod tests {
         );
         assert_eq!(t(r#"{"joints_deg": [0, 0, 0]}"#).unwrap_err().path, "joints_deg");
         assert_eq!(t(r#"{"rotation_deg": [0, 0, 0], "cfx": 1}"#).unwrap_err().path, "position_mm");
+    }
+
+    /// Split across threads, a batch gives what one thread gives, in order, and a bad target's
+    /// error names its own index in the whole batch.
+    #[test]
+    fn a_split_batch_is_the_sequential_batch() {
+        let set = irb120_table_5_1(Tool::flange());
+        let comp = Compensator::new(&set);
+        let targets: Vec<TargetSpec> = (0..1500)
+            .map(|i| {
+                let f = i as f64;
+                let joints = if i % 97 == 5 {
+                    vec![0.0; 5] // wrong length: this target's own error
+                } else {
+                    vec![
+                        (f * 0.7) % 60.0 - 30.0,
+                        (f * 0.3) % 40.0 - 10.0,
+                        (f * 0.5) % 50.0 - 30.0,
+                        10.0,
+                        45.0,
+                        f % 90.0,
+                    ]
+                };
+                TargetSpec { id: Some(i.to_string()), joints_deg: Some(joints), ..Default::default() }
+            })
+            .collect();
+        let split = compensate_on(&comp, 6, &targets, 3);
+        assert_eq!(compensate_targets(&comp, 6, &targets), split);
+        let sequential: Vec<_> = targets.iter().enumerate().map(|(i, t)| compensate_target(&comp, 6, i, t)).collect();
+        assert_eq!(split, sequential);
+        assert_eq!(split.len(), 1500);
+        for (i, r) in split.iter().enumerate() {
+            assert_eq!(r.id.as_deref(), Some(i.to_string().as_str()));
+            if i % 97 == 5 {
+                let e = r.error.as_deref().unwrap();
+                assert!(e.starts_with(&format!("targets[{i}].joints_deg")), "{e}");
+            } else {
+                assert!(r.error.is_none() && r.residual_mm.unwrap() < 1e-6, "{r:?}");
+            }
+        }
     }
 }

@@ -11,9 +11,9 @@ use utoipa::ToSchema;
 use super::extract::{Authorized, COMPENSATE, JsonBody};
 use super::robots::find as find_robot;
 use super::{ApiError, AppState};
-use crate::domain::pose::{Choice, Target};
+use crate::domain::pose::{compensate_target, compensate_targets};
 use crate::domain::{CompensationResult, TargetSpec, ToolSpec};
-use crate::kinematics::{Compensator, Param, ParameterSet, Seed, Tool};
+use crate::kinematics::{Compensator, Param, ParameterSet, Tool};
 
 /// A batch of targets to compensate.
 #[derive(Debug, Deserialize, ToSchema)]
@@ -53,61 +53,8 @@ pub fn with_tool(set: &ParameterSet, tool: Tool) -> ParameterSet {
     s
 }
 
-/// Compensate one validated target.
-pub fn compensate_one(comp: &Compensator, dof: usize, i: usize, t: &TargetSpec) -> CompensationResult {
-    let id = t.id.clone();
-    let target = match t.to_target(dof) {
-        Ok(t) => t,
-        Err(e) => return CompensationResult::failed(id, e.within(&format!("targets[{i}]")).to_string()),
-    };
-    let res = match &target {
-        Target::NominalJoints(q) => comp.joints(q),
-        Target::Pose { pose, choice } => match choice {
-            Choice::Branch(b) => comp.pose(pose, Seed::Branch(*b)),
-            Choice::Confdata(c) => comp.pose(pose, Seed::Confdata(*c)),
-            Choice::Seed(q) => comp.pose(pose, Seed::Joints(q)),
-        },
-    };
-    match res {
-        Ok(c) => CompensationResult::ok(id, &c),
-        Err(e) => CompensationResult::from_ik_error(id, &e),
-    }
-}
-
 /// Batches up to this size are solved on the request's own task.
 const INLINE_TARGETS: usize = 8;
-
-/// Targets per thread below which splitting a batch across cores is not worth a thread.
-const TARGETS_PER_THREAD: usize = 256;
-
-/// Compensate a batch, split across the machine's cores when it is large; results in order.
-pub fn compensate_batch(comp: &Compensator, dof: usize, targets: &[TargetSpec]) -> Vec<CompensationResult> {
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    compensate_on(comp, dof, targets, cores.min(targets.len() / TARGETS_PER_THREAD).max(1))
-}
-
-/// Compensate a batch on `threads` threads (contiguous chunks); results in order.
-fn compensate_on(comp: &Compensator, dof: usize, targets: &[TargetSpec], threads: usize) -> Vec<CompensationResult> {
-    if threads <= 1 {
-        return targets.iter().enumerate().map(|(i, t)| compensate_one(comp, dof, i, t)).collect();
-    }
-    let chunk = targets.len().div_ceil(threads);
-    std::thread::scope(|s| {
-        let parts: Vec<_> = targets
-            .chunks(chunk)
-            .enumerate()
-            .map(|(c, part)| {
-                s.spawn(move || {
-                    part.iter()
-                        .enumerate()
-                        .map(|(i, t)| compensate_one(comp, dof, c * chunk + i, t))
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        parts.into_iter().flat_map(|p| p.join().expect("a compensation thread panicked")).collect()
-    })
-}
 
 /// Compensate a batch of targets.
 #[utoipa::path(post, path = "/v1/robots/{robot_id}/compensate", tag = "compensation",
@@ -159,7 +106,7 @@ pub async fn compensate(
     let results = if custom.is_none() && targets.len() <= INLINE_TARGETS {
         // A few solves (~4 µs each) cost less than handing them to the blocking pool.
         let dof = compiled.set.dof();
-        targets.iter().enumerate().map(|(i, t)| compensate_one(&compiled.compensator, dof, i, t)).collect()
+        targets.iter().enumerate().map(|(i, t)| compensate_target(&compiled.compensator, dof, i, t)).collect()
     } else {
         let compiled = compiled.clone();
         tokio::task::spawn_blocking(move || {
@@ -171,7 +118,7 @@ pub async fn compensate(
                     (&own, set.dof())
                 }
             };
-            compensate_batch(comp, dof, &targets)
+            compensate_targets(comp, dof, &targets)
         })
         .await?
     };
@@ -182,51 +129,4 @@ pub async fn compensate(
         results,
         failed,
     }))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::kinematics::Tool;
-    use crate::kinematics::thesis::irb120_table_5_1;
-
-    /// Split across threads, a batch gives what one thread gives, in order, and a bad target's
-    /// error names its own index in the whole batch.
-    #[test]
-    fn a_split_batch_is_the_sequential_batch() {
-        let set = irb120_table_5_1(Tool::flange());
-        let comp = Compensator::new(&set);
-        let targets: Vec<TargetSpec> = (0..1500)
-            .map(|i| {
-                let f = i as f64;
-                let joints = if i % 97 == 5 {
-                    vec![0.0; 5] // wrong length: this target's own error
-                } else {
-                    vec![
-                        (f * 0.7) % 60.0 - 30.0,
-                        (f * 0.3) % 40.0 - 10.0,
-                        (f * 0.5) % 50.0 - 30.0,
-                        10.0,
-                        45.0,
-                        f % 90.0,
-                    ]
-                };
-                TargetSpec { id: Some(i.to_string()), joints_deg: Some(joints), ..Default::default() }
-            })
-            .collect();
-        let split = compensate_on(&comp, 6, &targets, 3);
-        assert_eq!(compensate_batch(&comp, 6, &targets), split);
-        let sequential: Vec<_> = targets.iter().enumerate().map(|(i, t)| compensate_one(&comp, 6, i, t)).collect();
-        assert_eq!(split, sequential);
-        assert_eq!(split.len(), 1500);
-        for (i, r) in split.iter().enumerate() {
-            assert_eq!(r.id.as_deref(), Some(i.to_string().as_str()));
-            if i % 97 == 5 {
-                let e = r.error.as_deref().unwrap();
-                assert!(e.starts_with(&format!("targets[{i}].joints_deg")), "{e}");
-            } else {
-                assert!(r.error.is_none() && r.residual_mm.unwrap() < 1e-6, "{r:?}");
-            }
-        }
-    }
 }
