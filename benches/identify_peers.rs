@@ -64,7 +64,7 @@ fn cell(n: usize) -> Cell {
 /// The peers' 23-parameter problem: plain MDH (no β, no compliance), base and tool fixed, d3 fixed.
 fn options() -> IdentifyOptions {
     IdentifyOptions {
-        model: ModelOptions { beta: false, compliance: false, extra: Vec::new() },
+        model: ModelOptions { beta: false, compliance: false, ..Default::default() },
         fixed: ["base_x", "base_y", "base_z", "base_a", "base_b", "base_c", "d3"].map(String::from).to_vec(),
         ..Default::default()
     }

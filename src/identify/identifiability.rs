@@ -56,6 +56,7 @@ fn priority(problem: &Problem, g: usize) -> (u8, i64) {
             Param::Joint(j, JointTerm::Compliance) => (3, j as i64),
             Param::Joint(j, _) => (4, j as i64),
             Param::Thermal => (4, 100),
+            Param::ToolMass => (4, 101),
             Param::Alpha(_) | Param::A(_) | Param::D(_) | Param::Theta(_) => (5, 0),
             Param::Tool(k) => (6, k as i64),
         },

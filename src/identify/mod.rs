@@ -5,6 +5,7 @@
 pub mod crossval;
 pub mod detmax;
 pub mod identifiability;
+pub mod noise;
 pub mod observability;
 pub mod problem;
 pub mod quality;
@@ -19,7 +20,8 @@ use crate::cell::Cell;
 use crate::kinematics::{JointTerm, Param, ParamLayout, ParameterSet, Tool};
 use crate::metrology::registration::{RegistrationError, estimate_base_of};
 pub use identifiability::Status;
-pub use problem::{GlobalParam, MeasurementSelection, Problem, ProblemError};
+pub use noise::NoiseModel;
+pub use problem::{GlobalParam, MeasurementSelection, Prior, Problem, ProblemError};
 pub use quality::Quality;
 pub use solver::{Fit, SolveError, SolverOptions};
 
@@ -30,19 +32,27 @@ pub struct ModelOptions {
     pub beta: bool,
     /// Linear gear compliance on every joint.
     pub compliance: bool,
-    /// Further effect terms (cyclic, backlash, coupling, cubic compliance, thermal).
+    /// Further effect terms (cyclic, backlash, coupling, cubic compliance, thermal, payload
+    /// error). A compliance `c{j}` or a `beta{j}` listed here is free even when `compliance` or
+    /// `beta` is off: the model has that one term.
     pub extra: Vec<Param>,
+    /// Correction tables: (joint, knot spacing in degrees). The knots cover the joint's range in
+    /// the identified measurements.
+    pub maps: Vec<(usize, u8)>,
 }
 
 impl Default for ModelOptions {
     fn default() -> Self {
-        Self { beta: true, compliance: true, extra: Vec::new() }
+        Self { beta: true, compliance: true, extra: Vec::new(), maps: Vec::new() }
     }
 }
 
 impl ModelOptions {
     /// Parse `+beta,-compliance,+cyc2_h1,+backlash2,+coupling5_6,+c2_cubic,+thermal_alpha`
-    /// (a `+cyc{j}_h{h}` adds its sine and cosine terms). Unsigned items add.
+    /// (a `+cyc{j}_h{h}` or `+cyc{j}_f{f}` adds its sine and cosine terms), `+tool_mass`,
+    /// `+map{j}_s{step}` (a correction table of joint j with knots every `step` degrees), and
+    /// single terms of a block that is off (`-compliance,+c3`; `-beta,+beta2`). Unsigned items
+    /// add.
     pub fn parse(spec: &str, dof: usize) -> Result<ModelOptions, String> {
         let mut m = ModelOptions::default();
         for item in spec.split(',').map(str::trim).filter(|s| !s.is_empty()) {
@@ -53,22 +63,41 @@ impl ModelOptions {
             match name {
                 "beta" => m.beta = on,
                 "compliance" => m.compliance = on,
+                _ if parse_map(name).is_some() => {
+                    let (j, step) = parse_map(name).expect("checked");
+                    if j >= dof {
+                        return Err(format!("'{item}': not an effect term of a {dof}-joint robot"));
+                    }
+                    if !on {
+                        return Err(format!("'{item}': effect terms are added with +, not removed"));
+                    }
+                    if !m.maps.contains(&(j, step)) {
+                        m.maps.push((j, step));
+                    }
+                }
                 _ => {
                     let params: Vec<Param> = if let Some(p) = Param::parse(name) {
                         vec![p]
                     } else if let Some(p) = Param::parse(&format!("{name}_sin")) {
-                        let Param::Joint(j, JointTerm::Cyclic { harmonic, .. }) = p else { unreachable!() };
-                        vec![p, Param::Joint(j, JointTerm::Cyclic { harmonic, cosine: true })]
+                        let Param::Joint(j, t) = p else { unreachable!() };
+                        let cos = match t {
+                            JointTerm::Cyclic { harmonic, .. } => JointTerm::Cyclic { harmonic, cosine: true },
+                            JointTerm::Periodic { quarters, .. } => JointTerm::Periodic { quarters, cosine: true },
+                            _ => unreachable!("only cyclic names end in _sin"),
+                        };
+                        vec![p, Param::Joint(j, cos)]
                     } else {
                         return Err(format!(
-                            "'{item}': unknown model option (beta, compliance, or an effect term such as cyc2_h1, backlash2, coupling5_6, c2_cubic, thermal_alpha)"
+                            "'{item}': unknown model option (beta, compliance, or an effect term such as cyc2_h1, cyc2_f7.25, backlash2, coupling5_6, c2_cubic, c3, beta2, map2_s3, thermal_alpha, tool_mass)"
                         ));
                     };
                     for p in params {
                         let ok = match p {
                             Param::Joint(j, JointTerm::Coupling { from }) => j < dof && from < dof,
-                            Param::Joint(j, t) => j < dof && t != JointTerm::Compliance,
-                            Param::Thermal => true,
+                            Param::Joint(_, JointTerm::Map { .. }) => false,
+                            Param::Joint(j, _) => j < dof,
+                            Param::Beta(j) => j < dof,
+                            Param::Thermal | Param::ToolMass => true,
                             _ => false,
                         };
                         if !ok {
@@ -86,6 +115,29 @@ impl ModelOptions {
         }
         Ok(m)
     }
+}
+
+/// `map{j}_s{step}` → (0-based joint, step in degrees).
+fn parse_map(name: &str) -> Option<(usize, u8)> {
+    let rest = name.strip_prefix("map")?;
+    let (j, step) = rest.split_once("_s")?;
+    let j: usize = j.parse().ok().filter(|&j: &usize| j >= 1 && !j.to_string().starts_with('0'))?;
+    let step: u8 = step.parse().ok().filter(|&s: &u8| s >= 1 && step == s.to_string())?;
+    Some((j - 1, step))
+}
+
+/// The knots of a correction table on joint j covering the joint's range in `qs` (rad), one
+/// knot beyond each end so every reading sits between two knots.
+pub fn map_knots(j: usize, step_deg: u8, qs: impl Iterator<Item = f64>) -> Vec<Param> {
+    let step = step_deg as f64 * crate::units::DEG;
+    let (lo, hi) = qs.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), q| (lo.min(q), hi.max(q)));
+    if !lo.is_finite() {
+        return Vec::new();
+    }
+    let (k0, k1) = ((lo / step).floor() as i64, (hi / step).ceil() as i64);
+    (k0.max(i16::MIN as i64)..=k1.min(i16::MAX as i64))
+        .map(|k| Param::Joint(j, JointTerm::Map { step_deg, knot: k as i16 }))
+        .collect()
 }
 
 /// Everything an identification can be told.
@@ -114,6 +166,16 @@ pub struct IdentifyOptions {
     /// and `tool` (every tool's six). `["base", "tool"]` re-registers a calibrated robot in a new
     /// cell, or gives the "before calibration" reference of a cell without a base guess.
     pub only: Vec<String>,
+    /// Weight every measurement by its instrument's σ (weighted least squares); `None` = every
+    /// residual row weighs the same (the thesis's plain least squares).
+    pub noise: Option<NoiseModel>,
+    /// Smoothing of correction tables (`map` terms): the weight of the second-difference rows
+    /// relative to the data's information on one knot (η in λ² = η·mean‖J_knot‖²). Larger is
+    /// smoother.
+    pub map_smoothing: f64,
+    /// Sessions whose tool TCP is identified although they declare it (a reflector nest whose
+    /// declared offset is suspect).
+    pub free_tcp: Vec<String>,
 }
 
 impl Default for IdentifyOptions {
@@ -127,9 +189,15 @@ impl Default for IdentifyOptions {
             rotation_weight: 0.1,
             start: None,
             only: Vec::new(),
+            noise: None,
+            map_smoothing: DEFAULT_MAP_SMOOTHING,
+            free_tcp: Vec::new(),
         }
     }
 }
+
+/// Default η of [`IdentifyOptions::map_smoothing`].
+pub const DEFAULT_MAP_SMOOTHING: f64 = 1.0;
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum IdentifyError {
@@ -203,11 +271,22 @@ pub fn prepare(cell: &Cell, opts: &IdentifyOptions) -> Result<Prepared, Identify
         }
     }
     layout.extend(&opts.model.extra);
+    if !opts.model.maps.is_empty() {
+        let picks = opts.selection.picks(cell)?;
+        for &(j, step) in &opts.model.maps {
+            let qs = picks.iter().map(|&(s, i)| cell.sessions[s].measurements[i].q[j]);
+            layout.extend(&map_knots(j, step, qs));
+        }
+    }
     let base = match cell.base_guess {
         Some(b) => b,
         None => estimate_base_of(cell, &opts.selection.picks(cell)?)?.0,
     };
-    let problem = Problem::new(cell, layout, base, &opts.selection, opts.rotation_weight)?;
+    let mut problem = Problem::new(cell, layout, base, &opts.selection, opts.rotation_weight)?;
+    if let Some(noise) = &opts.noise {
+        noise.check().map_err(IdentifyError::Option)?;
+        weight_by_instrument(&mut problem, cell, noise);
+    }
     let mut x0 = problem.nominal.clone();
     if let Some(start) = &opts.start {
         if start.model.dof() != dof || start.model.preset != cell.model.preset {
@@ -237,17 +316,20 @@ pub fn prepare(cell: &Cell, opts: &IdentifyOptions) -> Result<Prepared, Identify
         let name = problem.name(g);
         match *gp {
             GlobalParam::Robot(i) => match problem.layout.params()[i] {
-                Param::Beta(_) if !opts.model.beta => {
+                p @ Param::Beta(_) if !opts.model.beta && !opts.model.extra.contains(&p) => {
                     fixed.insert(g, format!("{name}: fixed, the model has no β (-beta)"));
                 }
-                Param::Joint(_, JointTerm::Compliance) if !opts.model.compliance => {
+                p @ Param::Joint(_, JointTerm::Compliance)
+                    if !opts.model.compliance && !opts.model.extra.contains(&p) =>
+                {
                     fixed.insert(g, format!("{name}: fixed, the model has no compliance (-compliance)"));
                 }
                 _ => {}
             },
             GlobalParam::Tool { tool, k } => {
                 let b = &problem.tools[tool];
-                if !b.identify_tcp && (k < 3 || b.has_orientation) {
+                let freed = b.sessions.iter().any(|s| opts.free_tcp.contains(s));
+                if !b.identify_tcp && !freed && (k < 3 || b.has_orientation) {
                     fixed.insert(g, format!("{name}: fixed, the session declares its TCP (measured, e.g. on a CMM)"));
                 }
             }
@@ -286,16 +368,83 @@ pub fn prepare(cell: &Cell, opts: &IdentifyOptions) -> Result<Prepared, Identify
         fixed.insert(g, format!("{f}: fixed by the user ({at})"));
     }
 
-    // Identifiability at the starting point.
+    for s in &opts.free_tcp {
+        if !problem.tools.iter().any(|b| b.sessions.contains(s)) {
+            return Err(IdentifyError::Option(format!("free TCP: '{s}' is not a session of this problem")));
+        }
+    }
+
+    // Identifiability at the starting point (correction tables with their regularisation rows).
     let all: Vec<usize> = (0..problem.n_params()).collect();
     let mut j0 = Mat::<f64>::zeros(problem.n_rows, all.len());
     let mut r0 = vec![0.0; problem.n_rows];
     problem.linearise(&x0, &all, &mut j0, &mut r0);
+    let priors = map_priors(&problem, &j0, opts.map_smoothing)?;
+    if !priors.is_empty() {
+        problem.add_priors(priors);
+        j0 = Mat::<f64>::zeros(problem.n_rows, all.len());
+        r0 = vec![0.0; problem.n_rows];
+        problem.linearise(&x0, &all, &mut j0, &mut r0);
+    }
     let (free, status) = identifiability::select(&problem, &j0, &fixed);
     if free.is_empty() {
         return Err(IdentifyError::Option("no parameter is free to identify".into()));
     }
     Ok(Prepared { problem, x0, free, status, base })
+}
+
+/// Weight each observation by 1/σ of its instrument (position rows) and of the orientation
+/// reading (rotation rows, whose residual is rotation_weight·angle).
+pub fn weight_by_instrument(problem: &mut Problem, cell: &Cell, noise: &NoiseModel) {
+    let instruments: Vec<_> = cell.sessions.iter().map(|s| s.instrument).collect();
+    let positions: Vec<nalgebra::Vector3<f64>> = problem.obs.iter().map(|o| problem.target_position(o)).collect();
+    let rw = problem.rotation_weight;
+    let mut k = 0;
+    problem.set_weights(|o| {
+        let sp = noise.position_sigma(instruments[o.session], &positions[k]);
+        k += 1;
+        [1.0 / sp, 1.0 / (noise.rotation * rw)]
+    });
+}
+
+/// The regularisation rows of every correction table (`map` terms) of the problem: per table, the
+/// second differences of consecutive knots, and one row for the table's mean. The mean row fixes
+/// the one direction the data cannot see — a constant table is the joint's zero offset — without
+/// biasing anything (the offset takes the constant). The second-difference rows weigh
+/// λ² = η·(mean squared norm of the table's columns in `j0`), so η is unit-free: η = 1 makes
+/// one unit of curvature cost what one unit of a typical knot's value explains.
+pub fn map_priors(problem: &Problem, j0: &Mat<f64>, eta: f64) -> Result<Vec<Prior>, IdentifyError> {
+    if !(eta.is_finite() && eta > 0.0) {
+        return Err(IdentifyError::Option(format!("map smoothing must be a positive number, got {eta}")));
+    }
+    // Tables: (joint, step) → knots (knot index, global parameter).
+    let mut tables: std::collections::BTreeMap<(usize, u8), Vec<(i16, usize)>> = Default::default();
+    for (g, gp) in problem.params.iter().enumerate() {
+        if let GlobalParam::Robot(i) = *gp
+            && let Param::Joint(j, JointTerm::Map { step_deg, knot }) = problem.layout.params()[i]
+        {
+            tables.entry((j, step_deg)).or_default().push((knot, g));
+        }
+    }
+    let mut priors = Vec::new();
+    for knots in tables.values_mut() {
+        knots.sort_unstable();
+        let norm2: Vec<f64> =
+            knots.iter().map(|&(_, g)| (0..problem.n_obs_rows).map(|r| j0[(r, g)].powi(2)).sum::<f64>()).collect();
+        let mean = norm2.iter().sum::<f64>() / norm2.len() as f64;
+        if mean <= 0.0 {
+            continue; // a table the data never reach: identifiability fixes it
+        }
+        let lambda = (eta * mean).sqrt();
+        for w in knots.windows(3) {
+            if w[1].0 == w[0].0 + 1 && w[2].0 == w[1].0 + 1 {
+                priors.push(Prior { terms: vec![(w[0].1, lambda), (w[1].1, -2.0 * lambda), (w[2].1, lambda)] });
+            }
+        }
+        let m = mean.sqrt() / knots.len() as f64;
+        priors.push(Prior { terms: knots.iter().map(|&(_, g)| (g, m)).collect() });
+    }
+    Ok(priors)
 }
 
 /// The candidate pool for DETMAX: every measurement of the chosen sessions, as its Jacobian
@@ -377,8 +526,8 @@ pub fn select_detmax(
 /// Identify a cell's robot.
 pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, IdentifyError> {
     let Prepared { problem, x0, free, status, base } = prepare(cell, opts)?;
-    if problem.n_rows <= free.len() {
-        return Err(IdentifyError::Underdetermined { rows: problem.n_rows, params: free.len() });
+    if problem.n_obs_rows + problem.priors.len() <= free.len() {
+        return Err(IdentifyError::Underdetermined { rows: problem.n_obs_rows, params: free.len() });
     }
 
     let fit = solver::solve(&problem, &free, &x0, &opts.solver)?;
@@ -468,15 +617,24 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
 }
 
 impl Identification {
+    /// The weighted Jacobian of the free parameters and the weighted residual at the solution
+    /// (measurement rows, then prior rows), as the solver saw them.
+    pub fn linearised(&self) -> (Mat<f64>, Vec<f64>) {
+        let mut j = Mat::<f64>::zeros(self.problem.n_rows, self.free.len());
+        let mut r = vec![0.0; self.problem.n_rows];
+        self.problem.linearise(&self.x, &self.free, &mut j, &mut r);
+        (j, r)
+    }
+
     /// The model's TCP prediction and its standard uncertainty from the parameter covariance, for
     /// each measurement of `session` (any session of the cell, e.g. a validation one measured with
     /// another, declared tool): (position in {W}, √trace(J·Cov·Jᵀ)) in m. Only the robot's free
     /// parameters carry uncertainty for a tool that was not identified.
     pub fn predict(&self, session: &crate::cell::Session) -> Vec<(nalgebra::Vector3<f64>, f64)> {
-        use crate::kinematics::{GravityModel, JointState, Rows};
+        use crate::kinematics::{JointState, Rows};
         let tool_tcp = if session.tool == self.set.tool { self.set.pose_of(Param::Tool) } else { session.tool.tcp };
         let chain = self.set.chain().with_base_tool(self.set.pose_of(Param::Base), tool_tcp);
-        let gravity = GravityModel::new(&self.set.model, &session.tool);
+        let gravity = self.set.gravity_for(&session.tool);
         let same_tool = session.tool == self.set.tool;
         // Layout column of each free parameter (robot parameters, and tool 0's when it is this tool).
         let cols: Vec<Option<usize>> = self

@@ -66,6 +66,16 @@ pub struct Obs {
     /// First row in the stacked residual.
     pub row: usize,
     pub rows: usize,
+    /// Row multipliers (1/σ in a common unit) of the position rows and of the rotation rows: 1
+    /// unless the caller weights the problem by an instrument model ([`Problem::set_weights`]).
+    pub weight: [f64; 2],
+}
+
+/// A linear pseudo-observation Σ coef·x ≈ 0 on global parameters: the regularisation rows of a
+/// correction table (smoothness, zero mean). Appended after the measurement rows.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Prior {
+    pub terms: Vec<(usize, f64)>,
 }
 
 /// Which measurements enter the problem.
@@ -146,7 +156,11 @@ pub struct Problem {
     /// Nominal value of every global parameter (SI).
     pub nominal: Vec<f64>,
     pub obs: Vec<Obs>,
+    /// Rows of the stacked system: the measurement rows, then one per prior.
     pub n_rows: usize,
+    /// Rows of the measurements alone.
+    pub n_obs_rows: usize,
+    pub priors: Vec<Prior>,
     /// m per rad for rotation residual rows.
     pub rotation_weight: f64,
     /// Session names, in cell order.
@@ -207,6 +221,19 @@ impl Problem {
         }
         // Observations.
         let gravity: Vec<GravityModel> = tools.iter().map(|b| GravityModel::new(&model, &b.tool)).collect();
+        // With a payload-error parameter, ∂τ/∂m of each tool: the torques are linear in the
+        // payload mass (its first moment enters the recursion linearly), so the difference of the
+        // torques with one kilogram more is exact, not a finite-difference approximation.
+        let heavier: Option<Vec<GravityModel>> = layout.index_of(Param::ToolMass).map(|_| {
+            tools
+                .iter()
+                .map(|b| {
+                    let mut t = b.tool.clone();
+                    t.mass += 1.0;
+                    GravityModel::new(&model, &t)
+                })
+                .collect()
+        });
         let trical = TriCal::default();
         let mut obs = Vec::with_capacity(picks.len());
         let mut row = 0;
@@ -221,6 +248,12 @@ impl Problem {
                 }
             }
             state.temperature_c = m.temperature_c.unwrap_or(REFERENCE_TEMPERATURE_C);
+            if let Some(h) = &heavier {
+                let t1 = h[t].torques(&m.q);
+                for j in 0..model.dof() {
+                    state.tau_per_kg[j] = t1[j] - tau[j];
+                }
+            }
             let target = match (&m.observation, &m.indicators) {
                 (Observation::Ball(k), ind) => {
                     let centre =
@@ -237,7 +270,7 @@ impl Problem {
                 }
             };
             let rows = if matches!(target, Target::Pose(_)) { 6 } else { 3 };
-            obs.push(Obs { session: s, index: i, tool: t, state, target, row, rows });
+            obs.push(Obs { session: s, index: i, tool: t, state, target, row, rows, weight: [1.0; 2] });
             row += rows;
         }
         Ok(Problem {
@@ -248,6 +281,8 @@ impl Problem {
             nominal,
             obs,
             n_rows: row,
+            n_obs_rows: row,
+            priors: Vec::new(),
             rotation_weight,
             session_names: cell.sessions.iter().map(|s| s.name.clone()).collect(),
         })
@@ -255,6 +290,39 @@ impl Problem {
 
     pub fn n_params(&self) -> usize {
         self.params.len()
+    }
+
+    /// Weight every observation: `weight(obs)` gives the multipliers of its position and rotation
+    /// rows (1/σ of each, in one common unit so the rows are comparable).
+    pub fn set_weights(&mut self, mut weight: impl FnMut(&Obs) -> [f64; 2]) {
+        for o in &mut self.obs {
+            o.weight = weight(o);
+        }
+    }
+
+    /// Append prior rows (Σ coef·x ≈ 0 on global parameters).
+    pub fn add_priors(&mut self, priors: Vec<Prior>) {
+        self.n_rows += priors.len();
+        self.priors.extend(priors);
+    }
+
+    /// Keep only the observations for which `keep(obs)` holds (rows renumbered, priors kept): a
+    /// training set of a cross-validation fold without rebuilding the problem.
+    pub fn retain_obs(&mut self, keep: impl Fn(&Obs) -> bool) {
+        self.obs.retain(|o| keep(o));
+        let mut row = 0;
+        for o in &mut self.obs {
+            o.row = row;
+            row += o.rows;
+        }
+        self.n_obs_rows = row;
+        self.n_rows = row + self.priors.len();
+    }
+
+    fn write_priors(&self, x: &[f64], out: &mut [f64]) {
+        for (k, p) in self.priors.iter().enumerate() {
+            out[self.n_obs_rows + k] = -p.terms.iter().map(|&(g, c)| c * x[g]).sum::<f64>();
+        }
     }
 
     /// Global index of a robot parameter, if present.
@@ -303,19 +371,42 @@ impl Problem {
             let f = chains[o.tool].fk(&o.state);
             self.write_residual(o, &f, &mut out[o.row..o.row + o.rows]);
         }
+        self.write_priors(x, out);
     }
 
-    fn write_residual(&self, o: &Obs, f: &Frame, out: &mut [f64]) {
+    /// The unweighted error target − model of an observation at the chain of its tool: position
+    /// (m) and, for a pose, the world rotation vector of R_target·R_modelᵀ (rad).
+    pub fn error(&self, o: &Obs, f: &Frame) -> (Vector3<f64>, Option<Vector3<f64>>) {
         let target = match &o.target {
             Target::Point(p) => *p,
             Target::Ball { centre, offset } => centre - f.r * offset,
             Target::Pose(p) => p.t,
         };
-        let d = target - f.t;
-        out[..3].copy_from_slice(d.as_slice());
-        if let Target::Pose(p) = &o.target {
-            let w = rotation_vector(&(p.r * f.r.transpose())) * self.rotation_weight;
-            out[3..6].copy_from_slice(w.as_slice());
+        let rot = match &o.target {
+            Target::Pose(p) => Some(rotation_vector(&(p.r * f.r.transpose()))),
+            _ => None,
+        };
+        (target - f.t, rot)
+    }
+
+    /// The observed position of an observation (its target before any TriCal offset), {W}, m.
+    pub fn target_position(&self, o: &Obs) -> Vector3<f64> {
+        match &o.target {
+            Target::Point(p) => *p,
+            Target::Ball { centre, .. } => *centre,
+            Target::Pose(p) => p.t,
+        }
+    }
+
+    fn write_residual(&self, o: &Obs, f: &Frame, out: &mut [f64]) {
+        let (d, rot) = self.error(o, f);
+        for k in 0..3 {
+            out[k] = d[k] * o.weight[0];
+        }
+        if let Some(w) = rot {
+            for k in 0..3 {
+                out[3 + k] = w[k] * self.rotation_weight * o.weight[1];
+            }
         }
     }
 
@@ -358,8 +449,23 @@ impl Problem {
             self.write_residual(o, &f, &mut res[o.row..o.row + o.rows]);
             for &(_, c) in &wanted[o.tool] {
                 for r in 0..o.rows {
-                    let w = if r >= 3 { self.rotation_weight } else { 1.0 };
+                    let w = if r >= 3 { self.rotation_weight * o.weight[1] } else { o.weight[0] };
                     jac[(o.row + r, c)] = buf[c * 6 + r] * w;
+                }
+            }
+        }
+        if !self.priors.is_empty() {
+            self.write_priors(x, res);
+            let col: std::collections::HashMap<usize, usize> = free.iter().enumerate().map(|(c, &g)| (g, c)).collect();
+            for (k, p) in self.priors.iter().enumerate() {
+                let r = self.n_obs_rows + k;
+                for c in 0..free.len() {
+                    jac[(r, c)] = 0.0;
+                }
+                for &(g, coef) in &p.terms {
+                    if let Some(&c) = col.get(&g) {
+                        jac[(r, c)] += coef;
+                    }
                 }
             }
         }
@@ -380,7 +486,7 @@ impl Problem {
             };
             if let Some(i) = i {
                 for r in 0..o.rows {
-                    let w = if r >= 3 { self.rotation_weight } else { 1.0 };
+                    let w = if r >= 3 { self.rotation_weight * o.weight[1] } else { o.weight[0] };
                     out[r * free.len() + c] = buf[i * 6 + r] * w;
                 }
             }

@@ -10,7 +10,7 @@ use nalgebra::{Matrix3, Vector3};
 
 use super::frame::{Frame, rot_zyx};
 use super::model::{MAX_JOINTS, RobotModel};
-use super::params::{JointTerm, Param, ParamLayout, REFERENCE_TEMPERATURE_C};
+use super::params::{JointTerm, MapEdge, Param, ParamLayout, REFERENCE_TEMPERATURE_C};
 
 /// Everything logged with one configuration that the model can depend on: joint readings, the
 /// gravity holding torques at them, the approach direction of each joint and the temperature.
@@ -25,6 +25,11 @@ pub struct JointState {
     pub approach: [f64; MAX_JOINTS],
     /// Robot temperature, °C (the reference temperature when unknown).
     pub temperature_c: f64,
+    /// ∂τ/∂m: the holding torques of one kilogram more payload at the tool's centre of mass,
+    /// N·m/kg. Only an identification that estimates the payload error (`tool_mass`) fills it;
+    /// everywhere else a parameter set's `tool_mass` is already in `tau` (see
+    /// `ParameterSet::gravity_for`), and this stays zero so it is not counted twice.
+    pub tau_per_kg: [f64; MAX_JOINTS],
 }
 
 impl JointState {
@@ -35,6 +40,7 @@ impl JointState {
             tau: [0.0; MAX_JOINTS],
             approach: [0.0; MAX_JOINTS],
             temperature_c: REFERENCE_TEMPERATURE_C,
+            tau_per_kg: [0.0; MAX_JOINTS],
         };
         s.q[..q.len()].copy_from_slice(q);
         s
@@ -151,10 +157,13 @@ pub struct Chain {
     tool_chi: [f64; 6],
     tool: Frame,
     compliance: [f64; MAX_JOINTS],
-    /// Joint-angle terms other than linear compliance: (joint, term, value).
-    terms: Vec<(usize, JointTerm, f64)>,
+    /// Joint-angle terms other than linear compliance: (joint, term, value, table edge of a map
+    /// knot).
+    terms: Vec<(usize, JointTerm, f64, MapEdge)>,
     /// Thermal expansion coefficient of the link lengths, 1/K.
     thermal: f64,
+    /// Payload mass error, kg (acts through `JointState::tau_per_kg`).
+    tool_mass: f64,
 }
 
 impl Chain {
@@ -182,6 +191,7 @@ impl Chain {
             compliance: [0.0; MAX_JOINTS],
             terms: Vec::new(),
             thermal: 0.0,
+            tool_mass: 0.0,
         };
         for (p, &v) in layout.params().iter().zip(values) {
             match *p {
@@ -191,10 +201,27 @@ impl Chain {
                 Param::Theta(j) => chain.rows[j].theta = v,
                 Param::Beta(j) => beta[j] = Some(v),
                 Param::Joint(j, JointTerm::Compliance) => chain.compliance[j] = v,
-                Param::Joint(j, term) => chain.terms.push((j, term, v)),
+                Param::Joint(j, term) => chain.terms.push((j, term, v, MapEdge::default())),
                 Param::Base(k) => chain.base_chi[k] = v,
                 Param::Tool(k) => chain.tool_chi[k] = v,
                 Param::Thermal => chain.thermal = v,
+                Param::ToolMass => chain.tool_mass = v,
+            }
+        }
+        // The first and last knot of each (joint, step) table extend their value beyond it.
+        let knots: Vec<(usize, u8, i16)> = chain
+            .terms
+            .iter()
+            .filter_map(|&(j, t, _, _)| match t {
+                JointTerm::Map { step_deg, knot } => Some((j, step_deg, knot)),
+                _ => None,
+            })
+            .collect();
+        for (j, t, _, edge) in chain.terms.iter_mut() {
+            if let JointTerm::Map { step_deg, knot } = *t {
+                let same = knots.iter().filter(|&&(kj, ks, _)| kj == *j && ks == step_deg).map(|k| k.2);
+                let (lo, hi) = same.fold((i16::MAX, i16::MIN), |(lo, hi), k| (lo.min(k), hi.max(k)));
+                *edge = MapEdge { first: knot == lo, last: knot == hi };
             }
         }
         for j in 0..n {
@@ -250,17 +277,37 @@ impl Chain {
         c
     }
 
+    /// The state as the joint terms see it: with a payload error, the torques of the true payload
+    /// τ + m·∂τ/∂m.
+    #[inline]
+    fn effective(&self, s: &JointState) -> JointState {
+        let mut e = *s;
+        if self.tool_mass != 0.0 {
+            for j in 0..self.n {
+                e.tau[j] += self.tool_mass * s.tau_per_kg[j];
+            }
+        }
+        e
+    }
+
     /// The DH joint angles θ_j = q_j + offset_j + c_j·τ_j + Σ (joint terms of j).
     #[inline]
     pub fn joint_angles(&self, s: &JointState) -> [f64; MAX_JOINTS] {
+        let s = &self.effective(s);
         let mut th = [0.0; MAX_JOINTS];
         for j in 0..self.n {
             th[j] = s.q[j] + self.rows[j].theta + self.compliance[j] * s.tau[j];
         }
-        for &(j, term, v) in &self.terms {
-            th[j] += v * basis(term, j, s);
+        for &(j, term, v, edge) in &self.terms {
+            th[j] += v * basis_at(term, j, s, edge);
         }
         th
+    }
+
+    /// The joint-angle error the effect terms add to joint j at a state (compliance included),
+    /// rad: θ_j − q_j − offset_j.
+    pub fn joint_correction(&self, s: &JointState, j: usize) -> f64 {
+        self.joint_angles(s)[j] - s.q[j] - self.rows[j].theta
     }
 
     /// ∂θ_i/∂q_k (row i, column k): the identity plus what the joint terms add. `dtau` is
@@ -279,7 +326,8 @@ impl Chain {
                 }
             }
         }
-        for &(j, term, v) in &self.terms {
+        let s = &self.effective(s);
+        for &(j, term, v, edge) in &self.terms {
             match term {
                 JointTerm::Compliance => unreachable!("linear compliance is kept apart"),
                 JointTerm::ComplianceCubic => {
@@ -293,6 +341,12 @@ impl Chain {
                     let (sn, cs) = (h * s.q[j]).sin_cos();
                     d[j][j] += v * h * if cosine { -sn } else { cs };
                 }
+                JointTerm::Periodic { quarters, cosine } => {
+                    let f = quarters as f64 / 4.0;
+                    let (sn, cs) = (f * s.q[j]).sin_cos();
+                    d[j][j] += v * f * if cosine { -sn } else { cs };
+                }
+                JointTerm::Map { .. } => d[j][j] += v * map_slope(term, s.q[j], edge),
                 JointTerm::Backlash => {}
                 JointTerm::Coupling { from } => d[j][from] += v,
             }
@@ -303,7 +357,7 @@ impl Chain {
     /// Whether θ depends on the gravity torques (so callers must supply τ and, for IK, ∂τ/∂q).
     pub fn uses_torques(&self) -> bool {
         self.compliance.iter().any(|&c| c != 0.0)
-            || self.terms.iter().any(|&(_, t, v)| t == JointTerm::ComplianceCubic && v != 0.0)
+            || self.terms.iter().any(|&(_, t, v, _)| t == JointTerm::ComplianceCubic && v != 0.0)
     }
 
     /// Length scale 1 + α·(T − 20 °C) of a state.
@@ -448,6 +502,7 @@ impl Chain {
         let theta = self.joint_angles(s);
         let scale = self.length_scale(s);
         let t = self.trace_scaled(&theta, scale);
+        let s = &self.effective(s);
         let p = t.tcp.t;
         let nr = rows as usize;
         assert!(ld >= nr, "leading dimension smaller than the rows");
@@ -461,7 +516,32 @@ impl Chain {
                 Param::Beta(j) => rot_col(&t.y_beta[j], &t.o_beta[j], &p),
                 Param::Theta(j) => rot_col(&t.z[j], &t.o[j], &p),
                 Param::D(j) => trans_col(&(t.z[j] * scale)),
-                Param::Joint(j, term) => times(rot_col(&t.z[j], &t.o[j], &p), basis(term, j, s)),
+                Param::Joint(j, term) => {
+                    let edge = match term {
+                        JointTerm::Map { .. } => self.edge_of(j, term),
+                        _ => MapEdge::default(),
+                    };
+                    times(rot_col(&t.z[j], &t.o[j], &p), basis_at(term, j, s, edge))
+                }
+                Param::ToolMass => {
+                    // ∂θ_j/∂m = (c_j + 3·d_j·τ_j²)·∂τ_j/∂m, summed over the joints' columns.
+                    let mut col = [0.0; 6];
+                    for j in 0..self.n {
+                        let mut k = self.compliance[j];
+                        for &(tj, term, v, _) in &self.terms {
+                            if tj == j && term == JointTerm::ComplianceCubic {
+                                k += 3.0 * v * s.tau[j] * s.tau[j];
+                            }
+                        }
+                        let w = k * s.tau_per_kg[j];
+                        if w != 0.0 {
+                            for (c, v) in col.iter_mut().zip(rot_col(&t.z[j], &t.o[j], &p)) {
+                                *c += w * v;
+                            }
+                        }
+                    }
+                    col
+                }
                 Param::Thermal => {
                     // ∂p/∂α = (T − 20)·Σ_j (a_j·x_{j−1} + d_j·z_j): every length grows together.
                     let dt = s.temperature_c - REFERENCE_TEMPERATURE_C;
@@ -502,6 +582,18 @@ impl Chain {
     }
 }
 
+impl Chain {
+    /// Table edge of a map knot of joint j (the chain's own record of its tables).
+    fn edge_of(&self, j: usize, term: JointTerm) -> MapEdge {
+        self.terms.iter().find(|&&(tj, t, _, _)| tj == j && t == term).map_or(MapEdge::default(), |t| t.3)
+    }
+
+    /// Payload mass error, kg.
+    pub fn tool_mass(&self) -> f64 {
+        self.tool_mass
+    }
+}
+
 #[inline(always)]
 fn unit(k: usize) -> Vector3<f64> {
     let mut v = Vector3::zeros();
@@ -522,9 +614,16 @@ fn trans_col(u: &Vector3<f64>) -> [f64; 6] {
     [u.x, u.y, u.z, 0.0, 0.0, 0.0]
 }
 
-/// φ of a joint term at a state: what its value multiplies to give Δθ_j.
+/// φ of a joint term at a state: what its value multiplies to give Δθ_j. A map knot is taken as
+/// an interior knot of its table (see [`basis_at`]).
 #[inline]
 pub fn basis(term: JointTerm, j: usize, s: &JointState) -> f64 {
+    basis_at(term, j, s, MapEdge::default())
+}
+
+/// φ of a joint term at a state, a map knot at the given edge of its table.
+#[inline]
+pub fn basis_at(term: JointTerm, j: usize, s: &JointState, edge: MapEdge) -> f64 {
     match term {
         JointTerm::Compliance => s.tau[j],
         JointTerm::ComplianceCubic => s.tau[j] * s.tau[j] * s.tau[j],
@@ -532,9 +631,26 @@ pub fn basis(term: JointTerm, j: usize, s: &JointState) -> f64 {
             let a = harmonic as f64 * s.q[j];
             if cosine { a.cos() } else { a.sin() }
         }
+        JointTerm::Periodic { quarters, cosine } => {
+            let a = quarters as f64 / 4.0 * s.q[j];
+            if cosine { a.cos() } else { a.sin() }
+        }
+        JointTerm::Map { step_deg, knot } => {
+            let u = s.q[j] / (step_deg as f64 * crate::units::DEG) - knot as f64;
+            if (u <= 0.0 && edge.first) || (u >= 0.0 && edge.last) { 1.0 } else { (1.0 - u.abs()).max(0.0) }
+        }
         JointTerm::Backlash => s.approach[j],
         JointTerm::Coupling { from } => s.q[from],
     }
+}
+
+/// dφ/dq_j of a map knot's hat function (zero outside its support and on the flat extensions).
+#[inline]
+fn map_slope(term: JointTerm, q: f64, edge: MapEdge) -> f64 {
+    let JointTerm::Map { step_deg, knot } = term else { return 0.0 };
+    let step = step_deg as f64 * crate::units::DEG;
+    let u = q / step - knot as f64;
+    if u.abs() >= 1.0 || (u <= 0.0 && edge.first) || (u >= 0.0 && edge.last) { 0.0 } else { -u.signum() / step }
 }
 
 #[inline(always)]
@@ -568,14 +684,51 @@ mod tests {
             c
         };
         let grow = 1.0 + get(Param::Thermal).unwrap_or(0.0) * (s.temperature_c - 20.0);
+        // The true payload's torques, and the table of each map: linear interpolation between
+        // the knots present, constant beyond the first and last.
+        let mass = get(Param::ToolMass).unwrap_or(0.0);
+        let tau: Vec<f64> = (0..model.dof()).map(|j| s.tau[j] + mass * s.tau_per_kg[j]).collect();
+        let table = |j: usize, step: u8| -> f64 {
+            let mut knots: Vec<(f64, f64)> = layout
+                .params()
+                .iter()
+                .zip(values)
+                .filter_map(|(p, &v)| match *p {
+                    Param::Joint(k, JointTerm::Map { step_deg, knot }) if k == j && step_deg == step => {
+                        Some((knot as f64 * step as f64 * std::f64::consts::PI / 180.0, v))
+                    }
+                    _ => None,
+                })
+                .collect();
+            knots.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let q = s.q[j];
+            if q <= knots[0].0 {
+                return knots[0].1;
+            }
+            if q >= knots[knots.len() - 1].0 {
+                return knots[knots.len() - 1].1;
+            }
+            let i = knots.iter().rposition(|k| k.0 <= q).unwrap();
+            // Knots need not be contiguous: between two present knots that are not neighbours the
+            // hat functions leave a gap of zero.
+            let (a, b) = (knots[i], knots[i + 1]);
+            let step_rad = step as f64 * std::f64::consts::PI / 180.0;
+            let ua = (q - a.0) / step_rad;
+            let ub = (b.0 - q) / step_rad;
+            a.1 * (1.0 - ua).max(0.0) + b.1 * (1.0 - ub).max(0.0)
+        };
         let mut t = Frame::from_xyzabc(&chi(Param::Base));
         for j in 0..model.dof() {
             let mut th = s.q[j] + get(Param::Theta(j)).unwrap();
             for (i, p) in layout.params().iter().enumerate() {
                 let v = values[i];
                 th += match *p {
-                    Param::Joint(k, JointTerm::Compliance) if k == j => v * s.tau[j],
-                    Param::Joint(k, JointTerm::ComplianceCubic) if k == j => v * s.tau[j].powi(3),
+                    Param::Joint(k, JointTerm::Compliance) if k == j => v * tau[j],
+                    Param::Joint(k, JointTerm::ComplianceCubic) if k == j => v * tau[j].powi(3),
+                    Param::Joint(k, JointTerm::Periodic { quarters, cosine }) if k == j => {
+                        let a = quarters as f64 / 4.0 * s.q[j];
+                        v * if cosine { a.cos() } else { a.sin() }
+                    }
                     Param::Joint(k, JointTerm::Cyclic { harmonic, cosine }) if k == j => {
                         let a = harmonic as f64 * s.q[j];
                         v * if cosine { a.cos() } else { a.sin() }
@@ -585,6 +738,16 @@ mod tests {
                     _ => 0.0,
                 };
             }
+            let mut steps: Vec<u8> = layout
+                .params()
+                .iter()
+                .filter_map(|p| match *p {
+                    Param::Joint(k, JointTerm::Map { step_deg, .. }) if k == j => Some(step_deg),
+                    _ => None,
+                })
+                .collect();
+            steps.dedup();
+            th += steps.iter().map(|&st| table(j, st)).sum::<f64>();
             t = t.compose(&r(rot_x(get(Param::Alpha(j)).unwrap()))).compose(&tx(get(Param::A(j)).unwrap() * grow));
             if let Some(b) = get(Param::Beta(j)) {
                 t = t.compose(&r(rot_y(b)));
@@ -604,7 +767,15 @@ mod tests {
             Param::Joint(2, JointTerm::Cyclic { harmonic: 17, cosine: false }),
             Param::Joint(1, JointTerm::Backlash),
             Param::Joint(5, JointTerm::Coupling { from: 4 }),
+            Param::Joint(2, JointTerm::Periodic { quarters: 29, cosine: true }),
+            Param::Joint(0, JointTerm::Map { step_deg: 40, knot: -1 }),
+            Param::Joint(0, JointTerm::Map { step_deg: 40, knot: 0 }),
+            Param::Joint(0, JointTerm::Map { step_deg: 40, knot: 1 }),
+            Param::Joint(0, JointTerm::Map { step_deg: 40, knot: 3 }),
+            Param::Joint(3, JointTerm::Map { step_deg: 90, knot: 0 }),
+            Param::Joint(3, JointTerm::Map { step_deg: 90, knot: 1 }),
             Param::Thermal,
+            Param::ToolMass,
         ]);
         l
     }
@@ -622,6 +793,7 @@ mod tests {
                 crate::kinematics::params::Unit::DegPerNm3 => rng.random_range(-1e-7..1e-7),
                 crate::kinematics::params::Unit::Ratio => rng.random_range(-1e-2..1e-2),
                 crate::kinematics::params::Unit::PpmPerK => rng.random_range(-5e-5..5e-5),
+                crate::kinematics::params::Unit::Kg => rng.random_range(-1.0..1.0),
             })
             .collect()
     }
@@ -634,6 +806,9 @@ mod tests {
             *a = rng.random_range(-1..=1) as f64;
         }
         s.temperature_c = rng.random_range(15.0..35.0);
+        for g in s.tau_per_kg.iter_mut().take(model.dof()) {
+            *g = rng.random_range(-5.0..5.0);
+        }
         s
     }
 
@@ -736,6 +911,11 @@ mod angle_jacobian_tests {
             Param::Joint(3, JointTerm::Cyclic { harmonic: 17, cosine: true }),
             Param::Joint(5, JointTerm::Coupling { from: 4 }),
             Param::Joint(2, JointTerm::Backlash),
+            Param::Joint(4, JointTerm::Periodic { quarters: 31, cosine: false }),
+            Param::Joint(0, JointTerm::Map { step_deg: 30, knot: -2 }),
+            Param::Joint(0, JointTerm::Map { step_deg: 30, knot: -1 }),
+            Param::Joint(0, JointTerm::Map { step_deg: 30, knot: 0 }),
+            Param::Joint(0, JointTerm::Map { step_deg: 30, knot: 1 }),
         ]);
         let mut values = layout.nominal_values(&model, &crate::kinematics::Tool::flange(), &[0.0; 6]);
         let mut rng = ChaCha8Rng::seed_from_u64(5);

@@ -74,7 +74,22 @@ impl ParameterSet {
 
     /// Gravity torques of this robot carrying this tool's payload (nominal geometry).
     pub fn gravity(&self) -> GravityModel {
-        GravityModel::new(&self.model, &self.tool)
+        self.gravity_for(&self.tool)
+    }
+
+    /// Gravity torques of this robot carrying another tool's payload. A `tool_mass` parameter (an
+    /// identified payload error, accepted from a diagnosis) is added to the tool's declared mass
+    /// here, once: the torques a parameter set's FK, validation and compensation use are those of
+    /// the true payload.
+    pub fn gravity_for(&self, tool: &Tool) -> GravityModel {
+        match self.value(Param::ToolMass) {
+            Some(dm) if dm != 0.0 => {
+                let mut t = tool.clone();
+                t.mass += dm;
+                GravityModel::new(&self.model, &t)
+            }
+            _ => GravityModel::new(&self.model, tool),
+        }
     }
 
     /// Pose vector χ of a block (`Param::Base` or `Param::Tool`) at the current values.

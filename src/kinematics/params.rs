@@ -31,6 +31,55 @@ pub enum JointTerm {
     Backlash,
     /// Coupling from another joint: φ = q_from (e.g. axis 5 → 6 on a wrist with coupled gears).
     Coupling { from: usize },
+    /// A periodic error at a frequency that is not a whole harmonic (transmission and encoder
+    /// errors of gear stages whose ratio is not an integer): `quarters`/4 cycles per revolution,
+    /// φ = sin(f·q_j), or cos when `cosine`. Whole frequencies are [`JointTerm::Cyclic`]; build
+    /// either with [`JointTerm::cyclic`].
+    Periodic { quarters: u16, cosine: bool },
+    /// One knot of a per-joint correction table (a lookup table interpolated linearly): knot k sits
+    /// at q_j = k·step, and φ is its hat function — 1 at the knot, falling linearly to 0 at the
+    /// neighbouring knots. The table's first and last knots hold their value beyond the table
+    /// (constant extrapolation), which the chain works out from the knots present (see
+    /// [`MapEdge`]). A smooth, regularised table captures non-periodic transmission errors that
+    /// a few harmonics miss.
+    Map { step_deg: u8, knot: i16 },
+}
+
+/// Where a [`JointTerm::Map`] knot sits in its table: the first and last knots extend their value
+/// beyond the table.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub struct MapEdge {
+    pub first: bool,
+    pub last: bool,
+}
+
+impl JointTerm {
+    /// The cyclic term of frequency `quarters`/4 cycles per revolution: a whole harmonic (1–255)
+    /// is [`JointTerm::Cyclic`], any other [`JointTerm::Periodic`]. `None` for frequency zero.
+    pub fn cyclic(quarters: u16, cosine: bool) -> Option<JointTerm> {
+        match quarters {
+            0 => None,
+            q if q % 4 == 0 && q / 4 <= 255 => Some(JointTerm::Cyclic { harmonic: (q / 4) as u8, cosine }),
+            q => Some(JointTerm::Periodic { quarters: q, cosine }),
+        }
+    }
+
+    /// Cycles per revolution of a cyclic or periodic term.
+    pub fn frequency(self) -> Option<f64> {
+        match self {
+            JointTerm::Cyclic { harmonic, .. } => Some(harmonic as f64),
+            JointTerm::Periodic { quarters, .. } => Some(quarters as f64 / 4.0),
+            _ => None,
+        }
+    }
+
+    /// The knot's angle of a map term, rad.
+    pub fn knot_angle(self) -> Option<f64> {
+        match self {
+            JointTerm::Map { step_deg, knot } => Some(knot as f64 * step_deg as f64 * crate::units::DEG),
+            _ => None,
+        }
+    }
 }
 
 /// One scalar parameter of the model. Joint indices are 0-based internally; names are Craig's.
@@ -55,6 +104,10 @@ pub enum Param {
     /// Thermal expansion coefficient of the link lengths (every a and d scales by
     /// 1 + α·(T − 20 °C)): `thermal_alpha`.
     Thermal,
+    /// Error of the declared payload mass, kg: the true payload of every tool is its declared
+    /// mass plus this, at the tool's declared centre of mass. It acts through the compliances
+    /// (the holding torques change): `tool_mass`.
+    ToolMass,
 }
 
 /// Reference temperature of the nominal link lengths (ISO 1), °C.
@@ -72,6 +125,7 @@ pub enum Unit {
     Ratio,
     /// Parts per million per kelvin (µm/(m·K)).
     PpmPerK,
+    Kg,
 }
 
 impl Unit {
@@ -83,6 +137,7 @@ impl Unit {
             Unit::DegPerNm3 => "deg/(N·m)³",
             Unit::Ratio => "rad/rad",
             Unit::PpmPerK => "ppm/K",
+            Unit::Kg => "kg",
         }
     }
 
@@ -95,6 +150,7 @@ impl Unit {
             "deg/(N·m)³" | "deg/(N*m)^3" | "deg/Nm3" => Some(Unit::DegPerNm3),
             "rad/rad" | "deg/deg" | "1" => Some(Unit::Ratio),
             "ppm/K" | "um/(m*K)" | "µm/(m·K)" => Some(Unit::PpmPerK),
+            "kg" => Some(Unit::Kg),
             _ => None,
         }
     }
@@ -104,7 +160,7 @@ impl Unit {
         match self {
             Unit::Mm => 1e-3,
             Unit::Deg | Unit::DegPerNm | Unit::DegPerNm3 => std::f64::consts::PI / 180.0,
-            Unit::Ratio => 1.0,
+            Unit::Ratio | Unit::Kg => 1.0,
             Unit::PpmPerK => 1e-6,
         }
     }
@@ -117,9 +173,13 @@ impl Param {
             Param::Alpha(_) | Param::Theta(_) | Param::Beta(_) => Unit::Deg,
             Param::Joint(_, JointTerm::Compliance) => Unit::DegPerNm,
             Param::Joint(_, JointTerm::ComplianceCubic) => Unit::DegPerNm3,
-            Param::Joint(_, JointTerm::Cyclic { .. } | JointTerm::Backlash) => Unit::Deg,
+            Param::Joint(
+                _,
+                JointTerm::Cyclic { .. } | JointTerm::Periodic { .. } | JointTerm::Backlash | JointTerm::Map { .. },
+            ) => Unit::Deg,
             Param::Joint(_, JointTerm::Coupling { .. }) => Unit::Ratio,
             Param::Thermal => Unit::PpmPerK,
+            Param::ToolMass => Unit::Kg,
             Param::Base(k) | Param::Tool(k) => {
                 if k < 3 {
                     Unit::Mm
@@ -136,6 +196,9 @@ impl Param {
         if let Some(k) = name.strip_prefix("base_") {
             return POSE_COMPONENTS.iter().position(|c| *c == k).map(Param::Base);
         }
+        if name == "tool_mass" {
+            return Some(Param::ToolMass);
+        }
         if let Some(k) = name.strip_prefix("tool_") {
             return POSE_COMPONENTS.iter().position(|c| *c == k).map(Param::Tool);
         }
@@ -143,19 +206,49 @@ impl Param {
             return Some(Param::Thermal);
         }
         if let Some(rest) = name.strip_prefix("cyc") {
-            // cyc{j}_h{h}_sin | cyc{j}_h{h}_cos
+            // cyc{j}_h{h}_sin | cyc{j}_h{h}_cos (whole harmonic) | cyc{j}_f{f}_sin (f in quarters)
             let mut parts = rest.split('_');
             let j = index1(parts.next()?)?;
-            let h: u8 = parts.next()?.strip_prefix('h').and_then(parse_index)?.try_into().ok()?;
+            let freq = parts.next()?;
             let cosine = match parts.next()? {
                 "sin" => false,
                 "cos" => true,
                 _ => return None,
             };
-            if parts.next().is_some() || h == 0 {
+            if parts.next().is_some() {
                 return None;
             }
-            return Some(Param::Joint(j, JointTerm::Cyclic { harmonic: h, cosine }));
+            let term = if let Some(h) = freq.strip_prefix('h') {
+                let h: u8 = parse_index(h)?.try_into().ok()?;
+                if h == 0 {
+                    return None;
+                }
+                JointTerm::Cyclic { harmonic: h, cosine }
+            } else {
+                let quarters = parse_quarters(freq.strip_prefix('f')?)?;
+                match JointTerm::cyclic(quarters, cosine)? {
+                    // A whole harmonic is spelled with h.
+                    JointTerm::Cyclic { .. } => return None,
+                    t => t,
+                }
+            };
+            return Some(Param::Joint(j, term));
+        }
+        if let Some(rest) = name.strip_prefix("map") {
+            // map{j}_s{step}_k{knot}
+            let mut parts = rest.split('_');
+            let j = index1(parts.next()?)?;
+            let step: u8 = parse_index(parts.next()?.strip_prefix('s')?)?.try_into().ok()?;
+            let k = parts.next()?.strip_prefix('k')?;
+            let (neg, digits) = match k.strip_prefix('-') {
+                Some(d) => (true, d),
+                None => (false, k),
+            };
+            let mag: i16 = parse_index(digits)?.try_into().ok()?;
+            if parts.next().is_some() || step == 0 || (neg && mag == 0) {
+                return None;
+            }
+            return Some(Param::Joint(j, JointTerm::Map { step_deg: step, knot: if neg { -mag } else { mag } }));
         }
         if let Some(rest) = name.strip_prefix("backlash") {
             return Some(Param::Joint(index1(rest)?, JointTerm::Backlash));
@@ -200,6 +293,27 @@ fn parse_index(s: &str) -> Option<usize> {
     s.parse().ok()
 }
 
+/// A frequency in cycles per revolution written as a decimal with at most two decimals that is a
+/// whole number of quarters (`7.25`, `0.5`, `12`) → quarters.
+fn parse_quarters(s: &str) -> Option<u16> {
+    let (whole, frac) = s.split_once('.').unwrap_or((s, ""));
+    let w = parse_index(whole)?;
+    let q = match frac {
+        "" => 0,
+        "25" => 1,
+        "5" => 2,
+        "75" => 3,
+        _ => return None,
+    };
+    u16::try_from(4 * w + q).ok()
+}
+
+/// A frequency in quarters as the shortest decimal (`29` → "7.25").
+fn format_quarters(q: u16) -> String {
+    let frac = ["", ".25", ".5", ".75"][(q % 4) as usize];
+    format!("{}{frac}", q / 4)
+}
+
 /// A 1-based joint number in a name → 0-based index.
 fn index1(s: &str) -> Option<usize> {
     parse_index(s).filter(|&i| i >= 1).map(|i| i - 1)
@@ -220,7 +334,12 @@ impl fmt::Display for Param {
             }
             Param::Joint(j, JointTerm::Backlash) => write!(f, "backlash{}", j + 1),
             Param::Joint(j, JointTerm::Coupling { from }) => write!(f, "coupling{}_{}", from + 1, j + 1),
+            Param::Joint(j, JointTerm::Periodic { quarters, cosine }) => {
+                write!(f, "cyc{}_f{}_{}", j + 1, format_quarters(quarters), if cosine { "cos" } else { "sin" })
+            }
+            Param::Joint(j, JointTerm::Map { step_deg, knot }) => write!(f, "map{}_s{step_deg}_k{knot}", j + 1),
             Param::Thermal => f.write_str("thermal_alpha"),
+            Param::ToolMass => f.write_str("tool_mass"),
             Param::Base(k) => write!(f, "base_{}", POSE_COMPONENTS[k]),
             Param::Tool(k) => write!(f, "tool_{}", POSE_COMPONENTS[k]),
         }
@@ -232,6 +351,9 @@ impl fmt::Display for Param {
 pub struct ParamLayout {
     params: Vec<Param>,
     dof: usize,
+    /// Bit j set: joint j+1's axis is nominally parallel to joint j's (α_j a multiple of π), so
+    /// Hayati's β can be given to row j (`beta{j}`).
+    parallel: u16,
 }
 
 impl ParamLayout {
@@ -248,7 +370,13 @@ impl ParamLayout {
         params.extend((0..n).map(|j| Param::Joint(j, JointTerm::Compliance)));
         params.extend((0..6).map(Param::Base));
         params.extend((0..6).map(Param::Tool));
-        Self { params, dof: n }
+        let parallel = (1..n)
+            .filter(|&j| {
+                let a = model.links[j].alpha.rem_euclid(std::f64::consts::PI);
+                a.min(std::f64::consts::PI - a) < 1e-9
+            })
+            .fold(0u16, |m, j| m | (1 << j));
+        Self { params, dof: n, parallel }
     }
 
     pub fn len(&self) -> usize {
@@ -261,6 +389,12 @@ impl ParamLayout {
 
     pub fn dof(&self) -> usize {
         self.dof
+    }
+
+    /// Rows j whose joint axis is nominally parallel to the previous joint's: where a Hayati β
+    /// belongs (`beta{j}`).
+    pub fn parallel_rows(&self) -> Vec<usize> {
+        (0..self.dof).filter(|&j| self.parallel & (1 << j) != 0).collect()
     }
 
     pub fn params(&self) -> &[Param] {
@@ -276,7 +410,10 @@ impl ParamLayout {
         match p {
             Param::Joint(j, JointTerm::Coupling { from }) => j < self.dof && from < self.dof,
             Param::Joint(j, _) => j < self.dof,
-            Param::Thermal => true,
+            Param::Thermal | Param::ToolMass => true,
+            // Hayati's β can be given to any row whose joint axis is nominally parallel to the
+            // previous one (where plain DH is not proportional, §3.4).
+            Param::Beta(j) => self.index_of(p).is_some() || (j < self.dof && self.parallel & (1 << j) != 0),
             _ => self.index_of(p).is_some(),
         }
     }
@@ -297,7 +434,7 @@ impl ParamLayout {
                 Param::D(j) => model.links[j].d,
                 Param::Theta(j) => model.links[j].theta,
                 Param::Beta(j) => model.links[j].beta.unwrap_or(0.0),
-                Param::Joint(..) | Param::Thermal => 0.0,
+                Param::Joint(..) | Param::Thermal | Param::ToolMass => 0.0,
                 Param::Base(k) => base[k],
                 Param::Tool(k) => tool.tcp[k],
             })
@@ -360,10 +497,35 @@ mod tests {
             Param::Joint(1, JointTerm::Backlash),
             Param::Joint(5, JointTerm::Coupling { from: 4 }),
             Param::Thermal,
+            Param::Joint(2, JointTerm::Periodic { quarters: 29, cosine: true }),
+            Param::Joint(1, JointTerm::Map { step_deg: 3, knot: -12 }),
+            Param::Joint(1, JointTerm::Map { step_deg: 3, knot: 0 }),
+            Param::ToolMass,
         ];
         ext.extend(&extra);
         let names: Vec<String> = extra.iter().map(|p| p.to_string()).collect();
-        assert_eq!(names, ["c2_cubic", "cyc2_h17_cos", "cyc3_h1_sin", "backlash2", "coupling5_6", "thermal_alpha"]);
+        assert_eq!(
+            names,
+            [
+                "c2_cubic",
+                "cyc2_h17_cos",
+                "cyc3_h1_sin",
+                "backlash2",
+                "coupling5_6",
+                "thermal_alpha",
+                "cyc3_f7.25_cos",
+                "map2_s3_k-12",
+                "map2_s3_k0",
+                "tool_mass",
+            ]
+        );
+        assert_eq!(JointTerm::cyclic(8, false), Some(JointTerm::Cyclic { harmonic: 2, cosine: false }));
+        assert_eq!(JointTerm::cyclic(2, true), Some(JointTerm::Periodic { quarters: 2, cosine: true }));
+        assert_eq!(JointTerm::cyclic(0, true), None);
+        assert_eq!(
+            Param::parse("cyc1_f0.5_sin"),
+            Some(Param::Joint(0, JointTerm::Periodic { quarters: 2, cosine: false }))
+        );
         for p in extra {
             assert_eq!(Param::parse(&p.to_string()), Some(p));
             assert!(ext.find(&p.to_string()).is_some());
@@ -386,6 +548,16 @@ mod tests {
             "backlash0",
             "c_cubic",
             "thermal",
+            "cyc2_f8_sin",
+            "cyc2_f7.3_sin",
+            "cyc2_f0_sin",
+            "cyc2_f7.25",
+            "map2_s0_k1",
+            "map2_s3_k-0",
+            "map2_s3_k01",
+            "map2_s3",
+            "map0_s3_k1",
+            "tool_mass2",
         ] {
             assert_eq!(Param::parse(bad), None, "{bad}");
         }

@@ -190,7 +190,7 @@ pub fn validate(
             }
         };
         let (cal_chain, nom_chain) = session_chains(set, session);
-        let gravity = GravityModel::new(&set.model, &session.tool);
+        let gravity = set.gravity_for(&session.tool);
         for (index, m) in session.measurements.iter().enumerate() {
             if m.q.len() != dof {
                 return Err(ValidateError::JointCount { session: session.name.clone(), index, got: m.q.len(), dof });
