@@ -15,6 +15,7 @@ pub mod db;
 pub mod demo;
 pub mod diagnose;
 pub mod domain;
+pub mod experiments;
 pub mod http;
 pub mod identify;
 pub mod import;

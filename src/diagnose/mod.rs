@@ -1,3 +1,651 @@
-//! The sim-to-real diagnosis (issue 11): where the calibrated model still misses, which physical
-//! effect it is missing, and how far the held-out error shrinks once that effect is added.
-//! Pure math, like `identify/`: no I/O.
+//! The sim-to-real diagnosis: where the calibrated model still misses, which physical effect it
+//! is missing, and how far the held-out error shrinks once that effect is added (DIAGNOSIS.md).
+//! Pure math, like `identify/`: no I/O; SI units; `domain::diagnosis` writes the wire format.
+//!
+//! The pipeline:
+//! 1. the current model (the parameter set's structure) is refitted on the pooled data —
+//!    identification and validation sessions, weighted by the instrument model, its geometry
+//!    anchored to the set's values — and linearised ([`stage`]);
+//! 2. the held-out error is decomposed into the noise floor, the extrapolation gap and the
+//!    unmodelled gap ([`floor`]);
+//! 3. where the misses lie ([`locate`]);
+//! 4. which effect: screening, confirmation on held-out poses, greedy acceptance and honest
+//!    verdicts ([`search`], [`library`], [`screen`], [`cv`]);
+//! 5. how far it shrinks: the held-out figures of every accepted model.
+//!
+//! Held-out means: grouped K-fold cross-validation over the validation poses, every fold's model
+//! trained on all identification measurements and the other folds (the "refit with part of the
+//! validation poses added" of the decomposition); without a validation session, over the
+//! identification poses themselves.
+
+pub mod cv;
+pub mod floor;
+pub mod library;
+pub mod linalg;
+pub mod locate;
+pub mod order;
+pub mod screen;
+pub mod search;
+pub mod stage;
+pub mod stats;
+
+use nalgebra::Vector3;
+
+use crate::cell::{Cell, Purpose};
+use crate::identify::{Anchor, Identification, IdentifyError, IdentifyOptions, ModelOptions, NoiseModel, identify};
+use crate::kinematics::{JointTerm, Param, ParamLayout, ParameterSet, Unit};
+use crate::validate::report::{Reference, validate};
+use crate::validate::stats::ErrorStats;
+use cv::Folds;
+use floor::Floor;
+use library::{Candidate, Kind, Unavailable};
+use locate::Where;
+use order::ApproachSource;
+use search::{Decision, Round, SearchOptions};
+
+/// Everything a diagnosis can be told.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DiagnoseOptions {
+    /// Identification sessions (empty: every identification session of the cell).
+    pub identification: Vec<String>,
+    /// Validation sessions (empty: every validation session; none in the cell: cross-validate
+    /// on the identification sessions).
+    pub validation: Vec<String>,
+    pub noise: NoiseModel,
+    pub folds: usize,
+    pub seed: u64,
+    /// κ limit of the pooled fits (scaled columns).
+    pub kappa_limit: f64,
+    /// m per rad for orientation rows.
+    pub rotation_weight: f64,
+    pub anchor: Anchor,
+    pub search: SearchOptions,
+    /// Edge of the workspace voxels, m.
+    pub voxel_size: f64,
+    /// False-discovery rate of the voxel tests.
+    pub fdr: f64,
+}
+
+impl Default for DiagnoseOptions {
+    fn default() -> Self {
+        Self {
+            identification: Vec::new(),
+            validation: Vec::new(),
+            noise: NoiseModel::default(),
+            folds: 5,
+            seed: 1,
+            kappa_limit: 1e4,
+            rotation_weight: 0.1,
+            anchor: Anchor::default(),
+            search: SearchOptions::default(),
+            voxel_size: 0.1,
+            fdr: 0.05,
+        }
+    }
+}
+
+/// What is diagnosed: a cell's measurements and a calibrated parameter set.
+#[derive(Clone, Debug)]
+pub struct Input<'a> {
+    pub cell: &'a Cell,
+    pub set: &'a ParameterSet,
+    /// Per layout entry of `set`: whether its identification fitted it. `None`: a parameter is
+    /// taken as fitted when its value differs from its nominal.
+    pub identified: Option<Vec<bool>>,
+    /// Parameters the set's identification held fixed on the user's request (kept fixed).
+    pub fixed: Vec<String>,
+}
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DiagnoseError {
+    #[error("{0}")]
+    Option(String),
+    #[error("the current model on the pooled data: {0}")]
+    Identify(#[from] IdentifyError),
+}
+
+/// The verdict's status.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Status {
+    /// One or more effects named, each confirmed on held-out poses.
+    Named,
+    /// No effect above the floor.
+    None,
+    /// An effect is likely but these data cannot tell it from the current model or from a
+    /// look-alike.
+    NotSeparable,
+    /// Structure no candidate explains.
+    UnknownEffect,
+}
+
+impl Status {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Status::Named => "named",
+            Status::None => "none",
+            Status::NotSeparable => "not_separable",
+            Status::UnknownEffect => "unknown_effect",
+        }
+    }
+}
+
+/// One parameter of an effect: value and standard deviation, SI.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParamEstimate {
+    pub param: Param,
+    pub value: f64,
+    pub std: Option<f64>,
+}
+
+/// A named (or suspected) effect.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Effect {
+    pub candidate: Candidate,
+    /// Its size in `unit` (SI): cyclic amplitude, backlash half-play, compliance, α, kg, …
+    pub estimate: Option<f64>,
+    pub std: Option<f64>,
+    pub unit: Unit,
+    pub parameters: Vec<ParamEstimate>,
+    /// Held-out gain when added: mean and RMS of |e|, m.
+    pub gain_mean: f64,
+    pub gain_rms: f64,
+    /// Confirmation p-value (one-sided Wilcoxon) and the screening's Holm-corrected log10 p.
+    pub confirm_p: Option<f64>,
+    pub screen_log10_p: f64,
+    pub separability: f64,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Verdict {
+    pub status: Status,
+    /// Named effects, most important (first accepted) first; for `not_separable`, the suspects.
+    pub effects: Vec<Effect>,
+    pub summary: String,
+    /// A look-alike that the data cannot tell from the best (not_separable).
+    pub lookalike: Option<Candidate>,
+    pub canonical_correlation: Option<f64>,
+    /// Model parameters absorbing the suspect (name, share).
+    pub absorbed_by: Vec<(String, f64)>,
+    /// The experiment that would separate it.
+    pub experiment: Option<String>,
+    /// After the named effects: what remains (another verdict's status and summary), if any.
+    pub remaining: Option<(Status, String)>,
+}
+
+/// Held-out figures of one model of the search.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShrinkEntry {
+    /// The effects added to the starting model so far (labels).
+    pub model: Vec<String>,
+    pub stats: ErrorStats,
+    /// (E_start − E)/(E_start − E_floor) on the mean; `None` for the starting model.
+    pub closure: Option<f64>,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Decomposition {
+    /// The parameter set as given, on the validation poses (no refit); `None` without validation.
+    pub calibrated: Option<ErrorStats>,
+    /// The starting model cross-validated with the identification data and part of the
+    /// validation poses.
+    pub heldout: ErrorStats,
+    pub floor: Floor,
+    /// calibrated − held-out, on the mean (what coverage explains).
+    pub extrapolation_gap: Option<f64>,
+    /// held-out − floor, on the mean (what missing physics explains).
+    pub unmodelled_gap: f64,
+}
+
+/// The whole diagnosis.
+pub struct Diagnosis {
+    pub verdict: Verdict,
+    pub decomposition: Decomposition,
+    pub location: Where,
+    pub rounds: Vec<Round>,
+    pub shrink: Vec<ShrinkEntry>,
+    pub approach: Option<ApproachSource>,
+    pub unavailable: Vec<Unavailable>,
+    /// Why the starting model could not be fitted on the pooled data (it was linearised at the
+    /// parameter set instead), if so.
+    pub start_note: Option<String>,
+    pub identification: Vec<String>,
+    pub validation: Vec<String>,
+    /// The options of the final model (the starting model plus the accepted effects).
+    pub model: IdentifyOptions,
+    /// The final model fitted on the pooled data without anchors: what accepting produces.
+    pub accepted: Option<Identification>,
+}
+
+/// The starting model's identification options: the set's structure and values.
+fn start_options(input: &Input<'_>, opts: &DiagnoseOptions, sessions: Vec<String>) -> IdentifyOptions {
+    let set = input.set;
+    let full = ParamLayout::full(&set.model);
+    let fitted = |i: usize| match &input.identified {
+        Some(f) => f.get(i).copied().unwrap_or(false),
+        None => set.values[i] != set.nominal[i],
+    };
+    let mut model = ModelOptions { beta: false, compliance: false, ..ModelOptions::default() };
+    for (i, p) in set.layout.params().iter().enumerate() {
+        match p {
+            Param::Beta(_) | Param::Joint(_, JointTerm::Compliance) if fitted(i) => model.extra.push(*p),
+            p if full.index_of(*p).is_none() => model.extra.push(*p),
+            _ => {}
+        }
+    }
+    let mut o = IdentifyOptions {
+        model,
+        fixed: input.fixed.clone(),
+        kappa_limit: opts.kappa_limit,
+        rotation_weight: opts.rotation_weight,
+        start: Some(set.clone()),
+        noise: Some(opts.noise.clone()),
+        map_smoothing: opts.search.map_smoothing,
+        anchor: Some(opts.anchor.clone()),
+        ..IdentifyOptions::default()
+    };
+    o.selection.sessions = sessions;
+    o
+}
+
+/// Diagnose `input`.
+pub fn diagnose(input: &Input<'_>, opts: &DiagnoseOptions) -> Result<Diagnosis, DiagnoseError> {
+    let cell = input.cell;
+    if opts.folds < 2 {
+        return Err(DiagnoseError::Option(format!("folds must be at least 2, got {}", opts.folds)));
+    }
+    let names = |purpose: Purpose, given: &[String]| -> Result<Vec<String>, DiagnoseError> {
+        if given.is_empty() {
+            return Ok(cell.sessions_for(purpose).map(|s| s.name.clone()).collect());
+        }
+        for g in given {
+            if cell.session(g).is_none() {
+                return Err(DiagnoseError::Option(format!("no session named '{g}' in the cell")));
+            }
+        }
+        Ok(given.to_vec())
+    };
+    let identification = names(Purpose::Identification, &opts.identification)?;
+    let validation = names(Purpose::Validation, &opts.validation)?;
+    if identification.is_empty() {
+        return Err(DiagnoseError::Option("the cell has no identification session".into()));
+    }
+    if let Some(s) = identification.iter().find(|s| validation.contains(s)) {
+        return Err(DiagnoseError::Option(format!("session '{s}' is named for both identification and validation")));
+    }
+    let mut sessions = identification.clone();
+    sessions.extend(validation.iter().cloned());
+
+    // The approach directions for the backlash candidate.
+    let mut work = cell.clone();
+    let approach = Some(order::fill_approach(&mut work, &sessions));
+
+    let start = start_options(input, opts, sessions.clone());
+    let stage0 = stage::Stage::fit(&work, start)?;
+    let start_note = stage0.fit.as_ref().err().cloned();
+    let pr = &stage0.problem;
+    let tested_sessions = if validation.is_empty() { &identification } else { &validation };
+    let tested: Vec<bool> = pr.obs.iter().map(|o| tested_sessions.contains(&pr.session_names[o.session])).collect();
+    let joints: Vec<Vec<f64>> = pr.obs.iter().map(|o| o.state.q[..pr.model.dof()].to_vec()).collect();
+    let folds = Folds::new(&joints, &tested, opts.folds, opts.seed);
+    if folds.n_poses < 2 * opts.folds {
+        return Err(DiagnoseError::Option(format!(
+            "{} tested poses are too few for {}-fold cross-validation",
+            folds.n_poses, opts.folds
+        )));
+    }
+    let tested_obs: Vec<usize> = (0..pr.obs.len()).filter(|&o| tested[o]).collect();
+    let fl = floor::floor(&stage0, &work, &tested_obs, &opts.noise, opts.seed);
+
+    // Calibration positions and the zone centre.
+    let id_obs: Vec<usize> =
+        (0..pr.obs.len()).filter(|&o| identification.contains(&pr.session_names[pr.obs[o].session])).collect();
+    let calib: Vec<Vector3<f64>> = id_obs.iter().map(|&o| pr.target_position(&pr.obs[o])).collect();
+    let calib_joints: Vec<Vec<f64>> = id_obs.iter().map(|&o| joints[o].clone()).collect();
+    let zone = match &cell.artefact {
+        Some(a) => a.triangle.centroid(),
+        None => calib.iter().sum::<Vector3<f64>>() / calib.len().max(1) as f64,
+    };
+    let base = input.set.chain().base().t;
+
+    let s = search::search(&work, stage0, &folds, fl.rms * fl.rms, &opts.search)?;
+    let location = locate::locate(
+        &s.stages[0],
+        &s.baselines[0],
+        &fl,
+        &calib,
+        &calib_joints,
+        zone,
+        base,
+        opts.voxel_size,
+        opts.fdr,
+    );
+
+    // Decomposition.
+    let heldout = ErrorStats::of(&s.baselines[0].norms()).expect("tested poses");
+    let calibrated = if validation.is_empty() {
+        None
+    } else {
+        validate(input.set, cell, &validation, Reference::Measured).ok().map(|r| r.calibrated.position)
+    };
+    let decomposition = Decomposition {
+        extrapolation_gap: calibrated.map(|c| c.mean - heldout.mean),
+        unmodelled_gap: heldout.mean - fl.mean,
+        calibrated,
+        heldout,
+        floor: fl,
+    };
+
+    // Shrink.
+    let mut shrink = Vec::new();
+    for (k, b) in s.baselines.iter().enumerate() {
+        let stats = ErrorStats::of(&b.norms()).expect("tested poses");
+        let closure = (k > 0).then(|| {
+            let gap = decomposition.heldout.mean - decomposition.floor.mean;
+            if gap > 0.0 { (decomposition.heldout.mean - stats.mean) / gap } else { 0.0 }
+        });
+        shrink.push(ShrinkEntry { model: s.accepted[..k].iter().map(|c| c.label()).collect(), stats, closure });
+    }
+
+    let verdict = verdict(&s, &decomposition);
+    let model = s.stages.last().expect("a stage").options.clone();
+    let accepted = if s.accepted.is_empty() {
+        None
+    } else {
+        let mut o = model.clone();
+        o.anchor = None;
+        o.start = Some(s.stages.last().expect("a stage").set.clone());
+        identify(&work, &o).ok().or_else(|| s.stages.last().and_then(|st| st.fit.as_ref().ok().cloned()))
+    };
+    let approach = approach.filter(|_| s.rounds[0].screened.iter().any(|c| c.candidate.kind == Kind::Backlash));
+    Ok(Diagnosis {
+        verdict,
+        decomposition,
+        location,
+        shrink,
+        approach,
+        unavailable: s.unavailable.clone(),
+        start_note,
+        identification,
+        validation,
+        model,
+        accepted,
+        rounds: s.rounds,
+    })
+}
+
+/// The held-out figures of the starting model with further parameters added (an oracle: the
+/// true effect's terms, in a virtual cell), cross-validated exactly as the diagnosis does.
+pub fn heldout_with(input: &Input<'_>, opts: &DiagnoseOptions, extra: &[Param]) -> Result<ErrorStats, DiagnoseError> {
+    let cell = input.cell;
+    let pick = |purpose: Purpose, given: &[String]| -> Vec<String> {
+        if given.is_empty() { cell.sessions_for(purpose).map(|s| s.name.clone()).collect() } else { given.to_vec() }
+    };
+    let identification = pick(Purpose::Identification, &opts.identification);
+    let validation = pick(Purpose::Validation, &opts.validation);
+    let mut sessions = identification.clone();
+    sessions.extend(validation.iter().cloned());
+    let mut work = cell.clone();
+    order::fill_approach(&mut work, &sessions);
+    let mut o = start_options(input, opts, sessions);
+    for p in extra {
+        if !o.model.extra.contains(p) {
+            o.model.extra.push(*p);
+        }
+    }
+    if let Some(start) = &mut o.start {
+        start.extend(extra);
+    }
+    let st = stage::Stage::fit(&work, o)?;
+    let pr = &st.problem;
+    let tested_sessions = if validation.is_empty() { &identification } else { &validation };
+    let tested: Vec<bool> = pr.obs.iter().map(|o| tested_sessions.contains(&pr.session_names[o.session])).collect();
+    let joints: Vec<Vec<f64>> = pr.obs.iter().map(|o| o.state.q[..pr.model.dof()].to_vec()).collect();
+    let folds = Folds::new(&joints, &tested, opts.folds, opts.seed);
+    let h = cv::cross_validate(&st, &folds, None);
+    ErrorStats::of(&h.norms()).ok_or_else(|| DiagnoseError::Option("no tested pose".into()))
+}
+
+/// The experiment that separates two kinds of effect (DIAGNOSIS §1).
+pub fn experiment(a: Kind, b: Option<Kind>) -> String {
+    use Kind::*;
+    let pair = |x: Kind, y: Kind| (a == x && b == Some(y)) || (a == y && b == Some(x));
+    if pair(Compliance, ToolMass) || pair(ComplianceCubic, ToolMass) || (a == ToolMass && b.is_none()) {
+        "measure with a second payload (add a known mass to the tool)".into()
+    } else if a == Thermal || b == Some(Thermal) {
+        "a temperature ramp, or the same poses measured cold and warm".into()
+    } else if a == Backlash || b == Some(Backlash) {
+        "the same poses approached from both sides of every joint".into()
+    } else if a.is_transmission() && b.is_some_and(|k| k.is_transmission()) {
+        "a sweep of the joint in fine steps (a few tenths of a degree) over its range".into()
+    } else if a == Base || b == Some(Base) || a == HayatiBeta || b == Some(HayatiBeta) {
+        "more balls and more orientations: calibration poses spread over the workspace".into()
+    } else if matches!(a, Compliance | ComplianceCubic) || b.is_some_and(|k| matches!(k, Compliance | ComplianceCubic))
+    {
+        "a second payload, and poses that vary the holding torque of the suspect joint".into()
+    } else {
+        "poses spread over the whole range of the joints involved, and more of them".into()
+    }
+}
+
+fn effect_of(s: &search::Search, round: usize, index: usize, stage_after: Option<usize>) -> Effect {
+    let r = &s.rounds[round];
+    let sc = &r.screened[index];
+    let ev = r.evaluated.iter().find(|e| e.index == index);
+    let c = sc.candidate.clone();
+    // Parameter values: from the model that carries the effect when accepted, else the screening's
+    // linear estimate.
+    let mut parameters = Vec::new();
+    match stage_after.map(|k| &s.stages[k]) {
+        Some(st) => {
+            let pr = &st.problem;
+            for p in &c.params {
+                let Some(g) = pr.robot_index(*p) else { continue };
+                let value = st.x[g];
+                let std = st
+                    .fit
+                    .as_ref()
+                    .ok()
+                    .and_then(|id| id.free.iter().position(|&f| f == g).map(|col| id.quality.std[col]));
+                parameters.push(ParamEstimate { param: *p, value, std });
+            }
+        }
+        None => {
+            for (p, v) in c.params.iter().zip(&sc.score.estimate) {
+                parameters.push(ParamEstimate { param: *p, value: *v, std: None });
+            }
+        }
+    }
+    let (estimate, std, unit) = magnitude(&c, &parameters);
+    Effect {
+        estimate,
+        std,
+        unit,
+        parameters,
+        gain_mean: ev.map_or(0.0, |e| e.vs_model.gain_mean),
+        gain_rms: ev.map_or(0.0, |e| e.vs_model.gain_rms),
+        confirm_p: ev.and_then(|e| e.vs_model.p),
+        screen_log10_p: sc.log10_p_holm,
+        separability: sc.score.rho,
+        candidate: c,
+    }
+}
+
+/// The size of an effect in one number: the amplitude of a cyclic pair, the RMS of a table, the
+/// value of a one-parameter effect, the largest (in σ) of a group.
+fn magnitude(c: &Candidate, p: &[ParamEstimate]) -> (Option<f64>, Option<f64>, Unit) {
+    let unit = p.first().map_or(Unit::Mm, |e| e.param.unit());
+    match c.kind {
+        Kind::Cyclic if p.len() == 2 => {
+            let (a, b) = (p[0].value, p[1].value);
+            let amp = a.hypot(b);
+            let std = match (p[0].std, p[1].std) {
+                (Some(sa), Some(sb)) if amp > 0.0 => Some(((a * sa).powi(2) + (b * sb).powi(2)).sqrt() / amp),
+                _ => None,
+            };
+            (Some(amp), std, unit)
+        }
+        Kind::JointMap if !p.is_empty() => {
+            let rms = (p.iter().map(|e| e.value * e.value).sum::<f64>() / p.len() as f64).sqrt();
+            (Some(rms), None, unit)
+        }
+        _ if p.len() == 1 => (Some(p[0].value), p[0].std, unit),
+        _ => {
+            let best = p.iter().max_by(|a, b| {
+                let z = |e: &ParamEstimate| e.std.map_or(0.0, |s| (e.value / s).abs());
+                z(a).total_cmp(&z(b))
+            });
+            (best.map(|e| e.value), best.and_then(|e| e.std), best.map_or(unit, |e| e.param.unit()))
+        }
+    }
+}
+
+/// A held-out RMS this many times the floor's, and this much above it (m), is an excess that a
+/// `none` would hide.
+const EXCESS_RATIO: f64 = 2.0;
+const EXCESS_MIN: f64 = 10e-6;
+
+/// The verdict from the rounds of the search.
+fn verdict(s: &search::Search, d: &Decomposition) -> Verdict {
+    let mut effects = Vec::new();
+    for (k, round) in s.rounds.iter().enumerate() {
+        if let Decision::Accept(i) = round.decision {
+            effects.push(effect_of(s, k, i, Some(k + 1)));
+        }
+    }
+    let last = s.rounds.len() - 1;
+    let lr = &s.rounds[last];
+    let gap = |x: f64| format!("{:.4} mm", x * 1e3);
+    // What the last round found (or did not).
+    let (status, summary, lookalike, corr, absorbed, experiment_, suspects) = match &lr.decision {
+        Decision::Accept(_) | Decision::Nothing => {
+            // Screening evidence that no held-out test could confirm: an effect the current
+            // model absorbs.
+            let strong = lr
+                .screened
+                .iter()
+                .filter(|c| c.significant && c.log10_p_holm < -6.0 && c.score.rho < 0.5)
+                .max_by(|a, b| a.score.bic_gain.total_cmp(&b.score.bic_gain));
+            match strong {
+                Some(c) if !matches!(lr.decision, Decision::Accept(_)) => {
+                    let i = lr.screened.iter().position(|x| std::ptr::eq(x, c)).expect("from the list");
+                    (
+                        Status::NotSeparable,
+                        format!(
+                            "{} is in the data (screening p = 1e{:.0}) but the current model absorbs {:.0} % of it (ρ = {:.2}): it does not predict held-out poses better",
+                            c.candidate.label(),
+                            c.log10_p_holm,
+                            (1.0 - c.score.rho * c.score.rho) * 100.0,
+                            c.score.rho
+                        ),
+                        None,
+                        None,
+                        c.absorbed_by.clone(),
+                        Some(experiment(c.candidate.kind, None)),
+                        vec![effect_of(s, last, i, None)],
+                    )
+                }
+                _ if d.heldout.rms > EXCESS_RATIO * d.floor.rms && d.heldout.rms - d.floor.rms > EXCESS_MIN => {
+                    let missing: Vec<String> =
+                        s.unavailable.iter().map(|u| format!("{} ({})", u.kind.name(), u.reason)).collect();
+                    let exp = s
+                        .unavailable
+                        .iter()
+                        .map(|u| match u.kind {
+                            Kind::Backlash => {
+                                "log each joint's approach direction, or keep the measuring order with its times"
+                                    .to_string()
+                            }
+                            Kind::Thermal => "log the robot's temperature".to_string(),
+                            k => experiment(k, None),
+                        })
+                        .collect::<Vec<_>>();
+                    (
+                        Status::NotSeparable,
+                        format!(
+                            "the held-out error (RMS {}) stands far above the floor ({}), but neither a candidate nor a smooth function of the configuration predicts it: an error that changes from pose to pose{}",
+                            gap(d.heldout.rms),
+                            gap(d.floor.rms),
+                            if missing.is_empty() {
+                                String::new()
+                            } else {
+                                format!("; not testable on these data: {}", missing.join("; "))
+                            }
+                        ),
+                        None,
+                        None,
+                        Vec::new(),
+                        Some(if exp.is_empty() {
+                            "repeat poses to measure the robot's repeatability, and check the instrument's noise".into()
+                        } else {
+                            exp.join("; ")
+                        }),
+                        Vec::new(),
+                    )
+                }
+                _ => (
+                    Status::None,
+                    format!(
+                        "no effect above the floor (held-out mean {} against a floor of {})",
+                        gap(d.heldout.mean),
+                        gap(d.floor.mean)
+                    ),
+                    None,
+                    None,
+                    Vec::new(),
+                    None,
+                    Vec::new(),
+                ),
+            }
+        }
+        Decision::NotSeparable { best, lookalike, canonical, reason } => {
+            let b = &lr.screened[*best];
+            let la = lookalike.map(|i| lr.screened[i].candidate.clone());
+            let mut sus = vec![effect_of(s, last, *best, None)];
+            if let Some(i) = lookalike {
+                sus.push(effect_of(s, last, *i, None));
+            }
+            (
+                Status::NotSeparable,
+                format!("{}: {reason}", b.candidate.label()),
+                la.clone(),
+                *canonical,
+                b.absorbed_by.clone(),
+                Some(experiment(b.candidate.kind, la.map(|c| c.kind))),
+                sus,
+            )
+        }
+        Decision::Unknown { best } => {
+            let what = match best {
+                Some(i) => format!(
+                    "a smooth function of the configuration predicts the residual better than the best candidate ({}), which is one of its forms",
+                    lr.screened[*i].candidate.label()
+                ),
+                None => "a smooth function of the configuration predicts the residual; no candidate does".into(),
+            };
+            (Status::UnknownEffect, what, None, None, Vec::new(), None, Vec::new())
+        }
+    };
+    if effects.is_empty() {
+        return Verdict {
+            status,
+            effects: suspects,
+            summary,
+            lookalike,
+            canonical_correlation: corr,
+            absorbed_by: absorbed,
+            experiment: experiment_,
+            remaining: None,
+        };
+    }
+    let names: Vec<String> = effects.iter().map(|e| e.candidate.label()).collect();
+    Verdict {
+        status: Status::Named,
+        summary: format!("{} named and confirmed on held-out poses", names.join(", ")),
+        effects,
+        lookalike: None,
+        canonical_correlation: None,
+        absorbed_by: Vec::new(),
+        experiment: None,
+        remaining: (status != Status::None).then_some((status, summary)),
+    }
+}

@@ -176,6 +176,28 @@ pub struct IdentifyOptions {
     /// Sessions whose tool TCP is identified although they declare it (a reflector nest whose
     /// declared offset is suspect).
     pub free_tcp: Vec<String>,
+    /// Keep the geometry (α, a, d, θ offsets, β) within a plausible distance of its start values.
+    pub anchor: Option<Anchor>,
+}
+
+/// A weak prior on the geometry: each free α, a, d, θ offset and β is an extra observation of
+/// its start value with standard deviation `length` or `angle`. A built robot's geometry differs
+/// from its calibrated values by micrometres, so σ of a millimetre or a tenth of a degree changes
+/// nothing where the model fits; where it cannot — plain DH on tilted parallel axes, whose
+/// least-squares solution lies at infinity (§3.4) — it keeps the fit finite, and the misfit
+/// visible, instead of letting the parameters run away.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Anchor {
+    /// m.
+    pub length: f64,
+    /// rad.
+    pub angle: f64,
+}
+
+impl Default for Anchor {
+    fn default() -> Self {
+        Self { length: 1e-3, angle: 0.1 * crate::units::DEG }
+    }
 }
 
 impl Default for IdentifyOptions {
@@ -192,6 +214,7 @@ impl Default for IdentifyOptions {
             noise: None,
             map_smoothing: DEFAULT_MAP_SMOOTHING,
             free_tcp: Vec::new(),
+            anchor: None,
         }
     }
 }
@@ -390,7 +413,28 @@ pub fn prepare(cell: &Cell, opts: &IdentifyOptions) -> Result<Prepared, Identify
     if free.is_empty() {
         return Err(IdentifyError::Option("no parameter is free to identify".into()));
     }
+    if let Some(a) = &opts.anchor {
+        let priors = anchor_priors(&problem, &free, &x0, a, opts.noise.is_some());
+        problem.add_priors(priors);
+    }
     Ok(Prepared { problem, x0, free, status, base })
+}
+
+/// Anchors of the free geometric parameters to their start values (see [`Anchor`]): one row
+/// (x − x₀)/σ each, in units of one measurement σ (10 µm when the problem is not weighted).
+fn anchor_priors(problem: &Problem, free: &[usize], x0: &[f64], a: &Anchor, weighted: bool) -> Vec<Prior> {
+    let unit = if weighted { 1.0 } else { 1e-5 };
+    free.iter()
+        .filter_map(|&g| {
+            let GlobalParam::Robot(i) = problem.params[g] else { return None };
+            let sigma = match problem.layout.params()[i] {
+                Param::A(_) | Param::D(_) => a.length,
+                Param::Alpha(_) | Param::Theta(_) | Param::Beta(_) => a.angle,
+                _ => return None,
+            };
+            Some(Prior { terms: vec![(g, unit / sigma)], target: unit / sigma * x0[g] })
+        })
+        .collect()
 }
 
 /// Weight each observation by 1/σ of its instrument (position rows) and of the orientation
@@ -438,11 +482,14 @@ pub fn map_priors(problem: &Problem, j0: &Mat<f64>, eta: f64) -> Result<Vec<Prio
         let lambda = (eta * mean).sqrt();
         for w in knots.windows(3) {
             if w[1].0 == w[0].0 + 1 && w[2].0 == w[1].0 + 1 {
-                priors.push(Prior { terms: vec![(w[0].1, lambda), (w[1].1, -2.0 * lambda), (w[2].1, lambda)] });
+                priors.push(Prior {
+                    terms: vec![(w[0].1, lambda), (w[1].1, -2.0 * lambda), (w[2].1, lambda)],
+                    target: 0.0,
+                });
             }
         }
         let m = mean.sqrt() / knots.len() as f64;
-        priors.push(Prior { terms: knots.iter().map(|&(_, g)| (g, m)).collect() });
+        priors.push(Prior { terms: knots.iter().map(|&(_, g)| (g, m)).collect(), target: 0.0 });
     }
     Ok(priors)
 }

@@ -71,11 +71,13 @@ pub struct Obs {
     pub weight: [f64; 2],
 }
 
-/// A linear pseudo-observation Σ coef·x ≈ 0 on global parameters: the regularisation rows of a
-/// correction table (smoothness, zero mean). Appended after the measurement rows.
+/// A linear pseudo-observation Σ coef·x ≈ target on global parameters: the regularisation rows
+/// of a correction table (smoothness, zero mean, target 0) or an anchor of a parameter to a
+/// value. Appended after the measurement rows.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Prior {
     pub terms: Vec<(usize, f64)>,
+    pub target: f64,
 }
 
 /// Which measurements enter the problem.
@@ -221,19 +223,18 @@ impl Problem {
         }
         // Observations.
         let gravity: Vec<GravityModel> = tools.iter().map(|b| GravityModel::new(&model, &b.tool)).collect();
-        // With a payload-error parameter, ∂τ/∂m of each tool: the torques are linear in the
-        // payload mass (its first moment enters the recursion linearly), so the difference of the
-        // torques with one kilogram more is exact, not a finite-difference approximation.
-        let heavier: Option<Vec<GravityModel>> = layout.index_of(Param::ToolMass).map(|_| {
-            tools
-                .iter()
-                .map(|b| {
-                    let mut t = b.tool.clone();
-                    t.mass += 1.0;
-                    GravityModel::new(&model, &t)
-                })
-                .collect()
-        });
+        // ∂τ/∂m of each tool, for a payload-error parameter (in the model or a candidate of the
+        // diagnosis): the torques are linear in the payload mass (its first moment enters the
+        // recursion linearly), so the difference of the torques with one kilogram more is exact,
+        // not a finite-difference approximation.
+        let heavier: Vec<GravityModel> = tools
+            .iter()
+            .map(|b| {
+                let mut t = b.tool.clone();
+                t.mass += 1.0;
+                GravityModel::new(&model, &t)
+            })
+            .collect();
         let trical = TriCal::default();
         let mut obs = Vec::with_capacity(picks.len());
         let mut row = 0;
@@ -248,11 +249,9 @@ impl Problem {
                 }
             }
             state.temperature_c = m.temperature_c.unwrap_or(REFERENCE_TEMPERATURE_C);
-            if let Some(h) = &heavier {
-                let t1 = h[t].torques(&m.q);
-                for j in 0..model.dof() {
-                    state.tau_per_kg[j] = t1[j] - tau[j];
-                }
+            let t1 = heavier[t].torques(&m.q);
+            for j in 0..model.dof() {
+                state.tau_per_kg[j] = t1[j] - tau[j];
             }
             let target = match (&m.observation, &m.indicators) {
                 (Observation::Ball(k), ind) => {
@@ -321,7 +320,7 @@ impl Problem {
 
     fn write_priors(&self, x: &[f64], out: &mut [f64]) {
         for (k, p) in self.priors.iter().enumerate() {
-            out[self.n_obs_rows + k] = -p.terms.iter().map(|&(g, c)| c * x[g]).sum::<f64>();
+            out[self.n_obs_rows + k] = p.target - p.terms.iter().map(|&(g, c)| c * x[g]).sum::<f64>();
         }
     }
 

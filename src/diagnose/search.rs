@@ -1,0 +1,627 @@
+//! The greedy search: screen every candidate on the current model, confirm the best few on
+//! held-out poses, accept one, refit, repeat — and stop with an honest verdict when the evidence
+//! is ambiguous (DIAGNOSIS §1, §3, §4).
+//!
+//! Statistical decisions, each with its null hypothesis and correction:
+//! - **Screening** (`screen`): H0 "the candidate's parameters are zero", F form of the score
+//!   test, Holm's correction over the whole family at `alpha` (family-wise error). The frequency
+//!   scan is one test per joint with a Bonferroni factor over its independent frequencies.
+//! - **Confirmation** (`cv`): H0 "adding the candidate does not lower the held-out squared error
+//!   of a pose", one-sided Wilcoxon signed-rank over the tested poses of a grouped K-fold
+//!   cross-validation, at `confirm_p`, and the held-out RMS must drop by more than `min_gain`
+//!   (the instrument's resolution). A candidate is named only if it passes both.
+//! - **Parsimony**: nested forms of one effect (a single compliance inside the group, a cyclic
+//!   term inside the same joint's table) — the simpler one is kept unless the richer predicts
+//!   significantly better (paired test at `confirm_p`).
+//! - **Look-alikes**: a confirmed candidate of another effect whose unabsorbed columns have a
+//!   canonical correlation above `lookalike_corr` with the best's, or that predicts within 10 % as
+//!   well without being significantly worse (paired test at 0.05): the data cannot tell the two
+//!   apart → `not_separable` with both names and the experiment that would.
+//! - **Absorption**: separability ρ below `rho_min` → `not_separable`: the current model takes
+//!   most of the effect; the parameters that absorb it are named.
+//! - **Unknown effect**: a flexible joint-space smoother (every joint's angle corrected by a
+//!   linear function of every holding torque, every reading and its square) cross-validated the
+//!   same way. If it confirms and predicts significantly better than the best named candidate,
+//!   or confirms when no candidate does, the verdict is `unknown_effect`: structure is there,
+//!   and no name in the library explains it.
+//!
+//! The thresholds' false-alarm rate is measured on simulated no-effect cells by
+//! `robocal bench-diagnosis` (BENCHMARKS.md), not assumed.
+
+use faer::Mat;
+
+use super::cv::{Folds, Heldout, Paired, cross_validate, paired};
+use super::library::{Candidate, Context, Kind, Unavailable, candidates, scan_multiplicity, scan_quarters};
+use super::linalg::{at_b, canonical_correlation, orthonormal_basis};
+use super::screen::{Basis, Score, score, table_penalty};
+use super::stage::Stage;
+use super::stats::holm_log10;
+use crate::cell::Cell;
+use crate::identify::{GlobalParam, IdentifyError, IdentifyOptions, map_knots};
+use crate::kinematics::{JointTerm, Param};
+
+/// Thresholds and sizes of the search.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SearchOptions {
+    /// Family-wise error rate of the screening (Holm).
+    pub alpha: f64,
+    /// Level of the held-out confirmation (one-sided Wilcoxon).
+    pub confirm_p: f64,
+    /// Smallest held-out RMS gain that counts, m.
+    pub min_gain: f64,
+    /// Candidates confirmed per round, best by screening first.
+    pub top: usize,
+    /// Effects accepted at most.
+    pub max_effects: usize,
+    pub rho_min: f64,
+    pub lookalike_corr: f64,
+    /// Knot spacing of tables, degrees (0: about 60 knots over each joint's range).
+    pub map_step_deg: u8,
+    /// η of the tables' smoothness.
+    pub map_smoothing: f64,
+    /// Smallest share of the held-out variance above the floor that a named effect must
+    /// explain: a candidate that predicts a sliver of a large unexplained error is fitting
+    /// whatever happens to correlate with it, not naming its cause.
+    pub min_share: f64,
+}
+
+impl Default for SearchOptions {
+    fn default() -> Self {
+        Self {
+            alpha: 0.05,
+            confirm_p: 0.01,
+            min_gain: 0.5e-6,
+            top: 6,
+            max_effects: 5,
+            rho_min: 0.15,
+            lookalike_corr: 0.95,
+            map_step_deg: 0,
+            map_smoothing: crate::identify::DEFAULT_MAP_SMOOTHING,
+            min_share: 0.2,
+        }
+    }
+}
+
+/// A candidate with its screening statistics.
+#[derive(Clone, Debug)]
+pub struct Screened {
+    pub candidate: Candidate,
+    pub score: Score,
+    /// Holm-corrected log10 p.
+    pub log10_p_holm: f64,
+    pub significant: bool,
+    /// The model parameters that absorb most of the candidate (name, share of ‖QᵀJ_k‖).
+    pub absorbed_by: Vec<(String, f64)>,
+}
+
+/// A candidate confirmed (or not) on held-out poses.
+#[derive(Clone, Debug)]
+pub struct Evaluated {
+    /// Index into the round's `screened`.
+    pub index: usize,
+    pub heldout: Heldout,
+    pub vs_model: Paired,
+    /// Share of the held-out variance above the floor it explains.
+    pub share: f64,
+    pub confirmed: bool,
+}
+
+/// Why a round ended the search, or what it accepted.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Decision {
+    /// This candidate (index into `screened`) is named and added.
+    Accept(usize),
+    /// Nothing passes screening and confirmation, and the smoother finds no structure.
+    Nothing,
+    /// The best candidate's evidence cannot be told from the current model or from another
+    /// candidate.
+    NotSeparable { best: usize, lookalike: Option<usize>, canonical: Option<f64>, reason: String },
+    /// Structure no candidate explains (the smoother predicts it, better than any name).
+    Unknown { best: Option<usize> },
+}
+
+/// One round of the search.
+#[derive(Clone, Debug)]
+pub struct Round {
+    pub screened: Vec<Screened>,
+    pub evaluated: Vec<Evaluated>,
+    pub smoother: Paired,
+    pub smoother_heldout: Heldout,
+    /// The smoother against the best confirmed candidate (H1: the smoother is better).
+    pub smoother_vs_best: Option<Paired>,
+    pub decision: Decision,
+}
+
+/// The whole search.
+pub struct Search {
+    /// Stage 0 (the starting model) and one per accepted effect.
+    pub stages: Vec<Stage>,
+    /// Held-out errors of each stage's model.
+    pub baselines: Vec<Heldout>,
+    pub rounds: Vec<Round>,
+    pub accepted: Vec<Candidate>,
+    pub unavailable: Vec<Unavailable>,
+}
+
+/// Run the search from `start` (the current model on the pooled data).
+/// `floor_ms` is the floor's mean squared error at the tested positions (m²).
+pub fn search(
+    cell: &Cell,
+    start: Stage,
+    folds: &Folds,
+    floor_ms: f64,
+    opts: &SearchOptions,
+) -> Result<Search, IdentifyError> {
+    let mut stages = vec![start];
+    let mut baselines = vec![cross_validate(&stages[0], folds, None)];
+    let mut rounds = Vec::new();
+    let mut accepted = Vec::new();
+    let mut unavailable = Vec::new();
+    loop {
+        let stage = stages.last().expect("a stage");
+        let base = baselines.last().expect("a baseline");
+        let (round, missing, chosen) = run_round(cell, stage, base, folds, floor_ms, opts);
+        if rounds.is_empty() {
+            unavailable = missing;
+        }
+        let decision = round.decision.clone();
+        rounds.push(round);
+        let Decision::Accept(_) = decision else { break };
+        let cand = chosen.expect("an accepted candidate");
+        let next_opts = extend_options(&stage.options, stage, &cand);
+        let next = Stage::fit(cell, next_opts)?;
+        baselines.push(cross_validate(&next, folds, None));
+        stages.push(next);
+        accepted.push(cand);
+        if accepted.len() >= opts.max_effects {
+            break;
+        }
+    }
+    Ok(Search { stages, baselines, rounds, accepted, unavailable })
+}
+
+/// Mean squared |e| over the tested observations, m².
+fn rms2(h: &Heldout) -> f64 {
+    h.errors.iter().map(|(_, e)| e.norm_squared()).sum::<f64>() / h.errors.len().max(1) as f64
+}
+
+/// The model options with a candidate added.
+pub fn extend_options(options: &IdentifyOptions, stage: &Stage, cand: &Candidate) -> IdentifyOptions {
+    let mut o = options.clone();
+    for p in &cand.params {
+        if !o.model.extra.contains(p) {
+            o.model.extra.push(*p);
+        }
+    }
+    let pr = &stage.problem;
+    for &g in &cand.frees {
+        let name = pr.name(g);
+        o.fixed.retain(|f| *f != name);
+        if let GlobalParam::Tool { tool, .. } = pr.params[g] {
+            for s in &pr.tools[tool].sessions {
+                if !o.free_tcp.contains(s) {
+                    o.free_tcp.push(s.clone());
+                }
+            }
+        }
+    }
+    // Start from the current solution: the refit only adds the effect.
+    let mut start = stage.set.clone();
+    for p in &cand.params {
+        start.extend(&[*p]);
+    }
+    o.start = Some(start);
+    o
+}
+
+/// A candidate's columns at the stage (weighted) and its penalty, its parameters realised
+/// (a table's knots laid over the pooled readings).
+fn realise(stage: &Stage, cand: &mut Candidate, opts: &SearchOptions) -> (Mat<f64>, Option<Mat<f64>>) {
+    let pr = &stage.problem;
+    if cand.kind == Kind::JointMap && cand.params.is_empty() {
+        let j = cand.joint.expect("a table has a joint");
+        cand.params = map_knots(j, cand.step_deg.expect("a step"), pr.obs.iter().map(|o| o.state.q[j]));
+    }
+    if !cand.frees.is_empty() {
+        return (stage.global_columns(&cand.frees), None);
+    }
+    let c = stage.columns(&cand.params);
+    let penalty = (cand.kind == Kind::JointMap).then(|| table_penalty(c.as_ref(), opts.map_smoothing));
+    (c, penalty)
+}
+
+/// The library's context for a stage.
+fn context<'a>(cell: &Cell, stage: &'a Stage, free: &'a [bool], opts: &SearchOptions, approach: bool) -> Context<'a> {
+    let pr = &stage.problem;
+    let dof = pr.model.dof();
+    let range = |f: &dyn Fn(&crate::identify::problem::Obs) -> f64| -> f64 {
+        let (lo, hi) = pr.obs.iter().map(f).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+        if lo.is_finite() { hi - lo } else { 0.0 }
+    };
+    let torque_range = (0..dof).map(|j| range(&|o| o.state.tau[j])).collect();
+    let joint_range = (0..dof).map(|j| range(&|o| o.state.q[j])).collect();
+    let temps: Vec<Option<f64>> =
+        pr.obs.iter().map(|o| cell.sessions[o.session].measurements[o.index].temperature_c).collect();
+    let temperature_range = if temps.iter().all(|t| t.is_some()) {
+        let v: Vec<f64> = temps.iter().map(|t| t.expect("all logged")).collect();
+        Some(v.iter().copied().fold(f64::NEG_INFINITY, f64::max) - v.iter().copied().fold(f64::INFINITY, f64::min))
+    } else {
+        None
+    };
+    let fixed_base: Vec<usize> = (0..pr.n_params())
+        .filter(|&g| matches!(pr.params[g], GlobalParam::Robot(i) if matches!(pr.layout.params()[i], Param::Base(_))))
+        .filter(|&g| !stage.is_free(g))
+        .collect();
+    let fixed_tools: Vec<Vec<usize>> = (0..pr.tools.len())
+        .map(|t| {
+            let k_max = if pr.tools[t].has_orientation { 6 } else { 3 };
+            (0..pr.n_params())
+                .filter(|&g| matches!(pr.params[g], GlobalParam::Tool { tool, k } if tool == t && k < k_max))
+                .filter(|&g| !stage.is_free(g))
+                .collect()
+        })
+        .collect();
+    Context {
+        dof,
+        layout: pr.layout.params(),
+        free,
+        parallel_rows: pr.layout.parallel_rows(),
+        torque_range,
+        joint_range,
+        approach_available: approach,
+        temperature_range,
+        fixed_base,
+        fixed_tools,
+        map_step_deg: opts.map_step_deg,
+    }
+}
+
+/// The smoother's columns: every joint's angle corrected by a linear function of every holding
+/// torque, every reading and every reading squared (weighted, n_rows × 3n²). Not a name: a
+/// generic stand-in for "a smooth function of the configuration".
+pub fn smoother_columns(stage: &Stage, g: &Mat<f64>) -> Mat<f64> {
+    let pr = &stage.problem;
+    let n = pr.model.dof();
+    let mut out = Mat::<f64>::zeros(stage.n_rows(), 3 * n * n);
+    for o in &pr.obs {
+        let s = &o.state;
+        let feats: Vec<f64> =
+            (0..n).map(|j| s.tau[j]).chain((0..n).map(|j| s.q[j])).chain((0..n).map(|j| s.q[j] * s.q[j])).collect();
+        for k in 0..n {
+            for (f, v) in feats.iter().enumerate() {
+                let c = k * 3 * n + f;
+                for r in o.row..o.row + o.rows {
+                    out[(r, c)] = g[(r, k)] * v;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// A small ridge for the smoother (its columns overlap the model's and each other's).
+fn ridge(c: &Mat<f64>, rel: f64) -> Mat<f64> {
+    let m = c.ncols();
+    Mat::<f64>::from_fn(
+        m,
+        m,
+        |i, k| if i == k { rel * (0..c.nrows()).map(|r| c[(r, i)].powi(2)).sum::<f64>() } else { 0.0 },
+    )
+}
+
+fn run_round(
+    cell: &Cell,
+    stage: &Stage,
+    base: &Heldout,
+    folds: &Folds,
+    floor_ms: f64,
+    opts: &SearchOptions,
+) -> (Round, Vec<Unavailable>, Option<Candidate>) {
+    let pr = &stage.problem;
+    let approach = pr.obs.iter().any(|o| o.state.approach.iter().any(|&a| a != 0.0));
+    let free = stage.free_layout();
+    let ctx = context(cell, stage, &free, opts, approach);
+    let (mut cands, missing) = candidates(&ctx);
+    let rp = Basis::project(stage.q.as_ref(), &stage.r);
+    let basis = Basis { q: stage.q.as_ref(), r: &rp, rss: stage.rss, n: stage.n_obs_rows(), p: stage.p() };
+
+    // Screening of the library.
+    let mut screened: Vec<Screened> = Vec::new();
+    let mut columns: Vec<(Mat<f64>, Option<Mat<f64>>)> = Vec::new();
+    for mut c in cands.drain(..) {
+        let (cols, pen) = realise(stage, &mut c, opts);
+        let sc = score(&basis, cols.as_ref(), pen.as_ref());
+        screened.push(Screened {
+            candidate: c,
+            score: sc,
+            log10_p_holm: 0.0,
+            significant: false,
+            absorbed_by: Vec::new(),
+        });
+        columns.push((cols, pen));
+    }
+    // The frequency scan, one test per joint.
+    let g = stage.joint_columns();
+    for j in 0..pr.model.dof() {
+        if let Some((c, cols)) = scan_joint(stage, &basis, &g, j, &screened) {
+            screened.push(c);
+            columns.push((cols, None));
+        }
+    }
+    // Holm over the family.
+    let lp: Vec<f64> = screened.iter().map(|s| s.score.log10_p).collect();
+    for (s, h) in screened.iter_mut().zip(holm_log10(&lp)) {
+        s.log10_p_holm = h;
+        s.significant = h < opts.alpha.log10() && s.score.dof > 0.0;
+    }
+    for (s, (cols, _)) in screened.iter_mut().zip(&columns) {
+        if s.significant {
+            s.absorbed_by = absorbed_by(stage, cols);
+        }
+    }
+
+    // Confirmation of the best few by screening.
+    let mut order: Vec<usize> = (0..screened.len()).filter(|&i| screened[i].significant).collect();
+    order.sort_by(|&a, &b| screened[b].score.bic_gain.total_cmp(&screened[a].score.bic_gain));
+    order.truncate(opts.top);
+    // Bonferroni over the candidates confirmed this round; the share of the excess variance.
+    let level = opts.confirm_p / order.len().max(1) as f64;
+    let excess = (rms2(base) - floor_ms).max(f64::MIN_POSITIVE);
+    let evaluated: Vec<Evaluated> = order
+        .iter()
+        .map(|&i| {
+            let (cols, pen) = &columns[i];
+            let heldout = cross_validate(stage, folds, Some((cols, pen.as_ref())));
+            let vs_model = paired(base, &heldout);
+            let share = (rms2(base) - rms2(&heldout)) / excess;
+            let confirmed =
+                vs_model.p.is_some_and(|p| p < level) && vs_model.gain_rms > opts.min_gain && share >= opts.min_share;
+            Evaluated { index: i, heldout, vs_model, share, confirmed }
+        })
+        .collect();
+
+    // The smoother.
+    let sm = smoother_columns(stage, &g);
+    let sm_pen = ridge(&sm, 1e-6);
+    let smoother_heldout = cross_validate(stage, folds, Some((&sm, Some(&sm_pen))));
+    let smoother = paired(base, &smoother_heldout);
+    let smoother_ok = smoother.p.is_some_and(|p| p < opts.confirm_p)
+        && smoother.gain_rms > opts.min_gain
+        && (rms2(base) - rms2(&smoother_heldout)) / excess >= opts.min_share;
+
+    // Decide.
+    let confirmed: Vec<&Evaluated> = evaluated.iter().filter(|e| e.confirmed).collect();
+    let mut smoother_vs_best = None;
+    let decision = if confirmed.is_empty() {
+        if smoother_ok { Decision::Unknown { best: None } } else { Decision::Nothing }
+    } else {
+        let best = choose(&confirmed, &screened, opts);
+        let sb = paired(&best.heldout, &smoother_heldout);
+        // The smoother predicts significantly better than the best name, and the name is one of
+        // the smoother's own forms (a compliance, a coupling: it adds nothing beyond it) — so
+        // the name captures only part of a structure that lies elsewhere. A name outside the
+        // smoother's span that adds beyond it is a real effect; whatever else the smoother sees
+        // is left to the next round.
+        let smoother_wins = smoother_ok
+            && sb.p.is_some_and(|p| p < opts.confirm_p)
+            && sb.gain_rms > opts.min_gain.max(0.05 * best.vs_model.gain_rms)
+            && {
+                let rp = Basis::project(stage.q.as_ref(), &stage.r);
+                encompassing(stage, &rp, &unabsorbed(stage, &sm), &columns[best.index].0) > opts.confirm_p.log10()
+            };
+        smoother_vs_best = Some(sb);
+        if smoother_wins {
+            Decision::Unknown { best: Some(best.index) }
+        } else if screened[best.index].score.rho < opts.rho_min {
+            Decision::NotSeparable {
+                best: best.index,
+                lookalike: None,
+                canonical: None,
+                reason: "absorbed by the current model".into(),
+            }
+        } else {
+            match lookalike(best, &confirmed, &screened, &columns, stage, opts) {
+                Some((other, corr, beyond)) => Decision::NotSeparable {
+                    best: best.index,
+                    lookalike: Some(other),
+                    canonical: Some(corr),
+                    reason: format!(
+                        "given {}, {} adds nothing these data can show (p = {:.2e})",
+                        screened[other].candidate.label(),
+                        screened[best.index].candidate.label(),
+                        10f64.powf(beyond)
+                    ),
+                },
+                None => Decision::Accept(best.index),
+            }
+        }
+    };
+    let chosen = match decision {
+        Decision::Accept(i) => Some(screened[i].candidate.clone()),
+        _ => None,
+    };
+    (Round { screened, evaluated, smoother, smoother_heldout, smoother_vs_best, decision }, missing, chosen)
+}
+
+/// The scan of joint j: the best quarter-cycle frequency by F, its p-value times the effective
+/// number of frequencies. Skipped when the best is a prespecified harmonic (1 or 2: already a
+/// candidate) or the joint does not move.
+fn scan_joint(
+    stage: &Stage,
+    basis: &Basis<'_>,
+    g: &Mat<f64>,
+    j: usize,
+    screened: &[Screened],
+) -> Option<(Screened, Mat<f64>)> {
+    let pr = &stage.problem;
+    let (lo, hi) =
+        pr.obs.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), o| (a.min(o.state.q[j]), b.max(o.state.q[j])));
+    let range = hi - lo;
+    if range.is_nan() || range <= 1e-3 {
+        return None;
+    }
+    let free = stage.free_layout();
+    let in_model = |q: u16| {
+        let t = JointTerm::cyclic(q, false).expect("non-zero");
+        pr.layout.params().iter().zip(&free).any(|(p, f)| *f && *p == Param::Joint(j, t))
+    };
+    let mut best: Option<(u16, Score, Mat<f64>)> = None;
+    for q in scan_quarters() {
+        if in_model(q) {
+            continue;
+        }
+        let f = q as f64 / 4.0;
+        let mut cols = Mat::<f64>::zeros(stage.n_rows(), 2);
+        for o in &pr.obs {
+            let (s, c) = (f * o.state.q[j]).sin_cos();
+            for r in o.row..o.row + o.rows {
+                cols[(r, 0)] = g[(r, j)] * s;
+                cols[(r, 1)] = g[(r, j)] * c;
+            }
+        }
+        let sc = score(basis, cols.as_ref(), None);
+        if best.as_ref().is_none_or(|(_, b, _)| sc.f > b.f) {
+            best = Some((q, sc, cols));
+        }
+    }
+    let (q, mut sc, cols) = best?;
+    if q == 4 || q == 8 {
+        return None;
+    }
+    if screened
+        .iter()
+        .any(|s| s.candidate.kind == Kind::Cyclic && s.candidate.joint == Some(j) && s.candidate.quarters == Some(q))
+    {
+        return None;
+    }
+    sc.log10_p = (sc.log10_p + scan_multiplicity(range).log10()).min(0.0);
+    let t = |cos| Param::Joint(j, JointTerm::cyclic(q, cos).expect("non-zero"));
+    let candidate = Candidate {
+        kind: Kind::Cyclic,
+        joint: Some(j),
+        from: None,
+        quarters: Some(q),
+        scanned: true,
+        step_deg: None,
+        params: vec![t(false), t(true)],
+        frees: Vec::new(),
+    };
+    Some((Screened { candidate, score: sc, log10_p_holm: 0.0, significant: false, absorbed_by: Vec::new() }, cols))
+}
+
+/// Nested forms of one effect: a compliance inside the group; a cyclic term and the same
+/// joint's table or another frequency of it.
+fn nested(a: &Candidate, b: &Candidate) -> bool {
+    match (a.kind, b.kind) {
+        (Kind::Compliance, Kind::Compliance) => a.joint.is_none() || b.joint.is_none() || a.joint == b.joint,
+        (x, y) if x.is_transmission() && y.is_transmission() => a.joint == b.joint,
+        _ => a.same_effect(b),
+    }
+}
+
+/// Parameters of a candidate, for parsimony (a table's effective size is its knot count).
+fn size(c: &Candidate) -> usize {
+    c.params.len().max(c.frees.len())
+}
+
+/// The best confirmed candidate: lowest held-out squared error, then the simplest of its nested
+/// forms unless the richer one predicts significantly better.
+fn choose<'e>(confirmed: &[&'e Evaluated], screened: &[Screened], opts: &SearchOptions) -> &'e Evaluated {
+    let mut best = *confirmed.iter().min_by(|a, b| a.heldout.mse().total_cmp(&b.heldout.mse())).expect("non-empty");
+    loop {
+        let simpler = confirmed
+            .iter()
+            .filter(|e| {
+                let (c, b) = (&screened[e.index].candidate, &screened[best.index].candidate);
+                e.index != best.index && nested(c, b) && size(c) < size(b)
+            })
+            .find(|e| {
+                let richer_better = paired(&e.heldout, &best.heldout);
+                !richer_better.p.is_some_and(|p| p < opts.confirm_p)
+            });
+        match simpler {
+            Some(s) => best = s,
+            None => return best,
+        }
+    }
+}
+
+/// The look-alike check: a confirmed candidate of another effect (not a nested form of the best)
+/// whose unabsorbed columns are nearly collinear with the best's, or that predicts nearly as
+/// well, is tested against the best both ways by encompassing score tests:
+/// - H0: "given the alternative, the best adds nothing" (F form, on the residual of the model
+///   plus the alternative); if it is not rejected at `confirm_p`, these data cannot tell the
+///   best from the alternative → `not_separable`.
+///
+/// Returns the look-alike, the canonical correlation and log10 p of the best beyond it.
+fn lookalike(
+    best: &Evaluated,
+    confirmed: &[&Evaluated],
+    screened: &[Screened],
+    columns: &[(Mat<f64>, Option<Mat<f64>>)],
+    stage: &Stage,
+    opts: &SearchOptions,
+) -> Option<(usize, f64, f64)> {
+    let bc = &screened[best.index].candidate;
+    let tb = unabsorbed(stage, &columns[best.index].0);
+    let rp = Basis::project(stage.q.as_ref(), &stage.r);
+    for e in confirmed {
+        let c = &screened[e.index].candidate;
+        if e.index == best.index || nested(c, bc) {
+            continue;
+        }
+        let ta = unabsorbed(stage, &columns[e.index].0);
+        let corr = canonical_correlation(tb.as_ref(), ta.as_ref());
+        let close = e.vs_model.gain_rms >= 0.8 * best.vs_model.gain_rms;
+        if corr <= 0.9 && !close {
+            continue;
+        }
+        let beyond = encompassing(stage, &rp, &ta, &columns[best.index].0);
+        if beyond > opts.confirm_p.log10() || corr > 0.999_999 {
+            return Some((e.index, corr, beyond));
+        }
+    }
+    None
+}
+
+/// log10 p of the score test of `cols` on the model plus the (unabsorbed) columns `alt`.
+fn encompassing(stage: &Stage, rp: &[f64], alt: &Mat<f64>, cols: &Mat<f64>) -> f64 {
+    let ua = orthonormal_basis(alt.as_ref(), 1e-9);
+    let (n, p, k) = (stage.n_rows(), stage.q.ncols(), ua.ncols());
+    let q = Mat::<f64>::from_fn(n, p + k, |r, c| if c < p { stage.q[(r, c)] } else { ua[(r, c - p)] });
+    let r = Basis::project(ua.as_ref(), rp);
+    let rss = r[..stage.n_obs_rows()].iter().map(|v| v * v).sum();
+    let basis = Basis { q: q.as_ref(), r: &r, rss, n: stage.n_obs_rows(), p: stage.p() + k };
+    score(&basis, cols.as_ref(), None).log10_p
+}
+
+/// The part of a candidate's columns the model cannot absorb, (I − QQᵀ)·J_k.
+fn unabsorbed(stage: &Stage, c: &Mat<f64>) -> Mat<f64> {
+    let a = at_b(stage.q.as_ref(), c.as_ref());
+    let proj = super::linalg::a_b(stage.q.as_ref(), a.as_ref());
+    Mat::<f64>::from_fn(c.nrows(), c.ncols(), |r, k| c[(r, k)] - proj[(r, k)])
+}
+
+/// The model parameters that absorb most of a candidate: the coefficients of its columns'
+/// regression on the model's (B = J⁺J_k), each parameter's share ‖J_i‖·‖B_i‖ of the total.
+fn absorbed_by(stage: &Stage, cols: &Mat<f64>) -> Vec<(String, f64)> {
+    let j = &stage.j;
+    let p = j.ncols();
+    let norms: Vec<f64> = (0..p).map(|c| (0..j.nrows()).map(|r| j[(r, c)].powi(2)).sum::<f64>().sqrt()).collect();
+    let js = Mat::<f64>::from_fn(j.nrows(), p, |r, c| j[(r, c)] / norms[c].max(f64::MIN_POSITIVE));
+    let g = at_b(js.as_ref(), js.as_ref());
+    let rhs = at_b(js.as_ref(), cols.as_ref());
+    let b: Vec<Vec<f64>> = (0..cols.ncols())
+        .map(|k| super::linalg::psd_solve(&g, &(0..p).map(|r| rhs[(r, k)]).collect::<Vec<_>>(), 1e-13))
+        .collect();
+    let mut share: Vec<(usize, f64)> =
+        (0..p).map(|i| (i, b.iter().map(|bk| bk[i] * bk[i]).sum::<f64>().sqrt())).collect();
+    let total: f64 = share.iter().map(|s| s.1).sum();
+    share.sort_by(|a, b| b.1.total_cmp(&a.1));
+    share
+        .into_iter()
+        .take(3)
+        .filter(|s| total > 0.0 && s.1 / total > 0.05)
+        .map(|(i, v)| (stage.problem.name(stage.free[i]), v / total))
+        .collect()
+}

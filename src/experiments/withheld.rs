@@ -1,0 +1,326 @@
+//! The diagnosis proven on withheld effects (`robocal bench-diagnosis`): in the virtual cell,
+//! each effect of the simulator is put in the true robot and withheld from the model, with and
+//! without the auxiliary logs (temperature, approach); the no-effect case and the
+//! out-of-library link bending are added; every case runs over several seeds. Each diagnosis is
+//! scored against what an honest answer is:
+//!
+//! | case | expected |
+//! |---|---|
+//! | a separable effect | `named`, the right kind first, the right joint (and harmonic) |
+//! | no effect | `none` (anything else is a false alarm) |
+//! | a payload error with one payload; backlash with neither approach log nor measuring order | `not_separable` (never a confident name) |
+//! | link bending | `unknown_effect` or `not_separable`, never `named` |
+//! | thermal growth without a temperature log | anything but a confident wrong name |
+//!
+//! and the gap closure of the named model against the oracle's (the true effect's terms added).
+
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+use rand_chacha::ChaCha8Rng;
+
+use crate::cell::Cell;
+use crate::diagnose::library::Kind;
+use crate::diagnose::{DiagnoseOptions, Input, Status, diagnose, heldout_with};
+use crate::identify::{IdentifyOptions, ModelOptions, identify};
+use crate::kinematics::{JointTerm, Param};
+use crate::sim::effects::Effects;
+use crate::sim::simulate::{SimulateOptions, simulate};
+
+/// What an honest diagnosis of a case says.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Expect {
+    /// `named`, with this kind first; the joint (0-based) and harmonic in quarters when given.
+    Named {
+        kind: Kind,
+        joint: Option<usize>,
+        from: Option<usize>,
+        quarters: Option<u16>,
+    },
+    None,
+    NotSeparable,
+    /// `unknown_effect` or `not_separable`.
+    NotNamed,
+    /// Anything but a name of another effect (an effect whose log is missing).
+    NoWrongName,
+}
+
+/// One case of the suite.
+#[derive(Clone, Debug)]
+pub struct Case {
+    pub name: String,
+    /// `simulate --effects` specification.
+    pub effects: String,
+    /// Keep the temperature and approach logs.
+    pub aux: bool,
+    /// Shuffle each session's measurements and drop their times (measuring order lost).
+    pub shuffle: bool,
+    pub expect: Expect,
+}
+
+/// The result of one case and seed.
+#[derive(Clone, Debug)]
+pub struct Outcome {
+    pub case: String,
+    pub seed: u64,
+    pub status: Status,
+    /// Label of the first effect of the verdict (named or suspected).
+    pub first: Option<String>,
+    pub correct: bool,
+    /// The named kind is another effect than the one withheld.
+    pub wrong_name: bool,
+    pub heldout_mean: f64,
+    pub floor_mean: f64,
+    /// Held-out mean of the last accepted model and of the oracle, m.
+    pub final_mean: f64,
+    pub oracle_mean: Option<f64>,
+    /// Gap closure of the diagnosis's model relative to the oracle's.
+    pub closure_ratio: Option<f64>,
+    pub seconds: f64,
+    pub error: Option<String>,
+}
+
+/// The suite: every effect of the simulator withheld in turn (magnitudes whose contribution
+/// after calibration stands above the floor), with and without logs, plus the special cases.
+pub fn suite() -> Vec<Case> {
+    let named = |kind, joint: Option<usize>, from: Option<usize>, quarters: Option<u16>| Expect::Named {
+        kind,
+        joint,
+        from,
+        quarters,
+    };
+    let mut cases = Vec::new();
+    let both = |cases: &mut Vec<Case>, name: &str, effects: &str, with: Expect, without: Expect| {
+        cases.push(Case { name: name.to_string(), effects: effects.into(), aux: true, shuffle: false, expect: with });
+        cases.push(Case {
+            name: format!("{name} (no logs)"),
+            effects: effects.into(),
+            aux: false,
+            shuffle: false,
+            expect: without,
+        });
+    };
+    both(&mut cases, "none", "", Expect::None, Expect::None);
+    let cyc = named(Kind::Cyclic, Some(2), None, Some(8));
+    both(&mut cases, "cyclic j3 h2", "cyclic:j=3:h=2:amp_deg=0.01", cyc.clone(), cyc);
+    let cyc = named(Kind::Cyclic, Some(0), None, Some(4));
+    both(&mut cases, "cyclic j1 h1", "cyclic:j=1:h=1:amp_deg=0.01", cyc.clone(), cyc);
+    let bl = named(Kind::Backlash, Some(1), None, None);
+    both(&mut cases, "backlash j2", "backlash:j=2:deg=0.01", bl.clone(), bl);
+    cases.push(Case {
+        name: "backlash j2 (no logs, shuffled)".into(),
+        effects: "backlash:j=2:deg=0.01".into(),
+        aux: false,
+        shuffle: true,
+        expect: Expect::NotSeparable,
+    });
+    both(&mut cases, "thermal", "thermal", named(Kind::Thermal, None, None, None), Expect::NoWrongName);
+    let cp = named(Kind::Coupling, Some(5), Some(4), None);
+    both(&mut cases, "coupling 5→6", "coupling:from=5:to=6:ratio=0.001", cp.clone(), cp);
+    let cc = named(Kind::ComplianceCubic, Some(1), None, None);
+    both(&mut cases, "compliance_cubic j2", "compliance_cubic:j=2:d=2.5e-7", cc.clone(), cc);
+    both(&mut cases, "tool_mass (one payload)", "tool_mass:delta_kg=0.5", Expect::NotSeparable, Expect::NotSeparable);
+    both(&mut cases, "link_bending", "link_bending:deg_per_nm=0.00286", Expect::NotNamed, Expect::NotNamed);
+    let hb = named(Kind::HayatiBeta, Some(2), None, None);
+    both(&mut cases, "-beta", "no_beta", hb.clone(), hb);
+    let cm = named(Kind::Compliance, None, None, None);
+    both(&mut cases, "-compliance", "no_compliance", cm.clone(), cm);
+    cases
+}
+
+/// The true effect's model terms (the oracle), when the library has them.
+fn oracle_terms(e: &Effects) -> Option<Vec<Param>> {
+    let mut p = Vec::new();
+    for c in &e.cyclic {
+        let j = c.j - 1;
+        p.push(Param::Joint(j, JointTerm::Cyclic { harmonic: c.h, cosine: false }));
+        p.push(Param::Joint(j, JointTerm::Cyclic { harmonic: c.h, cosine: true }));
+    }
+    for b in &e.backlash {
+        p.push(Param::Joint(b.j - 1, JointTerm::Backlash));
+    }
+    if e.thermal.is_some() {
+        p.push(Param::Thermal);
+    }
+    for c in &e.coupling {
+        p.push(Param::Joint(c.to - 1, JointTerm::Coupling { from: c.from - 1 }));
+    }
+    for c in &e.compliance_cubic {
+        p.push(Param::Joint(c.j - 1, JointTerm::ComplianceCubic));
+    }
+    if e.tool_mass.is_some() {
+        p.push(Param::ToolMass);
+    }
+    if e.no_beta {
+        p.push(Param::Beta(2));
+    }
+    if e.no_compliance {
+        p.extend((1..6).map(|j| Param::Joint(j, JointTerm::Compliance)));
+    }
+    if e.link_bending.is_some() || p.is_empty() { None } else { Some(p) }
+}
+
+/// The cell a case's diagnosis sees: logs stripped, order shuffled.
+fn prepare_cell(mut cell: Cell, case: &Case, seed: u64) -> Cell {
+    for s in &mut cell.sessions {
+        for m in &mut s.measurements {
+            if !case.aux {
+                m.temperature_c = None;
+                m.approach = None;
+            }
+            if case.shuffle {
+                m.time_s = None;
+            }
+        }
+        if case.shuffle {
+            s.measurements.shuffle(&mut ChaCha8Rng::seed_from_u64(seed ^ 0x5348_5546));
+        }
+    }
+    cell
+}
+
+/// Run one case at one seed.
+pub fn run_case(case: &Case, seed: u64, opts: &DiagnoseOptions) -> Outcome {
+    let t0 = std::time::Instant::now();
+    let fail = |e: String| Outcome {
+        case: case.name.clone(),
+        seed,
+        status: Status::None,
+        first: None,
+        correct: false,
+        wrong_name: false,
+        heldout_mean: f64::NAN,
+        floor_mean: f64::NAN,
+        final_mean: f64::NAN,
+        oracle_mean: None,
+        closure_ratio: None,
+        seconds: t0.elapsed().as_secs_f64(),
+        error: Some(e),
+    };
+    let effects = match Effects::parse(&case.effects, 6) {
+        Ok(e) => e,
+        Err(e) => return fail(e.to_string()),
+    };
+    let sim = match simulate(&SimulateOptions { seed, effects: effects.clone(), ..SimulateOptions::default() }) {
+        Ok(s) => s,
+        Err(e) => return fail(e.to_string()),
+    };
+    let cell = prepare_cell(sim.cell, case, seed);
+    // The calibration the engineer has: the model without the withheld effect, identified on
+    // the identification sessions.
+    let model = ModelOptions { beta: !effects.no_beta, compliance: !effects.no_compliance, ..ModelOptions::default() };
+    let id = match identify(&cell, &IdentifyOptions { model, ..IdentifyOptions::default() }) {
+        Ok(id) => id,
+        Err(e) => return fail(format!("identification: {e}")),
+    };
+    let identified: Vec<bool> = id.status.iter().map(|s| s == "identified").collect();
+    let input = Input { cell: &cell, set: &id.set, identified: Some(identified), fixed: Vec::new() };
+    let o = DiagnoseOptions { seed, ..opts.clone() };
+    let d = match diagnose(&input, &o) {
+        Ok(d) => d,
+        Err(e) => return fail(e.to_string()),
+    };
+    let v = &d.verdict;
+    let first = v.effects.first().map(|e| e.candidate.clone());
+    let withheld_kinds = withheld_kinds(&effects);
+    let wrong_name = v.status == Status::Named && first.as_ref().is_some_and(|c| !withheld_kinds.contains(&c.kind));
+    let correct = match &case.expect {
+        Expect::Named { kind, joint, from, quarters } => {
+            v.status == Status::Named
+                && first.as_ref().is_some_and(|c| {
+                    c.kind == *kind
+                        && (joint.is_none() || c.joint == *joint)
+                        && (from.is_none() || c.from == *from)
+                        && (quarters.is_none() || c.quarters == *quarters)
+                })
+        }
+        Expect::None => v.status == Status::None,
+        Expect::NotSeparable => v.status == Status::NotSeparable,
+        Expect::NotNamed => matches!(v.status, Status::NotSeparable | Status::UnknownEffect),
+        Expect::NoWrongName => !wrong_name,
+    };
+    let heldout_mean = d.decomposition.heldout.mean;
+    let floor_mean = d.decomposition.floor.mean;
+    let final_mean = d.shrink.last().map_or(heldout_mean, |s| s.stats.mean);
+    let oracle_mean = oracle_terms(&effects).and_then(|t| heldout_with(&input, &o, &t).ok()).map(|s| s.mean);
+    let closure_ratio = oracle_mean.and_then(|om| {
+        let oracle = heldout_mean - om;
+        (oracle > 0.0).then(|| (heldout_mean - final_mean) / oracle)
+    });
+    Outcome {
+        case: case.name.clone(),
+        seed,
+        status: v.status,
+        first: first.map(|c| c.label()),
+        correct,
+        wrong_name,
+        heldout_mean,
+        floor_mean,
+        final_mean,
+        oracle_mean,
+        closure_ratio,
+        seconds: t0.elapsed().as_secs_f64(),
+        error: None,
+    }
+}
+
+/// The kinds that name the withheld effect correctly (for the wrong-name count).
+fn withheld_kinds(e: &Effects) -> Vec<Kind> {
+    let mut k = Vec::new();
+    if !e.cyclic.is_empty() {
+        k.extend([Kind::Cyclic, Kind::JointMap]);
+    }
+    if !e.backlash.is_empty() {
+        k.push(Kind::Backlash);
+    }
+    if e.thermal.is_some() {
+        k.push(Kind::Thermal);
+    }
+    if !e.coupling.is_empty() {
+        k.push(Kind::Coupling);
+    }
+    if !e.compliance_cubic.is_empty() {
+        k.push(Kind::ComplianceCubic);
+    }
+    if e.tool_mass.is_some() {
+        k.push(Kind::ToolMass);
+    }
+    if e.no_beta {
+        k.push(Kind::HayatiBeta);
+    }
+    if e.no_compliance {
+        k.push(Kind::Compliance);
+    }
+    k
+}
+
+/// Run `cases` × `seeds` on `threads` threads; results in (case, seed) order. `progress` is
+/// called after each run with (done, total).
+pub fn run_suite(
+    cases: &[Case],
+    seeds: &[u64],
+    opts: &DiagnoseOptions,
+    threads: usize,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Vec<Outcome> {
+    let jobs: Vec<(usize, u64)> = (0..cases.len()).flat_map(|c| seeds.iter().map(move |&s| (c, s))).collect();
+    let next = AtomicUsize::new(0);
+    let done = AtomicUsize::new(0);
+    let out: Mutex<Vec<Option<Outcome>>> = Mutex::new(vec![None; jobs.len()]);
+    std::thread::scope(|scope| {
+        for _ in 0..threads.clamp(1, jobs.len().max(1)) {
+            scope.spawn(|| {
+                loop {
+                    let k = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(&(c, s)) = jobs.get(k) else { break };
+                    let r = run_case(&cases[c], s, opts);
+                    out.lock().expect("no panic while holding the lock")[k] = Some(r);
+                    progress(done.fetch_add(1, Ordering::Relaxed) + 1, jobs.len());
+                }
+            });
+        }
+    });
+    out.into_inner().expect("joined").into_iter().map(|o| o.expect("every job ran")).collect()
+}
