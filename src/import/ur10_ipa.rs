@@ -214,7 +214,7 @@ pub fn import_cell(series: &[(PathBuf, Purpose)], opts: &Ur10Options) -> Result<
 /// (`robocal crossval --transfer`, or `identify --start … --only base,tool`), not validated in the
 /// first session's frame.
 fn frame_notes(sessions: &[Session]) -> Vec<String> {
-    use crate::metrology::registration::estimate_base;
+    use crate::identify::base::estimate_base;
     let frames: Vec<Option<Frame>> = sessions
         .iter()
         .map(|s| {
