@@ -53,9 +53,7 @@ use crate::cell::{Cell, Instrument, Measurement, Observation, Purpose, Session};
 use crate::kinematics::Frame;
 use crate::kinematics::frame::{rot_x, rot_y, rot_z};
 use crate::kinematics::model::{RobotModel, Tool, ur10};
-
-const DEG: f64 = std::f64::consts::PI / 180.0;
-const MM: f64 = 1e-3;
+use crate::units::{DEG, MM};
 
 /// The file holding the initial probe transform in every series folder.
 pub const PROBE_TRANSFORM_FILE: &str = "Trafo_TM_F_init.txt";

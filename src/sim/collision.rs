@@ -22,6 +22,7 @@ use std::fmt;
 use nalgebra::{Vector2, Vector3};
 
 use crate::kinematics::{Chain, Frame, JointState, Param, ParameterSet, Trace};
+use crate::units::DEG;
 
 /// A segment `a`–`b` swept by a ball of `radius` (m).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -403,7 +404,7 @@ pub struct CollisionModel {
 }
 
 /// Largest joint step between path samples: 1°.
-pub const PATH_STEP: f64 = std::f64::consts::PI / 180.0;
+pub const PATH_STEP: f64 = DEG;
 
 impl CollisionModel {
     /// A general model: `pairs` index into `parts`. The base column (if any) is exempt from the
@@ -714,8 +715,6 @@ mod tests {
 mod model_tests {
     use super::*;
     use crate::kinematics::model::{Tool, irb120};
-
-    const DEG: f64 = std::f64::consts::PI / 180.0;
 
     /// The IRB 120 on the floor ({W} = {0}) with a TriCal-sized tool and no plate.
     fn model() -> CollisionModel {

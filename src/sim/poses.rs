@@ -31,9 +31,7 @@ use crate::kinematics::model::irb120;
 use crate::kinematics::thesis::{TABLE_5_1_NOMINAL_BASE, trical_tool};
 use crate::kinematics::{AnalyticIk, Branch, Chain, Frame, ParameterSet, RobotModel, Tool, Trace};
 use crate::metrology::BallTriangle;
-
-const DEG: f64 = PI / 180.0;
-const MM: f64 = 1e-3;
+use crate::units::{DEG, MM};
 
 /// A laser-tracker reflector nest (an SMR seat) on the measuring tool.
 #[derive(Clone, Debug, PartialEq)]
