@@ -115,3 +115,6 @@ impl Cell {
         }
     }
 }
+
+#[cfg(test)]
+pub(crate) mod fixtures;

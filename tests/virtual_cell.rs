@@ -137,7 +137,7 @@ fn nominal_model_error_on_the_validation_poses() {
 #[test]
 fn base_is_estimated_by_registration() {
     let sim = run(6, "", Noise::default());
-    let (chi, rms) = robocal::metrology::registration::estimate_base(&sim.cell).unwrap();
+    let (chi, rms) = robocal::identify::base::estimate_base(&sim.cell).unwrap();
     let truth = sim.truth.set.pose_of(robocal::kinematics::Param::Base);
     let dp = ((chi[0] - truth[0]).powi(2) + (chi[1] - truth[1]).powi(2) + (chi[2] - truth[2]).powi(2)).sqrt();
     println!("registered base: {:.3} mm from the true one, rms {:.3} mm", dp * 1e3, rms * 1e3);

@@ -220,3 +220,107 @@ fn structural_reason(problem: &Problem, g: usize, on: &[usize]) -> String {
         _ => String::new(),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cell::Purpose;
+    use crate::cell::fixtures::{irb120_cell, measurement, random_configurations, session};
+    use crate::cell::{Cell, Observation};
+    use crate::identify::problem::MeasurementSelection;
+    use crate::identify::{IdentifyOptions, prepare};
+    use crate::kinematics::ParamLayout;
+    use crate::kinematics::thesis::trical_tool;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    const BASE: [f64; 6] = [0.160, -0.256, -0.221, 1.6, 0.009, -0.024];
+
+    /// The thesis's setup: the IRB 120 with the TriCal (TCP declared) on three balls, 10
+    /// configurations each (only the Jacobian matters here, so they need not sit on the balls).
+    fn three_balls() -> Cell {
+        let ms = random_configurations(30, 3)
+            .into_iter()
+            .enumerate()
+            .map(|(i, q)| measurement(q, Observation::Ball(i % 3 + 1)))
+            .collect();
+        let mut cell = irb120_cell(vec![session("trical", Purpose::Identification, trical_tool(), ms)]);
+        cell.base_guess = Some(BASE);
+        cell
+    }
+
+    /// The thesis's 31 of 43 (§3.6, Table 5.1), and why each of the other 12 is fixed: the four
+    /// joint-1 geometry parameters redundant with the base, d2 dependent on d3 (parallel axes),
+    /// c1 without gravity torque (axis 1 is vertical), the tool position fixed as the session
+    /// declares it and its orientation not measured.
+    #[test]
+    fn irb120_on_three_balls_keeps_the_thesis_31() {
+        let p = prepare(&three_balls(), &IdentifyOptions::default()).unwrap();
+        let problem = &p.problem;
+        assert_eq!(problem.n_params(), 43);
+        let mut free: Vec<String> = p.free.iter().map(|&g| problem.name(g)).collect();
+        free.sort();
+        let mut thesis: Vec<String> =
+            crate::kinematics::thesis::TABLE_5_1_MEANS.iter().map(|(n, _)| n.to_string()).collect();
+        thesis.sort();
+        assert_eq!(free, thesis);
+        let fixed: HashMap<String, String> = (0..problem.n_params())
+            .filter_map(|g| match &p.status[g] {
+                Status::Fixed(why) => Some((problem.name(g), why.clone())),
+                Status::Identified => None,
+            })
+            .collect();
+        assert_eq!(fixed.len(), 12, "{fixed:#?}");
+        for joint1 in ["alpha0", "a0", "d1", "theta1"] {
+            let why = &fixed[joint1];
+            assert!(why.starts_with(&format!("{joint1}: dependent on base_")), "{why}");
+            assert!(why.ends_with(" (redundant with the base pose)"), "{why}");
+        }
+        assert_eq!(fixed["d2"], "d2: dependent on d3 (parallel axes 2–3)");
+        assert_eq!(fixed["c1"], "c1: no gravity torque on axis 1");
+        for c in ["x", "y", "z"] {
+            let name = format!("tool_{c}");
+            assert_eq!(fixed[&name], format!("{name}: fixed, the session declares its TCP (measured, e.g. on a CMM)"));
+        }
+        for c in ["a", "b", "c"] {
+            let name = format!("tool_{c}");
+            assert_eq!(fixed[&name], format!("{name}: orientation not measured"));
+        }
+    }
+
+    /// The sweep itself on a Jacobian made to order: independent random columns, except a zero
+    /// one (no effect), one far below the typical norm (rounding noise, no effect), one a multiple
+    /// of a kept column and one a combination of two; a fixed parameter keeps its reason. The
+    /// priority order decides which of two dependent columns is kept: the base's, not joint 1's.
+    #[test]
+    fn sweep_classifies_columns() {
+        let cell = three_balls();
+        let layout = ParamLayout::full(&cell.model);
+        let problem = Problem::new(&cell, layout, BASE, &MeasurementSelection::default(), 1.0).unwrap();
+        let n = problem.n_params();
+        let g = |name: &str| (0..n).find(|&g| problem.name(g) == name).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let rows = 60;
+        let mut jac = Mat::<f64>::from_fn(rows, n, |_, _| rng.random_range(-1.0..1.0));
+        for r in 0..rows {
+            jac[(r, g("c1"))] = 0.0;
+            jac[(r, g("c2"))] *= 1e-10;
+            jac[(r, g("d2"))] = -3.0 * jac[(r, g("d3"))];
+            jac[(r, g("theta1"))] = 0.5 * jac[(r, g("base_c"))] + 2.0 * jac[(r, g("base_a"))];
+        }
+        let fixed: HashMap<usize, String> = [(g("a4"), "a4: fixed by the user".to_string())].into();
+        let (free, status) = select(&problem, &jac, &fixed);
+        let label = |name: &str| status[g(name)].label();
+        assert_eq!(label("c1"), "c1: no gravity torque on axis 1");
+        assert_eq!(label("c2"), "c2: no gravity torque on axis 2");
+        assert_eq!(label("d2"), "d2: dependent on d3 (parallel axes 2–3)");
+        assert_eq!(label("theta1"), "theta1: dependent on base_a, base_c (redundant with the base pose)");
+        assert_eq!(label("a4"), "a4: fixed by the user");
+        assert_eq!(free.len(), n - 5);
+        assert!(free.windows(2).all(|w| w[0] < w[1]), "ascending");
+        for name in ["base_a", "base_c", "d3", "c3", "tool_c"] {
+            assert_eq!(label(name), "identified");
+            assert!(free.contains(&g(name)));
+        }
+    }
+}

@@ -2,6 +2,7 @@
 //! cell's measurements — least squares on faer with Levenberg–Marquardt damping, automatic
 //! identifiability, conditioning and observability, honest uncertainties, DETMAX pose selection.
 
+pub mod base;
 pub mod crossval;
 pub mod detmax;
 pub mod identifiability;
@@ -18,7 +19,8 @@ use faer::Mat;
 
 use crate::cell::Cell;
 use crate::kinematics::{JointTerm, Param, ParamLayout, ParameterSet, Tool};
-use crate::metrology::registration::{RegistrationError, estimate_base_of};
+use crate::metrology::registration::RegistrationError;
+use base::estimate_base_of;
 pub use identifiability::Status;
 pub use noise::NoiseModel;
 pub use problem::{GlobalParam, MeasurementSelection, Prior, Problem, ProblemError};

@@ -493,3 +493,257 @@ impl Problem {
         out
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cell::fixtures::{irb120_cell, measurement, random_configurations, session};
+    use crate::kinematics::ParameterSet;
+    use crate::kinematics::frame::rot_zyx;
+    use crate::kinematics::model::irb120;
+    use crate::kinematics::thesis::trical_tool;
+
+    /// T_0^W of the problems below (m, rad): the thesis cell's base, roughly.
+    const BASE: [f64; 6] = [0.160, -0.256, -0.221, 1.6, 0.009, -0.024];
+    const ROTATION_WEIGHT: f64 = 0.5;
+
+    /// A tracker nest on the TriCal body: another tool than the TriCal's ball.
+    fn nest() -> Tool {
+        Tool { tcp: [0.0, 0.060, 0.080, 0.0, 0.0, 0.0], ..trical_tool() }
+    }
+
+    /// The nominal TCP frame of `tool` at q, computed apart from the problem.
+    fn nominal_fk(tool: &Tool, q: &[f64]) -> Frame {
+        ParameterSet::nominal(irb120(), tool.clone(), BASE).nominal_chain().fk(&JointState::new(q))
+    }
+
+    /// Four sessions: three balls with the TriCal, three positions with the TriCal again (a second
+    /// session with the same tool), two full poses with the nest (targets off the nominal model by
+    /// a few mm and mrad), and a validation session.
+    fn cell() -> Cell {
+        let q = random_configurations(12, 7);
+        let balls = (0..3).map(|i| measurement(q[i].clone(), Observation::Ball(i + 1))).collect();
+        let points = (3..6)
+            .map(|i| {
+                let p = nominal_fk(&trical_tool(), &q[i]).t + Vector3::new(0.001, -0.002, 0.0005);
+                measurement(q[i].clone(), Observation::Position(p))
+            })
+            .collect();
+        let poses = (6..8)
+            .map(|i| {
+                let f = nominal_fk(&nest(), &q[i]);
+                let off = Frame::new(rot_zyx(0.002, -0.001, 0.003), Vector3::new(0.002, 0.001, -0.001));
+                measurement(q[i].clone(), Observation::Pose(f.compose(&off)))
+            })
+            .collect();
+        let check = (8..12).map(|i| measurement(q[i].clone(), Observation::Ball(1))).collect();
+        irb120_cell(vec![
+            session("balls", Purpose::Identification, trical_tool(), balls),
+            session("points", Purpose::Identification, trical_tool(), points),
+            session("poses", Purpose::Identification, nest(), poses),
+            session("check", Purpose::Validation, trical_tool(), check),
+        ])
+    }
+
+    fn problem(cell: &Cell, selection: &MeasurementSelection) -> Result<Problem, ProblemError> {
+        Problem::new(cell, ParamLayout::full(&cell.model), BASE, selection, ROTATION_WEIGHT)
+    }
+
+    fn residual(p: &Problem, x: &[f64]) -> Vec<f64> {
+        let mut r = vec![0.0; p.n_rows];
+        p.residual(x, &mut r);
+        r
+    }
+
+    /// Rows: 3 per ball or position, 6 per pose, stacked in selection order; the validation
+    /// session only when named. One parameter block per distinct tool, shared by the sessions
+    /// that used it.
+    #[test]
+    fn rows_and_tool_blocks() {
+        let cell = cell();
+        let p = problem(&cell, &MeasurementSelection::default()).unwrap();
+        assert_eq!(p.obs.len(), 8);
+        assert_eq!(p.n_rows, 3 * 3 + 3 * 3 + 2 * 6);
+        let rows: Vec<(usize, usize)> = p.obs.iter().map(|o| (o.row, o.rows)).collect();
+        let want: Vec<(usize, usize)> = (0..6).map(|i| (3 * i, 3)).chain([(18, 6), (24, 6)]).collect();
+        assert_eq!(rows, want);
+        assert_eq!(p.tools.len(), 2);
+        assert_eq!(p.tools[0].sessions, ["balls", "points"]);
+        assert_eq!(p.tools[1].sessions, ["poses"]);
+        assert_eq!((p.tools[0].has_orientation, p.tools[1].has_orientation), (false, true));
+        assert_eq!(p.obs.iter().map(|o| o.tool).collect::<Vec<_>>(), [0, 0, 0, 0, 0, 0, 1, 1]);
+        // The robot's parameters without the layout's tool entries, then six per tool.
+        let robot = p.layout.len() - 6;
+        assert_eq!(p.n_params(), robot + 12);
+        assert_eq!(p.params[robot + 7], GlobalParam::Tool { tool: 1, k: 1 });
+        assert_eq!((p.name(robot), p.name(robot + 11)), ("tool_x".to_string(), "tool2_c".to_string()));
+        assert_eq!(&p.nominal[robot + 6..robot + 12], &nest().tcp);
+        assert_eq!(p.nominal[p.robot_index(Param::Base(3)).unwrap()], BASE[3]);
+
+        // The validation session, named, alone.
+        let only = MeasurementSelection { sessions: vec!["check".into()], subset: Vec::new() };
+        let p = problem(&cell, &only).unwrap();
+        assert_eq!((p.obs.len(), p.n_rows, p.tools.len()), (4, 12, 1));
+        // A subset, in its own order.
+        let subset =
+            MeasurementSelection { sessions: Vec::new(), subset: vec![("poses".into(), 1), ("balls".into(), 2)] };
+        let p = problem(&cell, &subset).unwrap();
+        assert_eq!(p.obs.iter().map(|o| (o.session, o.index, o.row)).collect::<Vec<_>>(), [(2, 1, 0), (0, 2, 6)]);
+        assert_eq!(p.tools[0].tool, nest());
+    }
+
+    #[test]
+    fn selection_errors() {
+        let cell = cell();
+        let sel = |sessions: &[&str], subset: &[(&str, usize)]| MeasurementSelection {
+            sessions: sessions.iter().map(|s| s.to_string()).collect(),
+            subset: subset.iter().map(|(s, i)| (s.to_string(), *i)).collect(),
+        };
+        assert_eq!(problem(&cell, &sel(&["nope"], &[])).unwrap_err(), ProblemError::UnknownSession("nope".into()));
+        assert_eq!(
+            problem(&cell, &sel(&[], &[("points", 3)])).unwrap_err(),
+            ProblemError::UnknownMeasurement { session: "points".into(), index: 3 }
+        );
+        let mut empty = cell.clone();
+        empty.sessions.retain(|s| s.purpose == Purpose::Validation);
+        assert_eq!(problem(&empty, &MeasurementSelection::default()).unwrap_err(), ProblemError::Empty);
+        let mut bare = cell.clone();
+        bare.artefact = None;
+        assert_eq!(problem(&bare, &MeasurementSelection::default()).unwrap_err(), ProblemError::NoArtefact);
+    }
+
+    /// r = target − model: the residual at the nominal parameters against forward kinematics
+    /// computed apart, for a ball (its centre), a position and a pose (its rotation rows the
+    /// rotation vector of R_target·R_modelᵀ, weighted).
+    #[test]
+    fn residual_is_target_minus_model() {
+        let cell = cell();
+        let p = problem(&cell, &MeasurementSelection::default()).unwrap();
+        let r = residual(&p, &p.nominal);
+        for o in &p.obs {
+            let m = &cell.sessions[o.session].measurements[o.index];
+            let tool = &cell.sessions[o.session].tool;
+            let model = nominal_fk(tool, &m.q);
+            let (target, rot) = match &m.observation {
+                Observation::Ball(k) => (cell.artefact.as_ref().unwrap().triangle.ball(*k).unwrap(), None),
+                Observation::Position(t) => (*t, None),
+                Observation::Pose(f) => (f.t, Some(rotation_vector(&(f.r * model.r.transpose())) * ROTATION_WEIGHT)),
+            };
+            let d = target - model.t;
+            for k in 0..3 {
+                assert!(
+                    (r[o.row + k] - d[k]).abs() < 1e-12,
+                    "{:?} row {k}: {} vs {}",
+                    m.observation,
+                    r[o.row + k],
+                    d[k]
+                );
+            }
+            if let Some(w) = rot {
+                for k in 0..3 {
+                    assert!((r[o.row + 3 + k] - w[k]).abs() < 1e-12);
+                }
+                assert!(w.norm() > 1e-3 * ROTATION_WEIGHT, "the targets are off in rotation");
+            }
+        }
+        // The position session's targets are off the nominal model by (1, −2, 0.5) mm.
+        assert!((r[9] - 0.001).abs() < 1e-12 && (r[10] + 0.002).abs() < 1e-12 && (r[11] - 0.0005).abs() < 1e-12);
+    }
+
+    /// A ball target is the ball's centre: the same rows as a position target there. With
+    /// indicator readings the target moves by the trilaterated offset, turned into {W} by the
+    /// model's tool orientation.
+    #[test]
+    fn ball_target_against_position_target() {
+        let q = random_configurations(1, 8).remove(0);
+        let centre = crate::cell::fixtures::artefact().triangle.ball(2).unwrap();
+        let readings = [120e-6, -40e-6, 75e-6];
+        let mut with_readings = measurement(q.clone(), Observation::Ball(2));
+        with_readings.indicators = Some(readings);
+        let cell = irb120_cell(vec![session(
+            "s",
+            Purpose::Identification,
+            trical_tool(),
+            vec![
+                measurement(q.clone(), Observation::Ball(2)),
+                measurement(q.clone(), Observation::Position(centre)),
+                with_readings,
+            ],
+        )]);
+        let p = problem(&cell, &MeasurementSelection::default()).unwrap();
+        let r = residual(&p, &p.nominal);
+        assert_eq!(r[0..3], r[3..6]);
+        let offset = TriCal::default().offset(readings).unwrap();
+        assert!(offset.norm() > 1e-5);
+        let model = nominal_fk(&trical_tool(), &q);
+        let want = centre - model.r * offset - model.t;
+        for k in 0..3 {
+            assert!((r[6 + k] - want[k]).abs() < 1e-12, "{} vs {}", r[6 + k], want[k]);
+        }
+    }
+
+    /// The Jacobian J = ∂model/∂ρ of every parameter is −∂r/∂ρ by central differences of the
+    /// residual, at the nominal parameters (where the pose targets' rotation residual is a few
+    /// mrad) and, for the position rows, at a point away from nominal. The rotation rows are the
+    /// linearisation of the rotation vector at a small residual rotation, exact only as that
+    /// rotation vanishes: compared within 1e-2 of their column there (the residual is 4 mrad).
+    #[test]
+    fn jacobian_matches_central_differences_of_the_residual() {
+        let cell = cell();
+        let p = problem(&cell, &MeasurementSelection::default()).unwrap();
+        let all: Vec<usize> = (0..p.n_params()).collect();
+        let mut away = p.nominal.clone();
+        for (g, v) in away.iter_mut().enumerate() {
+            *v += 1e-3 * ((g % 7) as f64 - 3.0);
+        }
+        for (x, rotation_rows) in [(&p.nominal, true), (&away, false)] {
+            let mut jac = Mat::<f64>::zeros(p.n_rows, all.len());
+            let mut r0 = vec![0.0; p.n_rows];
+            p.linearise(x, &all, &mut jac, &mut r0);
+            assert_eq!(r0, residual(&p, x), "linearise returns the residual too");
+            let h = 1e-6;
+            for g in all.iter().copied() {
+                let (mut xp, mut xm) = (x.clone(), x.clone());
+                xp[g] += h;
+                xm[g] -= h;
+                let (rp, rm) = (residual(&p, &xp), residual(&p, &xm));
+                let col_norm = (0..p.n_rows).map(|row| jac[(row, g)].powi(2)).sum::<f64>().sqrt();
+                for o in &p.obs {
+                    let rows = if rotation_rows { o.rows } else { 3 };
+                    for k in 0..rows {
+                        let row = o.row + k;
+                        let fd = -(rp[row] - rm[row]) / (2.0 * h);
+                        let tol = if k < 3 { 1e-7 * col_norm.max(1.0) } else { 1e-2 * col_norm.max(1e-3) };
+                        assert!(
+                            (fd - jac[(row, g)]).abs() <= tol,
+                            "{} row {row}: analytic {} vs fd {fd}",
+                            p.name(g),
+                            jac[(row, g)]
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    /// A DETMAX block is the observation's rows of the Jacobian of the free columns.
+    #[test]
+    fn block_is_the_jacobian_rows_of_one_observation() {
+        let cell = cell();
+        let p = problem(&cell, &MeasurementSelection::default()).unwrap();
+        let free: Vec<usize> = (0..p.n_params()).filter(|g| g % 3 != 1).collect();
+        let mut jac = Mat::<f64>::zeros(p.n_rows, free.len());
+        let mut r = vec![0.0; p.n_rows];
+        p.linearise(&p.nominal, &free, &mut jac, &mut r);
+        let chains = p.chains(&p.nominal);
+        for o in &p.obs {
+            let b = p.block(&chains, o, &free);
+            for k in 0..o.rows {
+                for c in 0..free.len() {
+                    let (got, want) = (b[k * free.len() + c], jac[(o.row + k, c)]);
+                    assert!((got - want).abs() <= 1e-14 * want.abs().max(1.0), "obs {} row {k} column {c}", o.row);
+                }
+            }
+        }
+    }
+}

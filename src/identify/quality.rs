@@ -109,3 +109,97 @@ impl Quality {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::DMatrix;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// A fit of `n` rows (`n / 3` measurements of 3 rows) and `m` parameters whose columns span
+    /// five orders of magnitude, with a random residual; column `m − 1` is nearly the sum of
+    /// columns 1 and 2 when `weak`.
+    fn fit(n: usize, m: usize, weak: bool, seed: u64) -> (Fit, DMatrix<f64>) {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let scale: Vec<f64> = (0..m).map(|c| 10f64.powi(c as i32 % 5 - 3)).collect();
+        let mut j = DMatrix::from_fn(n, m, |_, c| rng.random_range(-1.0..1.0) * scale[c]);
+        if weak {
+            for r in 0..n {
+                j[(r, m - 1)] = j[(r, 1)] / scale[1] + j[(r, 2)] / scale[2] + 1e-4 * rng.random_range(-1.0..1.0);
+            }
+        }
+        let residual: Vec<f64> = (0..n).map(|_| rng.random_range(-1e-5..1e-5)).collect();
+        let cost = residual.iter().map(|v| v * v).sum();
+        let jacobian = Mat::from_fn(n, m, |r, c| j[(r, c)]);
+        let fit = Fit { x: vec![0.0; m], iterations: 1, residual, jacobian, weights: vec![1.0; n / 3], cost };
+        (fit, j)
+    }
+
+    fn rel(a: f64, b: f64) -> f64 {
+        (a - b).abs() / b.abs()
+    }
+
+    /// Covariance σ̂²(JᵀJ)⁻¹ with σ̂² = ‖r‖²/(N − m), its standard deviations and correlations,
+    /// the singular values and both condition numbers, against nalgebra on the tall J directly.
+    #[test]
+    fn covariance_and_conditioning_match_an_independent_computation() {
+        let (n, m) = (45, 7);
+        let (f, j) = fit(n, m, false, 1);
+        let rows: Vec<(usize, usize)> = (0..n / 3).map(|i| (3 * i, 3)).collect();
+        let q = Quality::of(&f, n / 3, &rows);
+
+        let sigma2 = f.cost / (n - m) as f64;
+        let cov = (j.transpose() * &j).try_inverse().unwrap() * sigma2;
+        assert!(rel(q.sigma * q.sigma, sigma2) < 1e-14);
+        for a in 0..m {
+            assert!(rel(q.std[a], cov[(a, a)].sqrt()) < 1e-9, "std {a}");
+            for b in 0..m {
+                let scale = (cov[(a, a)] * cov[(b, b)]).sqrt();
+                assert!((q.covariance[(a, b)] - cov[(a, b)]).abs() < 1e-9 * scale, "cov ({a}, {b})");
+                assert_eq!(q.covariance[(a, b)], q.covariance[(b, a)]);
+                assert!((q.correlation[(a, b)] - cov[(a, b)] / scale).abs() < 1e-9);
+            }
+            assert!((q.correlation[(a, a)] - 1.0).abs() < 1e-12);
+        }
+
+        let s = j.clone().svd(false, false).singular_values;
+        let mut s: Vec<f64> = s.iter().copied().collect();
+        s.sort_by(|a, b| b.total_cmp(a));
+        for (got, want) in q.singular_values.iter().zip(&s) {
+            assert!(rel(*got, *want) < 1e-12, "σ {got} vs {want}");
+        }
+        assert!(rel(q.kappa, s[0] / s[m - 1]) < 1e-10);
+        assert!(q.kappa > 1e3, "columns of mixed units are ill-scaled: κ {}", q.kappa);
+        let mut unit = j.clone();
+        for mut c in unit.column_iter_mut() {
+            let norm = c.norm();
+            c /= norm;
+        }
+        let su = unit.svd(false, false).singular_values;
+        let (hi, lo) = su.iter().fold((0.0f64, f64::INFINITY), |(h, l), v| (h.max(*v), l.min(*v)));
+        assert!(rel(q.kappa_scaled, hi / lo) < 1e-10);
+        assert!(q.kappa_scaled < 10.0, "random unit columns are well conditioned: {}", q.kappa_scaled);
+
+        // O1 = (Π σ)^(1/m)/√n; the RMS of the measurements' residual norms.
+        let o1 = s.iter().map(|v| v.ln()).sum::<f64>() / m as f64;
+        assert!(rel(q.observability.o1, o1.exp() / ((n / 3) as f64).sqrt()) < 1e-12);
+        let rms = (f.cost / (n / 3) as f64).sqrt();
+        assert!(rel(q.rms_residual, rms) < 1e-14);
+        assert_eq!((q.n_rows, q.n_configs), (n, n / 3));
+    }
+
+    /// The weakest direction of the scaled Jacobian names the columns of a near-dependence.
+    #[test]
+    fn weakest_direction_names_the_near_dependence() {
+        let (f, _) = fit(60, 6, true, 2);
+        let q = Quality::of(&f, 20, &[]);
+        let mut cols: Vec<usize> = q.weakest.iter().map(|w| w.0).collect();
+        cols.sort_unstable();
+        assert_eq!(cols, [1, 2, 5], "{:?}", q.weakest);
+        let w = |c: usize| q.weakest.iter().find(|x| x.0 == c).unwrap().1;
+        assert!(w(1).signum() == w(2).signum() && w(5).signum() == -w(1).signum(), "{:?}", q.weakest);
+        assert!(q.kappa_scaled > 1e3);
+        assert_eq!(q.rms_residual, 0.0, "no measurements named");
+    }
+}

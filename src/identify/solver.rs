@@ -224,3 +224,171 @@ fn damped_lstsq(a: &Mat<f64>, b: &[f64], lambda: f64) -> Vec<f64> {
     rhs[..n].copy_from_slice(b);
     lstsq(&aug, &rhs)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cell::fixtures::{irb120_cell, measurement, random_configurations, session};
+    use crate::cell::{Cell, Observation, Purpose};
+    use crate::identify::problem::{GlobalParam, MeasurementSelection};
+    use crate::kinematics::model::irb120;
+    use crate::kinematics::thesis::trical_tool;
+    use crate::kinematics::{JointState, Param, ParamLayout, ParameterSet};
+    use nalgebra::{DMatrix, DVector, Vector3};
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::{Distribution, Normal};
+
+    /// The nominal base of the problems (m, rad): z_0 parallel to Z_W.
+    const BASE: [f64; 6] = [0.160, -0.256, -0.221, 1.6, 0.0, 0.0];
+
+    /// Positions measured with the TriCal at `n` random configurations, on a robot whose base and
+    /// tool translations are off the nominal ones by `base_shift` and `tool_shift` (m), plus
+    /// Gaussian noise of `sigma` (m) per axis.
+    fn cell(n: usize, base_shift: [f64; 3], tool_shift: [f64; 3], sigma: f64) -> Cell {
+        let mut base = BASE;
+        let mut tool = trical_tool();
+        for k in 0..3 {
+            base[k] += base_shift[k];
+            tool.tcp[k] += tool_shift[k];
+        }
+        let chain = ParameterSet::nominal(irb120(), tool, base).nominal_chain();
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let noise = Normal::new(0.0, sigma.max(f64::MIN_POSITIVE)).unwrap();
+        let ms = random_configurations(n, 10)
+            .into_iter()
+            .map(|q| {
+                let e = if sigma > 0.0 {
+                    Vector3::new(noise.sample(&mut rng), noise.sample(&mut rng), noise.sample(&mut rng))
+                } else {
+                    Vector3::zeros()
+                };
+                let p = chain.fk(&JointState::new(&q)).t + e;
+                measurement(q, Observation::Position(p))
+            })
+            .collect();
+        irb120_cell(vec![session("points", Purpose::Identification, trical_tool(), ms)])
+    }
+
+    fn problem(cell: &Cell) -> Problem {
+        Problem::new(cell, ParamLayout::full(&cell.model), BASE, &MeasurementSelection::default(), 1.0).unwrap()
+    }
+
+    /// The base and tool translations: the TCP position is affine in them (p = t_base + R_base·(…
+    /// + R_flange·t_tool)), so the problem in these six parameters is linear.
+    fn translations(p: &Problem) -> Vec<usize> {
+        let base = (0..3).map(|k| p.robot_index(Param::Base(k)).unwrap());
+        let tool = (0..3).map(|k| p.params.iter().position(|g| *g == GlobalParam::Tool { tool: 0, k }).unwrap());
+        base.chain(tool).collect()
+    }
+
+    /// Exact data: the translations come back to rounding. Noisy data: the fit is the linear
+    /// least-squares solution x₀ + (JᵀJ)⁻¹Jᵀr₀ computed apart (nalgebra, normal equations).
+    #[test]
+    fn recovers_a_linear_problem() {
+        let (db, dt) = ([0.002, -0.001, 0.003], [0.0005, 0.001, -0.0015]);
+        let p = problem(&cell(20, db, dt, 0.0));
+        let free = translations(&p);
+        let fit = solve(&p, &free, &p.nominal, &SolverOptions::default()).unwrap();
+        let want: Vec<f64> = db.iter().chain(&dt).copied().collect();
+        for (c, &g) in free.iter().enumerate() {
+            let d = fit.x[g] - p.nominal[g];
+            assert!((d - want[c]).abs() < 1e-12, "{}: {d} vs {}", p.name(g), want[c]);
+        }
+        assert!(fit.cost < 1e-24, "cost {}", fit.cost);
+        assert!(fit.iterations <= 3, "{} iterations for a linear problem", fit.iterations);
+        assert_eq!(fit.weights, vec![1.0; 20]);
+        assert_eq!((fit.jacobian.nrows(), fit.jacobian.ncols(), fit.residual.len()), (60, 6, 60));
+
+        let p = problem(&cell(20, db, dt, 50e-6));
+        let fit = solve(&p, &free, &p.nominal, &SolverOptions::default()).unwrap();
+        let mut jac = Mat::<f64>::zeros(p.n_rows, free.len());
+        let mut r0 = vec![0.0; p.n_rows];
+        p.linearise(&p.nominal, &free, &mut jac, &mut r0);
+        let j = DMatrix::from_fn(p.n_rows, free.len(), |r, c| jac[(r, c)]);
+        let dx = (j.transpose() * &j).try_inverse().unwrap() * j.transpose() * DVector::from_vec(r0);
+        for (c, &g) in free.iter().enumerate() {
+            let d = fit.x[g] - p.nominal[g];
+            assert!((d - dx[c]).abs() < 1e-12, "{}: {d} vs {}", p.name(g), dx[c]);
+        }
+        // The final residual and Jacobian are those at the solution.
+        let mut r = vec![0.0; p.n_rows];
+        p.residual(&fit.x, &mut r);
+        assert!(r.iter().zip(&fit.residual).all(|(a, b)| (a - b).abs() < 1e-15));
+        assert!((fit.cost - r.iter().map(|v| v * v).sum::<f64>()).abs() < 1e-18);
+    }
+
+    /// Two parameters with one effect (base z and d1 both move the arm along Z_W when z_0 is
+    /// parallel to it): the unpivoted QR meets a zero pivot, the step is not finite, and the
+    /// solver reports divergence at the first iteration instead of returning numbers.
+    #[test]
+    fn rank_deficient_problem_is_reported() {
+        let p = problem(&cell(20, [0.0, 0.0, 0.003], [0.0; 3], 0.0));
+        let free = vec![p.robot_index(Param::Base(2)).unwrap(), p.robot_index(Param::D(0)).unwrap()];
+        let mut jac = Mat::<f64>::zeros(p.n_rows, 2);
+        let mut r = vec![0.0; p.n_rows];
+        p.linearise(&p.nominal, &free, &mut jac, &mut r);
+        assert!((0..p.n_rows).all(|row| jac[(row, 0)] == jac[(row, 1)]), "one column twice");
+        let outcome = solve(&p, &free, &p.nominal, &SolverOptions::default());
+        match outcome {
+            Err(SolveError::Diverged { iteration: 1, reason }) => {
+                assert!(reason.contains("step is not finite"), "{reason}")
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// Non-finite data: an error at the first iteration, not a number.
+    #[test]
+    fn non_finite_data_diverge() {
+        let mut c = cell(10, [0.0; 3], [0.0; 3], 0.0);
+        c.sessions[0].measurements[4].observation = Observation::Position(Vector3::new(f64::NAN, 0.0, 0.0));
+        let p = problem(&c);
+        let free = translations(&p);
+        match solve(&p, &free, &p.nominal, &SolverOptions::default()) {
+            Err(SolveError::Diverged { iteration: 1, reason }) => {
+                assert!(reason.contains("cost is not finite"), "{reason}")
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// A nonlinear problem (the base rotation free, started 0.1 rad off) cut at one iteration
+    /// is an error that says how far it got.
+    #[test]
+    fn iteration_limit_is_an_error() {
+        let p = problem(&cell(10, [0.0; 3], [0.0; 3], 0.0));
+        let free: Vec<usize> = (0..6).map(|k| p.robot_index(Param::Base(k)).unwrap()).collect();
+        let mut x0 = p.nominal.clone();
+        x0[free[3]] += 0.1;
+        let opts = SolverOptions { max_iterations: 1, ..Default::default() };
+        match solve(&p, &free, &x0, &opts) {
+            Err(SolveError::IterationLimit { iterations: 1, step_m, .. }) => assert!(step_m > 1e-6),
+            other => panic!("{other:?}"),
+        }
+        // Given the iterations, it converges to the true base.
+        let fit = solve(&p, &free, &x0, &SolverOptions::default()).unwrap();
+        assert!(free.iter().all(|&g| (fit.x[g] - p.nominal[g]).abs() < 1e-10));
+    }
+
+    /// Huber weights: a gross outlier among 10 µm noise is down-weighted, the others keep full
+    /// weight, and the fit stays where the clean data put it.
+    #[test]
+    fn huber_down_weights_an_outlier() {
+        let mut c = cell(30, [0.0; 3], [0.0; 3], 10e-6);
+        let clean = problem(&c);
+        let free = translations(&clean);
+        let reference = solve(&clean, &free, &clean.nominal, &SolverOptions::default()).unwrap();
+        if let Observation::Position(p) = &mut c.sessions[0].measurements[7].observation {
+            p.x += 0.005;
+        }
+        let p = problem(&c);
+        let opts = SolverOptions { huber: Some(2.0), ..Default::default() };
+        let fit = solve(&p, &free, &p.nominal, &opts).unwrap();
+        assert!(fit.weights[7] < 0.01, "outlier weight {}", fit.weights[7]);
+        assert!(fit.weights.iter().enumerate().filter(|&(i, _)| i != 7).all(|(_, w)| *w > 0.5), "{:?}", fit.weights);
+        let plain = solve(&p, &free, &p.nominal, &SolverOptions::default()).unwrap();
+        let shift = |f: &Fit| free.iter().map(|&g| (f.x[g] - reference.x[g]).abs()).fold(0.0, f64::max);
+        assert!(shift(&fit) < 5e-6 && shift(&plain) > 5e-5, "robust {} m, plain {} m", shift(&fit), shift(&plain));
+    }
+}

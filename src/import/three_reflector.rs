@@ -24,9 +24,7 @@ use nalgebra::Vector3;
 use super::{ImportError, Imported, line_list, read_text};
 use crate::cell::{Cell, Instrument, Measurement, Observation, Purpose, Session};
 use crate::kinematics::{RobotModel, Tool};
-
-const DEG: f64 = std::f64::consts::PI / 180.0;
-const MM: f64 = 1e-3;
+use crate::units::{DEG, MM};
 
 /// Import a joints file and one positions file per reflector for `model`, every session with
 /// `purpose`.

@@ -53,9 +53,7 @@ use crate::cell::{Cell, Instrument, Measurement, Observation, Purpose, Session};
 use crate::kinematics::Frame;
 use crate::kinematics::frame::{rot_x, rot_y, rot_z};
 use crate::kinematics::model::{RobotModel, Tool, ur10};
-
-const DEG: f64 = std::f64::consts::PI / 180.0;
-const MM: f64 = 1e-3;
+use crate::units::{DEG, MM};
 
 /// The file holding the initial probe transform in every series folder.
 pub const PROBE_TRANSFORM_FILE: &str = "Trafo_TM_F_init.txt";
@@ -214,7 +212,7 @@ pub fn import_cell(series: &[(PathBuf, Purpose)], opts: &Ur10Options) -> Result<
 /// (`robocal crossval --transfer`, or `identify --start … --only base,tool`), not validated in the
 /// first session's frame.
 fn frame_notes(sessions: &[Session]) -> Vec<String> {
-    use crate::metrology::registration::estimate_base;
+    use crate::identify::base::estimate_base;
     let frames: Vec<Option<Frame>> = sessions
         .iter()
         .map(|s| {

@@ -7,6 +7,7 @@
 use nalgebra::Vector3;
 
 use super::frame::rot_x;
+use crate::units::{DEG, MM};
 
 /// The largest chain the fixed-size kernels handle. Industrial arms have 6 or 7 joints.
 pub const MAX_JOINTS: usize = 8;
@@ -153,9 +154,6 @@ impl RobotModel {
         q >= lo && q <= hi
     }
 }
-
-const DEG: f64 = std::f64::consts::PI / 180.0;
-const MM: f64 = 1e-3;
 
 /// ABB IRB 120: thesis Table 3.1 (geometry), Table 3.4 (masses and centres of mass) and the
 /// joint limits of the product specification. Hayati's β on joint 3 (axes 2 and 3 are parallel).

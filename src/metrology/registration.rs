@@ -1,11 +1,12 @@
 //! Rigid registration of point pairs (Kabsch / Horn): the rotation and translation that best map
 //! points `a` onto points `b` in the least-squares sense. Used to estimate T_0^W when a cell has
 //! no base guess — real tracker data arrive in the tracker's own frame, far from any guess.
+//! Takes points, not a cell: the cell's measurements are turned into point pairs by
+//! `identify::base`, above this layer.
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::cell::Cell;
-use crate::kinematics::{Frame, JointState, ParameterSet};
+use crate::kinematics::Frame;
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RegistrationError {
@@ -51,33 +52,12 @@ pub fn register(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> Result<(Frame, f64), 
     Ok((f, rms))
 }
 
-/// Estimate T_0^W of a cell: nominal TCP positions (base at identity, each session's tool)
-/// registered onto the observed positions (ball centres or measured positions).
-/// Returns χ (m, rad) and the RMS residual (m).
-pub fn estimate_base(cell: &Cell) -> Result<([f64; 6], f64), RegistrationError> {
-    let picks: Vec<(usize, usize)> =
-        cell.sessions.iter().enumerate().flat_map(|(s, x)| (0..x.measurements.len()).map(move |i| (s, i))).collect();
-    estimate_base_of(cell, &picks)
-}
-
-/// As [`estimate_base`] on the given measurements only, (session index, measurement index): the
-/// ones an identification uses. Sessions measured in different instrument frames (a tracker
-/// moved between days) must not be registered together.
-pub fn estimate_base_of(cell: &Cell, picks: &[(usize, usize)]) -> Result<([f64; 6], f64), RegistrationError> {
-    let chains: Vec<_> = cell
-        .sessions
-        .iter()
-        .map(|s| ParameterSet::nominal(cell.model.clone(), s.tool.clone(), [0.0; 6]).nominal_chain())
-        .collect();
-    let (mut a, mut b) = (Vec::new(), Vec::new());
-    for &(s, i) in picks {
-        let m = &cell.sessions[s].measurements[i];
-        if let Some(p) = cell.observed_position(m) {
-            a.push(chains[s].fk(&JointState::new(&m.q)).t);
-            b.push(p);
-        }
-    }
-    let (f, rms) = register(&a, &b)?;
+/// T_0^W from point pairs: the rigid transform that maps the model's TCP positions, computed with
+/// the base at identity, onto the observed ones (ball centres or measured positions), as χ
+/// (m, rad), and its RMS residual (m). Assembling the pairs from a cell's measurements is the
+/// caller's job (`identify::base`).
+pub fn register_base(model: &[Vector3<f64>], observed: &[Vector3<f64>]) -> Result<([f64; 6], f64), RegistrationError> {
+    let (f, rms) = register(model, observed)?;
     Ok((f.to_xyzabc(), rms))
 }
 

@@ -20,8 +20,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::kinematics::ParameterSet;
 use crate::kinematics::params::{JointTerm, Param};
-
-const DEG: f64 = std::f64::consts::PI / 180.0;
+use crate::units::DEG;
 
 /// Per-joint cyclic error, Δθ_j = amp·sin(h·q_j + phase).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -4,6 +4,7 @@
 
 pub mod collision;
 pub mod effects;
+pub mod geometry;
 pub mod instruments;
 pub mod measure;
 pub mod poses;
