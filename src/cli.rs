@@ -10,9 +10,10 @@ use serde_json::{Value, json};
 use crate::cell::Purpose;
 use crate::domain::pose::{compensate_targets, frame_from_parts, position_mm};
 use crate::domain::{
-    DEG, DomainError, MM, ParameterSetDoc, PoseOut, RobotSpec, TargetSpec, ToolSpec, from_json, joints_deg, to_deg,
+    DomainError, ParameterSetDoc, PoseOut, RobotSpec, Target, TargetSpec, ToolSpec, from_json, joints_deg, to_deg,
 };
-use crate::kinematics::{AnalyticIk, Branch, Compensator, Confdata, IkError, JointState, ParameterSet, Seed, Tool};
+use crate::kinematics::{AnalyticIk, Branch, Compensator, IkError, JointState, ParameterSet, Seed, Tool};
+use crate::units::{DEG, MM, UM};
 
 #[derive(Parser, Debug)]
 #[command(
@@ -160,7 +161,7 @@ pub struct StudyArgs {
     #[arg(long, default_value = "", allow_hyphen_values = true)]
     pub model: String,
     /// Refuse fits whose column-scaled κ(J) exceeds this (refused fits are counted, not scored).
-    #[arg(long, default_value_t = 1000.0)]
+    #[arg(long, default_value_t = crate::domain::identification::default_kappa_limit())]
     pub kappa_limit: f64,
     /// Worker threads; default: the machine's available parallelism.
     #[arg(long)]
@@ -217,13 +218,13 @@ pub struct IdentifyArgs {
     #[arg(long)]
     pub fix: Option<String>,
     /// Refuse fits whose column-scaled κ(J) exceeds this.
-    #[arg(long, default_value_t = 1000.0)]
+    #[arg(long, default_value_t = crate::domain::identification::default_kappa_limit())]
     pub kappa_limit: f64,
     /// Huber loss threshold in robust standard deviations (e.g. 2.5); default plain least squares.
     #[arg(long)]
     pub huber: Option<f64>,
     /// Length weighting orientation residuals of full-pose measurements, mm per rad.
-    #[arg(long, default_value_t = 100.0)]
+    #[arg(long, default_value_t = crate::domain::identification::default_rotation_weight_mm())]
     pub rotation_weight_mm: f64,
     /// Start from this parameter set (e.g. a calibration made in another set-up): its robot
     /// parameters and its tool's TCP are the starting point, and fixed parameters keep its values.
@@ -274,10 +275,10 @@ pub struct CrossvalArgs {
     #[arg(long)]
     pub fix: Option<String>,
     /// Refuse fits whose column-scaled κ(J) exceeds this.
-    #[arg(long, default_value_t = 1000.0)]
+    #[arg(long, default_value_t = crate::domain::identification::default_kappa_limit())]
     pub kappa_limit: f64,
     /// Length weighting orientation residuals of full-pose measurements, mm per rad.
-    #[arg(long, default_value_t = 100.0)]
+    #[arg(long, default_value_t = crate::domain::identification::default_rotation_weight_mm())]
     pub rotation_weight_mm: f64,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -543,33 +544,29 @@ fn list(s: &Option<String>) -> Vec<String> {
         .unwrap_or_default()
 }
 
+/// A checked option's error, named as the flag it came from (`kappa_limit` → `--kappa-limit`).
+fn option_error(e: DomainError) -> CliError {
+    CliError::arg(&format!("--{}", e.path.replace('_', "-")), e.reason)
+}
+
 fn identify(a: IdentifyArgs) -> Result<String, CliError> {
-    use crate::identify::{IdentifyOptions, ModelOptions, SolverOptions};
+    use crate::domain::identification::{IdentifySpec, SelectSpec, run_identification};
     let cell = load_cell(&a.cell)?;
-    let mut opts = IdentifyOptions {
-        model: ModelOptions::parse(&a.model, cell.model.dof()).map_err(|e| CliError::arg("--model", e))?,
-        fixed: list(&a.fix),
+    let spec = IdentifySpec {
+        model: a.model.clone(),
+        fix: list(&a.fix),
         kappa_limit: a.kappa_limit,
-        solver: SolverOptions { huber: a.huber, ..Default::default() },
-        rotation_weight: a.rotation_weight_mm * MM,
+        huber: a.huber,
+        rotation_weight_mm: a.rotation_weight_mm,
         only: list(&a.only),
-        ..Default::default()
     };
+    let mut opts = spec.to_options(cell.model.dof()).map_err(option_error)?;
     if let Some(p) = &a.start {
         let doc = ParameterSetDoc::from_json(&read(p)?).map_err(|e| CliError::file(p, e))?;
         opts.start = Some(doc.set);
     }
-    if a.kappa_limit.is_nan() || a.kappa_limit <= 1.0 {
-        return Err(CliError::arg("--kappa-limit", "must be above 1"));
-    }
-    if a.huber.is_some_and(|k| !k.is_finite() || k <= 0.0) {
-        return Err(CliError::arg("--huber", "must be a positive threshold"));
-    }
-    if !a.rotation_weight_mm.is_finite() || a.rotation_weight_mm <= 0.0 {
-        return Err(CliError::arg("--rotation-weight-mm", "must be positive"));
-    }
     opts.selection.sessions = list(&a.sessions);
-    let selection = match a.select.as_deref() {
+    let select = match a.select.as_deref() {
         None => {
             if a.n.is_some() {
                 return Err(CliError::arg("--n", "needs --select detmax"));
@@ -578,18 +575,11 @@ fn identify(a: IdentifyArgs) -> Result<String, CliError> {
         }
         Some("detmax") => {
             let n = a.n.ok_or_else(|| CliError::arg("--n", "--select detmax needs --n"))?;
-            let index = crate::identify::observability::Index::parse(&a.index)
-                .ok_or_else(|| CliError::arg("--index", format!("'{}' is not O1…O5", a.index)))?;
-            let (subset, info) =
-                crate::identify::select_detmax(&cell, &opts, n, index, a.seed).map_err(|e| CliError(e.to_string()))?;
-            opts.selection.subset = subset;
-            Some(info)
+            Some(SelectSpec { n, index: a.index.clone(), seed: a.seed }.to_selection().map_err(option_error)?)
         }
         Some(other) => return Err(CliError::arg("--select", format!("'{other}' is not a selection method (detmax)"))),
     };
-    let id = crate::identify::identify(&cell, &opts).map_err(|e| CliError(e.to_string()))?;
-    let sessions: Vec<String> = id.problem.tools.iter().flat_map(|t| t.sessions.clone()).collect();
-    let doc = crate::domain::identification::identification_doc(&id, &sessions, selection);
+    let (id, doc) = run_identification(&cell, opts, select, &|| ()).map_err(|e| CliError(e.to_string()))?;
     let q = &id.quality;
     fs::write(&a.out, format!("{}\n", doc.to_json_pretty()))
         .map_err(|e| CliError(format!("{}: cannot write: {e}", a.out.display())))?;
@@ -607,28 +597,17 @@ fn identify(a: IdentifyArgs) -> Result<String, CliError> {
 }
 
 fn study(a: StudyArgs) -> Result<String, CliError> {
+    use crate::domain::identification::{IdentifySpec, observability_index};
     use crate::identify::study::{StudyOptions, parse_sizes, study};
-    use crate::identify::{IdentifyOptions, ModelOptions};
     let cell = load_cell(&a.cell)?;
     let sizes = parse_sizes(&a.sizes).map_err(|e| CliError::arg("--sizes", e))?;
     if a.sets == 0 {
         return Err(CliError::arg("--sets", "must be at least 1"));
     }
-    if a.kappa_limit.is_nan() || a.kappa_limit <= 1.0 {
-        return Err(CliError::arg("--kappa-limit", "must be above 1"));
-    }
-    let index = crate::identify::observability::Index::parse(&a.index)
-        .ok_or_else(|| CliError::arg("--index", format!("'{}' is not O1…O5", a.index)))?;
-    let threads = match a.threads {
-        Some(0) => return Err(CliError::arg("--threads", "must be at least 1")),
-        Some(t) => t,
-        None => std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
-    };
-    let mut identify = IdentifyOptions {
-        model: ModelOptions::parse(&a.model, cell.model.dof()).map_err(|e| CliError::arg("--model", e))?,
-        kappa_limit: a.kappa_limit,
-        ..Default::default()
-    };
+    let spec = IdentifySpec { model: a.model.clone(), kappa_limit: a.kappa_limit, ..Default::default() };
+    let mut identify = spec.to_options(cell.model.dof()).map_err(option_error)?;
+    let index = observability_index(&a.index, "index").map_err(option_error)?;
+    let threads = threads(a.threads)?;
     identify.selection.sessions = list(&a.sessions);
     let opts = StudyOptions {
         sizes,
@@ -700,6 +679,15 @@ fn study(a: StudyArgs) -> Result<String, CliError> {
         text.push_str(&format!("wrote {}", out.display()));
     }
     Ok(text.trim_end().to_string())
+}
+
+/// `--threads`: at least 1; default the machine's available parallelism.
+fn threads(t: Option<usize>) -> Result<usize, CliError> {
+    match t {
+        Some(0) => Err(CliError::arg("--threads", "must be at least 1")),
+        Some(t) => Ok(t),
+        None => Ok(std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)),
+    }
 }
 
 fn runtime() -> Result<tokio::runtime::Runtime, CliError> {
@@ -817,37 +805,29 @@ fn demo(a: DemoArgs) -> Result<String, CliError> {
 }
 
 fn crossval(a: CrossvalArgs) -> Result<String, CliError> {
+    use crate::domain::identification::{IdentifySpec, kappa_limit};
     use crate::identify::crossval::{CrossvalOptions, HeldOut, Variant, crossval};
-    use crate::identify::{IdentifyOptions, ModelOptions};
     let cell = load_cell(&a.cell)?;
-    if a.kappa_limit.is_nan() || a.kappa_limit <= 1.0 {
-        return Err(CliError::arg("--kappa-limit", "must be above 1"));
-    }
-    if !a.rotation_weight_mm.is_finite() || a.rotation_weight_mm <= 0.0 {
-        return Err(CliError::arg("--rotation-weight-mm", "must be positive"));
-    }
+    let spec = IdentifySpec {
+        fix: list(&a.fix),
+        kappa_limit: a.kappa_limit,
+        rotation_weight_mm: a.rotation_weight_mm,
+        ..Default::default()
+    };
+    let base = spec.to_options(cell.model.dof()).map_err(option_error)?;
     let sizes = if a.sizes.trim().is_empty() {
         Vec::new()
     } else {
         crate::identify::study::parse_sizes(&a.sizes).map_err(|e| CliError::arg("--sizes", e))?
     };
-    let threads = match a.threads {
-        Some(0) => return Err(CliError::arg("--threads", "must be at least 1")),
-        Some(t) => t,
-        None => std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
-    };
-    let base = IdentifyOptions {
-        fixed: list(&a.fix),
-        kappa_limit: a.kappa_limit,
-        rotation_weight: a.rotation_weight_mm * MM,
-        ..Default::default()
-    };
-    let specs = if a.model.is_empty() { vec!["-compliance".to_string(), String::new()] } else { a.model.clone() };
+    let threads = threads(a.threads)?;
+    let models = if a.model.is_empty() { vec!["-compliance".to_string(), String::new()] } else { a.model.clone() };
     let mut variants = Vec::new();
-    for spec in &specs {
-        let model = ModelOptions::parse(spec, cell.model.dof()).map_err(|e| CliError::arg("--model", e))?;
-        let name = if spec.is_empty() { "default".to_string() } else { spec.clone() };
-        variants.push(Variant { name, options: IdentifyOptions { model, ..base.clone() } });
+    for model in &models {
+        let options =
+            IdentifySpec { model: model.clone(), ..spec.clone() }.to_options(cell.model.dof()).map_err(option_error)?;
+        let name = if model.is_empty() { "default".to_string() } else { model.clone() };
+        variants.push(Variant { name, options });
     }
     let opts = CrossvalOptions {
         session: a.session.clone(),
@@ -863,8 +843,8 @@ fn crossval(a: CrossvalArgs) -> Result<String, CliError> {
         threads,
     };
     let started = std::time::Instant::now();
-    if a.transfer_kappa_limit.is_some_and(|k| k.is_nan() || k <= 1.0) {
-        return Err(CliError::arg("--transfer-kappa-limit", "must be above 1"));
+    if let Some(k) = a.transfer_kappa_limit {
+        kappa_limit(k, "transfer_kappa_limit").map_err(option_error)?;
     }
     let cv = crossval(&cell, &opts).map_err(|e| CliError(e.to_string()))?;
     let elapsed = started.elapsed().as_secs_f64();
@@ -1026,8 +1006,8 @@ fn simulate(a: SimulateArgs) -> Result<String, CliError> {
                 .ok_or_else(|| CliError::arg("--centring", format!("'{}' is not loop or uniform-ball", a.centring)))?,
             epsilon: a.epsilon_mm * MM,
             repeatability: a.repeatability_mm * MM,
-            tracker_sigma: a.tracker_sigma_um * 1e-6,
-            tracker_sigma_per_m: a.tracker_sigma_um_per_m * 1e-6,
+            tracker_sigma: a.tracker_sigma_um * UM,
+            tracker_sigma_per_m: a.tracker_sigma_um_per_m * UM,
         }
     };
     opts.record_indicators = a.indicators;
@@ -1247,36 +1227,39 @@ fn ik(a: IkArgs) -> Result<String, CliError> {
         }
         None => None,
     };
-    let target = frame_from_parts(position, rotation, quaternion).map_err(|e| {
-        let arg = match e.path.as_str() {
-            "position_mm" => "--position-mm",
-            "quaternion" => "--quaternion",
-            _ => "--rotation-deg",
-        };
-        CliError::arg(arg, e.reason)
-    })?;
-    let comp = Compensator::new(&set);
-    let dof = set.dof();
-    let seed_joints = match a.seed_joints_deg.as_deref() {
-        Some(s) => Some(
-            joints_deg(&numbers("--seed-joints-deg", s, None)?, dof, "")
-                .map_err(|e| CliError::arg("--seed-joints-deg", e.reason))?,
-        ),
-        None => None,
-    };
+    let seed_joints_deg = a.seed_joints_deg.as_deref().map(|s| numbers("--seed-joints-deg", s, None)).transpose()?;
     let confdata = match a.confdata.as_deref() {
         Some(s) => {
             let v = numbers("--confdata", s, Some(4))?;
             if v.iter().any(|x| x.fract() != 0.0) {
                 return Err(CliError::arg("--confdata", "values must be integers"));
             }
-            let cfx = Branch::new(v[3] as u8)
-                .filter(|_| (0.0..8.0).contains(&v[3]))
-                .ok_or_else(|| CliError::arg("--confdata", "cfx must be 0–7"))?;
-            Some(Confdata { cf1: v[0] as i32, cf4: v[1] as i32, cf6: v[2] as i32, cfx })
+            Some([v[0] as i32, v[1] as i32, v[2] as i32, v[3] as i32])
         }
         None => None,
     };
+    let flag = |e: DomainError| {
+        let arg = match e.path.split(['[', '.']).next().unwrap_or_default() {
+            "position_mm" => "--position-mm",
+            "quaternion" => "--quaternion",
+            "cfx" => "--cfx",
+            "confdata" => "--confdata",
+            "seed_joints_deg" => "--seed-joints-deg",
+            _ => "--rotation-deg",
+        };
+        CliError::arg(arg, e.reason)
+    };
+    let spec = TargetSpec {
+        position_mm: Some(position),
+        rotation_deg: rotation,
+        quaternion,
+        cfx: a.cfx,
+        confdata,
+        seed_joints_deg,
+        ..Default::default()
+    };
+    let target = frame_from_parts(position, rotation, quaternion).map_err(flag)?;
+    let comp = Compensator::new(&set);
     let one = |seed: Seed<'_>| -> Value {
         match comp.pose(&target, seed) {
             Ok(c) => json!({
@@ -1289,13 +1272,14 @@ fn ik(a: IkArgs) -> Result<String, CliError> {
             Err(e) => json!({ "error": e.to_string() }),
         }
     };
-    let out = if let Some(q) = &seed_joints {
-        one(Seed::Joints(q))
-    } else if let Some(c) = confdata {
-        one(Seed::Confdata(c))
-    } else if let Some(cfx) = a.cfx {
-        let b = Branch::new(cfx).ok_or_else(|| CliError::arg("--cfx", format!("must be 0–7, got {cfx}")))?;
-        one(Seed::Branch(b))
+    // A configuration is read as a compensation target reads it, so the command line refuses what
+    // a targets file refuses (two configurations at once, a cfx out of range); none asks for
+    // every branch.
+    let out = if spec.cfx.is_some() || spec.confdata.is_some() || spec.seed_joints_deg.is_some() {
+        let Target::Pose { choice, .. } = spec.to_target(set.dof()).map_err(flag)? else {
+            unreachable!("a spec without joints_deg is a pose target")
+        };
+        one(choice.seed())
     } else {
         if !comp.has_closed_form() {
             return Err(CliError::arg(

@@ -11,13 +11,14 @@ use axum::http::Method;
 use serde_json::{Value, json};
 
 use crate::domain::cell::CellFile;
-use crate::domain::{DEG, MM, ParameterSetDoc, PoseOut, ToolSpec, to_deg};
+use crate::domain::{ParameterSetDoc, PoseOut, ToolSpec, to_deg};
 use crate::http::client::{Client, ClientError};
 use crate::kinematics::thesis::irb120_table_5_1;
 use crate::kinematics::{AnalyticIk, JointState, ParameterSet};
 use crate::sim::measure::{BallPose, NestPose, Rig, measure};
 use crate::sim::poses::{CellLayout, PlanningCell, ValidationOptions};
 use crate::sim::{effects::Effects, instruments::Noise, truth::Truth};
+use crate::units::{DEG, MM};
 use crate::validate::report::{Reference, validate};
 use crate::validate::stats::ErrorStats;
 

@@ -20,10 +20,9 @@ pub use param_set::{ParamEntry, ParameterSetDoc, ParameterSetFile};
 pub use pose::{Choice, CompensationResult, PoseOut, PoseSpec, Target, TargetSpec};
 pub use robot::{JointSpec, RobotSpec, ToolSpec};
 
-/// Millimetres → metres.
-pub const MM: f64 = 1e-3;
-/// Degrees → radians.
-pub const DEG: f64 = std::f64::consts::PI / 180.0;
+/// The boundary's units, defined once in [`crate::units`]; re-exported here because every file
+/// format converts with them.
+pub use crate::units::{DEG, MM};
 
 /// Bad input: where (a JSON-style path such as `parameters[3].value`) and why.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -5,14 +5,11 @@
 
 use serde::Serialize;
 
-use super::MM;
+use crate::units::{MM, MRAD};
 use crate::validate::normality::ShapiroWilk;
 use crate::validate::regression::LinearFit;
 use crate::validate::report::{AxisStats, ModelErrors, Residual, ValidationReport};
 use crate::validate::stats::ErrorStats;
-
-/// Milliradians → radians.
-pub const MRAD: f64 = 1e-3;
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ValidationOut {

@@ -73,6 +73,13 @@ impl ApiError {
         ApiError::NotFound { what, id: id.to_string() }
     }
 
+    /// A domain validation error whose path is the request field itself: that field, and the
+    /// bare reason as the detail.
+    pub fn field(e: DomainError) -> Self {
+        let field = (!e.path.is_empty()).then_some(e.path);
+        ApiError::Invalid { detail: e.reason, field }
+    }
+
     /// A domain validation error under a request-body prefix (`measurements[3]`).
     pub fn domain(e: DomainError, prefix: &str) -> Self {
         let e = if prefix.is_empty() { e } else { e.within(prefix) };

@@ -56,7 +56,7 @@ pub async fn create(
     body.sessions = checked_sessions(&state, &robot.id, &body.sessions, "identification").await?;
     run::identify_options(&body, model.dof(), Vec::new())?;
     if let Some(s) = &body.select {
-        run::index_of(s, "select")?;
+        run::selection(s)?;
     }
     super::jobs::submit(&state, IDENTIFICATION, &robot.id, &body).await
 }

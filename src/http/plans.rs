@@ -49,7 +49,7 @@ pub async fn create(
         return Err(ApiError::invalid("validation", format!("must be 0–{MAX_VALIDATION}")));
     }
     if let Some(s) = &body.select {
-        run::index_of(s, "select")?;
+        run::selection(s)?;
         if s.n >= 3 * body.per_ball {
             return Err(ApiError::invalid(
                 "select.n",

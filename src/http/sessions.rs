@@ -15,10 +15,10 @@ use utoipa::{IntoParams, ToSchema};
 use super::extract::{Authorized, JsonBody, MEASURE, READ, is_json, parse_json};
 use super::robots::{find as find_robot, model_of};
 use super::{ApiError, AppState};
-use crate::cell::{Artefact, Instrument};
+use crate::cell::Instrument;
 use crate::db::{self, records};
+use crate::domain::ToolSpec;
 use crate::domain::cell::{ArtefactSpec, InstrumentSpec, MeasurementSpec, PurposeSpec, measurement};
-use crate::domain::{MM, ToolSpec};
 
 /// A session to create.
 #[derive(Debug, Deserialize, ToSchema)]
@@ -393,8 +393,7 @@ pub async fn append(
                 .ok_or_else(|| ApiError::Internal(format!("artefact {id} missing")))?;
             let spec: ArtefactSpec =
                 serde_json::from_str(&row.spec_json).map_err(|e| ApiError::Internal(e.to_string()))?;
-            let triangle = super::artefacts::triangle(&spec)?;
-            Some(Artefact { triangle, ball_diameter: spec.ball_diameter_mm * MM })
+            Some(super::artefacts::artefact(&spec)?)
         }
     };
     let mut rows = Vec::with_capacity(specs.len());

@@ -9,15 +9,14 @@ use super::requests::{IdentificationRequest, PosePlanRequest, SelectSpec, Valida
 use crate::cell::{Cell, Instrument, Measurement, Observation, Purpose, Session};
 use crate::db::records::{self, RobotRow};
 use crate::domain::cell::{ArtefactSpec, CellFile};
-use crate::domain::identification::identification_doc;
-use crate::domain::{DEG, MM, ParameterSetDoc, to_deg};
+use crate::domain::identification::{DetmaxSelection, run_identification};
+use crate::domain::{ParameterSetDoc, to_deg};
 use crate::http::robots::model_of;
 use crate::http::{ApiError, cells};
-use crate::identify::observability::Index;
-use crate::identify::{DetmaxPool, IdentifyError, IdentifyOptions, ModelOptions, SolveError, SolverOptions};
+use crate::identify::{DetmaxPool, IdentifyError, IdentifyOptions, SolveError};
 use crate::kinematics::{Preset, RobotModel};
-use crate::metrology::BallTriangle;
 use crate::sim::poses::{CellLayout, IdentificationOptions, PlanningCell, ValidationOptions};
+use crate::units::{DEG, MM};
 
 /// Job kinds as stored.
 pub const POSE_PLAN: &str = "pose_plan";
@@ -78,41 +77,21 @@ pub async fn load(pool: &SqlitePool, kind: &str, robot_id: &str, request_json: &
     }
 }
 
-/// Identification options from a request (the same as `robocal identify`'s flags).
+/// Identification options from a request (checked as `robocal identify` checks its flags); an
+/// error is 422 at the request's field.
 pub fn identify_options(
     r: &IdentificationRequest,
     dof: usize,
     sessions: Vec<String>,
 ) -> Result<IdentifyOptions, ApiError> {
-    if !r.kappa_limit.is_finite() || r.kappa_limit <= 1.0 {
-        return Err(ApiError::invalid("kappa_limit", "must be above 1"));
-    }
-    if r.huber.is_some_and(|k| !k.is_finite() || k <= 0.0) {
-        return Err(ApiError::invalid("huber", "must be a positive threshold"));
-    }
-    if !r.rotation_weight_mm.is_finite() || r.rotation_weight_mm <= 0.0 {
-        return Err(ApiError::invalid("rotation_weight_mm", "must be positive"));
-    }
-    let model = ModelOptions::parse(&r.model, dof).map_err(|e| ApiError::invalid("model", e))?;
-    let mut o = IdentifyOptions {
-        model,
-        fixed: r.fix.clone(),
-        kappa_limit: r.kappa_limit,
-        solver: SolverOptions { huber: r.huber, ..Default::default() },
-        rotation_weight: r.rotation_weight_mm * MM,
-        ..Default::default()
-    };
+    let mut o = r.spec().to_options(dof).map_err(ApiError::field)?;
     o.selection.sessions = sessions;
     Ok(o)
 }
 
-/// A DETMAX index name, or 422.
-pub fn index_of(s: &SelectSpec, field: &str) -> Result<Index, ApiError> {
-    if s.n == 0 {
-        return Err(ApiError::invalid(format!("{field}.n"), "must be at least 1"));
-    }
-    Index::parse(&s.index)
-        .ok_or_else(|| ApiError::invalid(format!("{field}.index"), format!("'{}' is not O1…O5", s.index)))
+/// A request's DETMAX selection, checked; an error is 422 at `select.n` or `select.index`.
+pub fn selection(s: &SelectSpec) -> Result<DetmaxSelection, ApiError> {
+    s.to_selection().map_err(|e| ApiError::field(e.within("select")))
 }
 
 /// Numerical trouble as its own problem kind; input trouble as 422.
@@ -147,22 +126,9 @@ pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64) + Sync)) -> Result<Output
         Inputs::PosePlan { base, model, request, artefact } => pose_plan(&model, base, &request, &artefact, progress),
         Inputs::Identification { robot: _, request, cell, session_names } => {
             let cell_si = cell.to_cell().map_err(|e| ApiError::domain(e, "stored cell"))?;
-            let mut opts = identify_options(&request, cell_si.model.dof(), session_names.clone())?;
-            let selection = match &request.select {
-                None => None,
-                Some(s) => {
-                    let index = index_of(s, "select")?;
-                    let (subset, info) = DetmaxPool::new(&cell_si, &opts)
-                        .and_then(|p| p.select(s.n, index, s.seed))
-                        .map_err(identify_error)?;
-                    opts.selection.subset = subset;
-                    Some(info)
-                }
-            };
-            progress(0.3);
-            let id = crate::identify::identify(&cell_si, &opts).map_err(identify_error)?;
-            let sessions: Vec<String> = id.problem.tools.iter().flat_map(|t| t.sessions.clone()).collect();
-            let doc = identification_doc(&id, &sessions, selection);
+            let opts = identify_options(&request, cell_si.model.dof(), session_names.clone())?;
+            let select = request.select.as_ref().map(selection).transpose()?;
+            let (id, doc) = run_identification(&cell_si, opts, select, &|| progress(0.3)).map_err(identify_error)?;
             let q = &id.quality;
             let summary = json!({
                 "identified": id.free_names.len(),
@@ -229,16 +195,8 @@ pub fn planning_cell(
         ));
     }
     let tool = request.tool.to_tool().map_err(|e| ApiError::domain(e, "tool"))?;
-    let d = &artefact.distances_mm;
-    let triangle = BallTriangle::from_distances(d.d12 * MM, d.d13 * MM, d.d23 * MM)
-        .map_err(|e| ApiError::invalid("artefact_id", e.to_string()))?;
-    let layout = CellLayout {
-        robot: model.clone(),
-        tool,
-        base,
-        artefact: crate::cell::Artefact { triangle, ball_diameter: artefact.ball_diameter_mm * MM },
-        ..CellLayout::default()
-    };
+    let artefact = artefact.to_artefact().map_err(|e| ApiError::invalid("artefact_id", e.to_string()))?;
+    let layout = CellLayout { robot: model.clone(), tool, base, artefact, ..CellLayout::default() };
     PlanningCell::new(&layout).map_err(|e| ApiError::invalid("tool", e.to_string()))
 }
 
@@ -258,9 +216,9 @@ fn pose_plan(
     let candidates = pc.plan_identification(&id_opts, request.seed).map_err(plan_error)?;
     progress(0.4);
     let mut identification = candidates.poses.clone();
-    let mut selection = Value::Null;
+    let mut selection_info = Value::Null;
     if let Some(s) = &request.select {
-        let index = index_of(s, "select")?;
+        let select = selection(s)?;
         if s.n >= identification.len() {
             return Err(ApiError::invalid(
                 "select.n",
@@ -294,11 +252,11 @@ fn pose_plan(
             }],
         };
         let pool = DetmaxPool::new(&cell, &IdentifyOptions::default()).map_err(identify_error)?;
-        let (subset, info) = pool.select(s.n, index, s.seed).map_err(identify_error)?;
+        let (subset, info) = pool.select(select.n, select.index, select.seed).map_err(identify_error)?;
         progress(0.7);
         let chosen: Vec<_> = subset.iter().map(|(_, i)| identification[*i].clone()).collect();
         identification = pc.sequence(chosen).map_err(plan_error)?;
-        selection = info;
+        selection_info = info;
     }
     let validation = if request.validation == 0 {
         Vec::new()
@@ -318,7 +276,7 @@ fn pose_plan(
         })).collect::<Vec<_>>(),
         "validation": validation.iter().map(|p| json!({"joints_deg": to_deg(&p.q), "nest": p.nest})).collect::<Vec<_>>(),
         "candidates": candidates.poses.len(),
-        "selection": selection,
+        "selection": selection_info,
         "nests": nests,
         "home_deg": to_deg(&pc.layout().home),
     });
