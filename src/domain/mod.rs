@@ -36,6 +36,16 @@ impl DomainError {
         Self { path: path.into(), reason: reason.into() }
     }
 
+    /// The field at fault as a request names it (`None`: the whole document).
+    pub fn field(&self) -> Option<String> {
+        (!self.path.is_empty()).then(|| self.path.clone())
+    }
+
+    /// The same error, nested under `prefix` (unchanged when `prefix` is empty).
+    pub fn under(self, prefix: &str) -> Self {
+        if prefix.is_empty() { self } else { self.within(prefix) }
+    }
+
     /// The same error, nested under `prefix`.
     pub fn within(self, prefix: &str) -> Self {
         let path = if self.path.is_empty() {

@@ -6,8 +6,10 @@ use axum::extract::{Path, State};
 use axum::response::Response;
 
 use super::extract::{Authorized, CALIBRATE, JsonBody};
-use super::robots::{find as find_robot, model_of};
-use super::{ApiError, AppState, cells};
+use super::robots::find as find_robot;
+use super::{ApiError, AppState};
+use crate::app::cells;
+use crate::app::robots::model_of;
 use crate::jobs::requests::IdentificationRequest;
 use crate::jobs::run::{self, IDENTIFICATION};
 

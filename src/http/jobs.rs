@@ -12,6 +12,7 @@ use utoipa::{IntoParams, ToSchema};
 use super::extract::{Authorized, CALIBRATE, READ};
 use super::{ApiError, AppState, Problem};
 use crate::db::{self, jobs::JobRow};
+use crate::jobs::{JobContext, JobError};
 
 /// A background job.
 #[derive(Debug, Serialize, Deserialize, ToSchema)]
@@ -66,6 +67,19 @@ pub fn job_out(j: &JobRow) -> Result<JobOut, ApiError> {
         finished_at: j.finished_at.clone(),
         updated_at: j.updated_at.clone(),
     })
+}
+
+/// The job workers' context from the service's state; the failures they store are this API's
+/// problem documents.
+impl From<AppState> for JobContext {
+    fn from(s: AppState) -> Self {
+        JobContext { pool: s.pool, wake: s.wake, caches: s.caches, metrics: s.metrics, failure_json }
+    }
+}
+
+/// A job's failure as stored in `jobs.error_json` and served as the job's `error`.
+fn failure_json(e: &JobError) -> String {
+    serde_json::to_string(&ApiError::from(e.clone()).problem()).expect("problem serialises")
 }
 
 /// Queue a job and answer 202 with it and its `Location`.

@@ -10,8 +10,9 @@ use serde_json::Value;
 use utoipa::ToSchema;
 
 use super::extract::{Authorized, CALIBRATE, JsonBody, READ};
-use super::robots::{find as find_robot, model_of};
+use super::robots::find as find_robot;
 use super::{ApiError, AppState};
+use crate::app::robots::{model_of, robot_base};
 use crate::db::records;
 use crate::domain::cell::ArtefactSpec;
 use crate::jobs::requests::PosePlanRequest;
@@ -57,7 +58,7 @@ pub async fn create(
             ));
         }
     }
-    let base = run::robot_base(&robot)?;
+    let base = robot_base(&robot)?;
     run::planning_cell(&model, base, &body, &artefact)?;
     super::jobs::submit(&state, POSE_PLAN, &robot.id, &body).await
 }

@@ -13,8 +13,9 @@ use sha2::{Digest, Sha256};
 use utoipa::{IntoParams, ToSchema};
 
 use super::extract::{Authorized, JsonBody, MEASURE, READ, is_json, parse_json};
-use super::robots::{find as find_robot, model_of};
+use super::robots::find as find_robot;
 use super::{ApiError, AppState};
+use crate::app::robots::model_of;
 use crate::cell::Instrument;
 use crate::db::{self, records};
 use crate::domain::ToolSpec;
@@ -59,8 +60,8 @@ pub fn session_out(s: &records::SessionRow) -> Result<SessionOut, ApiError> {
         id: s.id.clone(),
         robot_id: s.robot_id.clone(),
         name: s.name.clone(),
-        purpose: super::cells::purpose_spec(&s.purpose),
-        instrument: super::cells::instrument_spec(&s.instrument),
+        purpose: crate::app::cells::purpose_spec(&s.purpose),
+        instrument: crate::app::cells::instrument_spec(&s.instrument),
         tool: serde_json::from_str(&s.tool_json).map_err(|e| ApiError::Internal(format!("session {}: {e}", s.id)))?,
         identify_tcp: s.identify_tcp,
         artefact_id: s.artefact_id.clone(),

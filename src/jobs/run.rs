@@ -5,14 +5,15 @@
 use serde_json::{Value, json};
 use sqlx::SqlitePool;
 
+use super::JobError;
 use super::requests::{IdentificationRequest, PosePlanRequest, SelectSpec, ValidationJob};
+use crate::app::cells;
+use crate::app::robots::{model_of, robot_base};
 use crate::cell::{Cell, Instrument, Measurement, Observation, Purpose, Session};
 use crate::db::records::{self, RobotRow};
 use crate::domain::cell::{ArtefactSpec, CellFile};
 use crate::domain::identification::{DetmaxSelection, run_identification};
 use crate::domain::{ParameterSetDoc, to_deg};
-use crate::http::robots::model_of;
-use crate::http::{ApiError, cells};
 use crate::identify::{DetmaxPool, IdentifyError, IdentifyOptions, SolveError};
 use crate::kinematics::{Preset, RobotModel};
 use crate::sim::poses::{CellLayout, IdentificationOptions, PlanningCell, ValidationOptions};
@@ -37,20 +38,20 @@ pub enum Output {
     Validation { parameter_set_id: String, report: Value, sessions_json: String, summary: Value },
 }
 
-fn stored<T: serde::de::DeserializeOwned>(json: &str, what: &str) -> Result<T, ApiError> {
-    serde_json::from_str(json).map_err(|e| ApiError::Internal(format!("stored {what}: {e}")))
+fn stored<T: serde::de::DeserializeOwned>(json: &str, what: &str) -> Result<T, JobError> {
+    serde_json::from_str(json).map_err(|e| JobError::Internal(format!("stored {what}: {e}")))
 }
 
 /// Load a job's inputs.
-pub async fn load(pool: &SqlitePool, kind: &str, robot_id: &str, request_json: &str) -> Result<Inputs, ApiError> {
+pub async fn load(pool: &SqlitePool, kind: &str, robot_id: &str, request_json: &str) -> Result<Inputs, JobError> {
     let robot =
-        records::robot(pool, robot_id).await?.ok_or_else(|| ApiError::Internal(format!("robot {robot_id} missing")))?;
+        records::robot(pool, robot_id).await?.ok_or_else(|| JobError::Internal(format!("robot {robot_id} missing")))?;
     match kind {
         POSE_PLAN => {
             let request: PosePlanRequest = stored(request_json, "pose-plan request")?;
             let row = records::artefact(pool, &request.artefact_id)
                 .await?
-                .ok_or_else(|| ApiError::invalid("artefact_id", format!("no artefact '{}'", request.artefact_id)))?;
+                .ok_or_else(|| JobError::invalid("artefact_id", format!("no artefact '{}'", request.artefact_id)))?;
             let artefact: ArtefactSpec = stored(&row.spec_json, "artefact")?;
             let model = model_of(&robot)?;
             let base = robot_base(&robot)?;
@@ -67,13 +68,13 @@ pub async fn load(pool: &SqlitePool, kind: &str, robot_id: &str, request_json: &
             let job: ValidationJob = stored(request_json, "validation request")?;
             let set = records::parameter_set(pool, &job.parameter_set_id)
                 .await?
-                .ok_or_else(|| ApiError::Internal(format!("parameter set {} missing", job.parameter_set_id)))?;
+                .ok_or_else(|| JobError::Internal(format!("parameter set {} missing", job.parameter_set_id)))?;
             let sessions = cells::resolve_sessions(pool, &robot.id, &job.request.sessions, "sessions").await?;
             let cell = cells::cell_file(pool, &robot, &sessions).await?;
             let session_names = sessions.iter().map(|s| s.name.clone()).collect();
             Ok(Inputs::Validation { job, set_json: set.doc_json, cell, session_names })
         }
-        other => Err(ApiError::Internal(format!("unknown job kind '{other}'"))),
+        other => Err(JobError::Internal(format!("unknown job kind '{other}'"))),
     }
 }
 
@@ -83,49 +84,49 @@ pub fn identify_options(
     r: &IdentificationRequest,
     dof: usize,
     sessions: Vec<String>,
-) -> Result<IdentifyOptions, ApiError> {
-    let mut o = r.spec().to_options(dof).map_err(ApiError::field)?;
+) -> Result<IdentifyOptions, JobError> {
+    let mut o = r.spec().to_options(dof).map_err(JobError::field)?;
     o.selection.sessions = sessions;
     Ok(o)
 }
 
 /// A request's DETMAX selection, checked; an error is 422 at `select.n` or `select.index`.
-pub fn selection(s: &SelectSpec) -> Result<DetmaxSelection, ApiError> {
-    s.to_selection().map_err(|e| ApiError::field(e.within("select")))
+pub fn selection(s: &SelectSpec) -> Result<DetmaxSelection, JobError> {
+    s.to_selection().map_err(|e| JobError::field(e.within("select")))
 }
 
 /// Numerical trouble as its own problem kind; input trouble as 422.
-pub fn identify_error(e: IdentifyError) -> ApiError {
+pub fn identify_error(e: IdentifyError) -> JobError {
     let detail = e.to_string();
     match e {
         IdentifyError::RankDeficient { .. } => {
-            ApiError::Numerical { kind: "rank-deficient", title: "Rank-deficient fit", detail }
+            JobError::Numerical { kind: "rank-deficient", title: "Rank-deficient fit", detail }
         }
         IdentifyError::IllConditioned { .. } => {
-            ApiError::Numerical { kind: "ill-conditioned", title: "Ill-conditioned fit (κ above the limit)", detail }
+            JobError::Numerical { kind: "ill-conditioned", title: "Ill-conditioned fit (κ above the limit)", detail }
         }
         IdentifyError::Underdetermined { .. } => {
-            ApiError::Numerical { kind: "underdetermined", title: "Fewer residuals than parameters", detail }
+            JobError::Numerical { kind: "underdetermined", title: "Fewer residuals than parameters", detail }
         }
         IdentifyError::Solve(SolveError::Diverged { .. }) => {
-            ApiError::Numerical { kind: "divergence", title: "The fit diverged", detail }
+            JobError::Numerical { kind: "divergence", title: "The fit diverged", detail }
         }
         IdentifyError::Solve(SolveError::IterationLimit { .. }) => {
-            ApiError::Numerical { kind: "no-convergence", title: "The fit did not converge", detail }
+            JobError::Numerical { kind: "no-convergence", title: "The fit did not converge", detail }
         }
         IdentifyError::Registration(_) => {
-            ApiError::Numerical { kind: "registration", title: "The base could not be registered", detail }
+            JobError::Numerical { kind: "registration", title: "The base could not be registered", detail }
         }
-        IdentifyError::Problem(_) | IdentifyError::Option(_) => ApiError::Invalid { detail, field: None },
+        IdentifyError::Problem(_) | IdentifyError::Option(_) => JobError::Invalid { detail, field: None },
     }
 }
 
 /// The computation (blocking). `progress` is told how far it got (0–1).
-pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64) + Sync)) -> Result<Output, ApiError> {
+pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64) + Sync)) -> Result<Output, JobError> {
     match inputs {
         Inputs::PosePlan { base, model, request, artefact } => pose_plan(&model, base, &request, &artefact, progress),
         Inputs::Identification { robot: _, request, cell, session_names } => {
-            let cell_si = cell.to_cell().map_err(|e| ApiError::domain(e, "stored cell"))?;
+            let cell_si = cell.to_cell().map_err(|e| JobError::domain(e, "stored cell"))?;
             let opts = identify_options(&request, cell_si.model.dof(), session_names.clone())?;
             let select = request.select.as_ref().map(selection).transpose()?;
             let (id, doc) = run_identification(&cell_si, opts, select, &|| progress(0.3)).map_err(identify_error)?;
@@ -148,15 +149,15 @@ pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64) + Sync)) -> Result<Output
         }
         Inputs::Validation { job, set_json, cell, session_names } => {
             let doc = ParameterSetDoc::from_json(&set_json)
-                .map_err(|e| ApiError::Internal(format!("stored parameter set: {e}")))?;
-            let cell_si = cell.to_cell().map_err(|e| ApiError::domain(e, "stored cell"))?;
+                .map_err(|e| JobError::Internal(format!("stored parameter set: {e}")))?;
+            let cell_si = cell.to_cell().map_err(|e| JobError::domain(e, "stored cell"))?;
             let report = crate::validate::report::validate(
                 &doc.set,
                 &cell_si,
                 &session_names,
                 crate::validate::report::Reference::Measured,
             )
-            .map_err(|e| ApiError::Invalid { detail: e.to_string(), field: Some("sessions".into()) })?;
+            .map_err(|e| JobError::Invalid { detail: e.to_string(), field: Some("sessions".into()) })?;
             let full = crate::domain::validation::report_to_json(&report, job.request.residuals);
             let p = &report.calibrated.position;
             let n = &report.nominal.position;
@@ -184,9 +185,9 @@ pub fn planning_cell(
     base: [f64; 6],
     request: &PosePlanRequest,
     artefact: &ArtefactSpec,
-) -> Result<PlanningCell, ApiError> {
+) -> Result<PlanningCell, JobError> {
     if model.preset != Some(Preset::Irb120) {
-        return Err(ApiError::invalid(
+        return Err(JobError::invalid(
             "robot",
             format!(
                 "pose planning needs the closed-form inverse kinematics and collision model of the irb120 preset; robot '{}' has neither",
@@ -194,14 +195,14 @@ pub fn planning_cell(
             ),
         ));
     }
-    let tool = request.tool.to_tool().map_err(|e| ApiError::domain(e, "tool"))?;
-    let artefact = artefact.to_artefact().map_err(|e| ApiError::invalid("artefact_id", e.to_string()))?;
+    let tool = request.tool.to_tool().map_err(|e| JobError::domain(e, "tool"))?;
+    let artefact = artefact.to_artefact().map_err(|e| JobError::invalid("artefact_id", e.to_string()))?;
     let layout = CellLayout { robot: model.clone(), tool, base, artefact, ..CellLayout::default() };
-    PlanningCell::new(&layout).map_err(|e| ApiError::invalid("tool", e.to_string()))
+    PlanningCell::new(&layout).map_err(|e| JobError::invalid("tool", e.to_string()))
 }
 
-fn plan_error(e: crate::sim::poses::PlanError) -> ApiError {
-    ApiError::Numerical { kind: "unplannable", title: "No collision-free plan", detail: e.to_string() }
+fn plan_error(e: crate::sim::poses::PlanError) -> JobError {
+    JobError::Numerical { kind: "unplannable", title: "No collision-free plan", detail: e.to_string() }
 }
 
 fn pose_plan(
@@ -210,7 +211,7 @@ fn pose_plan(
     request: &PosePlanRequest,
     artefact: &ArtefactSpec,
     progress: &(dyn Fn(f64) + Sync),
-) -> Result<Output, ApiError> {
+) -> Result<Output, JobError> {
     let pc = planning_cell(model, base, request, artefact)?;
     let id_opts = IdentificationOptions { per_ball: request.per_ball, ..Default::default() };
     let candidates = pc.plan_identification(&id_opts, request.seed).map_err(plan_error)?;
@@ -220,14 +221,14 @@ fn pose_plan(
     if let Some(s) = &request.select {
         let select = selection(s)?;
         if s.n >= identification.len() {
-            return Err(ApiError::invalid(
+            return Err(JobError::invalid(
                 "select.n",
                 format!("must be smaller than the {} candidates", identification.len()),
             ));
         }
         // The candidates as a TriCal session of ball measurements: DETMAX on their Jacobian blocks
         // at the nominal model (the identification's own starting point).
-        let tool = request.tool.to_tool().map_err(|e| ApiError::domain(e, "tool"))?;
+        let tool = request.tool.to_tool().map_err(|e| JobError::domain(e, "tool"))?;
         let cell = Cell {
             model: model.clone(),
             base_guess: Some(base),
@@ -283,22 +284,6 @@ fn pose_plan(
     Ok(Output::PosePlan { result })
 }
 
-/// The robot's base guess T_0^W: planning needs to know where the artefact is relative to the
-/// robot.
-pub fn robot_base(robot: &RobotRow) -> Result<[f64; 6], ApiError> {
-    let Some(json) = robot.base_guess_json.as_deref() else {
-        return Err(ApiError::invalid(
-            "base_guess",
-            format!(
-                "robot '{}' has no base_guess: pose planning needs where the artefact lies relative to the robot",
-                robot.name
-            ),
-        ));
-    };
-    let b: crate::domain::cell::PoseXyzAbc = stored(json, "base guess")?;
-    b.to_si("base_guess").map_err(|e| ApiError::domain(e, ""))
-}
-
 /// Write a job's output; returns the job's `result_json`.
 pub async fn store(
     tx: &mut sqlx::SqliteConnection,
@@ -306,7 +291,7 @@ pub async fn store(
     robot_id: &str,
     request_json: &str,
     out: Output,
-) -> Result<Value, ApiError> {
+) -> Result<Value, JobError> {
     match out {
         Output::PosePlan { result } => {
             let row = records::PosePlanRow {
