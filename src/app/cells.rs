@@ -7,9 +7,7 @@ use sqlx::SqlitePool;
 use super::AppError;
 use crate::db::records::{self, RobotRow, SessionRow};
 use crate::domain::ToolSpec;
-use crate::domain::cell::{
-    ArtefactSpec, CellFile, InstrumentSpec, MeasurementSpec, PoseXyzAbc, PurposeSpec, SessionSpec,
-};
+use crate::domain::cell::{ArtefactSpec, CellFile, MeasurementSpec, PoseXyzAbc, SessionSpec};
 
 /// The robot's sessions named (by id or name) in a request field; 422 naming the item when one
 /// is unknown or repeated.
@@ -33,14 +31,6 @@ pub async fn resolve_sessions(
         out.push(s);
     }
     Ok(out)
-}
-
-pub fn purpose_spec(s: &str) -> PurposeSpec {
-    if s == "validation" { PurposeSpec::Validation } else { PurposeSpec::Identification }
-}
-
-pub fn instrument_spec(s: &str) -> InstrumentSpec {
-    if s == "trical" { InstrumentSpec::Trical } else { InstrumentSpec::LaserTracker }
 }
 
 /// Every stored measurement of a session, in order.
@@ -93,8 +83,8 @@ pub async fn cell_file(pool: &SqlitePool, robot: &RobotRow, sessions: &[SessionR
     for s in sessions {
         specs.push(SessionSpec {
             name: s.name.clone(),
-            purpose: purpose_spec(&s.purpose),
-            instrument: instrument_spec(&s.instrument),
+            purpose: s.purpose,
+            instrument: s.instrument,
             tool: serde_json::from_str::<ToolSpec>(&s.tool_json).map_err(|e| internal("tool", e))?,
             identify_tcp: s.identify_tcp,
             measurements: session_measurements(pool, &s.id).await?,

@@ -115,18 +115,60 @@ impl ArtefactSpec {
     }
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+// What a session is for, as files, the wire and the store spell it: `identification`,
+// `validation`. (A plain comment: a doc comment would change the OpenAPI schema.)
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema, sqlx::Type)]
 #[serde(rename_all = "snake_case")]
+#[sqlx(rename_all = "snake_case")]
 pub enum PurposeSpec {
     Identification,
     Validation,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+impl PurposeSpec {
+    pub fn to_purpose(self) -> Purpose {
+        match self {
+            PurposeSpec::Identification => Purpose::Identification,
+            PurposeSpec::Validation => Purpose::Validation,
+        }
+    }
+
+    pub fn from_purpose(p: Purpose) -> Self {
+        match p {
+            Purpose::Identification => PurposeSpec::Identification,
+            Purpose::Validation => PurposeSpec::Validation,
+        }
+    }
+
+    pub fn as_str(self) -> &'static str {
+        self.to_purpose().as_str()
+    }
+}
+
+// The instrument of a session, as files, the wire and the store spell it: `trical`,
+// `laser_tracker`. (A plain comment: a doc comment would change the OpenAPI schema.)
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema, sqlx::Type)]
 #[serde(rename_all = "snake_case")]
+#[sqlx(rename_all = "snake_case")]
 pub enum InstrumentSpec {
     Trical,
     LaserTracker,
+}
+
+impl InstrumentSpec {
+    pub fn to_instrument(self) -> Instrument {
+        match self {
+            InstrumentSpec::Trical => Instrument::TriCal,
+            InstrumentSpec::LaserTracker => Instrument::LaserTracker,
+        }
+    }
+
+    pub fn from_instrument(i: Instrument) -> Self {
+        match i {
+            Instrument::TriCal => InstrumentSpec::Trical,
+            Instrument::LaserTracker => InstrumentSpec::LaserTracker,
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize, utoipa::ToSchema)]
@@ -204,10 +246,7 @@ impl CellFile {
                 return Err(DomainError::new(format!("{at}.name"), "another session has this name"));
             }
             let tool = s.tool.to_tool().map_err(|e| e.within(&format!("{at}.tool")))?;
-            let instrument = match s.instrument {
-                InstrumentSpec::Trical => Instrument::TriCal,
-                InstrumentSpec::LaserTracker => Instrument::LaserTracker,
-            };
+            let instrument = s.instrument.to_instrument();
             if instrument == Instrument::TriCal && artefact.is_none() {
                 return Err(DomainError::new(format!("{at}.instrument"), "a trical session needs the cell's artefact"));
             }
@@ -218,10 +257,7 @@ impl CellFile {
             }
             sessions.push(Session {
                 name: s.name.clone(),
-                purpose: match s.purpose {
-                    PurposeSpec::Identification => Purpose::Identification,
-                    PurposeSpec::Validation => Purpose::Validation,
-                },
+                purpose: s.purpose.to_purpose(),
                 instrument,
                 tool,
                 identify_tcp: s.identify_tcp,
@@ -241,14 +277,8 @@ impl CellFile {
                 .iter()
                 .map(|s| SessionSpec {
                     name: s.name.clone(),
-                    purpose: match s.purpose {
-                        Purpose::Identification => PurposeSpec::Identification,
-                        Purpose::Validation => PurposeSpec::Validation,
-                    },
-                    instrument: match s.instrument {
-                        Instrument::TriCal => InstrumentSpec::Trical,
-                        Instrument::LaserTracker => InstrumentSpec::LaserTracker,
-                    },
+                    purpose: PurposeSpec::from_purpose(s.purpose),
+                    instrument: InstrumentSpec::from_instrument(s.instrument),
                     tool: ToolSpec::from_tool(&s.tool),
                     identify_tcp: s.identify_tcp,
                     measurements: s.measurements.iter().map(measurement_spec).collect(),

@@ -158,7 +158,7 @@ pub fn run_identification(
 pub fn identification_doc(id: &Identification, sessions: &[String], selection: Option<Value>) -> ParameterSetDoc {
     let mut doc = ParameterSetDoc::new(id.set.clone());
     doc.std = id.std.clone();
-    doc.status = id.status.iter().map(|s| Some(s.clone())).collect();
+    doc.status = id.status.iter().map(|s| Some(s.as_str().to_string())).collect();
     let q = &id.quality;
     let m = q.std.len();
     let tools: Vec<Value> = id

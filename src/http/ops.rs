@@ -60,9 +60,9 @@ pub async fn readyz(State(state): State<AppState>) -> Result<Json<Readiness>, Ap
     responses((status = 200, description = "Prometheus text exposition format", body = String, content_type = "text/plain; version=0.0.4")))]
 pub async fn metrics(State(state): State<AppState>) -> Result<impl IntoResponse, ApiError> {
     let counts = db::jobs::counts(&state.pool).await?;
-    for s in db::jobs::STATES {
-        let n = counts.iter().find(|(k, _)| k == s).map_or(0, |(_, n)| *n);
-        state.metrics.jobs.with_label_values(&[s]).set(n);
+    for s in db::jobs::JobState::ALL {
+        let n = counts.iter().find(|(k, _)| *k == s).map_or(0, |(_, n)| *n);
+        state.metrics.jobs.with_label_values(&[s.as_str()]).set(n);
     }
     Ok(([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], state.metrics.render()))
 }

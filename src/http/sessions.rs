@@ -16,7 +16,6 @@ use super::extract::{Authorized, JsonBody, MEASURE, READ, is_json, parse_json};
 use super::robots::find as find_robot;
 use super::{ApiError, AppState};
 use crate::app::robots::model_of;
-use crate::cell::Instrument;
 use crate::db::{self, records};
 use crate::domain::ToolSpec;
 use crate::domain::cell::{ArtefactSpec, InstrumentSpec, MeasurementSpec, PurposeSpec, measurement};
@@ -60,8 +59,8 @@ pub fn session_out(s: &records::SessionRow) -> Result<SessionOut, ApiError> {
         id: s.id.clone(),
         robot_id: s.robot_id.clone(),
         name: s.name.clone(),
-        purpose: crate::app::cells::purpose_spec(&s.purpose),
-        instrument: crate::app::cells::instrument_spec(&s.instrument),
+        purpose: s.purpose,
+        instrument: s.instrument,
         tool: serde_json::from_str(&s.tool_json).map_err(|e| ApiError::Internal(format!("session {}: {e}", s.id)))?,
         identify_tcp: s.identify_tcp,
         artefact_id: s.artefact_id.clone(),
@@ -111,16 +110,8 @@ pub async fn create(
         id: db::new_id(),
         robot_id: robot.id.clone(),
         name: name.to_string(),
-        purpose: match body.purpose {
-            PurposeSpec::Identification => "identification",
-            PurposeSpec::Validation => "validation",
-        }
-        .into(),
-        instrument: match body.instrument {
-            InstrumentSpec::Trical => "trical",
-            InstrumentSpec::LaserTracker => "laser_tracker",
-        }
-        .into(),
+        purpose: body.purpose,
+        instrument: body.instrument,
         tool_json: serde_json::to_string(&body.tool).expect("serialises"),
         identify_tcp: body.identify_tcp,
         artefact_id: body.artefact_id.clone(),
@@ -385,7 +376,7 @@ pub async fn append(
     };
 
     // Validate every measurement against the robot, the instrument and the artefact.
-    let instrument = if session.instrument == "trical" { Instrument::TriCal } else { Instrument::LaserTracker };
+    let instrument = session.instrument.to_instrument();
     let artefact = match &session.artefact_id {
         None => None,
         Some(id) => {

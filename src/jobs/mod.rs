@@ -6,13 +6,13 @@
 //! in the solver after the grace period is put back in the queue, not lost.
 
 pub mod requests;
+pub mod results;
 pub mod run;
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-use serde_json::Value;
 use tokio::sync::watch;
 use tokio::task::JoinHandle;
 use tracing::Instrument;
@@ -23,6 +23,7 @@ use tokio::sync::Notify;
 use crate::app::cache::Caches;
 use crate::app::{AppError, Metrics};
 use crate::db;
+use crate::db::jobs::JobState;
 use crate::domain::DomainError;
 
 /// Why a job failed (or, checked at submission, would fail).
@@ -178,7 +179,7 @@ async fn run_one(
     let started = Instant::now();
     // Progress in thousandths, shared with the blocking solver.
     let progress = Arc::new(AtomicU64::new(0));
-    let end = match run::load(&state.pool, &job.kind, &job.robot_id, &job.request_json).await {
+    let end = match run::load(&state.pool, job.kind, &job.robot_id, &job.request_json).await {
         Err(e) => End::Failed(e),
         Ok(inputs) => {
             progress.store(50, Ordering::Relaxed);
@@ -244,7 +245,7 @@ async fn finish(state: &JobContext, owner: &str, job: &db::jobs::JobRow, end: En
             tracing::info!("shutdown: job put back in the queue");
         }
         _ if cancelled => {
-            db::jobs::finish(&state.pool, &job.id, owner, "cancelled", None, None).await?;
+            db::jobs::finish(&state.pool, &job.id, owner, JobState::Cancelled, None, None).await?;
             tracing::info!("job cancelled; its result was discarded");
         }
         End::Failed(e) => {
@@ -254,12 +255,13 @@ async fn finish(state: &JobContext, owner: &str, job: &db::jobs::JobRow, end: En
                 tracing::info!(error = %e, "job failed");
             }
             let problem = (state.failure_json)(&e);
-            db::jobs::finish(&state.pool, &job.id, owner, "failed", None, Some(&problem)).await?;
+            db::jobs::finish(&state.pool, &job.id, owner, JobState::Failed, None, Some(&problem)).await?;
         }
         End::Done(out) => {
             let mut tx = db::begin_write(&state.pool).await?;
-            let result: Value = run::store(&mut tx, &job.id, &job.robot_id, &job.request_json, out).await?;
-            if db::jobs::finish(&mut *tx, &job.id, owner, "succeeded", Some(&result.to_string()), None).await? {
+            let result = run::store(&mut tx, &job.id, &job.robot_id, &job.request_json, out).await?;
+            let result_json = serde_json::to_string(&result).expect("a result serialises");
+            if db::jobs::finish(&mut *tx, &job.id, owner, JobState::Succeeded, Some(&result_json), None).await? {
                 tx.commit().await?;
                 // An identification may have activated its set.
                 state.caches.robot_changed(&job.robot_id);

@@ -7,22 +7,23 @@ use sqlx::SqlitePool;
 
 use super::JobError;
 use super::requests::{IdentificationRequest, PosePlanRequest, SelectSpec, ValidationJob};
+use super::results::{
+    IdentificationResult, IdentificationSummary, JobResult, PlanNest, PlannedBallPose, PlannedTrackerPose, PosePlan,
+    PosePlanResult, ValidationJobSummary, ValidationResult,
+};
 use crate::app::cells;
 use crate::app::robots::{model_of, robot_base};
 use crate::cell::{Cell, Instrument, Measurement, Observation, Purpose, Session};
+use crate::db::jobs::JobKind;
 use crate::db::records::{self, RobotRow};
 use crate::domain::cell::{ArtefactSpec, CellFile};
 use crate::domain::identification::{DetmaxSelection, run_identification};
-use crate::domain::{ParameterSetDoc, to_deg};
+use crate::domain::validation::ErrorFigures;
+use crate::domain::{ParameterSetDoc, ToolSpec, to_deg};
 use crate::identify::{DetmaxPool, IdentifyError, IdentifyOptions, SolveError};
 use crate::kinematics::{Preset, RobotModel};
 use crate::sim::poses::{CellLayout, IdentificationOptions, PlanningCell, ValidationOptions};
 use crate::units::{DEG, MM};
-
-/// Job kinds as stored.
-pub const POSE_PLAN: &str = "pose_plan";
-pub const IDENTIFICATION: &str = "identification";
-pub const VALIDATION: &str = "validation";
 
 /// Everything a job needs, loaded.
 pub enum Inputs {
@@ -33,9 +34,9 @@ pub enum Inputs {
 
 /// What a job computed.
 pub enum Output {
-    PosePlan { result: Value },
-    Identification { doc_json: String, sessions_json: String, summary: Value, activate: bool },
-    Validation { parameter_set_id: String, report: Value, sessions_json: String, summary: Value },
+    PosePlan { plan: PosePlan },
+    Identification { doc_json: String, sessions_json: String, summary: IdentificationSummary, activate: bool },
+    Validation { parameter_set_id: String, report: Value, sessions_json: String, summary: ValidationJobSummary },
 }
 
 fn stored<T: serde::de::DeserializeOwned>(json: &str, what: &str) -> Result<T, JobError> {
@@ -43,11 +44,11 @@ fn stored<T: serde::de::DeserializeOwned>(json: &str, what: &str) -> Result<T, J
 }
 
 /// Load a job's inputs.
-pub async fn load(pool: &SqlitePool, kind: &str, robot_id: &str, request_json: &str) -> Result<Inputs, JobError> {
+pub async fn load(pool: &SqlitePool, kind: JobKind, robot_id: &str, request_json: &str) -> Result<Inputs, JobError> {
     let robot =
         records::robot(pool, robot_id).await?.ok_or_else(|| JobError::Internal(format!("robot {robot_id} missing")))?;
     match kind {
-        POSE_PLAN => {
+        JobKind::PosePlan => {
             let request: PosePlanRequest = stored(request_json, "pose-plan request")?;
             let row = records::artefact(pool, &request.artefact_id)
                 .await?
@@ -57,14 +58,14 @@ pub async fn load(pool: &SqlitePool, kind: &str, robot_id: &str, request_json: &
             let base = robot_base(&robot)?;
             Ok(Inputs::PosePlan { base, model, request, artefact })
         }
-        IDENTIFICATION => {
+        JobKind::Identification => {
             let request: IdentificationRequest = stored(request_json, "identification request")?;
             let sessions = cells::resolve_sessions(pool, &robot.id, &request.sessions, "sessions").await?;
             let cell = cells::cell_file(pool, &robot, &sessions).await?;
             let session_names = sessions.iter().map(|s| s.name.clone()).collect();
             Ok(Inputs::Identification { robot, request, cell, session_names })
         }
-        VALIDATION => {
+        JobKind::Validation => {
             let job: ValidationJob = stored(request_json, "validation request")?;
             let set = records::parameter_set(pool, &job.parameter_set_id)
                 .await?
@@ -74,7 +75,6 @@ pub async fn load(pool: &SqlitePool, kind: &str, robot_id: &str, request_json: &
             let session_names = sessions.iter().map(|s| s.name.clone()).collect();
             Ok(Inputs::Validation { job, set_json: set.doc_json, cell, session_names })
         }
-        other => Err(JobError::Internal(format!("unknown job kind '{other}'"))),
     }
 }
 
@@ -131,15 +131,15 @@ pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64) + Sync)) -> Result<Output
             let select = request.select.as_ref().map(selection).transpose()?;
             let (id, doc) = run_identification(&cell_si, opts, select, &|| progress(0.3)).map_err(identify_error)?;
             let q = &id.quality;
-            let summary = json!({
-                "identified": id.free_names.len(),
-                "measurements": q.n_configs,
-                "iterations": id.iterations,
-                "kappa_si": q.kappa,
-                "kappa_scaled": q.kappa_scaled,
-                "o1_si": q.observability.o1,
-                "rms_residual_mm": q.rms_residual / MM,
-            });
+            let summary = IdentificationSummary {
+                identified: id.free_names.len(),
+                measurements: q.n_configs,
+                iterations: id.iterations,
+                kappa_si: q.kappa,
+                kappa_scaled: q.kappa_scaled,
+                o1_si: q.observability.o1,
+                rms_residual_mm: q.rms_residual / MM,
+            };
             Ok(Output::Identification {
                 doc_json: doc.to_json_pretty(),
                 sessions_json: json!(session_names).to_string(),
@@ -159,15 +159,11 @@ pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64) + Sync)) -> Result<Output
             )
             .map_err(|e| JobError::Invalid { detail: e.to_string(), field: Some("sessions".into()) })?;
             let full = crate::domain::validation::report_to_json(&report, job.request.residuals);
-            let p = &report.calibrated.position;
-            let n = &report.nominal.position;
-            let summary = json!({
-                "measurements": p.n,
-                "mean_mm": p.mean / MM, "median_mm": p.median / MM, "std_mm": p.std / MM,
-                "rms_mm": p.rms / MM, "p95_mm": p.p95 / MM, "max_mm": p.max / MM,
-                "nominal": {"mean_mm": n.mean / MM, "median_mm": n.median / MM, "std_mm": n.std / MM,
-                            "rms_mm": n.rms / MM, "p95_mm": n.p95 / MM, "max_mm": n.max / MM},
-            });
+            let summary = ValidationJobSummary {
+                measurements: report.calibrated.position.n,
+                calibrated: ErrorFigures::of(&report.calibrated.position),
+                nominal: ErrorFigures::of(&report.nominal.position),
+            };
             Ok(Output::Validation {
                 parameter_set_id: job.parameter_set_id,
                 report: full,
@@ -217,7 +213,7 @@ fn pose_plan(
     let candidates = pc.plan_identification(&id_opts, request.seed).map_err(plan_error)?;
     progress(0.4);
     let mut identification = candidates.poses.clone();
-    let mut selection_info = Value::Null;
+    let mut selection_info = None;
     if let Some(s) = &request.select {
         let select = selection(s)?;
         if s.n >= identification.len() {
@@ -257,7 +253,7 @@ fn pose_plan(
         progress(0.7);
         let chosen: Vec<_> = subset.iter().map(|(_, i)| identification[*i].clone()).collect();
         identification = pc.sequence(chosen).map_err(plan_error)?;
-        selection_info = info;
+        selection_info = Some(info);
     }
     let validation = if request.validation == 0 {
         Vec::new()
@@ -265,48 +261,48 @@ fn pose_plan(
         let v_opts = ValidationOptions { count: request.validation, ..Default::default() };
         pc.plan_validation(&v_opts, request.seed).map_err(plan_error)?.poses
     };
-    let nests: Vec<Value> = pc
-        .layout()
-        .nests
-        .iter()
-        .map(|n| json!({"tool": crate::domain::ToolSpec::from_tool(&n.tool), "opening": [n.opening.x, n.opening.y, n.opening.z]}))
-        .collect();
-    let result = json!({
-        "identification": identification.iter().map(|p| json!({
-            "joints_deg": to_deg(&p.q), "ball": p.ball, "nu_deg": p.nu.map(|v| v / DEG),
-        })).collect::<Vec<_>>(),
-        "validation": validation.iter().map(|p| json!({"joints_deg": to_deg(&p.q), "nest": p.nest})).collect::<Vec<_>>(),
-        "candidates": candidates.poses.len(),
-        "selection": selection_info,
-        "nests": nests,
-        "home_deg": to_deg(&pc.layout().home),
-    });
-    Ok(Output::PosePlan { result })
+    let plan = PosePlan {
+        identification: identification
+            .iter()
+            .map(|p| PlannedBallPose { joints_deg: to_deg(&p.q), ball: p.ball, nu_deg: p.nu.map(|v| v / DEG) })
+            .collect(),
+        validation: validation.iter().map(|p| PlannedTrackerPose { joints_deg: to_deg(&p.q), nest: p.nest }).collect(),
+        candidates: candidates.poses.len(),
+        selection: selection_info,
+        nests: pc
+            .layout()
+            .nests
+            .iter()
+            .map(|n| PlanNest { tool: ToolSpec::from_tool(&n.tool), opening: [n.opening.x, n.opening.y, n.opening.z] })
+            .collect(),
+        home_deg: to_deg(&pc.layout().home),
+    };
+    Ok(Output::PosePlan { plan })
 }
 
-/// Write a job's output; returns the job's `result_json`.
+/// Write a job's output; returns the job's result.
 pub async fn store(
     tx: &mut sqlx::SqliteConnection,
     job_id: &str,
     robot_id: &str,
     request_json: &str,
     out: Output,
-) -> Result<Value, JobError> {
+) -> Result<JobResult, JobError> {
     match out {
-        Output::PosePlan { result } => {
+        Output::PosePlan { plan } => {
             let row = records::PosePlanRow {
                 id: crate::db::new_id(),
                 robot_id: robot_id.to_string(),
                 request_json: request_json.to_string(),
-                result_json: result.to_string(),
+                result_json: serde_json::to_string(&plan).expect("a plan serialises"),
                 job_id: Some(job_id.to_string()),
                 created_at: crate::db::now(),
             };
             records::insert_pose_plan(&mut *tx, &row).await?;
-            Ok(json!({
-                "pose_plan_id": row.id,
-                "identification": result["identification"].as_array().map_or(0, Vec::len),
-                "validation": result["validation"].as_array().map_or(0, Vec::len),
+            Ok(JobResult::PosePlan(PosePlanResult {
+                pose_plan_id: row.id,
+                identification: plan.identification.len(),
+                validation: plan.validation.len(),
             }))
         }
         Output::Identification { doc_json, sessions_json, summary, activate } => {
@@ -315,9 +311,12 @@ pub async fn store(
             if activate {
                 records::set_active_parameter_set(&mut *tx, robot_id, &row.id).await?;
             }
-            let mut r = json!({"parameter_set_id": row.id, "version": row.version, "activated": activate});
-            r["summary"] = summary;
-            Ok(r)
+            Ok(JobResult::Identification(IdentificationResult {
+                parameter_set_id: row.id,
+                version: row.version,
+                activated: activate,
+                summary,
+            }))
         }
         Output::Validation { parameter_set_id, report, sessions_json, summary } => {
             let row = records::ValidationRow {
@@ -329,9 +328,7 @@ pub async fn store(
                 created_at: crate::db::now(),
             };
             records::insert_validation(&mut *tx, &row).await?;
-            let mut r = json!({"validation_id": row.id, "parameter_set_id": parameter_set_id});
-            r["summary"] = summary;
-            Ok(r)
+            Ok(JobResult::Validation(ValidationResult { validation_id: row.id, parameter_set_id, summary }))
         }
     }
 }
