@@ -5,6 +5,7 @@
 
 pub mod cell;
 pub mod identification;
+pub mod measurement_csv;
 pub mod param_set;
 pub mod pose;
 pub mod robot;

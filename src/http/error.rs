@@ -11,6 +11,7 @@ use utoipa::ToSchema;
 
 use crate::app::AppError;
 use crate::domain::DomainError;
+use crate::domain::measurement_csv::CsvError;
 use crate::jobs::JobError;
 
 /// A problem document (RFC 9457).
@@ -142,6 +143,17 @@ impl From<AppError> for ApiError {
         match e {
             AppError::Invalid { detail, field } => ApiError::Invalid { detail, field },
             AppError::Internal(m) => ApiError::Internal(m),
+        }
+    }
+}
+
+/// A CSV batch that does not read is malformed (400); one whose values do not fit is invalid
+/// (422); either names the header, column or line.
+impl From<CsvError> for ApiError {
+    fn from(e: CsvError) -> Self {
+        match e {
+            CsvError::Malformed(e) => ApiError::Malformed { field: e.field(), detail: e.reason },
+            CsvError::Invalid(e) => ApiError::field(e),
         }
     }
 }

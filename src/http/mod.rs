@@ -8,6 +8,7 @@ pub mod error;
 pub mod extract;
 pub mod identifications;
 pub mod jobs;
+pub mod measurements;
 pub mod metrics;
 pub mod ops;
 pub mod parameter_sets;
@@ -91,7 +92,7 @@ fn api_router() -> OpenApiRouter<AppState> {
         .routes(routes!(artefacts::get))
         .routes(routes!(sessions::create, sessions::list))
         .routes(routes!(sessions::get))
-        .routes(routes!(sessions::append, sessions::measurements))
+        .routes(routes!(measurements::append, measurements::measurements))
         .routes(routes!(plans::create))
         .routes(routes!(plans::get))
         .routes(routes!(identifications::create))
