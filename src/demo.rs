@@ -10,14 +10,22 @@ use std::time::{Duration, Instant};
 use axum::http::Method;
 use serde_json::{Value, json};
 
-use crate::domain::cell::CellFile;
-use crate::domain::{DEG, MM, ParameterSetDoc, PoseOut, ToolSpec, to_deg};
+use crate::db::jobs::JobState;
+use crate::domain::cell::{CellFile, PurposeSpec};
+use crate::domain::validation::ErrorFigures;
+use crate::domain::{ParameterSetDoc, PoseOut, ToolSpec, to_deg};
 use crate::http::client::{Client, ClientError};
+use crate::http::compensation::CompensationOut;
+use crate::http::jobs::JobOut;
+use crate::http::measurements::BatchOut;
+use crate::http::plans::PosePlanOut;
+use crate::jobs::results::JobResult;
 use crate::kinematics::thesis::irb120_table_5_1;
 use crate::kinematics::{AnalyticIk, JointState, ParameterSet};
 use crate::sim::measure::{BallPose, NestPose, Rig, measure};
 use crate::sim::poses::{CellLayout, PlanningCell, ValidationOptions};
 use crate::sim::{effects::Effects, instruments::Noise, truth::Truth};
+use crate::units::{DEG, MM};
 use crate::validate::report::{Reference, validate};
 use crate::validate::stats::ErrorStats;
 
@@ -93,16 +101,21 @@ fn step(e: impl std::fmt::Display) -> DemoError {
     DemoError::Step(e.to_string())
 }
 
-/// Wait for a job to end; its final representation.
-async fn wait_job(client: &Client, job: &Value) -> Result<Value, DemoError> {
-    let id = job["id"].as_str().ok_or_else(|| step("the job answer has no id"))?.to_string();
+/// Wait for a job to end; its result.
+async fn wait_job(client: &Client, job: &JobOut) -> Result<JobResult, DemoError> {
+    let id = &job.id;
     let start = Instant::now();
     loop {
-        let j: Value = client.get(&format!("/v1/jobs/{id}")).await?;
-        match j["state"].as_str() {
-            Some("succeeded") => return Ok(j),
-            Some("failed") | Some("cancelled") => {
-                return Err(DemoError::Step(format!("{} job {id} ended {}: {}", j["kind"], j["state"], j["error"])));
+        let j: JobOut = client.get(&format!("/v1/jobs/{id}")).await?;
+        match j.state {
+            JobState::Succeeded => return j.result.ok_or_else(|| step(format!("job {id} succeeded without a result"))),
+            JobState::Failed | JobState::Cancelled => {
+                return Err(DemoError::Step(format!(
+                    "{} job {id} ended {}: {}",
+                    json!(j.kind),
+                    json!(j.state),
+                    json!(j.error)
+                )));
             }
             _ => {}
         }
@@ -148,7 +161,7 @@ pub async fn run(client: &Client, opts: &DemoOptions, log: &mut dyn FnMut(&str))
 
     // Pose plan.
     let trical = ToolSpec::from_tool(&layout.tool);
-    let job: Value = client
+    let job: JobOut = client
         .post(
             &format!("/v1/robots/{robot_id}/pose-plans"),
             &json!({"artefact_id": artefact_id, "tool": trical, "per_ball": opts.per_ball,
@@ -156,43 +169,33 @@ pub async fn run(client: &Client, opts: &DemoOptions, log: &mut dyn FnMut(&str))
                     "seed": opts.seed}),
         )
         .await?;
-    let job = wait_job(client, &job).await?;
-    let plan_id = job["result"]["pose_plan_id"].as_str().ok_or_else(|| step("plan job without plan id"))?;
-    let plan: Value = client.get(&format!("/v1/pose-plans/{plan_id}")).await?;
-    let plan = &plan["plan"];
-    let q_of = |p: &Value| -> Result<[f64; 6], DemoError> {
-        let v: Vec<f64> = serde_json::from_value(p["joints_deg"].clone()).map_err(step)?;
-        let mut q = [0.0; 6];
-        if v.len() != 6 {
-            return Err(step("a planned pose without six joints"));
-        }
-        for j in 0..6 {
-            q[j] = v[j] * DEG;
-        }
-        Ok(q)
+    let JobResult::PosePlan(planned) = wait_job(client, &job).await? else {
+        return Err(step("a pose-plan job without a pose plan"));
     };
-    let balls: Vec<BallPose> = plan["identification"]
-        .as_array()
-        .ok_or_else(|| step("plan without identification poses"))?
+    let plan_id = &planned.pose_plan_id;
+    let plan: PosePlanOut = client.get(&format!("/v1/pose-plans/{plan_id}")).await?;
+    let plan = plan.plan;
+    let q_of = |joints_deg: &[f64]| -> Result<[f64; 6], DemoError> {
+        let q: [f64; 6] = joints_deg.try_into().map_err(|_| step("a planned pose without six joints"))?;
+        Ok(q.map(|v| v * DEG))
+    };
+    let balls: Vec<BallPose> = plan
+        .identification
         .iter()
-        .map(|p| {
-            Ok(BallPose { q: q_of(p)?, ball: p["ball"].as_u64().ok_or_else(|| step("pose without ball"))? as usize })
-        })
+        .map(|p| Ok(BallPose { q: q_of(&p.joints_deg)?, ball: p.ball.ok_or_else(|| step("pose without ball"))? }))
         .collect::<Result<_, DemoError>>()?;
-    let nests: Vec<NestPose> = plan["validation"]
-        .as_array()
-        .ok_or_else(|| step("plan without validation poses"))?
+    let nests: Vec<NestPose> = plan
+        .validation
         .iter()
-        .map(|p| {
-            Ok(NestPose { q: q_of(p)?, nest: p["nest"].as_u64().ok_or_else(|| step("pose without nest"))? as usize })
-        })
+        .map(|p| Ok(NestPose { q: q_of(&p.joints_deg)?, nest: p.nest.ok_or_else(|| step("pose without nest"))? }))
         .collect::<Result<_, DemoError>>()?;
+    let index = |k: &str| plan.selection.as_ref().and_then(|s| s[k].as_f64()).unwrap_or(f64::NAN);
     log(&format!(
         "pose plan {plan_id}: {} TriCal candidates, {} chosen by DETMAX (O1 {:.4} → {:.4}), {} tracker poses",
-        plan["candidates"],
+        plan.candidates,
         balls.len(),
-        plan["selection"]["index_initial"].as_f64().unwrap_or(f64::NAN),
-        plan["selection"]["index_final"].as_f64().unwrap_or(f64::NAN),
+        index("index_initial"),
+        index("index_final"),
         nests.len()
     ));
 
@@ -214,66 +217,57 @@ pub async fn run(client: &Client, opts: &DemoOptions, log: &mut dyn FnMut(&str))
     let mut id_sessions = Vec::new();
     let mut val_sessions = Vec::new();
     for s in &file.sessions {
-        let purpose = serde_json::to_value(s.purpose).map_err(step)?;
         let session: Value = client
             .post(
                 &format!("/v1/robots/{robot_id}/sessions"),
-                &json!({"name": s.name, "purpose": purpose, "instrument": s.instrument, "tool": s.tool,
+                &json!({"name": s.name, "purpose": s.purpose, "instrument": s.instrument, "tool": s.tool,
                         "artefact_id": artefact_id}),
             )
             .await?;
         let sid = session["id"].as_str().ok_or_else(|| step("session without id"))?.to_string();
-        let batch: Value =
+        let batch: BatchOut =
             client.post(&format!("/v1/sessions/{sid}/measurements"), &json!({"measurements": s.measurements})).await?;
-        if purpose == "identification" {
+        if s.purpose == PurposeSpec::Identification {
             id_sessions.push(s.name.clone());
         } else {
             val_sessions.push(s.name.clone());
         }
-        log(&format!(
-            "session {} ({}): {} measurements uploaded",
-            s.name,
-            purpose.as_str().unwrap_or(""),
-            batch["count"]
-        ));
+        log(&format!("session {} ({}): {} measurements uploaded", s.name, s.purpose.as_str(), batch.count));
     }
 
     // Identification, activated.
-    let job: Value = client
+    let job: JobOut = client
         .post(&format!("/v1/robots/{robot_id}/identifications"), &json!({"sessions": id_sessions, "activate": true}))
         .await?;
-    let job = wait_job(client, &job).await?;
-    let set_id =
-        job["result"]["parameter_set_id"].as_str().ok_or_else(|| step("identification without set"))?.to_string();
-    let summary = &job["result"]["summary"];
+    let JobResult::Identification(identified) = wait_job(client, &job).await? else {
+        return Err(step("an identification job without a parameter set"));
+    };
+    let set_id = identified.parameter_set_id;
+    let summary = &identified.summary;
     log(&format!(
         "identification: {} parameters from {} measurements in {} iterations, κ {:.0} (SI) / {:.0} (scaled), residual RMS {:.4} mm → parameter set v{} (active)",
-        summary["identified"],
-        summary["measurements"],
-        summary["iterations"],
-        summary["kappa_si"].as_f64().unwrap_or(f64::NAN),
-        summary["kappa_scaled"].as_f64().unwrap_or(f64::NAN),
-        summary["rms_residual_mm"].as_f64().unwrap_or(f64::NAN),
-        job["result"]["version"]
+        summary.identified,
+        summary.measurements,
+        summary.iterations,
+        summary.kappa_si,
+        summary.kappa_scaled,
+        summary.rms_residual_mm,
+        identified.version
     ));
 
     // Validation on the tracker sessions.
-    let job: Value = client
+    // (The job's summary carries the validation's figures, the same numbers as its report.)
+    let job: JobOut = client
         .post(
             &format!("/v1/parameter-sets/{set_id}/validations"),
             &json!({"sessions": val_sessions, "residuals": false}),
         )
         .await?;
-    let job = wait_job(client, &job).await?;
-    let vid = job["result"]["validation_id"].as_str().ok_or_else(|| step("validation without id"))?;
-    let v: Value = client.get(&format!("/v1/validations/{vid}")).await?;
-    let r = &v["report"];
-    let row = |x: &Value| Row {
-        mean: x["mean_mm"].as_f64().unwrap_or(f64::NAN),
-        std: x["std_mm"].as_f64().unwrap_or(f64::NAN),
-        max: x["max_mm"].as_f64().unwrap_or(f64::NAN),
+    let JobResult::Validation(validated) = wait_job(client, &job).await? else {
+        return Err(step("a validation job without a validation"));
     };
-    let (nominal_measured, calibrated_measured) = (row(&r["nominal"]), row(r));
+    let row = |x: &ErrorFigures| Row { mean: x.mean_mm, std: x.std_mm, max: x.max_mm };
+    let (nominal_measured, calibrated_measured) = (row(&validated.summary.nominal), row(&validated.summary.calibrated));
 
     // The same set against the truth (the client knows it; the server never does).
     let export = client.send(Method::GET, &format!("/v1/parameter-sets/{set_id}/export"), None, &[]).await?;
@@ -312,26 +306,26 @@ pub async fn run(client: &Client, opts: &DemoOptions, log: &mut dyn FnMut(&str))
                 specs.push(json!({"id": format!("n{}-{i}", k + 1), "joints_deg": to_deg(&p.q)}));
             }
         }
-        let answer: Value = client
+        let answer: CompensationOut = client
             .post(
                 &format!("/v1/robots/{robot_id}/compensate"),
                 &json!({"tool": ToolSpec::from_tool(tool), "targets": specs}),
             )
             .await?;
         let robot_true = truth.robot(tool);
-        for ((p, want), res) in mine.iter().zip(&wanted).zip(answer["results"].as_array().into_iter().flatten()) {
+        for ((p, want), res) in mine.iter().zip(&wanted).zip(&answer.results) {
             // Uncompensated: the controller's nominal IK of the target gives back the planned joints.
             let zero = [0.0; 6];
             uncompensated.push((robot_true.tcp(&robot_true.state(&p.q, &zero, 20.0)).t - want).norm());
-            match res["joints_deg"].as_array() {
+            match &res.joints_deg {
                 None => {
                     failed += 1;
                     if failed <= 5 {
-                        log(&format!("target {}: {}", res["id"], res["error"]));
+                        log(&format!("target {}: {}", json!(res.id), json!(res.error)));
                     }
                 }
                 Some(qd) => {
-                    let q: Vec<f64> = qd.iter().map(|v| v.as_f64().unwrap_or(f64::NAN) * DEG).collect();
+                    let q: Vec<f64> = qd.iter().map(|v| v * DEG).collect();
                     compensated.push((robot_true.tcp(&robot_true.state(&q, &zero, 20.0)).t - want).norm());
                 }
             }
@@ -343,10 +337,10 @@ pub async fn run(client: &Client, opts: &DemoOptions, log: &mut dyn FnMut(&str))
     Ok(DemoReport {
         robot_id,
         parameter_set_id: set_id,
-        candidates: plan["candidates"].as_u64().unwrap_or(0) as usize,
+        candidates: plan.candidates,
         identification_poses: balls.len(),
         validation_poses: nests.len(),
-        identified: summary["identified"].as_u64().unwrap_or(0) as usize,
+        identified: identified.summary.identified,
         nominal_measured,
         calibrated_measured,
         nominal_truth,

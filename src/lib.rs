@@ -2,13 +2,15 @@
 //!
 //! The pure-math layers (`kinematics`, `metrology`, `identify`, `validate`, `sim`) know nothing
 //! of I/O; `domain` converts the wire and file formats (mm, deg) to and from them, once; `db`
-//! (SQLite), `jobs` (the persisted queue) and `http` (axum) make the service; `cli` and `server`
-//! are thin front ends over the same calls.
+//! (SQLite), `app` (what the routes and the jobs share: the state, a robot's model, a cell from
+//! stored sessions), `jobs` (the persisted queue) and `http` (axum) make the service, each using
+//! only the layers below it; `cli` and `server` are thin front ends over the same calls.
 
 // Numeric kernels index several parallel per-joint arrays with one joint index; iterator zips of
 // four arrays read worse than the formulas they implement.
 #![allow(clippy::needless_range_loop)]
 
+pub mod app;
 pub mod cell;
 pub mod cli;
 pub mod db;

@@ -8,3 +8,5 @@ pub const DEG: f64 = std::f64::consts::PI / 180.0;
 pub const MM: f64 = 1e-3;
 /// Metres per micrometre.
 pub const UM: f64 = 1e-6;
+/// Radians per milliradian.
+pub const MRAD: f64 = 1e-3;

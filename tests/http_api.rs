@@ -404,17 +404,23 @@ async fn identification_validation_and_compensation() {
     assert_eq!(j["result"]["version"], 1);
     let set_id = j["result"]["parameter_set_id"].as_str().unwrap().to_string();
 
-    // Bit for bit: the CLI's identification of the exported cell file.
+    // Bit for bit: the real `robocal identify` on the exported cell file writes the server's
+    // parameter-set file (plus the newline that ends every file the CLI writes).
     let exported = app.get(&format!("/v1/robots/{rid}/cell?sessions=trical-1")).await;
     assert_eq!(exported.status, StatusCode::OK, "{}", exported.text);
-    let file: CellFile = serde_json::from_value(exported.body.clone()).unwrap();
-    let local = file.to_cell().unwrap();
-    let mut opts = robocal::identify::IdentifyOptions::default();
-    opts.selection.sessions = vec!["trical-1".into()];
-    let id = robocal::identify::identify(&local, &opts).unwrap();
-    let doc = robocal::domain::identification::identification_doc(&id, &["trical-1".to_string()], None);
+    let (cell_path, cli_path) = (app.dir.join("exported.json"), app.dir.join("cli_params.json"));
+    std::fs::write(&cell_path, &exported.text).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .arg("identify")
+        .arg(&cell_path)
+        .args(["--sessions", "trical-1", "--out"])
+        .arg(&cli_path)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let cli_file = std::fs::read_to_string(&cli_path).unwrap();
     let server_doc = app.get(&format!("/v1/parameter-sets/{set_id}/export")).await;
-    assert_eq!(server_doc.text, doc.to_json_pretty(), "the server's parameter set is the CLI's");
+    assert_eq!(cli_file, format!("{}\n", server_doc.text), "the server's parameter set is the CLI's");
     // … and the export parses as a parameter-set file.
     robocal::domain::ParameterSetDoc::from_json(&server_doc.text).unwrap();
 

@@ -3,7 +3,7 @@
 
 use robocal::cell::Purpose;
 use robocal::identify::observability::Index;
-use robocal::identify::{Identification, IdentifyOptions, identify, select_detmax};
+use robocal::identify::{Identification, IdentifyOptions, Status, identify, select_detmax};
 use robocal::sim::instruments::Noise;
 use robocal::sim::simulate::{SimulateOptions, Simulated, simulate};
 use robocal::validate::ErrorStats;
@@ -52,7 +52,7 @@ fn identifies_exactly_the_thesis_31() {
     let mut want: Vec<String> = THESIS_31.iter().map(|s| s.to_string()).collect();
     want.sort();
     assert_eq!(got, want);
-    let reasons: Vec<&String> = id.status.iter().filter(|s| *s != "identified").collect();
+    let reasons: Vec<&Status> = id.status.iter().filter(|s| *s != "identified").collect();
     assert_eq!(reasons.len(), 12, "{reasons:#?}");
     for needle in [
         "d2: dependent on d3 (parallel axes 2–3)",

@@ -142,7 +142,7 @@ fn position_only_fit_reports_what_it_cannot_identify() {
     let opts =
         IdentifyOptions { model: ModelOptions { compliance: false, ..Default::default() }, ..Default::default() };
     let id = identify(&c, &opts).unwrap();
-    let status = |name: &str| id.status[id.set.layout.find(name).unwrap()].clone();
+    let status = |name: &str| id.status[id.set.layout.find(name).unwrap()].to_string();
     assert_eq!(status("theta6"), "theta6: no effect, the TCP lies on axis 6 and orientation is not measured");
     assert!(status("a5").starts_with("a5: dependent on"), "{}", status("a5"));
     assert_eq!(status("tool_a"), "tool_a: orientation not measured");

@@ -3,20 +3,92 @@
 //! while the solver runs, and writes the result and the final state in one transaction. Leases
 //! left by a killed server are requeued at start-up: the job runs again from its request.
 
+use std::fmt;
 use std::time::{Duration, SystemTime};
 
+use serde::{Deserialize, Serialize};
 use sqlx::SqlitePool;
 use sqlx::sqlite::SqliteExecutor;
 
 use super::{now, time_text};
 
+/// What a job does; stored (and served) as `pose_plan`, `identification`, `validation`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, sqlx::Type, Serialize, Deserialize)]
+#[sqlx(rename_all = "snake_case")]
+#[serde(rename_all = "snake_case")]
+pub enum JobKind {
+    PosePlan,
+    Identification,
+    Validation,
+}
+
+impl JobKind {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JobKind::PosePlan => "pose_plan",
+            JobKind::Identification => "identification",
+            JobKind::Validation => "validation",
+        }
+    }
+}
+
+impl fmt::Display for JobKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Where a job is; stored (and served) as `queued`, `running`, `succeeded`, `failed`,
+/// `cancelled`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, sqlx::Type, Serialize, Deserialize)]
+#[sqlx(rename_all = "snake_case")]
+#[serde(rename_all = "snake_case")]
+pub enum JobState {
+    Queued,
+    Running,
+    Succeeded,
+    Failed,
+    Cancelled,
+}
+
+impl JobState {
+    pub const ALL: [JobState; 5] =
+        [JobState::Queued, JobState::Running, JobState::Succeeded, JobState::Failed, JobState::Cancelled];
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JobState::Queued => "queued",
+            JobState::Running => "running",
+            JobState::Succeeded => "succeeded",
+            JobState::Failed => "failed",
+            JobState::Cancelled => "cancelled",
+        }
+    }
+
+    /// The state named `s`, as stored.
+    pub fn parse(s: &str) -> Option<JobState> {
+        JobState::ALL.into_iter().find(|k| k.as_str() == s)
+    }
+
+    /// Succeeded, failed or cancelled: nothing more happens to the job.
+    pub fn has_ended(self) -> bool {
+        matches!(self, JobState::Succeeded | JobState::Failed | JobState::Cancelled)
+    }
+}
+
+impl fmt::Display for JobState {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
 /// A job row.
 #[derive(Clone, Debug, PartialEq, sqlx::FromRow)]
 pub struct JobRow {
     pub id: String,
-    pub kind: String,
+    pub kind: JobKind,
     pub robot_id: String,
-    pub state: String,
+    pub state: JobState,
     pub progress: f64,
     pub request_json: String,
     pub result_json: Option<String>,
@@ -31,14 +103,11 @@ pub struct JobRow {
     pub updated_at: String,
 }
 
-/// States a job can be in.
-pub const STATES: [&str; 5] = ["queued", "running", "succeeded", "failed", "cancelled"];
-
 /// Queue a new job.
 pub async fn insert(
     db: impl SqliteExecutor<'_>,
     id: &str,
-    kind: &str,
+    kind: JobKind,
     robot_id: &str,
     request_json: &str,
 ) -> Result<(), sqlx::Error> {
@@ -66,7 +135,7 @@ pub async fn get(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<JobRow>
 pub async fn list(
     db: impl SqliteExecutor<'_>,
     robot_id: Option<&str>,
-    state: Option<&str>,
+    state: Option<JobState>,
     limit: i64,
 ) -> Result<Vec<JobRow>, sqlx::Error> {
     sqlx::query_as(
@@ -136,7 +205,7 @@ pub async fn finish(
     db: impl SqliteExecutor<'_>,
     id: &str,
     owner: &str,
-    state: &str,
+    state: JobState,
     result_json: Option<&str>,
     error_json: Option<&str>,
 ) -> Result<bool, sqlx::Error> {
@@ -213,6 +282,40 @@ pub async fn cancel(pool: &SqlitePool, id: &str) -> Result<Option<JobRow>, sqlx:
 }
 
 /// Job counts by state (for /metrics).
-pub async fn counts(db: impl SqliteExecutor<'_>) -> Result<Vec<(String, i64)>, sqlx::Error> {
+pub async fn counts(db: impl SqliteExecutor<'_>) -> Result<Vec<(JobState, i64)>, sqlx::Error> {
     sqlx::query_as("SELECT state, COUNT(*) FROM jobs GROUP BY state").fetch_all(db).await
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The enums are stored as the text the column always held, so existing databases read
+    /// the same and the API serves the same strings.
+    #[tokio::test]
+    async fn kinds_and_states_are_stored_as_their_names() {
+        let pool = crate::db::connect_memory().await.unwrap();
+        sqlx::query("INSERT INTO robots (id, name, model_json, created_at) VALUES ('r', 'r', '{}', 't')")
+            .execute(&pool)
+            .await
+            .unwrap();
+        for (i, kind) in [JobKind::PosePlan, JobKind::Identification, JobKind::Validation].into_iter().enumerate() {
+            insert(&pool, &i.to_string(), kind, "r", "{}").await.unwrap();
+        }
+        let job = claim(&pool, "w", Duration::from_secs(60)).await.unwrap().unwrap();
+        assert_eq!((job.kind, job.state), (JobKind::PosePlan, JobState::Running));
+        assert!(finish(&pool, &job.id, "w", JobState::Succeeded, Some("{}"), None).await.unwrap());
+        let text: Vec<(String, String)> =
+            sqlx::query_as("SELECT kind, state FROM jobs ORDER BY id").fetch_all(&pool).await.unwrap();
+        assert_eq!(
+            text,
+            [("pose_plan", "succeeded"), ("identification", "queued"), ("validation", "queued")]
+                .map(|(k, s)| (k.to_string(), s.to_string()))
+        );
+        for s in JobState::ALL {
+            assert_eq!(JobState::parse(s.as_str()), Some(s));
+            assert_eq!(serde_json::to_value(s).unwrap(), s.as_str());
+        }
+        assert_eq!(JobState::parse("done"), None);
+    }
 }

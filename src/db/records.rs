@@ -4,6 +4,8 @@
 
 use sqlx::sqlite::SqliteExecutor;
 
+use crate::domain::cell::{InstrumentSpec, PurposeSpec};
+
 /// A robot row.
 #[derive(Clone, Debug, PartialEq, sqlx::FromRow)]
 pub struct RobotRow {
@@ -86,8 +88,8 @@ pub struct SessionRow {
     pub id: String,
     pub robot_id: String,
     pub name: String,
-    pub purpose: String,
-    pub instrument: String,
+    pub purpose: PurposeSpec,
+    pub instrument: InstrumentSpec,
     pub tool_json: String,
     pub identify_tcp: bool,
     pub artefact_id: Option<String>,
@@ -108,8 +110,8 @@ pub async fn insert_session(db: impl SqliteExecutor<'_>, s: &SessionRow) -> Resu
     .bind(&s.id)
     .bind(&s.robot_id)
     .bind(&s.name)
-    .bind(&s.purpose)
-    .bind(&s.instrument)
+    .bind(s.purpose)
+    .bind(s.instrument)
     .bind(&s.tool_json)
     .bind(s.identify_tcp)
     .bind(&s.artefact_id)

@@ -23,11 +23,12 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use super::robot::{RobotSpec, ToolSpec};
-use super::{DEG, DomainError, MM, finite, from_json, joints_deg, to_deg};
+use super::{DomainError, finite, from_json, joints_deg, to_deg};
 use crate::cell::{Artefact, Cell, Instrument, Measurement, Observation, Purpose, Session};
 use crate::kinematics::Frame;
 use crate::kinematics::frame::{rot_zyx, zyx_from_rot};
 use crate::metrology::{ArtefactError, BallTriangle};
+use crate::units::{DEG, MM};
 
 /// A pose vector in file units.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
@@ -86,18 +87,88 @@ pub struct ArtefactSpec {
     pub ball_diameter_mm: f64,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+impl ArtefactSpec {
+    /// The ball triangle (ball centres in {W} from the three measured distances, thesis
+    /// eq. 4.3–4.7) and the ball diameter, in SI; errors name `distances_mm.d12` … or
+    /// `ball_diameter_mm`. The one conversion the cell files, the artefact endpoints and the
+    /// pose-plan jobs share.
+    pub fn to_artefact(&self) -> Result<Artefact, DomainError> {
+        let d = &self.distances_mm;
+        let triangle = BallTriangle::from_distances(d.d12 * MM, d.d13 * MM, d.d23 * MM).map_err(|e| match e {
+            ArtefactError::Distance { field, reason } => DomainError::new(format!("distances_mm.{field}"), reason),
+            other => DomainError::new("distances_mm", other.to_string()),
+        })?;
+        let diameter = self.ball_diameter_mm;
+        if !(diameter.is_finite() && diameter > 0.0) {
+            return Err(DomainError::new("ball_diameter_mm", "must be a positive number"));
+        }
+        Ok(Artefact { triangle, ball_diameter: diameter * MM })
+    }
+
+    /// The specification of an artefact (the inverse of [`ArtefactSpec::to_artefact`]).
+    pub fn from_artefact(a: &Artefact) -> Self {
+        ArtefactSpec {
+            kind: ArtefactKind::BallTriangle,
+            distances_mm: Distances { d12: a.triangle.d12 / MM, d13: a.triangle.d13 / MM, d23: a.triangle.d23 / MM },
+            ball_diameter_mm: a.ball_diameter / MM,
+        }
+    }
+}
+
+// What a session is for, as files, the wire and the store spell it: `identification`,
+// `validation`. (A plain comment: a doc comment would change the OpenAPI schema.)
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema, sqlx::Type)]
 #[serde(rename_all = "snake_case")]
+#[sqlx(rename_all = "snake_case")]
 pub enum PurposeSpec {
     Identification,
     Validation,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+impl PurposeSpec {
+    pub fn to_purpose(self) -> Purpose {
+        match self {
+            PurposeSpec::Identification => Purpose::Identification,
+            PurposeSpec::Validation => Purpose::Validation,
+        }
+    }
+
+    pub fn from_purpose(p: Purpose) -> Self {
+        match p {
+            Purpose::Identification => PurposeSpec::Identification,
+            Purpose::Validation => PurposeSpec::Validation,
+        }
+    }
+
+    pub fn as_str(self) -> &'static str {
+        self.to_purpose().as_str()
+    }
+}
+
+// The instrument of a session, as files, the wire and the store spell it: `trical`,
+// `laser_tracker`. (A plain comment: a doc comment would change the OpenAPI schema.)
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema, sqlx::Type)]
 #[serde(rename_all = "snake_case")]
+#[sqlx(rename_all = "snake_case")]
 pub enum InstrumentSpec {
     Trical,
     LaserTracker,
+}
+
+impl InstrumentSpec {
+    pub fn to_instrument(self) -> Instrument {
+        match self {
+            InstrumentSpec::Trical => Instrument::TriCal,
+            InstrumentSpec::LaserTracker => Instrument::LaserTracker,
+        }
+    }
+
+    pub fn from_instrument(i: Instrument) -> Self {
+        match i {
+            Instrument::TriCal => InstrumentSpec::Trical,
+            Instrument::LaserTracker => InstrumentSpec::LaserTracker,
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize, utoipa::ToSchema)]
@@ -163,24 +234,7 @@ impl CellFile {
         let model =
             RobotSpec::from_json_value(&self.robot).and_then(|r| r.to_model()).map_err(|e| e.within("robot"))?;
         let base_guess = self.base_guess.as_ref().map(|b| b.to_si("base_guess")).transpose()?;
-        let artefact = match &self.artefact {
-            None => None,
-            Some(a) => {
-                let d = &a.distances_mm;
-                let triangle =
-                    BallTriangle::from_distances(d.d12 * MM, d.d13 * MM, d.d23 * MM).map_err(|e| match e {
-                        ArtefactError::Distance { field, reason } => {
-                            DomainError::new(format!("artefact.distances_mm.{field}"), reason)
-                        }
-                        other => DomainError::new("artefact.distances_mm", other.to_string()),
-                    })?;
-                let diameter = finite(a.ball_diameter_mm, "artefact.ball_diameter_mm")?;
-                if diameter <= 0.0 {
-                    return Err(DomainError::new("artefact.ball_diameter_mm", "must be positive"));
-                }
-                Some(Artefact { triangle, ball_diameter: diameter * MM })
-            }
-        };
+        let artefact = self.artefact.as_ref().map(|a| a.to_artefact().map_err(|e| e.within("artefact"))).transpose()?;
         let mut names = HashSet::new();
         let mut sessions = Vec::with_capacity(self.sessions.len());
         for (si, s) in self.sessions.iter().enumerate() {
@@ -192,10 +246,7 @@ impl CellFile {
                 return Err(DomainError::new(format!("{at}.name"), "another session has this name"));
             }
             let tool = s.tool.to_tool().map_err(|e| e.within(&format!("{at}.tool")))?;
-            let instrument = match s.instrument {
-                InstrumentSpec::Trical => Instrument::TriCal,
-                InstrumentSpec::LaserTracker => Instrument::LaserTracker,
-            };
+            let instrument = s.instrument.to_instrument();
             if instrument == Instrument::TriCal && artefact.is_none() {
                 return Err(DomainError::new(format!("{at}.instrument"), "a trical session needs the cell's artefact"));
             }
@@ -206,10 +257,7 @@ impl CellFile {
             }
             sessions.push(Session {
                 name: s.name.clone(),
-                purpose: match s.purpose {
-                    PurposeSpec::Identification => Purpose::Identification,
-                    PurposeSpec::Validation => Purpose::Validation,
-                },
+                purpose: s.purpose.to_purpose(),
                 instrument,
                 tool,
                 identify_tcp: s.identify_tcp,
@@ -223,28 +271,14 @@ impl CellFile {
         CellFile {
             robot: RobotSpec::from_model(&c.model).to_json_value(),
             base_guess: c.base_guess.as_ref().map(PoseXyzAbc::from_si),
-            artefact: c.artefact.as_ref().map(|a| ArtefactSpec {
-                kind: ArtefactKind::BallTriangle,
-                distances_mm: Distances {
-                    d12: a.triangle.d12 / MM,
-                    d13: a.triangle.d13 / MM,
-                    d23: a.triangle.d23 / MM,
-                },
-                ball_diameter_mm: a.ball_diameter / MM,
-            }),
+            artefact: c.artefact.as_ref().map(ArtefactSpec::from_artefact),
             sessions: c
                 .sessions
                 .iter()
                 .map(|s| SessionSpec {
                     name: s.name.clone(),
-                    purpose: match s.purpose {
-                        Purpose::Identification => PurposeSpec::Identification,
-                        Purpose::Validation => PurposeSpec::Validation,
-                    },
-                    instrument: match s.instrument {
-                        Instrument::TriCal => InstrumentSpec::Trical,
-                        Instrument::LaserTracker => InstrumentSpec::LaserTracker,
-                    },
+                    purpose: PurposeSpec::from_purpose(s.purpose),
+                    instrument: InstrumentSpec::from_instrument(s.instrument),
                     tool: ToolSpec::from_tool(&s.tool),
                     identify_tcp: s.identify_tcp,
                     measurements: s.measurements.iter().map(measurement_spec).collect(),
@@ -382,6 +416,22 @@ mod tests {
         assert_eq!(back.sessions[0].measurements[0].observation, Observation::Ball(2));
         assert!(matches!(back.sessions[1].measurements[1].observation, Observation::Pose(_)));
         assert!((back.base_guess.unwrap()[3] - 91.6 * DEG).abs() < 1e-15);
+    }
+
+    /// One conversion for every artefact: a round trip, and errors at the spec's own fields.
+    #[test]
+    fn artefact_specs_convert_once() {
+        let spec: ArtefactSpec = serde_json::from_value(good()["artefact"].clone()).unwrap();
+        assert_eq!(ArtefactSpec::from_artefact(&spec.to_artefact().unwrap()), spec);
+        let bad = |edit: &dyn Fn(&mut ArtefactSpec)| {
+            let mut s = spec.clone();
+            edit(&mut s);
+            s.to_artefact().unwrap_err().path
+        };
+        assert_eq!(bad(&|s| s.distances_mm.d13 = -1.0), "distances_mm.d13");
+        assert_eq!(bad(&|s| s.distances_mm.d23 = 700.0), "distances_mm");
+        assert_eq!(bad(&|s| s.ball_diameter_mm = 0.0), "ball_diameter_mm");
+        assert_eq!(bad(&|s| s.ball_diameter_mm = f64::NAN), "ball_diameter_mm");
     }
 
     /// Each promised error, with the session, measurement index and field in its path.

@@ -1,17 +1,164 @@
-//! An identification written as a parameter-set file: per parameter value, nominal, std, unit and
-//! status, plus the quality report (in mm and degrees where it has lengths and angles).
+//! Identifications at the boundary: their options as given (`robocal identify`'s flags, an
+//! identification request), checked once for both front ends, with their defaults; the run both
+//! front ends make; and the result written as a parameter-set file — per parameter value,
+//! nominal, std, unit and status, plus the quality report (in mm and degrees where it has lengths
+//! and angles).
 
+use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
+use utoipa::ToSchema;
 
-use super::{DEG, MM, ParameterSetDoc};
-use crate::identify::Identification;
+use super::{DomainError, ParameterSetDoc};
+use crate::cell::Cell;
+use crate::identify::observability::Index;
+use crate::identify::{Identification, IdentifyError, IdentifyOptions, ModelOptions, SolverOptions};
+use crate::units::{DEG, MM};
+
+/// The κ limit when none is given: the identification's own (thesis §4.2.3, κ ≤ 1000).
+pub fn default_kappa_limit() -> f64 {
+    IdentifyOptions::default().kappa_limit
+}
+
+/// The orientation-residual weight when none is given, mm per rad: the identification's own.
+pub fn default_rotation_weight_mm() -> f64 {
+    IdentifyOptions::default().rotation_weight / MM
+}
+
+/// A κ limit: a finite number above 1 (a fit is refused when the column-scaled κ(J) exceeds it).
+pub fn kappa_limit(v: f64, path: &str) -> Result<f64, DomainError> {
+    if v.is_finite() && v > 1.0 { Ok(v) } else { Err(DomainError::new(path, "must be above 1")) }
+}
+
+/// An observability index by name: `O1` … `O5`.
+pub fn observability_index(name: &str, path: &str) -> Result<Index, DomainError> {
+    Index::parse(name).ok_or_else(|| DomainError::new(path, format!("'{name}' is not O1…O5")))
+}
+
+/// The options of an identification as given, in file units. `robocal identify`'s flags and an
+/// identification request both become one, and [`IdentifySpec::to_options`] checks it; errors
+/// name the option (`kappa_limit`, `huber`, `rotation_weight_mm`, `model`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct IdentifySpec {
+    /// `+beta,-compliance,+cyc2_h1,…`; empty: geometry + β + compliance.
+    pub model: String,
+    /// Parameters held at their nominal values.
+    pub fix: Vec<String>,
+    /// Refuse fits whose column-scaled κ(J) exceeds this.
+    pub kappa_limit: f64,
+    /// Huber loss threshold in robust standard deviations; `None`: plain least squares.
+    pub huber: Option<f64>,
+    /// Length weighting orientation residuals of full-pose measurements, mm per rad.
+    pub rotation_weight_mm: f64,
+    /// Free only these parameters (names, or the groups `base` and `tool`); empty: all.
+    pub only: Vec<String>,
+}
+
+impl Default for IdentifySpec {
+    fn default() -> Self {
+        Self {
+            model: String::new(),
+            fix: Vec::new(),
+            kappa_limit: default_kappa_limit(),
+            huber: None,
+            rotation_weight_mm: default_rotation_weight_mm(),
+            only: Vec::new(),
+        }
+    }
+}
+
+impl IdentifySpec {
+    /// The checked options for a robot of `dof` joints (every session; no subset, no start).
+    pub fn to_options(&self, dof: usize) -> Result<IdentifyOptions, DomainError> {
+        let kappa_limit = kappa_limit(self.kappa_limit, "kappa_limit")?;
+        if self.huber.is_some_and(|k| !k.is_finite() || k <= 0.0) {
+            return Err(DomainError::new("huber", "must be a positive threshold"));
+        }
+        if !self.rotation_weight_mm.is_finite() || self.rotation_weight_mm <= 0.0 {
+            return Err(DomainError::new("rotation_weight_mm", "must be positive"));
+        }
+        let model = ModelOptions::parse(&self.model, dof).map_err(|e| DomainError::new("model", e))?;
+        Ok(IdentifyOptions {
+            model,
+            fixed: self.fix.clone(),
+            kappa_limit,
+            solver: SolverOptions { huber: self.huber, ..Default::default() },
+            rotation_weight: self.rotation_weight_mm * MM,
+            only: self.only.clone(),
+            ..Default::default()
+        })
+    }
+}
+
+fn o1() -> String {
+    "O1".into()
+}
+fn one() -> u64 {
+    1
+}
+
+/// DETMAX selection of `n` measurements maximising an observability index (thesis §4.2.5).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SelectSpec {
+    #[schema(minimum = 1)]
+    pub n: usize,
+    /// `O1` (default, the thesis's) … `O5`.
+    #[serde(default = "o1")]
+    pub index: String,
+    /// Seed of the random start.
+    #[serde(default = "one")]
+    pub seed: u64,
+}
+
+/// A checked DETMAX selection.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DetmaxSelection {
+    pub n: usize,
+    pub index: Index,
+    pub seed: u64,
+}
+
+impl SelectSpec {
+    /// Errors name `n` or `index`.
+    pub fn to_selection(&self) -> Result<DetmaxSelection, DomainError> {
+        if self.n == 0 {
+            return Err(DomainError::new("n", "must be at least 1"));
+        }
+        Ok(DetmaxSelection { n: self.n, index: observability_index(&self.index, "index")?, seed: self.seed })
+    }
+}
+
+/// An identification as `robocal identify` and the identification job both run it: the DETMAX
+/// selection when asked (its description goes into the quality report; `selected` is told when
+/// it is done), the fit, and the parameter-set document. The same calls in the same order, so the
+/// two front ends give the same parameter set, bit for bit.
+pub fn run_identification(
+    cell: &Cell,
+    mut opts: IdentifyOptions,
+    select: Option<DetmaxSelection>,
+    selected: &dyn Fn(),
+) -> Result<(Identification, ParameterSetDoc), IdentifyError> {
+    let selection = match select {
+        None => None,
+        Some(s) => {
+            let (subset, info) = crate::identify::select_detmax(cell, &opts, s.n, s.index, s.seed)?;
+            opts.selection.subset = subset;
+            Some(info)
+        }
+    };
+    selected();
+    let id = crate::identify::identify(cell, &opts)?;
+    let sessions: Vec<String> = id.problem.tools.iter().flat_map(|t| t.sessions.clone()).collect();
+    let doc = identification_doc(&id, &sessions, selection);
+    Ok((id, doc))
+}
 
 /// The parameter-set document of an identification; `selection` describes how the measurements
 /// were chosen (e.g. DETMAX settings), carried into the quality report.
 pub fn identification_doc(id: &Identification, sessions: &[String], selection: Option<Value>) -> ParameterSetDoc {
     let mut doc = ParameterSetDoc::new(id.set.clone());
     doc.std = id.std.clone();
-    doc.status = id.status.iter().map(|s| Some(s.clone())).collect();
+    doc.status = id.status.iter().map(|s| Some(s.as_str().to_string())).collect();
     let q = &id.quality;
     let m = q.std.len();
     let tools: Vec<Value> = id
@@ -48,4 +195,30 @@ pub fn identification_doc(id: &Identification, sessions: &[String], selection: O
         "downweighted": id.downweighted.iter().map(|(s, i, w)| json!({"session": s, "index": i, "weight": w})).collect::<Vec<_>>(),
     }));
     doc
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The defaults are the identification's own, to the bit, and every option's error names it.
+    #[test]
+    fn options_are_checked_once_with_the_identifications_defaults() {
+        let o = IdentifySpec::default().to_options(6).unwrap();
+        let d = IdentifyOptions::default();
+        assert_eq!(o.kappa_limit.to_bits(), d.kappa_limit.to_bits());
+        assert_eq!(o.rotation_weight.to_bits(), d.rotation_weight.to_bits());
+        assert_eq!((o.model, o.solver.huber), (d.model, d.solver.huber));
+        let err = |spec: IdentifySpec| spec.to_options(6).unwrap_err().path;
+        for k in [f64::NAN, f64::INFINITY, 1.0, 0.5] {
+            assert_eq!(err(IdentifySpec { kappa_limit: k, ..Default::default() }), "kappa_limit", "{k}");
+        }
+        assert_eq!(err(IdentifySpec { huber: Some(0.0), ..Default::default() }), "huber");
+        assert_eq!(err(IdentifySpec { rotation_weight_mm: f64::NAN, ..Default::default() }), "rotation_weight_mm");
+        assert_eq!(err(IdentifySpec { model: "+warp".into(), ..Default::default() }), "model");
+        let s = |n: usize, index: &str| SelectSpec { n, index: index.into(), seed: 1 }.to_selection();
+        assert_eq!(s(0, "O1").unwrap_err().path, "n");
+        assert_eq!(s(5, "O9").unwrap_err().path, "index");
+        assert_eq!(s(5, "O3").unwrap().index, Index::O3);
+    }
 }

@@ -5,6 +5,7 @@
 
 pub mod cell;
 pub mod identification;
+pub mod measurement_csv;
 pub mod param_set;
 pub mod pose;
 pub mod robot;
@@ -20,10 +21,9 @@ pub use param_set::{ParamEntry, ParameterSetDoc, ParameterSetFile};
 pub use pose::{Choice, CompensationResult, PoseOut, PoseSpec, Target, TargetSpec};
 pub use robot::{JointSpec, RobotSpec, ToolSpec};
 
-/// Millimetres → metres.
-pub const MM: f64 = 1e-3;
-/// Degrees → radians.
-pub const DEG: f64 = std::f64::consts::PI / 180.0;
+/// The boundary's units, defined once in [`crate::units`]; re-exported here because every file
+/// format converts with them.
+pub use crate::units::{DEG, MM};
 
 /// Bad input: where (a JSON-style path such as `parameters[3].value`) and why.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -35,6 +35,16 @@ pub struct DomainError {
 impl DomainError {
     pub fn new(path: impl Into<String>, reason: impl Into<String>) -> Self {
         Self { path: path.into(), reason: reason.into() }
+    }
+
+    /// The field at fault as a request names it (`None`: the whole document).
+    pub fn field(&self) -> Option<String> {
+        (!self.path.is_empty()).then(|| self.path.clone())
+    }
+
+    /// The same error, nested under `prefix` (unchanged when `prefix` is empty).
+    pub fn under(self, prefix: &str) -> Self {
+        if prefix.is_empty() { self } else { self.within(prefix) }
     }
 
     /// The same error, nested under `prefix`.

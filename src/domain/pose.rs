@@ -6,9 +6,10 @@
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use super::{DEG, DomainError, MM, finite, joints_deg, to_deg, vec3_mm};
+use super::{DomainError, finite, joints_deg, to_deg, vec3_mm};
 use crate::kinematics::frame::{quaternion_from_rot, rot_from_quaternion, rot_zyx, zyx_from_rot};
 use crate::kinematics::{Branch, Compensated, Compensator, Confdata, Frame, IkError, Seed};
+use crate::units::{DEG, MM};
 
 /// A TCP pose in {W}.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -132,6 +133,17 @@ pub enum Choice {
     Seed(Vec<f64>),
 }
 
+impl Choice {
+    /// The inverse kinematics' seed for this choice.
+    pub fn seed(&self) -> Seed<'_> {
+        match self {
+            Choice::Branch(b) => Seed::Branch(*b),
+            Choice::Confdata(c) => Seed::Confdata(*c),
+            Choice::Seed(q) => Seed::Joints(q),
+        }
+    }
+}
+
 impl TargetSpec {
     pub fn to_target(&self, dof: usize) -> Result<Target, DomainError> {
         if let Some(q) = &self.joints_deg {
@@ -248,11 +260,7 @@ pub fn compensate_target(comp: &Compensator, dof: usize, i: usize, t: &TargetSpe
     };
     let res = match &target {
         Target::NominalJoints(q) => comp.joints(q),
-        Target::Pose { pose, choice } => match choice {
-            Choice::Branch(b) => comp.pose(pose, Seed::Branch(*b)),
-            Choice::Confdata(c) => comp.pose(pose, Seed::Confdata(*c)),
-            Choice::Seed(q) => comp.pose(pose, Seed::Joints(q)),
-        },
+        Target::Pose { pose, choice } => comp.pose(pose, choice.seed()),
     };
     match res {
         Ok(c) => CompensationResult::ok(id, &c),

@@ -5,10 +5,11 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-use super::{DEG, DomainError, MM, finite, from_value, vec3_mm};
+use super::{DomainError, finite, from_value, vec3_mm};
 use crate::kinematics::model::{
     Link, ModelError, Preset, RobotModel, STANDARD_GRAVITY, StandardDhRow, Tool, modified_from_standard,
 };
+use crate::units::{DEG, MM};
 
 /// One joint of a custom robot (modified DH unless the robot says `"convention": "standard"`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

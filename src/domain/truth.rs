@@ -9,11 +9,12 @@ use serde_json::Value;
 
 use super::param_set::{ParamEntry, ParameterSetDoc, ParameterSetFile};
 use super::robot::ToolSpec;
-use super::{DomainError, MM, from_json};
+use super::{DomainError, from_json};
 use crate::sim::effects::Effects;
 use crate::sim::instruments::Noise;
 use crate::sim::measure::{MeasurementTruth, RunTruth};
 use crate::sim::truth::Truth;
+use crate::units::{MM, UM};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -37,8 +38,10 @@ impl NoiseSpec {
             centring: n.centring.name().into(),
             epsilon_mm: n.epsilon / MM,
             repeatability_mm: n.repeatability / MM,
-            tracker_sigma_um: n.tracker_sigma * 1e6,
-            tracker_sigma_um_per_m: n.tracker_sigma_per_m * 1e6,
+            // × (1 / UM), exactly 1e6, not ÷ UM: the latter rounds differently (0.8 µm/m has always
+            // been written 0.7999999999999999) and would change the bytes of every truth file.
+            tracker_sigma_um: n.tracker_sigma * (1.0 / UM),
+            tracker_sigma_um_per_m: n.tracker_sigma_per_m * (1.0 / UM),
         }
     }
 }

@@ -3,16 +3,14 @@
 //! at the top level (what a reader compares with the thesis's Table 5.2), the same fields for the
 //! nominal model under `nominal`, and optionally one row per measurement.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
 
-use super::MM;
+use crate::units::{MM, MRAD};
 use crate::validate::normality::ShapiroWilk;
 use crate::validate::regression::LinearFit;
 use crate::validate::report::{AxisStats, ModelErrors, Residual, ValidationReport};
 use crate::validate::stats::ErrorStats;
-
-/// Milliradians → radians.
-pub const MRAD: f64 = 1e-3;
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ValidationOut {
@@ -31,17 +29,37 @@ pub struct ValidationOut {
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ModelErrorsOut {
     pub n: usize,
+    #[serde(flatten)]
+    pub position: ErrorFigures,
+    pub orientation: Option<OrientationOut>,
+    pub per_axis: PerAxisOut,
+    pub shapiro: Option<ShapiroOut>,
+    pub vs_base_distance: Option<FitOut>,
+    pub vs_zone_distance: Option<FitOut>,
+}
+
+/// Position error magnitudes, mm.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct ErrorFigures {
     pub mean_mm: f64,
     pub median_mm: f64,
     pub std_mm: f64,
     pub rms_mm: f64,
     pub p95_mm: f64,
     pub max_mm: f64,
-    pub orientation: Option<OrientationOut>,
-    pub per_axis: PerAxisOut,
-    pub shapiro: Option<ShapiroOut>,
-    pub vs_base_distance: Option<FitOut>,
-    pub vs_zone_distance: Option<FitOut>,
+}
+
+impl ErrorFigures {
+    pub fn of(s: &ErrorStats) -> Self {
+        ErrorFigures {
+            mean_mm: s.mean / MM,
+            median_mm: s.median / MM,
+            std_mm: s.std / MM,
+            rms_mm: s.rms / MM,
+            p95_mm: s.p95 / MM,
+            max_mm: s.max / MM,
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -127,12 +145,7 @@ impl ModelErrorsOut {
         let p = &e.position;
         Self {
             n: p.n,
-            mean_mm: p.mean / MM,
-            median_mm: p.median / MM,
-            std_mm: p.std / MM,
-            rms_mm: p.rms / MM,
-            p95_mm: p.p95 / MM,
-            max_mm: p.max / MM,
+            position: ErrorFigures::of(p),
             orientation: e.orientation.as_ref().map(OrientationOut::from_stats),
             per_axis: PerAxisOut {
                 x: AxisOut::from_axis(&e.per_axis[0]),

@@ -9,10 +9,10 @@ use utoipa::ToSchema;
 
 use super::extract::{Authorized, JsonBody, MEASURE, READ};
 use super::{ApiError, AppState};
+use crate::cell::Artefact;
 use crate::db::{self, records};
-use crate::domain::MM;
 use crate::domain::cell::{ArtefactKind, ArtefactSpec, Distances};
-use crate::metrology::{ArtefactError, BallTriangle};
+use crate::units::MM;
 
 /// An artefact to create.
 #[derive(Debug, Deserialize, ToSchema)]
@@ -46,22 +46,14 @@ pub struct ArtefactOut {
 }
 
 /// Validate an artefact specification (distances form a proper triangle, positive diameter).
-pub fn triangle(spec: &ArtefactSpec) -> Result<BallTriangle, ApiError> {
-    let d = &spec.distances_mm;
-    let t = BallTriangle::from_distances(d.d12 * MM, d.d13 * MM, d.d23 * MM).map_err(|e| match e {
-        ArtefactError::Distance { field, reason } => ApiError::invalid(format!("distances_mm.{field}"), reason),
-        other => ApiError::invalid("distances_mm", other.to_string()),
-    })?;
-    if !spec.ball_diameter_mm.is_finite() || spec.ball_diameter_mm <= 0.0 {
-        return Err(ApiError::invalid("ball_diameter_mm", "must be a positive number"));
-    }
-    Ok(t)
+pub fn artefact(spec: &ArtefactSpec) -> Result<Artefact, ApiError> {
+    spec.to_artefact().map_err(ApiError::field)
 }
 
 pub fn artefact_out(row: &records::ArtefactRow) -> Result<ArtefactOut, ApiError> {
     let spec: ArtefactSpec =
         serde_json::from_str(&row.spec_json).map_err(|e| ApiError::Internal(format!("artefact {}: {e}", row.id)))?;
-    let t = triangle(&spec)?;
+    let t = artefact(&spec)?.triangle;
     let c = |k: usize| {
         let p = t.ball(k).expect("balls 1–3");
         [p.x / MM, p.y / MM, p.z / MM]
@@ -96,7 +88,7 @@ pub async fn create(
     }
     let spec =
         ArtefactSpec { kind: body.kind, distances_mm: body.distances_mm, ball_diameter_mm: body.ball_diameter_mm };
-    triangle(&spec)?;
+    artefact(&spec)?;
     let row = records::ArtefactRow {
         id: db::new_id(),
         name: name.to_string(),

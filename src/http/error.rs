@@ -9,7 +9,10 @@ use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
+use crate::app::AppError;
 use crate::domain::DomainError;
+use crate::domain::measurement_csv::CsvError;
+use crate::jobs::JobError;
 
 /// A problem document (RFC 9457).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
@@ -73,11 +76,16 @@ impl ApiError {
         ApiError::NotFound { what, id: id.to_string() }
     }
 
+    /// A domain validation error whose path is the request field itself: that field, and the
+    /// bare reason as the detail.
+    pub fn field(e: DomainError) -> Self {
+        ApiError::Invalid { field: e.field(), detail: e.reason }
+    }
+
     /// A domain validation error under a request-body prefix (`measurements[3]`).
     pub fn domain(e: DomainError, prefix: &str) -> Self {
-        let e = if prefix.is_empty() { e } else { e.within(prefix) };
-        let field = (!e.path.is_empty()).then(|| e.path.clone());
-        ApiError::Invalid { detail: e.to_string(), field }
+        let e = e.under(prefix);
+        ApiError::Invalid { field: e.field(), detail: e.to_string() }
     }
 
     pub fn status(&self) -> StatusCode {
@@ -126,7 +134,38 @@ impl ApiError {
 
 impl From<sqlx::Error> for ApiError {
     fn from(e: sqlx::Error) -> Self {
-        ApiError::Internal(format!("database: {e}"))
+        AppError::from(e).into()
+    }
+}
+
+impl From<AppError> for ApiError {
+    fn from(e: AppError) -> Self {
+        match e {
+            AppError::Invalid { detail, field } => ApiError::Invalid { detail, field },
+            AppError::Internal(m) => ApiError::Internal(m),
+        }
+    }
+}
+
+/// A CSV batch that does not read is malformed (400); one whose values do not fit is invalid
+/// (422); either names the header, column or line.
+impl From<CsvError> for ApiError {
+    fn from(e: CsvError) -> Self {
+        match e {
+            CsvError::Malformed(e) => ApiError::Malformed { field: e.field(), detail: e.reason },
+            CsvError::Invalid(e) => ApiError::field(e),
+        }
+    }
+}
+
+/// A job's failure is answered (at submission) and stored (when it runs) as the same problem.
+impl From<JobError> for ApiError {
+    fn from(e: JobError) -> Self {
+        match e {
+            JobError::Invalid { detail, field } => ApiError::Invalid { detail, field },
+            JobError::Numerical { kind, title, detail } => ApiError::Numerical { kind, title, detail },
+            JobError::Internal(m) => ApiError::Internal(m),
+        }
     }
 }
 

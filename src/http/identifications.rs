@@ -6,24 +6,33 @@ use axum::extract::{Path, State};
 use axum::response::Response;
 
 use super::extract::{Authorized, CALIBRATE, JsonBody};
-use super::robots::{find as find_robot, model_of};
-use super::{ApiError, AppState, cells};
+use super::robots::find as find_robot;
+use super::{ApiError, AppState};
+use crate::app::cells;
+use crate::app::robots::model_of;
+use crate::db::jobs::JobKind;
+use crate::domain::cell::PurposeSpec;
 use crate::jobs::requests::IdentificationRequest;
-use crate::jobs::run::{self, IDENTIFICATION};
+use crate::jobs::run;
 
 /// Check that the named sessions exist, have `purpose` and hold measurements; their ids.
 pub async fn checked_sessions(
     state: &AppState,
     robot_id: &str,
     names: &[String],
-    purpose: &str,
+    purpose: PurposeSpec,
 ) -> Result<Vec<String>, ApiError> {
     let sessions = cells::resolve_sessions(&state.pool, robot_id, names, "sessions").await?;
     for (i, s) in sessions.iter().enumerate() {
         if s.purpose != purpose {
             return Err(ApiError::invalid(
                 format!("sessions[{i}]"),
-                format!("session '{}' is a {} session; this needs {purpose} sessions", s.name, s.purpose),
+                format!(
+                    "session '{}' is a {} session; this needs {} sessions",
+                    s.name,
+                    s.purpose.as_str(),
+                    purpose.as_str()
+                ),
             ));
         }
         if s.measurements == 0 {
@@ -53,10 +62,10 @@ pub async fn create(
 ) -> Result<Response, ApiError> {
     let robot = find_robot(&state, &robot_id).await?;
     let model = model_of(&robot)?;
-    body.sessions = checked_sessions(&state, &robot.id, &body.sessions, "identification").await?;
+    body.sessions = checked_sessions(&state, &robot.id, &body.sessions, PurposeSpec::Identification).await?;
     run::identify_options(&body, model.dof(), Vec::new())?;
     if let Some(s) = &body.select {
-        run::index_of(s, "select")?;
+        run::selection(s)?;
     }
-    super::jobs::submit(&state, IDENTIFICATION, &robot.id, &body).await
+    super::jobs::submit(&state, JobKind::Identification, &robot.id, &body).await
 }

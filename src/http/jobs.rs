@@ -11,25 +11,29 @@ use utoipa::{IntoParams, ToSchema};
 
 use super::extract::{Authorized, CALIBRATE, READ};
 use super::{ApiError, AppState, Problem};
-use crate::db::{self, jobs::JobRow};
+use crate::db;
+use crate::db::jobs::{JobKind, JobRow, JobState};
+use crate::jobs::results::JobResult;
+use crate::jobs::{JobContext, JobError};
 
 /// A background job.
 #[derive(Debug, Serialize, Deserialize, ToSchema)]
 pub struct JobOut {
     pub id: String,
     /// `pose_plan`, `identification` or `validation`.
-    pub kind: String,
+    #[schema(value_type = String)]
+    pub kind: JobKind,
     pub robot_id: String,
     /// `queued`, `running`, `succeeded`, `failed` or `cancelled`.
-    pub state: String,
+    #[schema(value_type = String)]
+    pub state: JobState,
     /// 0–1.
     pub progress: f64,
     /// The request as stored (sessions resolved to ids).
     #[schema(value_type = Object)]
     pub request: Value,
     /// Where the result lives (`parameter_set_id`, `validation_id`, `pose_plan_id`) and a summary.
-    #[schema(value_type = Option<Object>)]
-    pub result: Option<Value>,
+    pub result: Option<JobResult>,
     /// Why it failed (rank deficiency, κ above the limit, divergence, …).
     pub error: Option<Problem>,
     /// Times the job was started (more than 1 after a restart).
@@ -47,12 +51,17 @@ pub fn job_out(j: &JobRow) -> Result<JobOut, ApiError> {
         |s: &str| serde_json::from_str::<Value>(s).map_err(|e| ApiError::Internal(format!("job {}: {e}", j.id)));
     Ok(JobOut {
         id: j.id.clone(),
-        kind: j.kind.clone(),
+        kind: j.kind,
         robot_id: j.robot_id.clone(),
-        state: j.state.clone(),
+        state: j.state,
         progress: j.progress,
         request: parse(&j.request_json)?,
-        result: j.result_json.as_deref().map(parse).transpose()?,
+        result: j
+            .result_json
+            .as_deref()
+            .map(|s| JobResult::from_json(j.kind, s))
+            .transpose()
+            .map_err(|e| ApiError::Internal(format!("job {}: {e}", j.id)))?,
         error: j
             .error_json
             .as_deref()
@@ -68,10 +77,23 @@ pub fn job_out(j: &JobRow) -> Result<JobOut, ApiError> {
     })
 }
 
+/// The job workers' context from the service's state; the failures they store are this API's
+/// problem documents.
+impl From<AppState> for JobContext {
+    fn from(s: AppState) -> Self {
+        JobContext { pool: s.pool, wake: s.wake, caches: s.caches, metrics: s.metrics, failure_json }
+    }
+}
+
+/// A job's failure as stored in `jobs.error_json` and served as the job's `error`.
+fn failure_json(e: &JobError) -> String {
+    serde_json::to_string(&ApiError::from(e.clone()).problem()).expect("problem serialises")
+}
+
 /// Queue a job and answer 202 with it and its `Location`.
 pub async fn submit(
     state: &AppState,
-    kind: &str,
+    kind: JobKind,
     robot_id: &str,
     request: &impl Serialize,
 ) -> Result<Response, ApiError> {
@@ -107,12 +129,13 @@ pub async fn list(
     _auth: Authorized<READ>,
     Query(q): Query<JobQuery>,
 ) -> Result<Json<Vec<JobOut>>, ApiError> {
-    let state_filter = q.state.as_deref().filter(|s| !s.is_empty());
-    if let Some(s) = state_filter
-        && !db::jobs::STATES.contains(&s)
-    {
-        return Err(ApiError::invalid("state", format!("'{s}' is not one of {}", db::jobs::STATES.join(", "))));
-    }
+    let state_filter = match q.state.as_deref().filter(|s| !s.is_empty()) {
+        None => None,
+        Some(s) => Some(JobState::parse(s).ok_or_else(|| {
+            let all: Vec<&str> = JobState::ALL.iter().map(|s| s.as_str()).collect();
+            ApiError::invalid("state", format!("'{s}' is not one of {}", all.join(", ")))
+        })?),
+    };
     let limit = q.limit.unwrap_or(100);
     if !(1..=1000).contains(&limit) {
         return Err(ApiError::invalid("limit", "must be 1–1000"));
@@ -153,11 +176,11 @@ pub async fn cancel(
     Path(job_id): Path<String>,
 ) -> Result<Json<JobOut>, ApiError> {
     let before = db::jobs::get(&state.pool, &job_id).await?.ok_or_else(|| ApiError::not_found("job", &job_id))?;
-    if matches!(before.state.as_str(), "succeeded" | "failed" | "cancelled") {
+    if before.state.has_ended() {
         return Err(ApiError::conflict(format!("job {job_id} has already ended ({})", before.state)));
     }
     let row = db::jobs::cancel(&state.pool, &job_id).await?.ok_or_else(|| ApiError::not_found("job", &job_id))?;
-    if matches!(row.state.as_str(), "succeeded" | "failed") {
+    if matches!(row.state, JobState::Succeeded | JobState::Failed) {
         return Err(ApiError::conflict(format!("job {job_id} ended ({}) before it could be cancelled", row.state)));
     }
     Ok(Json(job_out(&row)?))

@@ -2,14 +2,13 @@
 //! generated from the handlers (utoipa), Prometheus metrics.
 
 pub mod artefacts;
-pub mod cache;
-pub mod cells;
 pub mod client;
 pub mod compensation;
 pub mod error;
 pub mod extract;
 pub mod identifications;
 pub mod jobs;
+pub mod measurements;
 pub mod metrics;
 pub mod ops;
 pub mod parameter_sets;
@@ -19,14 +18,9 @@ pub mod sessions;
 pub mod tokens;
 pub mod validations;
 
-use std::sync::Arc;
-use std::time::Duration;
-
 use axum::Router;
 use axum::extract::DefaultBodyLimit;
 use axum::http::StatusCode;
-use sqlx::SqlitePool;
-use tokio::sync::Notify;
 use tower_http::compression::CompressionLayer;
 use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
 use tower_http::timeout::TimeoutLayer;
@@ -36,60 +30,9 @@ use utoipa::{Modify, OpenApi};
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
+pub use crate::app::{AppState, ServiceConfig, cache};
 pub use error::{ApiError, Problem};
 pub use metrics::Metrics;
-
-/// Service settings.
-#[derive(Clone, Debug)]
-pub struct ServiceConfig {
-    /// Every `/v1` request needs a bearer token with the right scope (always when the server is
-    /// bound to a non-loopback address).
-    pub require_auth: bool,
-    /// Most measurements (or compensation targets) in one request: 413 beyond.
-    pub max_batch: usize,
-    /// Largest request body, bytes: 413 beyond.
-    pub max_body_bytes: usize,
-    /// Requests taking longer are answered 503 (jobs run in the background and are not affected).
-    pub request_timeout: Duration,
-}
-
-impl Default for ServiceConfig {
-    fn default() -> Self {
-        Self {
-            require_auth: false,
-            max_batch: 10_000,
-            max_body_bytes: 32 * 1024 * 1024,
-            request_timeout: Duration::from_secs(60),
-        }
-    }
-}
-
-/// What every handler shares.
-#[derive(Clone)]
-pub struct AppState {
-    pub pool: SqlitePool,
-    pub config: Arc<ServiceConfig>,
-    pub metrics: Arc<Metrics>,
-    /// Wakes the job workers when a job is queued.
-    pub wake: Arc<Notify>,
-    /// The OpenAPI document, served at `/openapi.json`.
-    pub openapi_json: Arc<String>,
-    /// Robots and compiled parameter sets (the compensation hot path).
-    pub caches: Arc<cache::Caches>,
-}
-
-impl AppState {
-    pub fn new(pool: SqlitePool, config: ServiceConfig) -> Self {
-        AppState {
-            pool,
-            config: Arc::new(config),
-            metrics: Arc::new(Metrics::new()),
-            wake: Arc::new(Notify::new()),
-            openapi_json: Arc::new(openapi_json()),
-            caches: Arc::new(cache::Caches::new(256)),
-        }
-    }
-}
 
 struct BearerAuth;
 
@@ -149,7 +92,7 @@ fn api_router() -> OpenApiRouter<AppState> {
         .routes(routes!(artefacts::get))
         .routes(routes!(sessions::create, sessions::list))
         .routes(routes!(sessions::get))
-        .routes(routes!(sessions::append, sessions::measurements))
+        .routes(routes!(measurements::append, measurements::measurements))
         .routes(routes!(plans::create))
         .routes(routes!(plans::get))
         .routes(routes!(identifications::create))

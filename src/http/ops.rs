@@ -1,5 +1,7 @@
 //! Operations: liveness, readiness, Prometheus metrics, the OpenAPI document.
 
+use std::sync::LazyLock;
+
 use axum::Json;
 use axum::extract::State;
 use axum::http::{StatusCode, Uri, header};
@@ -58,9 +60,9 @@ pub async fn readyz(State(state): State<AppState>) -> Result<Json<Readiness>, Ap
     responses((status = 200, description = "Prometheus text exposition format", body = String, content_type = "text/plain; version=0.0.4")))]
 pub async fn metrics(State(state): State<AppState>) -> Result<impl IntoResponse, ApiError> {
     let counts = db::jobs::counts(&state.pool).await?;
-    for s in db::jobs::STATES {
-        let n = counts.iter().find(|(k, _)| k == s).map_or(0, |(_, n)| *n);
-        state.metrics.jobs.with_label_values(&[s]).set(n);
+    for s in db::jobs::JobState::ALL {
+        let n = counts.iter().find(|(k, _)| *k == s).map_or(0, |(_, n)| *n);
+        state.metrics.jobs.with_label_values(&[s.as_str()]).set(n);
     }
     Ok(([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], state.metrics.render()))
 }
@@ -68,8 +70,9 @@ pub async fn metrics(State(state): State<AppState>) -> Result<impl IntoResponse,
 /// This OpenAPI 3.1 document.
 #[utoipa::path(get, path = "/openapi.json", tag = "ops",
     responses((status = 200, description = "The OpenAPI 3.1 document", body = Object)))]
-pub async fn openapi(State(state): State<AppState>) -> impl IntoResponse {
-    ([(header::CONTENT_TYPE, "application/json")], state.openapi_json.as_str().to_string())
+pub async fn openapi() -> impl IntoResponse {
+    static DOCUMENT: LazyLock<String> = LazyLock::new(super::openapi_json);
+    ([(header::CONTENT_TYPE, "application/json")], DOCUMENT.as_str())
 }
 
 /// Unknown paths: a problem document, not an empty 404.

@@ -12,8 +12,9 @@ use serde_json::Value;
 use utoipa::ToSchema;
 
 use super::extract::{Authorized, CALIBRATE, JsonBody, READ};
-use super::robots::{find as find_robot, model_of};
+use super::robots::find as find_robot;
 use super::{ApiError, AppState};
+use crate::app::robots::model_of;
 use crate::db::{self, records};
 use crate::domain::ParameterSetFile;
 

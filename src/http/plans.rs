@@ -5,17 +5,20 @@
 use axum::Json;
 use axum::extract::{Path, State};
 use axum::response::Response;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use utoipa::ToSchema;
 
 use super::extract::{Authorized, CALIBRATE, JsonBody, READ};
-use super::robots::{find as find_robot, model_of};
+use super::robots::find as find_robot;
 use super::{ApiError, AppState};
+use crate::app::robots::{model_of, robot_base};
+use crate::db::jobs::JobKind;
 use crate::db::records;
 use crate::domain::cell::ArtefactSpec;
 use crate::jobs::requests::PosePlanRequest;
-use crate::jobs::run::{self, POSE_PLAN};
+use crate::jobs::results::PosePlan;
+use crate::jobs::run;
 
 /// Largest candidate count per ball and validation count a plan may ask for.
 pub const MAX_PER_BALL: usize = 2000;
@@ -49,7 +52,7 @@ pub async fn create(
         return Err(ApiError::invalid("validation", format!("must be 0–{MAX_VALIDATION}")));
     }
     if let Some(s) = &body.select {
-        run::index_of(s, "select")?;
+        run::selection(s)?;
         if s.n >= 3 * body.per_ball {
             return Err(ApiError::invalid(
                 "select.n",
@@ -57,13 +60,13 @@ pub async fn create(
             ));
         }
     }
-    let base = run::robot_base(&robot)?;
+    let base = robot_base(&robot)?;
     run::planning_cell(&model, base, &body, &artefact)?;
-    super::jobs::submit(&state, POSE_PLAN, &robot.id, &body).await
+    super::jobs::submit(&state, JobKind::PosePlan, &robot.id, &body).await
 }
 
 /// A pose plan.
-#[derive(Debug, Serialize, ToSchema)]
+#[derive(Debug, Serialize, Deserialize, ToSchema)]
 pub struct PosePlanOut {
     pub id: String,
     pub robot_id: String,
@@ -71,11 +74,7 @@ pub struct PosePlanOut {
     pub created_at: String,
     #[schema(value_type = Object)]
     pub request: Value,
-    /// `identification`: [{joints_deg, ball, nu_deg}] in measuring order; `validation`:
-    /// [{joints_deg, nest}]; `candidates`; `selection` (DETMAX settings and indices); `nests`
-    /// (the reflector tools, in the flange frame); `home_deg`.
-    #[schema(value_type = Object)]
-    pub plan: Value,
+    pub plan: PosePlan,
 }
 
 /// Get a pose plan.
@@ -92,13 +91,13 @@ pub async fn get(
 ) -> Result<Json<PosePlanOut>, ApiError> {
     let row =
         records::pose_plan(&state.pool, &plan_id).await?.ok_or_else(|| ApiError::not_found("pose plan", &plan_id))?;
-    let parse = |s: &str| serde_json::from_str::<Value>(s).map_err(|e| ApiError::Internal(e.to_string()));
+    let internal = |e: serde_json::Error| ApiError::Internal(format!("pose plan {}: {e}", row.id));
     Ok(Json(PosePlanOut {
+        request: serde_json::from_str(&row.request_json).map_err(internal)?,
+        plan: serde_json::from_str(&row.result_json).map_err(internal)?,
         id: row.id,
         robot_id: row.robot_id,
         job_id: row.job_id,
         created_at: row.created_at,
-        request: parse(&row.request_json)?,
-        plan: parse(&row.result_json)?,
     }))
 }

@@ -9,11 +9,13 @@ use serde_json::Value;
 use utoipa::{IntoParams, ToSchema};
 
 use super::extract::{Authorized, JsonBody, MEASURE, READ};
-use super::{ApiError, AppState, cells};
+use super::{ApiError, AppState};
+use crate::app::cells;
+use crate::app::robots::model_of;
 use crate::db::{self, records};
 use crate::domain::RobotSpec;
 use crate::domain::cell::PoseXyzAbc;
-use crate::kinematics::{ParamLayout, RobotModel};
+use crate::kinematics::ParamLayout;
 
 /// A robot to create.
 #[derive(Debug, Deserialize, ToSchema)]
@@ -45,15 +47,6 @@ pub struct RobotOut {
     /// The parameter set compensation uses, once one is activated.
     pub active_parameter_set_id: Option<String>,
     pub created_at: String,
-}
-
-/// The robot's validated model.
-pub fn model_of(row: &records::RobotRow) -> Result<RobotModel, ApiError> {
-    let v: Value =
-        serde_json::from_str(&row.model_json).map_err(|e| ApiError::Internal(format!("robot {}: {e}", row.id)))?;
-    RobotSpec::from_json_value(&v)
-        .and_then(|s| s.to_model())
-        .map_err(|e| ApiError::Internal(format!("robot {}: stored model invalid: {e}", row.id)))
 }
 
 pub fn robot_out(row: &records::RobotRow) -> Result<RobotOut, ApiError> {

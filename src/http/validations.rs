@@ -12,9 +12,10 @@ use utoipa::ToSchema;
 use super::extract::{Authorized, CALIBRATE, JsonBody, READ};
 use super::identifications::checked_sessions;
 use super::{ApiError, AppState};
+use crate::db::jobs::JobKind;
 use crate::db::records;
+use crate::domain::cell::PurposeSpec;
 use crate::jobs::requests::{ValidationJob, ValidationRequest};
-use crate::jobs::run::VALIDATION;
 
 /// Start a validation of a parameter set (a job; its result is a validation).
 #[utoipa::path(post, path = "/v1/parameter-sets/{set_id}/validations", tag = "validations",
@@ -34,9 +35,9 @@ pub async fn create(
     let set = records::parameter_set(&state.pool, &set_id)
         .await?
         .ok_or_else(|| ApiError::not_found("parameter set", &set_id))?;
-    body.sessions = checked_sessions(&state, &set.robot_id, &body.sessions, "validation").await?;
+    body.sessions = checked_sessions(&state, &set.robot_id, &body.sessions, PurposeSpec::Validation).await?;
     let job = ValidationJob { parameter_set_id: set.id.clone(), request: body };
-    super::jobs::submit(&state, VALIDATION, &set.robot_id, &job).await
+    super::jobs::submit(&state, JobKind::Validation, &set.robot_id, &job).await
 }
 
 /// A validation.

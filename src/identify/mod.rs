@@ -224,6 +224,34 @@ impl Default for IdentifyOptions {
 /// Default η of [`IdentifyOptions::map_smoothing`].
 pub const DEFAULT_MAP_SMOOTHING: f64 = 1.0;
 
+impl Status {
+    /// `identified`, or the reason the parameter is fixed: the text files and the wire carry.
+    pub fn as_str(&self) -> &str {
+        match self {
+            Status::Identified => "identified",
+            Status::Fixed(reason) => reason,
+        }
+    }
+}
+
+impl std::fmt::Display for Status {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl PartialEq<str> for Status {
+    fn eq(&self, other: &str) -> bool {
+        self.as_str() == other
+    }
+}
+
+impl PartialEq<&str> for Status {
+    fn eq(&self, other: &&str) -> bool {
+        self.as_str() == *other
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum IdentifyError {
     #[error("{0}")]
@@ -261,8 +289,8 @@ pub struct Identification {
     pub set: ParameterSet,
     /// Per layout parameter of `set`: standard deviation (SI) when identified.
     pub std: Vec<Option<f64>>,
-    /// Per layout parameter: "identified" or why it is fixed.
-    pub status: Vec<String>,
+    /// Per layout parameter: identified, or fixed and why.
+    pub status: Vec<Status>,
     /// Every tool of the problem (the first is `set.tool`).
     pub tools: Vec<ToolResult>,
     pub quality: Quality,
@@ -631,7 +659,7 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
     set.nominal = problem.layout.nominal_values(&cell.model, &problem.tools[0].tool, &base);
     set.values = problem.layout_values(&fit.x, 0);
     let mut std = vec![None; set.layout.len()];
-    let mut st = vec![String::new(); set.layout.len()];
+    let mut st = vec![Status::Fixed(String::new()); set.layout.len()];
     for (g, p) in problem.params.iter().enumerate() {
         let i = match *p {
             GlobalParam::Robot(i) => Some(i),
@@ -640,7 +668,7 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
         };
         if let Some(i) = i {
             std[i] = std_g[g];
-            st[i] = label(g);
+            st[i] = status[g].clone();
         }
     }
     let downweighted = problem

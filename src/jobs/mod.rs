@@ -6,19 +6,85 @@
 //! in the solver after the grace period is put back in the queue, not lost.
 
 pub mod requests;
+pub mod results;
 pub mod run;
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-use serde_json::Value;
 use tokio::sync::watch;
 use tokio::task::JoinHandle;
 use tracing::Instrument;
 
+use sqlx::SqlitePool;
+use tokio::sync::Notify;
+
+use crate::app::cache::Caches;
+use crate::app::{AppError, Metrics};
 use crate::db;
-use crate::http::{ApiError, AppState};
+use crate::db::jobs::JobState;
+use crate::domain::DomainError;
+
+/// Why a job failed (or, checked at submission, would fail).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum JobError {
+    /// Bad input: the request field at fault, when there is one.
+    #[error("{detail}")]
+    Invalid { detail: String, field: Option<String> },
+    /// Numerical trouble: rank deficiency, κ above the limit, divergence, an unreachable pose
+    /// plan. `kind` is the problem slug, `title` its short description.
+    #[error("{detail}")]
+    Numerical { kind: &'static str, title: &'static str, detail: String },
+    /// Logged, never echoed.
+    #[error("internal error: {0}")]
+    Internal(String),
+}
+
+impl JobError {
+    pub fn invalid(field: impl Into<String>, detail: impl Into<String>) -> Self {
+        JobError::Invalid { detail: detail.into(), field: Some(field.into()) }
+    }
+
+    /// A domain error whose path is the request field itself: that field, the bare reason.
+    pub fn field(e: DomainError) -> Self {
+        JobError::Invalid { field: e.field(), detail: e.reason }
+    }
+
+    /// A domain error under `prefix`, its path in the detail.
+    pub fn domain(e: DomainError, prefix: &str) -> Self {
+        let e = e.under(prefix);
+        JobError::Invalid { field: e.field(), detail: e.to_string() }
+    }
+}
+
+impl From<AppError> for JobError {
+    fn from(e: AppError) -> Self {
+        match e {
+            AppError::Invalid { detail, field } => JobError::Invalid { detail, field },
+            AppError::Internal(m) => JobError::Internal(m),
+        }
+    }
+}
+
+impl From<sqlx::Error> for JobError {
+    fn from(e: sqlx::Error) -> Self {
+        AppError::from(e).into()
+    }
+}
+
+/// What the workers need: the store, the queue's wake-up, the caches a finished job invalidates,
+/// the metrics they time the solver into, and how a failure is written to `jobs.error_json`.
+#[derive(Clone)]
+pub struct JobContext {
+    pub pool: SqlitePool,
+    pub wake: Arc<Notify>,
+    pub caches: Arc<Caches>,
+    pub metrics: Arc<Metrics>,
+    /// The stored form of a failure: the service's problem document (the HTTP layer supplies it,
+    /// so `GET /v1/jobs/{id}` shows a failed job's error as it shows any error).
+    pub failure_json: fn(&JobError) -> String,
+}
 
 /// A claimed job's lease; renewed every [`HEARTBEAT`] while it runs.
 pub const LEASE: Duration = Duration::from_secs(60);
@@ -34,7 +100,8 @@ pub struct Workers {
 
 impl Workers {
     /// Requeue the jobs a previous process left running, then start `n` workers.
-    pub async fn start(state: AppState, n: usize, grace: Duration) -> Result<Workers, sqlx::Error> {
+    pub async fn start(ctx: impl Into<JobContext>, n: usize, grace: Duration) -> Result<Workers, sqlx::Error> {
+        let state: JobContext = ctx.into();
         let requeued = db::jobs::requeue_stale(&state.pool, true).await?;
         if requeued > 0 {
             tracing::warn!(requeued, "requeued jobs left running by a previous process");
@@ -60,7 +127,7 @@ impl Workers {
     }
 }
 
-async fn worker(state: AppState, owner: String, mut stop: watch::Receiver<bool>, grace: Duration) {
+async fn worker(state: JobContext, owner: String, mut stop: watch::Receiver<bool>, grace: Duration) {
     let mut last_sweep = Instant::now();
     loop {
         if *stop.borrow() {
@@ -96,13 +163,13 @@ async fn worker(state: AppState, owner: String, mut stop: watch::Receiver<bool>,
 /// How a job ended, for the final write.
 enum End {
     Done(run::Output),
-    Failed(ApiError),
+    Failed(JobError),
     /// Shutdown overtook the solver: requeue.
     Released,
 }
 
 async fn run_one(
-    state: &AppState,
+    state: &JobContext,
     owner: &str,
     job: db::jobs::JobRow,
     stop: &mut watch::Receiver<bool>,
@@ -112,7 +179,7 @@ async fn run_one(
     let started = Instant::now();
     // Progress in thousandths, shared with the blocking solver.
     let progress = Arc::new(AtomicU64::new(0));
-    let end = match run::load(&state.pool, &job.kind, &job.robot_id, &job.request_json).await {
+    let end = match run::load(&state.pool, job.kind, &job.robot_id, &job.request_json).await {
         Err(e) => End::Failed(e),
         Ok(inputs) => {
             progress.store(50, Ordering::Relaxed);
@@ -134,7 +201,7 @@ async fn run_one(
                         break match r {
                             Ok(Ok(out)) => End::Done(out),
                             Ok(Err(e)) => End::Failed(e),
-                            Err(e) => End::Failed(ApiError::Internal(format!("the solver task failed: {e}"))),
+                            Err(e) => End::Failed(JobError::Internal(format!("the solver task failed: {e}"))),
                         };
                     }
                     _ = beat.tick() => {
@@ -170,7 +237,7 @@ async fn run_one(
     }
 }
 
-async fn finish(state: &AppState, owner: &str, job: &db::jobs::JobRow, end: End) -> Result<(), ApiError> {
+async fn finish(state: &JobContext, owner: &str, job: &db::jobs::JobRow, end: End) -> Result<(), JobError> {
     let cancelled = db::jobs::cancel_requested(&state.pool, &job.id).await?;
     match end {
         End::Released => {
@@ -178,22 +245,23 @@ async fn finish(state: &AppState, owner: &str, job: &db::jobs::JobRow, end: End)
             tracing::info!("shutdown: job put back in the queue");
         }
         _ if cancelled => {
-            db::jobs::finish(&state.pool, &job.id, owner, "cancelled", None, None).await?;
+            db::jobs::finish(&state.pool, &job.id, owner, JobState::Cancelled, None, None).await?;
             tracing::info!("job cancelled; its result was discarded");
         }
         End::Failed(e) => {
-            if let ApiError::Internal(m) = &e {
+            if let JobError::Internal(m) = &e {
                 tracing::error!(error = %m, "job failed with an internal error");
             } else {
                 tracing::info!(error = %e, "job failed");
             }
-            let problem = serde_json::to_string(&e.problem()).expect("problem serialises");
-            db::jobs::finish(&state.pool, &job.id, owner, "failed", None, Some(&problem)).await?;
+            let problem = (state.failure_json)(&e);
+            db::jobs::finish(&state.pool, &job.id, owner, JobState::Failed, None, Some(&problem)).await?;
         }
         End::Done(out) => {
             let mut tx = db::begin_write(&state.pool).await?;
-            let result: Value = run::store(&mut tx, &job.id, &job.robot_id, &job.request_json, out).await?;
-            if db::jobs::finish(&mut *tx, &job.id, owner, "succeeded", Some(&result.to_string()), None).await? {
+            let result = run::store(&mut tx, &job.id, &job.robot_id, &job.request_json, out).await?;
+            let result_json = serde_json::to_string(&result).expect("a result serialises");
+            if db::jobs::finish(&mut *tx, &job.id, owner, JobState::Succeeded, Some(&result_json), None).await? {
                 tx.commit().await?;
                 // An identification may have activated its set.
                 state.caches.robot_changed(&job.robot_id);

@@ -5,41 +5,20 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use crate::domain::ToolSpec;
+pub use crate::domain::identification::SelectSpec;
+use crate::domain::identification::{IdentifySpec, default_kappa_limit, default_rotation_weight_mm};
 
-fn o1() -> String {
-    "O1".into()
-}
-fn one() -> u64 {
-    1
-}
 fn per_ball() -> usize {
     120
 }
 fn validation_poses() -> usize {
     506
 }
-fn kappa_limit() -> f64 {
-    1000.0
-}
-fn rotation_weight_mm() -> f64 {
-    100.0
+fn one() -> u64 {
+    1
 }
 fn yes() -> bool {
     true
-}
-
-/// DETMAX selection of `n` measurements maximising an observability index (thesis §4.2.5).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-pub struct SelectSpec {
-    #[schema(minimum = 1)]
-    pub n: usize,
-    /// `O1` (default, the thesis's) … `O5`.
-    #[serde(default = "o1")]
-    pub index: String,
-    /// Seed of the random start.
-    #[serde(default = "one")]
-    pub seed: u64,
 }
 
 /// A pose plan: collision-checked TriCal configurations on the artefact's balls (ν ≤ 50° from
@@ -81,14 +60,14 @@ pub struct IdentificationRequest {
     #[serde(default)]
     pub fix: Vec<String>,
     /// Refuse fits whose column-scaled κ(J) exceeds this (thesis §4.2.3).
-    #[serde(default = "kappa_limit")]
+    #[serde(default = "default_kappa_limit")]
     #[schema(exclusive_minimum = 1.0)]
     pub kappa_limit: f64,
     /// Huber loss threshold in robust standard deviations; default plain least squares.
     #[serde(default)]
     pub huber: Option<f64>,
     /// Length weighting orientation residuals of full-pose measurements, mm per rad.
-    #[serde(default = "rotation_weight_mm")]
+    #[serde(default = "default_rotation_weight_mm")]
     #[schema(exclusive_minimum = 0.0)]
     pub rotation_weight_mm: f64,
     /// Identify from a DETMAX-selected subset of the sessions' measurements.
@@ -97,6 +76,20 @@ pub struct IdentificationRequest {
     /// Make the new parameter set the robot's active one when the job succeeds.
     #[serde(default)]
     pub activate: bool,
+}
+
+impl IdentificationRequest {
+    /// The options as `robocal identify` takes them (every parameter may be freed).
+    pub fn spec(&self) -> IdentifySpec {
+        IdentifySpec {
+            model: self.model.clone(),
+            fix: self.fix.clone(),
+            kappa_limit: self.kappa_limit,
+            huber: self.huber,
+            rotation_weight_mm: self.rotation_weight_mm,
+            only: Vec::new(),
+        }
+    }
 }
 
 /// A validation of a parameter set on validation sessions.

@@ -5,24 +5,25 @@
 use serde_json::{Value, json};
 use sqlx::SqlitePool;
 
+use super::JobError;
 use super::requests::{IdentificationRequest, PosePlanRequest, SelectSpec, ValidationJob};
+use super::results::{
+    IdentificationResult, IdentificationSummary, JobResult, PlanNest, PlannedBallPose, PlannedTrackerPose, PosePlan,
+    PosePlanResult, ValidationJobSummary, ValidationResult,
+};
+use crate::app::cells;
+use crate::app::robots::{model_of, robot_base};
 use crate::cell::{Cell, Instrument, Measurement, Observation, Purpose, Session};
+use crate::db::jobs::JobKind;
 use crate::db::records::{self, RobotRow};
 use crate::domain::cell::{ArtefactSpec, CellFile};
-use crate::domain::identification::identification_doc;
-use crate::domain::{DEG, MM, ParameterSetDoc, to_deg};
-use crate::http::robots::model_of;
-use crate::http::{ApiError, cells};
-use crate::identify::observability::Index;
-use crate::identify::{DetmaxPool, IdentifyError, IdentifyOptions, ModelOptions, SolveError, SolverOptions};
+use crate::domain::identification::{DetmaxSelection, run_identification};
+use crate::domain::validation::ErrorFigures;
+use crate::domain::{ParameterSetDoc, ToolSpec, to_deg};
+use crate::identify::{DetmaxPool, IdentifyError, IdentifyOptions, SolveError};
 use crate::kinematics::{Preset, RobotModel};
-use crate::metrology::BallTriangle;
 use crate::sim::poses::{CellLayout, IdentificationOptions, PlanningCell, ValidationOptions};
-
-/// Job kinds as stored.
-pub const POSE_PLAN: &str = "pose_plan";
-pub const IDENTIFICATION: &str = "identification";
-pub const VALIDATION: &str = "validation";
+use crate::units::{DEG, MM};
 
 /// Everything a job needs, loaded.
 pub enum Inputs {
@@ -33,146 +34,112 @@ pub enum Inputs {
 
 /// What a job computed.
 pub enum Output {
-    PosePlan { result: Value },
-    Identification { doc_json: String, sessions_json: String, summary: Value, activate: bool },
-    Validation { parameter_set_id: String, report: Value, sessions_json: String, summary: Value },
+    PosePlan { plan: PosePlan },
+    Identification { doc_json: String, sessions_json: String, summary: IdentificationSummary, activate: bool },
+    Validation { parameter_set_id: String, report: Value, sessions_json: String, summary: ValidationJobSummary },
 }
 
-fn stored<T: serde::de::DeserializeOwned>(json: &str, what: &str) -> Result<T, ApiError> {
-    serde_json::from_str(json).map_err(|e| ApiError::Internal(format!("stored {what}: {e}")))
+fn stored<T: serde::de::DeserializeOwned>(json: &str, what: &str) -> Result<T, JobError> {
+    serde_json::from_str(json).map_err(|e| JobError::Internal(format!("stored {what}: {e}")))
 }
 
 /// Load a job's inputs.
-pub async fn load(pool: &SqlitePool, kind: &str, robot_id: &str, request_json: &str) -> Result<Inputs, ApiError> {
+pub async fn load(pool: &SqlitePool, kind: JobKind, robot_id: &str, request_json: &str) -> Result<Inputs, JobError> {
     let robot =
-        records::robot(pool, robot_id).await?.ok_or_else(|| ApiError::Internal(format!("robot {robot_id} missing")))?;
+        records::robot(pool, robot_id).await?.ok_or_else(|| JobError::Internal(format!("robot {robot_id} missing")))?;
     match kind {
-        POSE_PLAN => {
+        JobKind::PosePlan => {
             let request: PosePlanRequest = stored(request_json, "pose-plan request")?;
             let row = records::artefact(pool, &request.artefact_id)
                 .await?
-                .ok_or_else(|| ApiError::invalid("artefact_id", format!("no artefact '{}'", request.artefact_id)))?;
+                .ok_or_else(|| JobError::invalid("artefact_id", format!("no artefact '{}'", request.artefact_id)))?;
             let artefact: ArtefactSpec = stored(&row.spec_json, "artefact")?;
             let model = model_of(&robot)?;
             let base = robot_base(&robot)?;
             Ok(Inputs::PosePlan { base, model, request, artefact })
         }
-        IDENTIFICATION => {
+        JobKind::Identification => {
             let request: IdentificationRequest = stored(request_json, "identification request")?;
             let sessions = cells::resolve_sessions(pool, &robot.id, &request.sessions, "sessions").await?;
             let cell = cells::cell_file(pool, &robot, &sessions).await?;
             let session_names = sessions.iter().map(|s| s.name.clone()).collect();
             Ok(Inputs::Identification { robot, request, cell, session_names })
         }
-        VALIDATION => {
+        JobKind::Validation => {
             let job: ValidationJob = stored(request_json, "validation request")?;
             let set = records::parameter_set(pool, &job.parameter_set_id)
                 .await?
-                .ok_or_else(|| ApiError::Internal(format!("parameter set {} missing", job.parameter_set_id)))?;
+                .ok_or_else(|| JobError::Internal(format!("parameter set {} missing", job.parameter_set_id)))?;
             let sessions = cells::resolve_sessions(pool, &robot.id, &job.request.sessions, "sessions").await?;
             let cell = cells::cell_file(pool, &robot, &sessions).await?;
             let session_names = sessions.iter().map(|s| s.name.clone()).collect();
             Ok(Inputs::Validation { job, set_json: set.doc_json, cell, session_names })
         }
-        other => Err(ApiError::Internal(format!("unknown job kind '{other}'"))),
     }
 }
 
-/// Identification options from a request (the same as `robocal identify`'s flags).
+/// Identification options from a request (checked as `robocal identify` checks its flags); an
+/// error is 422 at the request's field.
 pub fn identify_options(
     r: &IdentificationRequest,
     dof: usize,
     sessions: Vec<String>,
-) -> Result<IdentifyOptions, ApiError> {
-    if !r.kappa_limit.is_finite() || r.kappa_limit <= 1.0 {
-        return Err(ApiError::invalid("kappa_limit", "must be above 1"));
-    }
-    if r.huber.is_some_and(|k| !k.is_finite() || k <= 0.0) {
-        return Err(ApiError::invalid("huber", "must be a positive threshold"));
-    }
-    if !r.rotation_weight_mm.is_finite() || r.rotation_weight_mm <= 0.0 {
-        return Err(ApiError::invalid("rotation_weight_mm", "must be positive"));
-    }
-    let model = ModelOptions::parse(&r.model, dof).map_err(|e| ApiError::invalid("model", e))?;
-    let mut o = IdentifyOptions {
-        model,
-        fixed: r.fix.clone(),
-        kappa_limit: r.kappa_limit,
-        solver: SolverOptions { huber: r.huber, ..Default::default() },
-        rotation_weight: r.rotation_weight_mm * MM,
-        ..Default::default()
-    };
+) -> Result<IdentifyOptions, JobError> {
+    let mut o = r.spec().to_options(dof).map_err(JobError::field)?;
     o.selection.sessions = sessions;
     Ok(o)
 }
 
-/// A DETMAX index name, or 422.
-pub fn index_of(s: &SelectSpec, field: &str) -> Result<Index, ApiError> {
-    if s.n == 0 {
-        return Err(ApiError::invalid(format!("{field}.n"), "must be at least 1"));
-    }
-    Index::parse(&s.index)
-        .ok_or_else(|| ApiError::invalid(format!("{field}.index"), format!("'{}' is not O1…O5", s.index)))
+/// A request's DETMAX selection, checked; an error is 422 at `select.n` or `select.index`.
+pub fn selection(s: &SelectSpec) -> Result<DetmaxSelection, JobError> {
+    s.to_selection().map_err(|e| JobError::field(e.within("select")))
 }
 
 /// Numerical trouble as its own problem kind; input trouble as 422.
-pub fn identify_error(e: IdentifyError) -> ApiError {
+pub fn identify_error(e: IdentifyError) -> JobError {
     let detail = e.to_string();
     match e {
         IdentifyError::RankDeficient { .. } => {
-            ApiError::Numerical { kind: "rank-deficient", title: "Rank-deficient fit", detail }
+            JobError::Numerical { kind: "rank-deficient", title: "Rank-deficient fit", detail }
         }
         IdentifyError::IllConditioned { .. } => {
-            ApiError::Numerical { kind: "ill-conditioned", title: "Ill-conditioned fit (κ above the limit)", detail }
+            JobError::Numerical { kind: "ill-conditioned", title: "Ill-conditioned fit (κ above the limit)", detail }
         }
         IdentifyError::Underdetermined { .. } => {
-            ApiError::Numerical { kind: "underdetermined", title: "Fewer residuals than parameters", detail }
+            JobError::Numerical { kind: "underdetermined", title: "Fewer residuals than parameters", detail }
         }
         IdentifyError::Solve(SolveError::Diverged { .. }) => {
-            ApiError::Numerical { kind: "divergence", title: "The fit diverged", detail }
+            JobError::Numerical { kind: "divergence", title: "The fit diverged", detail }
         }
         IdentifyError::Solve(SolveError::IterationLimit { .. }) => {
-            ApiError::Numerical { kind: "no-convergence", title: "The fit did not converge", detail }
+            JobError::Numerical { kind: "no-convergence", title: "The fit did not converge", detail }
         }
         IdentifyError::Registration(_) => {
-            ApiError::Numerical { kind: "registration", title: "The base could not be registered", detail }
+            JobError::Numerical { kind: "registration", title: "The base could not be registered", detail }
         }
-        IdentifyError::Problem(_) | IdentifyError::Option(_) => ApiError::Invalid { detail, field: None },
+        IdentifyError::Problem(_) | IdentifyError::Option(_) => JobError::Invalid { detail, field: None },
     }
 }
 
 /// The computation (blocking). `progress` is told how far it got (0–1).
-pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64) + Sync)) -> Result<Output, ApiError> {
+pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64) + Sync)) -> Result<Output, JobError> {
     match inputs {
         Inputs::PosePlan { base, model, request, artefact } => pose_plan(&model, base, &request, &artefact, progress),
         Inputs::Identification { robot: _, request, cell, session_names } => {
-            let cell_si = cell.to_cell().map_err(|e| ApiError::domain(e, "stored cell"))?;
-            let mut opts = identify_options(&request, cell_si.model.dof(), session_names.clone())?;
-            let selection = match &request.select {
-                None => None,
-                Some(s) => {
-                    let index = index_of(s, "select")?;
-                    let (subset, info) = DetmaxPool::new(&cell_si, &opts)
-                        .and_then(|p| p.select(s.n, index, s.seed))
-                        .map_err(identify_error)?;
-                    opts.selection.subset = subset;
-                    Some(info)
-                }
-            };
-            progress(0.3);
-            let id = crate::identify::identify(&cell_si, &opts).map_err(identify_error)?;
-            let sessions: Vec<String> = id.problem.tools.iter().flat_map(|t| t.sessions.clone()).collect();
-            let doc = identification_doc(&id, &sessions, selection);
+            let cell_si = cell.to_cell().map_err(|e| JobError::domain(e, "stored cell"))?;
+            let opts = identify_options(&request, cell_si.model.dof(), session_names.clone())?;
+            let select = request.select.as_ref().map(selection).transpose()?;
+            let (id, doc) = run_identification(&cell_si, opts, select, &|| progress(0.3)).map_err(identify_error)?;
             let q = &id.quality;
-            let summary = json!({
-                "identified": id.free_names.len(),
-                "measurements": q.n_configs,
-                "iterations": id.iterations,
-                "kappa_si": q.kappa,
-                "kappa_scaled": q.kappa_scaled,
-                "o1_si": q.observability.o1,
-                "rms_residual_mm": q.rms_residual / MM,
-            });
+            let summary = IdentificationSummary {
+                identified: id.free_names.len(),
+                measurements: q.n_configs,
+                iterations: id.iterations,
+                kappa_si: q.kappa,
+                kappa_scaled: q.kappa_scaled,
+                o1_si: q.observability.o1,
+                rms_residual_mm: q.rms_residual / MM,
+            };
             Ok(Output::Identification {
                 doc_json: doc.to_json_pretty(),
                 sessions_json: json!(session_names).to_string(),
@@ -182,25 +149,21 @@ pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64) + Sync)) -> Result<Output
         }
         Inputs::Validation { job, set_json, cell, session_names } => {
             let doc = ParameterSetDoc::from_json(&set_json)
-                .map_err(|e| ApiError::Internal(format!("stored parameter set: {e}")))?;
-            let cell_si = cell.to_cell().map_err(|e| ApiError::domain(e, "stored cell"))?;
+                .map_err(|e| JobError::Internal(format!("stored parameter set: {e}")))?;
+            let cell_si = cell.to_cell().map_err(|e| JobError::domain(e, "stored cell"))?;
             let report = crate::validate::report::validate(
                 &doc.set,
                 &cell_si,
                 &session_names,
                 crate::validate::report::Reference::Measured,
             )
-            .map_err(|e| ApiError::Invalid { detail: e.to_string(), field: Some("sessions".into()) })?;
+            .map_err(|e| JobError::Invalid { detail: e.to_string(), field: Some("sessions".into()) })?;
             let full = crate::domain::validation::report_to_json(&report, job.request.residuals);
-            let p = &report.calibrated.position;
-            let n = &report.nominal.position;
-            let summary = json!({
-                "measurements": p.n,
-                "mean_mm": p.mean / MM, "median_mm": p.median / MM, "std_mm": p.std / MM,
-                "rms_mm": p.rms / MM, "p95_mm": p.p95 / MM, "max_mm": p.max / MM,
-                "nominal": {"mean_mm": n.mean / MM, "median_mm": n.median / MM, "std_mm": n.std / MM,
-                            "rms_mm": n.rms / MM, "p95_mm": n.p95 / MM, "max_mm": n.max / MM},
-            });
+            let summary = ValidationJobSummary {
+                measurements: report.calibrated.position.n,
+                calibrated: ErrorFigures::of(&report.calibrated.position),
+                nominal: ErrorFigures::of(&report.nominal.position),
+            };
             Ok(Output::Validation {
                 parameter_set_id: job.parameter_set_id,
                 report: full,
@@ -218,9 +181,9 @@ pub fn planning_cell(
     base: [f64; 6],
     request: &PosePlanRequest,
     artefact: &ArtefactSpec,
-) -> Result<PlanningCell, ApiError> {
+) -> Result<PlanningCell, JobError> {
     if model.preset != Some(Preset::Irb120) {
-        return Err(ApiError::invalid(
+        return Err(JobError::invalid(
             "robot",
             format!(
                 "pose planning needs the closed-form inverse kinematics and collision model of the irb120 preset; robot '{}' has neither",
@@ -228,22 +191,14 @@ pub fn planning_cell(
             ),
         ));
     }
-    let tool = request.tool.to_tool().map_err(|e| ApiError::domain(e, "tool"))?;
-    let d = &artefact.distances_mm;
-    let triangle = BallTriangle::from_distances(d.d12 * MM, d.d13 * MM, d.d23 * MM)
-        .map_err(|e| ApiError::invalid("artefact_id", e.to_string()))?;
-    let layout = CellLayout {
-        robot: model.clone(),
-        tool,
-        base,
-        artefact: crate::cell::Artefact { triangle, ball_diameter: artefact.ball_diameter_mm * MM },
-        ..CellLayout::default()
-    };
-    PlanningCell::new(&layout).map_err(|e| ApiError::invalid("tool", e.to_string()))
+    let tool = request.tool.to_tool().map_err(|e| JobError::domain(e, "tool"))?;
+    let artefact = artefact.to_artefact().map_err(|e| JobError::invalid("artefact_id", e.to_string()))?;
+    let layout = CellLayout { robot: model.clone(), tool, base, artefact, ..CellLayout::default() };
+    PlanningCell::new(&layout).map_err(|e| JobError::invalid("tool", e.to_string()))
 }
 
-fn plan_error(e: crate::sim::poses::PlanError) -> ApiError {
-    ApiError::Numerical { kind: "unplannable", title: "No collision-free plan", detail: e.to_string() }
+fn plan_error(e: crate::sim::poses::PlanError) -> JobError {
+    JobError::Numerical { kind: "unplannable", title: "No collision-free plan", detail: e.to_string() }
 }
 
 fn pose_plan(
@@ -252,24 +207,24 @@ fn pose_plan(
     request: &PosePlanRequest,
     artefact: &ArtefactSpec,
     progress: &(dyn Fn(f64) + Sync),
-) -> Result<Output, ApiError> {
+) -> Result<Output, JobError> {
     let pc = planning_cell(model, base, request, artefact)?;
     let id_opts = IdentificationOptions { per_ball: request.per_ball, ..Default::default() };
     let candidates = pc.plan_identification(&id_opts, request.seed).map_err(plan_error)?;
     progress(0.4);
     let mut identification = candidates.poses.clone();
-    let mut selection = Value::Null;
+    let mut selection_info = None;
     if let Some(s) = &request.select {
-        let index = index_of(s, "select")?;
+        let select = selection(s)?;
         if s.n >= identification.len() {
-            return Err(ApiError::invalid(
+            return Err(JobError::invalid(
                 "select.n",
                 format!("must be smaller than the {} candidates", identification.len()),
             ));
         }
         // The candidates as a TriCal session of ball measurements: DETMAX on their Jacobian blocks
         // at the nominal model (the identification's own starting point).
-        let tool = request.tool.to_tool().map_err(|e| ApiError::domain(e, "tool"))?;
+        let tool = request.tool.to_tool().map_err(|e| JobError::domain(e, "tool"))?;
         let cell = Cell {
             model: model.clone(),
             base_guess: Some(base),
@@ -294,11 +249,11 @@ fn pose_plan(
             }],
         };
         let pool = DetmaxPool::new(&cell, &IdentifyOptions::default()).map_err(identify_error)?;
-        let (subset, info) = pool.select(s.n, index, s.seed).map_err(identify_error)?;
+        let (subset, info) = pool.select(select.n, select.index, select.seed).map_err(identify_error)?;
         progress(0.7);
         let chosen: Vec<_> = subset.iter().map(|(_, i)| identification[*i].clone()).collect();
         identification = pc.sequence(chosen).map_err(plan_error)?;
-        selection = info;
+        selection_info = Some(info);
     }
     let validation = if request.validation == 0 {
         Vec::new()
@@ -306,64 +261,48 @@ fn pose_plan(
         let v_opts = ValidationOptions { count: request.validation, ..Default::default() };
         pc.plan_validation(&v_opts, request.seed).map_err(plan_error)?.poses
     };
-    let nests: Vec<Value> = pc
-        .layout()
-        .nests
-        .iter()
-        .map(|n| json!({"tool": crate::domain::ToolSpec::from_tool(&n.tool), "opening": [n.opening.x, n.opening.y, n.opening.z]}))
-        .collect();
-    let result = json!({
-        "identification": identification.iter().map(|p| json!({
-            "joints_deg": to_deg(&p.q), "ball": p.ball, "nu_deg": p.nu.map(|v| v / DEG),
-        })).collect::<Vec<_>>(),
-        "validation": validation.iter().map(|p| json!({"joints_deg": to_deg(&p.q), "nest": p.nest})).collect::<Vec<_>>(),
-        "candidates": candidates.poses.len(),
-        "selection": selection,
-        "nests": nests,
-        "home_deg": to_deg(&pc.layout().home),
-    });
-    Ok(Output::PosePlan { result })
-}
-
-/// The robot's base guess T_0^W: planning needs to know where the artefact is relative to the
-/// robot.
-pub fn robot_base(robot: &RobotRow) -> Result<[f64; 6], ApiError> {
-    let Some(json) = robot.base_guess_json.as_deref() else {
-        return Err(ApiError::invalid(
-            "base_guess",
-            format!(
-                "robot '{}' has no base_guess: pose planning needs where the artefact lies relative to the robot",
-                robot.name
-            ),
-        ));
+    let plan = PosePlan {
+        identification: identification
+            .iter()
+            .map(|p| PlannedBallPose { joints_deg: to_deg(&p.q), ball: p.ball, nu_deg: p.nu.map(|v| v / DEG) })
+            .collect(),
+        validation: validation.iter().map(|p| PlannedTrackerPose { joints_deg: to_deg(&p.q), nest: p.nest }).collect(),
+        candidates: candidates.poses.len(),
+        selection: selection_info,
+        nests: pc
+            .layout()
+            .nests
+            .iter()
+            .map(|n| PlanNest { tool: ToolSpec::from_tool(&n.tool), opening: [n.opening.x, n.opening.y, n.opening.z] })
+            .collect(),
+        home_deg: to_deg(&pc.layout().home),
     };
-    let b: crate::domain::cell::PoseXyzAbc = stored(json, "base guess")?;
-    b.to_si("base_guess").map_err(|e| ApiError::domain(e, ""))
+    Ok(Output::PosePlan { plan })
 }
 
-/// Write a job's output; returns the job's `result_json`.
+/// Write a job's output; returns the job's result.
 pub async fn store(
     tx: &mut sqlx::SqliteConnection,
     job_id: &str,
     robot_id: &str,
     request_json: &str,
     out: Output,
-) -> Result<Value, ApiError> {
+) -> Result<JobResult, JobError> {
     match out {
-        Output::PosePlan { result } => {
+        Output::PosePlan { plan } => {
             let row = records::PosePlanRow {
                 id: crate::db::new_id(),
                 robot_id: robot_id.to_string(),
                 request_json: request_json.to_string(),
-                result_json: result.to_string(),
+                result_json: serde_json::to_string(&plan).expect("a plan serialises"),
                 job_id: Some(job_id.to_string()),
                 created_at: crate::db::now(),
             };
             records::insert_pose_plan(&mut *tx, &row).await?;
-            Ok(json!({
-                "pose_plan_id": row.id,
-                "identification": result["identification"].as_array().map_or(0, Vec::len),
-                "validation": result["validation"].as_array().map_or(0, Vec::len),
+            Ok(JobResult::PosePlan(PosePlanResult {
+                pose_plan_id: row.id,
+                identification: plan.identification.len(),
+                validation: plan.validation.len(),
             }))
         }
         Output::Identification { doc_json, sessions_json, summary, activate } => {
@@ -372,9 +311,12 @@ pub async fn store(
             if activate {
                 records::set_active_parameter_set(&mut *tx, robot_id, &row.id).await?;
             }
-            let mut r = json!({"parameter_set_id": row.id, "version": row.version, "activated": activate});
-            r["summary"] = summary;
-            Ok(r)
+            Ok(JobResult::Identification(IdentificationResult {
+                parameter_set_id: row.id,
+                version: row.version,
+                activated: activate,
+                summary,
+            }))
         }
         Output::Validation { parameter_set_id, report, sessions_json, summary } => {
             let row = records::ValidationRow {
@@ -386,9 +328,7 @@ pub async fn store(
                 created_at: crate::db::now(),
             };
             records::insert_validation(&mut *tx, &row).await?;
-            let mut r = json!({"validation_id": row.id, "parameter_set_id": parameter_set_id});
-            r["summary"] = summary;
-            Ok(r)
+            Ok(JobResult::Validation(ValidationResult { validation_id: row.id, parameter_set_id, summary }))
         }
     }
 }

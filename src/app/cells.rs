@@ -4,12 +4,10 @@
 use serde_json::Value;
 use sqlx::SqlitePool;
 
-use super::ApiError;
+use super::AppError;
 use crate::db::records::{self, RobotRow, SessionRow};
 use crate::domain::ToolSpec;
-use crate::domain::cell::{
-    ArtefactSpec, CellFile, InstrumentSpec, MeasurementSpec, PoseXyzAbc, PurposeSpec, SessionSpec,
-};
+use crate::domain::cell::{ArtefactSpec, CellFile, MeasurementSpec, PoseXyzAbc, SessionSpec};
 
 /// The robot's sessions named (by id or name) in a request field; 422 naming the item when one
 /// is unknown or repeated.
@@ -18,46 +16,38 @@ pub async fn resolve_sessions(
     robot_id: &str,
     names: &[String],
     field: &str,
-) -> Result<Vec<SessionRow>, ApiError> {
+) -> Result<Vec<SessionRow>, AppError> {
     if names.is_empty() {
-        return Err(ApiError::invalid(field, "name at least one session"));
+        return Err(AppError::invalid(field, "name at least one session"));
     }
     let mut out: Vec<SessionRow> = Vec::with_capacity(names.len());
     for (i, n) in names.iter().enumerate() {
         let s = records::session_of_robot(pool, robot_id, n)
             .await?
-            .ok_or_else(|| ApiError::invalid(format!("{field}[{i}]"), format!("this robot has no session '{n}'")))?;
+            .ok_or_else(|| AppError::invalid(format!("{field}[{i}]"), format!("this robot has no session '{n}'")))?;
         if out.iter().any(|o| o.id == s.id) {
-            return Err(ApiError::invalid(format!("{field}[{i}]"), format!("session '{n}' is named twice")));
+            return Err(AppError::invalid(format!("{field}[{i}]"), format!("session '{n}' is named twice")));
         }
         out.push(s);
     }
     Ok(out)
 }
 
-pub fn purpose_spec(s: &str) -> PurposeSpec {
-    if s == "validation" { PurposeSpec::Validation } else { PurposeSpec::Identification }
-}
-
-pub fn instrument_spec(s: &str) -> InstrumentSpec {
-    if s == "trical" { InstrumentSpec::Trical } else { InstrumentSpec::LaserTracker }
-}
-
 /// Every stored measurement of a session, in order.
-pub async fn session_measurements(pool: &SqlitePool, session_id: &str) -> Result<Vec<MeasurementSpec>, ApiError> {
+pub async fn session_measurements(pool: &SqlitePool, session_id: &str) -> Result<Vec<MeasurementSpec>, AppError> {
     let rows = records::measurements(pool, session_id, 0, i64::MAX).await?;
     rows.iter()
         .map(|(seq, json)| {
             serde_json::from_str(json)
-                .map_err(|e| ApiError::Internal(format!("measurement {seq} of session {session_id}: {e}")))
+                .map_err(|e| AppError::Internal(format!("measurement {seq} of session {session_id}: {e}")))
         })
         .collect()
 }
 
 /// The cell file of `sessions` of `robot`, in the given order. Sessions that use an artefact must
 /// all use the same one (a cell has one world frame).
-pub async fn cell_file(pool: &SqlitePool, robot: &RobotRow, sessions: &[SessionRow]) -> Result<CellFile, ApiError> {
-    let internal = |what: &str, e: serde_json::Error| ApiError::Internal(format!("robot {}: {what}: {e}", robot.id));
+pub async fn cell_file(pool: &SqlitePool, robot: &RobotRow, sessions: &[SessionRow]) -> Result<CellFile, AppError> {
+    let internal = |what: &str, e: serde_json::Error| AppError::Internal(format!("robot {}: {what}: {e}", robot.id));
     let robot_json: Value = serde_json::from_str(&robot.model_json).map_err(|e| internal("model", e))?;
     let base_guess: Option<PoseXyzAbc> = robot
         .base_guess_json
@@ -71,7 +61,7 @@ pub async fn cell_file(pool: &SqlitePool, robot: &RobotRow, sessions: &[SessionR
             match artefact_id {
                 None => artefact_id = Some(a),
                 Some(b) if b != a => {
-                    return Err(ApiError::invalid(
+                    return Err(AppError::invalid(
                         "sessions",
                         format!("sessions use different artefacts ({b} and {a}); a cell has one artefact"),
                     ));
@@ -85,7 +75,7 @@ pub async fn cell_file(pool: &SqlitePool, robot: &RobotRow, sessions: &[SessionR
         Some(id) => {
             let row = records::artefact(pool, id)
                 .await?
-                .ok_or_else(|| ApiError::Internal(format!("artefact {id} missing")))?;
+                .ok_or_else(|| AppError::Internal(format!("artefact {id} missing")))?;
             Some(serde_json::from_str::<ArtefactSpec>(&row.spec_json).map_err(|e| internal("artefact", e))?)
         }
     };
@@ -93,8 +83,8 @@ pub async fn cell_file(pool: &SqlitePool, robot: &RobotRow, sessions: &[SessionR
     for s in sessions {
         specs.push(SessionSpec {
             name: s.name.clone(),
-            purpose: purpose_spec(&s.purpose),
-            instrument: instrument_spec(&s.instrument),
+            purpose: s.purpose,
+            instrument: s.instrument,
             tool: serde_json::from_str::<ToolSpec>(&s.tool_json).map_err(|e| internal("tool", e))?,
             identify_tcp: s.identify_tcp,
             measurements: session_measurements(pool, &s.id).await?,

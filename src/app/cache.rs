@@ -24,7 +24,7 @@ use std::time::{Duration, Instant};
 use quick_cache::sync::Cache;
 use sqlx::SqlitePool;
 
-use super::ApiError;
+use super::AppError;
 use crate::db::records::{self, ParameterSetRow, RobotRow};
 use crate::db::tokens::{self, TokenRow};
 use crate::domain::ParameterSetDoc;
@@ -110,13 +110,13 @@ impl Caches {
     }
 
     /// The parameter set, compiled, from the cache or the database (`None`: no such set).
-    pub async fn parameter_set(&self, pool: &SqlitePool, id: &str) -> Result<Option<Arc<CompiledSet>>, ApiError> {
+    pub async fn parameter_set(&self, pool: &SqlitePool, id: &str) -> Result<Option<Arc<CompiledSet>>, AppError> {
         if let Some(s) = self.sets.get(id) {
             return Ok(Some(s));
         }
         let Some(row) = records::parameter_set(pool, id).await? else { return Ok(None) };
         let doc = ParameterSetDoc::from_json(&row.doc_json)
-            .map_err(|e| ApiError::Internal(format!("stored set {}: {e}", row.id)))?;
+            .map_err(|e| AppError::Internal(format!("stored set {}: {e}", row.id)))?;
         let compensator = Compensator::new(&doc.set);
         let compiled = Arc::new(CompiledSet { row, set: doc.set, compensator });
         self.sets.insert(id.to_string(), compiled.clone());

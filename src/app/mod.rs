@@ -1,0 +1,90 @@
+//! What the routes and the jobs share, on top of the store: the service's state (the pool, its
+//! settings, the in-memory caches, the metrics registry, the job queue's wake-up), loading a
+//! robot's model, and assembling a cell file from stored sessions. It knows nothing of HTTP or of
+//! the job workers: both sit above it and turn [`AppError`] into their own errors.
+
+pub mod cache;
+pub mod cells;
+pub mod metrics;
+pub mod robots;
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use sqlx::SqlitePool;
+use tokio::sync::Notify;
+
+pub use metrics::Metrics;
+
+/// Service settings.
+#[derive(Clone, Debug)]
+pub struct ServiceConfig {
+    /// Every `/v1` request needs a bearer token with the right scope (always when the server is
+    /// bound to a non-loopback address).
+    pub require_auth: bool,
+    /// Most measurements (or compensation targets) in one request: 413 beyond.
+    pub max_batch: usize,
+    /// Largest request body, bytes: 413 beyond.
+    pub max_body_bytes: usize,
+    /// Requests taking longer are answered 503 (jobs run in the background and are not affected).
+    pub request_timeout: Duration,
+}
+
+impl Default for ServiceConfig {
+    fn default() -> Self {
+        Self {
+            require_auth: false,
+            max_batch: 10_000,
+            max_body_bytes: 32 * 1024 * 1024,
+            request_timeout: Duration::from_secs(60),
+        }
+    }
+}
+
+/// What every handler shares (and the job workers take their context from).
+#[derive(Clone)]
+pub struct AppState {
+    pub pool: SqlitePool,
+    pub config: Arc<ServiceConfig>,
+    pub metrics: Arc<Metrics>,
+    /// Wakes the job workers when a job is queued.
+    pub wake: Arc<Notify>,
+    /// Robots and compiled parameter sets (the compensation hot path).
+    pub caches: Arc<cache::Caches>,
+}
+
+impl AppState {
+    pub fn new(pool: SqlitePool, config: ServiceConfig) -> Self {
+        AppState {
+            pool,
+            config: Arc::new(config),
+            metrics: Arc::new(Metrics::new()),
+            wake: Arc::new(Notify::new()),
+            caches: Arc::new(cache::Caches::new(256)),
+        }
+    }
+}
+
+/// What can go wrong loading from the store.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum AppError {
+    /// The request named something the store cannot serve (an unknown or repeated session,
+    /// sessions on different artefacts, a robot without a base guess): the field and why.
+    #[error("{detail}")]
+    Invalid { detail: String, field: Option<String> },
+    /// The store failed, or holds what it should not; logged, never echoed.
+    #[error("internal error: {0}")]
+    Internal(String),
+}
+
+impl AppError {
+    pub fn invalid(field: impl Into<String>, detail: impl Into<String>) -> Self {
+        AppError::Invalid { detail: detail.into(), field: Some(field.into()) }
+    }
+}
+
+impl From<sqlx::Error> for AppError {
+    fn from(e: sqlx::Error) -> Self {
+        AppError::Internal(format!("database: {e}"))
+    }
+}

@@ -1,0 +1,139 @@
+//! Calibration commands: identify a cell's robot, validate a parameter set on a cell.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use super::{CliError, DetmaxArgs, list, load_cell, option_error, read, write, write_or_return};
+use crate::domain::ParameterSetDoc;
+use crate::units::MM;
+
+#[derive(Args, Debug)]
+pub struct IdentifyArgs {
+    /// The cell file.
+    pub cell: PathBuf,
+    /// Sessions to identify from (comma-separated names); default: every identification session.
+    #[arg(long)]
+    pub sessions: Option<String>,
+    /// Pose selection: `detmax` picks --n measurements maximising --index.
+    #[arg(long)]
+    pub select: Option<String>,
+    #[arg(long)]
+    pub n: Option<usize>,
+    #[command(flatten)]
+    pub detmax: DetmaxArgs,
+    /// Model options: +beta,-compliance,+cyc2_h1,+backlash2,+coupling5_6,+c2_cubic,+thermal_alpha.
+    #[arg(long, default_value = "", allow_hyphen_values = true)]
+    pub model: String,
+    /// Parameters held at their nominal values (comma-separated names, e.g. a2,tool_x).
+    #[arg(long)]
+    pub fix: Option<String>,
+    /// Refuse fits whose column-scaled κ(J) exceeds this.
+    #[arg(long, default_value_t = crate::domain::identification::default_kappa_limit())]
+    pub kappa_limit: f64,
+    /// Huber loss threshold in robust standard deviations (e.g. 2.5); default plain least squares.
+    #[arg(long)]
+    pub huber: Option<f64>,
+    /// Length weighting orientation residuals of full-pose measurements, mm per rad.
+    #[arg(long, default_value_t = crate::domain::identification::default_rotation_weight_mm())]
+    pub rotation_weight_mm: f64,
+    /// Start from this parameter set (e.g. a calibration made in another set-up): its robot
+    /// parameters and its tool's TCP are the starting point, and fixed parameters keep its values.
+    /// The base comes from the cell (base guess or registration).
+    #[arg(long)]
+    pub start: Option<PathBuf>,
+    /// Free only these parameters (comma-separated names, or the groups `base` and `tool`);
+    /// `--start calibrated.json --only base,tool` re-registers a calibrated robot in a new cell.
+    #[arg(long)]
+    pub only: Option<String>,
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct ValidateArgs {
+    /// The parameter-set file.
+    pub params: PathBuf,
+    /// The cell file.
+    pub cell: PathBuf,
+    /// Session to validate on (repeatable; default: every validation session).
+    #[arg(long)]
+    pub session: Vec<String>,
+    /// Score against the true positions of a simulated cell (its --truth-out file) instead of the readings.
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
+    /// Include the per-measurement residuals.
+    #[arg(long)]
+    pub residuals: bool,
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+pub(super) fn identify(a: IdentifyArgs) -> Result<String, CliError> {
+    use crate::domain::identification::{IdentifySpec, run_identification};
+    let cell = load_cell(&a.cell)?;
+    let spec = IdentifySpec {
+        model: a.model.clone(),
+        fix: list(&a.fix),
+        kappa_limit: a.kappa_limit,
+        huber: a.huber,
+        rotation_weight_mm: a.rotation_weight_mm,
+        only: list(&a.only),
+    };
+    let mut opts = spec.to_options(cell.model.dof()).map_err(option_error)?;
+    if let Some(p) = &a.start {
+        let doc = ParameterSetDoc::from_json(&read(p)?).map_err(|e| CliError::file(p, e))?;
+        opts.start = Some(doc.set);
+    }
+    opts.selection.sessions = list(&a.sessions);
+    let select = match a.select.as_deref() {
+        None => {
+            if a.n.is_some() {
+                return Err(CliError::arg("--n", "needs --select detmax"));
+            }
+            None
+        }
+        Some("detmax") => {
+            let n = a.n.ok_or_else(|| CliError::arg("--n", "--select detmax needs --n"))?;
+            Some(a.detmax.select(n)?)
+        }
+        Some(other) => return Err(CliError::arg("--select", format!("'{other}' is not a selection method (detmax)"))),
+    };
+    let (id, doc) = run_identification(&cell, opts, select, &|| ()).map_err(|e| CliError(e.to_string()))?;
+    let q = &id.quality;
+    write(&a.out, &doc.to_json_pretty())?;
+    Ok(format!(
+        "wrote {}: {} parameters identified from {} measurements in {} iterations; κ {:.1} (scaled) / {:.1} (SI), O1 {:.4}, residual RMS {:.4} mm",
+        a.out.display(),
+        id.free_names.len(),
+        q.n_configs,
+        id.iterations,
+        q.kappa_scaled,
+        q.kappa,
+        q.observability.o1,
+        q.rms_residual / MM
+    ))
+}
+
+pub(super) fn validate(a: ValidateArgs) -> Result<String, CliError> {
+    use crate::validate::report::{Reference, validate, validation_sessions};
+    let doc = ParameterSetDoc::from_json(&read(&a.params)?).map_err(|e| CliError::file(&a.params, e))?;
+    let cell = load_cell(&a.cell)?;
+    let sessions = if a.session.is_empty() { validation_sessions(&cell) } else { a.session.clone() };
+    let parsed = match &a.truth {
+        Some(p) => {
+            let t = crate::domain::truth::parse_truth(&read(p)?).map_err(|e| CliError::file(p, e))?;
+            Some(t.run.ok_or_else(|| {
+                CliError::arg("--truth", "the file has no per-measurement truth (write it with simulate --truth-out)")
+            })?)
+        }
+        None => None,
+    };
+    let reference = match &parsed {
+        Some(run) => Reference::Truth(run),
+        None => Reference::Measured,
+    };
+    let report = validate(&doc.set, &cell, &sessions, reference).map_err(|e| CliError::arg("--session", e))?;
+    let v = crate::domain::validation::report_to_json(&report, a.residuals);
+    write_or_return(&a.out, serde_json::to_string_pretty(&v).expect("json"))
+}

@@ -1,0 +1,208 @@
+//! Data commands: simulate the virtual cell, import real data sets; both write cell files.
+
+use std::path::{Path, PathBuf};
+
+use clap::{Args, Subcommand};
+
+use super::{CliError, read, robot_model, three, write};
+use crate::cell::Purpose;
+use crate::units::{MM, UM};
+
+#[derive(Args, Debug)]
+pub struct SimulateArgs {
+    /// Seed of the pose plans and of every noise draw: the same seed gives byte-identical files.
+    #[arg(long)]
+    pub seed: u64,
+    /// Unmodelled effects of the true robot, e.g. cyclic:j=2:h=1:amp_deg=0.01,backlash,thermal
+    /// (see sim/effects.rs for the list, keys and defaults).
+    #[arg(long, default_value = "")]
+    pub effects: String,
+    /// TriCal poses per ball.
+    #[arg(long, default_value_t = 120)]
+    pub id_per_ball: usize,
+    /// Laser-tracker validation poses.
+    #[arg(long, default_value_t = 506)]
+    pub validation: usize,
+    /// The true parameter set (or a truth file from --truth-out); default: thesis Table 5.1.
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
+    /// TriCal centring tolerance ε, mm.
+    #[arg(long, default_value_t = 0.010, allow_hyphen_values = true)]
+    pub epsilon_mm: f64,
+    /// How auto-centring is simulated: `loop` (the §7 procedure: corrections on the controller's
+    /// nominal model until the reading is within ε) or `uniform-ball` (the TCP uniform in the
+    /// ε-ball plus an independent repeatability offset; more pessimistic).
+    #[arg(long, default_value = "loop")]
+    pub centring: String,
+    /// Robot repeatability (ISO 9283 RP), mm.
+    #[arg(long, default_value_t = 0.010, allow_hyphen_values = true)]
+    pub repeatability_mm: f64,
+    /// Laser-tracker noise, 1σ per axis: µm + µm per metre of range.
+    #[arg(long, default_value_t = 16.0, allow_hyphen_values = true)]
+    pub tracker_sigma_um: f64,
+    #[arg(long, default_value_t = 0.8, allow_hyphen_values = true)]
+    pub tracker_sigma_um_per_m: f64,
+    /// No noise at all (ε, repeatability and tracker set to zero).
+    #[arg(long)]
+    pub no_noise: bool,
+    /// Record the TriCal indicator readings left after centring.
+    #[arg(long)]
+    pub indicators: bool,
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Write the truth (true parameters, effects, per-measurement true positions) here.
+    #[arg(long)]
+    pub truth_out: Option<PathBuf>,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum ImportCommand {
+    /// The UR10 laser-tracker data set (../shared/datasets/ur10-ipa): one session per series.
+    Ur10Ipa(Ur10IpaArgs),
+    /// A joints file (deg, one pose a line) and one positions file per tracker reflector (mm).
+    ThreeReflector(ThreeReflectorArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct Ur10IpaArgs {
+    /// A series folder, optionally with its purpose: PATH[:identification|:validation]. Repeatable.
+    #[arg(long, required = true)]
+    pub series: Vec<String>,
+    /// Mass of the probe on the flange, kg (not in the data set; drives the gravity torques).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub tool_mass_kg: f64,
+    /// Centre of mass of the probe in the flange frame, mm (default: at the TCP).
+    #[arg(long, allow_hyphen_values = true)]
+    pub tool_com_mm: Option<String>,
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct ThreeReflectorArgs {
+    /// Joints file: one pose per line, joint values in degrees, whitespace-separated.
+    #[arg(long)]
+    pub joints: PathBuf,
+    /// One positions file per reflector (x y z mm per line, line-aligned with the joints). Repeatable.
+    #[arg(long, required = true)]
+    pub positions: Vec<PathBuf>,
+    /// A preset (irb120, ur10) or a robot JSON file.
+    #[arg(long)]
+    pub robot: String,
+    /// identification or validation.
+    #[arg(long, default_value = "identification")]
+    pub purpose: String,
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+pub(super) fn simulate(a: SimulateArgs) -> Result<String, CliError> {
+    use crate::sim::{effects::Effects, instruments::Noise, simulate::SimulateOptions};
+    let mut opts =
+        SimulateOptions { seed: a.seed, id_per_ball: a.id_per_ball, validation: a.validation, ..Default::default() };
+    let dof = opts.layout.robot.dof();
+    let effects = Effects::parse(&a.effects, dof).map_err(|e| CliError::arg("--effects", e))?;
+    if let Some(p) = &a.truth {
+        let parsed = crate::domain::truth::parse_truth(&read(p)?).map_err(|e| CliError::file(p, e))?;
+        let mut truth = parsed.truth;
+        if !effects.is_empty() {
+            if !truth.effects.is_empty() {
+                return Err(CliError::arg("--effects", "the truth file carries its own effects; edit them there"));
+            }
+            truth = crate::sim::truth::Truth::new(truth.set, effects.clone());
+        }
+        opts.truth = Some(truth);
+    }
+    opts.effects = effects;
+    for (arg, v) in [
+        ("--epsilon-mm", a.epsilon_mm),
+        ("--repeatability-mm", a.repeatability_mm),
+        ("--tracker-sigma-um", a.tracker_sigma_um),
+        ("--tracker-sigma-um-per-m", a.tracker_sigma_um_per_m),
+    ] {
+        if !v.is_finite() || v < 0.0 {
+            return Err(CliError::arg(arg, "must be a non-negative number"));
+        }
+    }
+    opts.noise = if a.no_noise {
+        Noise::none()
+    } else {
+        Noise {
+            centring: crate::sim::instruments::Centring::parse(&a.centring)
+                .ok_or_else(|| CliError::arg("--centring", format!("'{}' is not loop or uniform-ball", a.centring)))?,
+            epsilon: a.epsilon_mm * MM,
+            repeatability: a.repeatability_mm * MM,
+            tracker_sigma: a.tracker_sigma_um * UM,
+            tracker_sigma_per_m: a.tracker_sigma_um_per_m * UM,
+        }
+    };
+    opts.record_indicators = a.indicators;
+    if a.id_per_ball == 0 {
+        return Err(CliError::arg("--id-per-ball", "must be at least 1"));
+    }
+    let sim = crate::sim::simulate::simulate(&opts).map_err(|e| CliError(e.to_string()))?;
+    let text = crate::domain::cell::cell_to_json(&sim.cell);
+    write(&a.out, &text)?;
+    let mut report = format!(
+        "wrote {} ({} sessions, {} measurements)",
+        a.out.display(),
+        sim.cell.sessions.len(),
+        sim.cell.sessions.iter().map(|s| s.measurements.len()).sum::<usize>()
+    );
+    if let Some(p) = &a.truth_out {
+        let spec = crate::domain::truth::SimulationSpec {
+            seed: a.seed,
+            noise: crate::domain::truth::NoiseSpec::from_noise(&opts.noise),
+            tracker_position_mm: [opts.layout.tracker.x / MM, opts.layout.tracker.y / MM, opts.layout.tracker.z / MM],
+        };
+        let t = crate::domain::truth::truth_to_json(&sim.truth, Some((&spec, &sim.run)));
+        write(p, &t)?;
+        report.push_str(&format!("\nwrote {}", p.display()));
+    }
+    Ok(report)
+}
+
+fn purpose(arg: &str, s: &str) -> Result<Purpose, CliError> {
+    match s {
+        "identification" => Ok(Purpose::Identification),
+        "validation" => Ok(Purpose::Validation),
+        other => Err(CliError::arg(arg, format!("'{other}' is not a purpose (identification, validation)"))),
+    }
+}
+
+fn write_imported(out: &Path, imported: crate::import::Imported) -> Result<String, CliError> {
+    let n: usize = imported.cell.sessions.iter().map(|s| s.measurements.len()).sum();
+    let text = crate::domain::cell::cell_to_json(&imported.cell);
+    write(out, &text)?;
+    let mut report = format!("wrote {} ({} sessions, {n} measurements)", out.display(), imported.cell.sessions.len());
+    for note in imported.notes {
+        report.push_str(&format!("\nnote: {note}"));
+    }
+    Ok(report)
+}
+
+pub(super) fn import_ur10(a: Ur10IpaArgs) -> Result<String, CliError> {
+    let mut series = Vec::new();
+    for s in &a.series {
+        let (path, p) = match s.rsplit_once(':') {
+            Some((path, p)) if p == "identification" || p == "validation" => (path, purpose("--series", p)?),
+            _ => (s.as_str(), Purpose::Identification),
+        };
+        series.push((PathBuf::from(path), p));
+    }
+    let opts = crate::import::ur10_ipa::Ur10Options {
+        purpose: Purpose::Identification,
+        tool_mass_kg: a.tool_mass_kg,
+        tool_com_mm: a.tool_com_mm.as_deref().map(|s| three("--tool-com-mm", s)).transpose()?,
+    };
+    let imported = crate::import::ur10_ipa::import_cell(&series, &opts).map_err(|e| CliError(e.to_string()))?;
+    write_imported(&a.out, imported)
+}
+
+pub(super) fn import_three(a: ThreeReflectorArgs) -> Result<String, CliError> {
+    let model = robot_model("--robot", &a.robot)?;
+    let p = purpose("--purpose", &a.purpose)?;
+    let imported = crate::import::three_reflector::import(&a.joints, &a.positions, model, p)
+        .map_err(|e| CliError(e.to_string()))?;
+    write_imported(&a.out, imported)
+}

@@ -1,0 +1,182 @@
+//! Experiments on a cell: the thesis's Algorithm 5.1 study, and cross-validation on real data.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use super::reports::{CrossvalReport, StudyReport};
+use super::{CliError, DetmaxArgs, ThreadsArgs, list, load_cell, option_error, write};
+
+#[derive(Args, Debug)]
+pub struct StudyArgs {
+    /// The cell file (identification sessions form the pool; validation sessions score each fit).
+    pub cell: PathBuf,
+    /// Set sizes: `20..100` (every n), `20..100:10` (step 10) or `20,50,75`.
+    #[arg(long, default_value = "20..100")]
+    pub sizes: String,
+    /// DETMAX-optimised sets per size.
+    #[arg(long, default_value_t = 30)]
+    pub sets: usize,
+    #[command(flatten)]
+    pub detmax: DetmaxArgs,
+    /// Pool sessions (comma-separated); default: every identification session.
+    #[arg(long)]
+    pub sessions: Option<String>,
+    /// Validation sessions (comma-separated); default: every validation session.
+    #[arg(long)]
+    pub validation: Option<String>,
+    /// Model options, as for identify.
+    #[arg(long, default_value = "", allow_hyphen_values = true)]
+    pub model: String,
+    /// Refuse fits whose column-scaled κ(J) exceeds this (refused fits are counted, not scored).
+    #[arg(long, default_value_t = crate::domain::identification::default_kappa_limit())]
+    pub kappa_limit: f64,
+    #[command(flatten)]
+    pub threads: ThreadsArgs,
+    /// Polish each DETMAX result to exchange-optimality (default: the thesis's DETMAX alone, whose
+    /// random starts end in different local optima).
+    #[arg(long)]
+    pub polish: bool,
+    /// Write every identification's result and the per-size quartiles as JSON here.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+pub struct CrossvalArgs {
+    /// The cell file.
+    pub cell: PathBuf,
+    /// The session whose measurements are split into identification and test sets.
+    #[arg(long)]
+    pub session: String,
+    /// Folds of the k-fold cross-validation (0: skip).
+    #[arg(long, default_value_t = 5)]
+    pub folds: usize,
+    /// Identification sizes of the few-poses scheme (comma-separated; each draw identifies on n poses
+    /// of one random half of the session and tests on the other half).
+    #[arg(long, default_value = "")]
+    pub sizes: String,
+    /// Draws per size.
+    #[arg(long, default_value_t = 10)]
+    pub draws: usize,
+    /// Sessions to transfer the whole-session model to, refitting only base and tools there.
+    #[arg(long)]
+    pub transfer: Option<String>,
+    /// Base or tool parameters kept at the identified values in the transfer refit (comma-separated,
+    /// e.g. `tool_z` when a transfer session's tool orientations barely vary).
+    #[arg(long)]
+    pub transfer_fix: Option<String>,
+    /// κ limit of the transfer refits (default: --kappa-limit). Base and tools are nuisance
+    /// parameters there; the κ of each refit is reported beside its errors.
+    #[arg(long)]
+    pub transfer_kappa_limit: Option<f64>,
+    /// A model to evaluate, as identify's --model (repeatable; `--model=` is the default model).
+    /// Default: `-compliance` (geometry) and the default model (geometry + compliance).
+    #[arg(long, allow_hyphen_values = true)]
+    pub model: Vec<String>,
+    /// Parameters held at their nominal values in every model (comma-separated).
+    #[arg(long)]
+    pub fix: Option<String>,
+    /// Refuse fits whose column-scaled κ(J) exceeds this.
+    #[arg(long, default_value_t = crate::domain::identification::default_kappa_limit())]
+    pub kappa_limit: f64,
+    /// Length weighting orientation residuals of full-pose measurements, mm per rad.
+    #[arg(long, default_value_t = crate::domain::identification::default_rotation_weight_mm())]
+    pub rotation_weight_mm: f64,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    #[command(flatten)]
+    pub threads: ThreadsArgs,
+    /// Write the full result as JSON here.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+pub(super) fn study(a: StudyArgs) -> Result<String, CliError> {
+    use crate::domain::identification::IdentifySpec;
+    use crate::identify::study::{StudyOptions, parse_sizes, study};
+    let cell = load_cell(&a.cell)?;
+    let sizes = parse_sizes(&a.sizes).map_err(|e| CliError::arg("--sizes", e))?;
+    if a.sets == 0 {
+        return Err(CliError::arg("--sets", "must be at least 1"));
+    }
+    let spec = IdentifySpec { model: a.model.clone(), kappa_limit: a.kappa_limit, ..Default::default() };
+    let mut identify = spec.to_options(cell.model.dof()).map_err(option_error)?;
+    let index = a.detmax.index()?;
+    let threads = a.threads.count()?;
+    identify.selection.sessions = list(&a.sessions);
+    let opts = StudyOptions {
+        sizes,
+        sets: a.sets,
+        index,
+        polish: a.polish,
+        seed: a.detmax.seed,
+        threads,
+        validation: list(&a.validation),
+        identify,
+    };
+    let started = std::time::Instant::now();
+    let st = study(&cell, &opts).map_err(|e| CliError(e.to_string()))?;
+    let elapsed = started.elapsed().as_secs_f64();
+    let report = StudyReport::new(&st, a.sets, index, a.polish, a.detmax.seed, elapsed, threads);
+    let mut text = report.text();
+    if let Some(out) = &a.out {
+        write(out, &serde_json::to_string_pretty(&report).expect("json"))?;
+        text.push_str(&format!("wrote {}", out.display()));
+    }
+    Ok(text.trim_end().to_string())
+}
+
+pub(super) fn crossval(a: CrossvalArgs) -> Result<String, CliError> {
+    use crate::domain::identification::{IdentifySpec, kappa_limit};
+    use crate::identify::crossval::{CrossvalOptions, Variant, crossval};
+    let cell = load_cell(&a.cell)?;
+    let spec = IdentifySpec {
+        fix: list(&a.fix),
+        kappa_limit: a.kappa_limit,
+        rotation_weight_mm: a.rotation_weight_mm,
+        ..Default::default()
+    };
+    let base = spec.to_options(cell.model.dof()).map_err(option_error)?;
+    let sizes = if a.sizes.trim().is_empty() {
+        Vec::new()
+    } else {
+        crate::identify::study::parse_sizes(&a.sizes).map_err(|e| CliError::arg("--sizes", e))?
+    };
+    let threads = a.threads.count()?;
+    let models = if a.model.is_empty() { vec!["-compliance".to_string(), String::new()] } else { a.model.clone() };
+    let mut variants = Vec::new();
+    for model in &models {
+        let options =
+            IdentifySpec { model: model.clone(), ..spec.clone() }.to_options(cell.model.dof()).map_err(option_error)?;
+        let name = if model.is_empty() { "default".to_string() } else { model.clone() };
+        variants.push(Variant { name, options });
+    }
+    let opts = CrossvalOptions {
+        session: a.session.clone(),
+        folds: a.folds,
+        sizes,
+        draws: a.draws,
+        transfer: list(&a.transfer),
+        transfer_fixed: list(&a.transfer_fix),
+        transfer_kappa_limit: a.transfer_kappa_limit,
+        variants,
+        before: base.clone(),
+        seed: a.seed,
+        threads,
+    };
+    let started = std::time::Instant::now();
+    if let Some(k) = a.transfer_kappa_limit {
+        kappa_limit(k, "transfer_kappa_limit").map_err(option_error)?;
+    }
+    let cv = crossval(&cell, &opts).map_err(|e| CliError(e.to_string()))?;
+    let elapsed = started.elapsed().as_secs_f64();
+
+    let report = CrossvalReport::new(&cv, a.seed, a.folds, a.draws, elapsed, threads);
+    let mut text = report.text();
+    if let Some(out) = &a.out {
+        write(out, &serde_json::to_string_pretty(&report).expect("json"))?;
+        text.push_str(&format!("wrote {}", out.display()));
+    }
+    Ok(text.trim_end().to_string())
+}

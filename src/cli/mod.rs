@@ -1,0 +1,217 @@
+//! The `robocal` command line: a thin front end over the library. Inputs and outputs in mm and
+//! degrees; every error names the argument (or file field) at fault.
+
+mod calibrate;
+mod data;
+mod experiments;
+mod kinematics;
+mod reports;
+mod service;
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use clap::{Args, Parser, Subcommand};
+use serde_json::{Value, json};
+
+use crate::domain::identification::{DetmaxSelection, SelectSpec, observability_index};
+use crate::domain::{DomainError, RobotSpec};
+use crate::identify::observability::Index;
+pub use calibrate::{IdentifyArgs, ValidateArgs};
+pub use data::{ImportCommand, SimulateArgs, ThreeReflectorArgs, Ur10IpaArgs};
+pub use experiments::{CrossvalArgs, StudyArgs};
+pub use kinematics::{CompensateArgs, FkArgs, IkArgs, ModelArgs, NominalArgs, ToolArgs};
+pub use service::{DemoArgs, OpenapiArgs, ServeArgs, TokenCommand};
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "robocal",
+    version,
+    about = "Robot calibration: kinematic models, identification and compensated targets"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Forward kinematics: joints (deg) → TCP pose (mm, deg).
+    Fk(FkArgs),
+    /// Inverse kinematics: TCP pose → joints, for one configuration branch or all eight.
+    Ik(IkArgs),
+    /// Fake-target compensation of a batch of targets with a calibrated parameter set.
+    Compensate(CompensateArgs),
+    /// Write the nominal parameter set of a robot and tool (a starting point for custom models).
+    Nominal(NominalArgs),
+    /// Convert a real data set into a cell file.
+    #[command(subcommand)]
+    Import(ImportCommand),
+    /// Simulate the virtual cell: plan the TriCal and tracker runs, measure a true robot, write the cell file.
+    Simulate(SimulateArgs),
+    /// Identify the robot's parameters from a cell's measurements.
+    Identify(IdentifyArgs),
+    /// Validate a parameter set on a cell's sessions: error statistics of the calibrated and nominal models.
+    Validate(ValidateArgs),
+    /// The thesis's Algorithm 5.1: DETMAX-optimised sets of each size, each identified and validated.
+    Study(StudyArgs),
+    /// Held-out errors on real data: k-fold cross-validation, few-pose identifications tested on a
+    /// disjoint half, and transfer to other sessions with base and tools refitted.
+    Crossval(CrossvalArgs),
+    /// Run the calibration service: HTTP API, background jobs, embedded SQLite database.
+    Serve(ServeArgs),
+    /// Manage the service's bearer tokens (directly in its database).
+    #[command(subcommand)]
+    Token(TokenCommand),
+    /// Print or write the OpenAPI 3.1 document of the service.
+    Openapi(OpenapiArgs),
+    /// The whole loop on the virtual cell through the HTTP API: plan, measure, identify, validate,
+    /// compensate; prints the before/after table.
+    Demo(DemoArgs),
+}
+
+/// A command-line failure: the argument (or file and field) and the reason.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct CliError(pub String);
+
+impl CliError {
+    fn arg(arg: &str, reason: impl std::fmt::Display) -> Self {
+        CliError(format!("{arg}: {reason}"))
+    }
+    fn file(path: &Path, e: DomainError) -> Self {
+        CliError(format!("{}: {e}", path.display()))
+    }
+}
+
+pub fn run(cli: Cli) -> Result<String, CliError> {
+    match cli.command {
+        Command::Fk(a) => kinematics::fk(a),
+        Command::Ik(a) => kinematics::ik(a),
+        Command::Compensate(a) => kinematics::compensate(a),
+        Command::Nominal(a) => kinematics::nominal(a),
+        Command::Import(ImportCommand::Ur10Ipa(a)) => data::import_ur10(a),
+        Command::Import(ImportCommand::ThreeReflector(a)) => data::import_three(a),
+        Command::Simulate(a) => data::simulate(a),
+        Command::Identify(a) => calibrate::identify(a),
+        Command::Validate(a) => calibrate::validate(a),
+        Command::Study(a) => experiments::study(a),
+        Command::Crossval(a) => experiments::crossval(a),
+        Command::Serve(a) => service::serve(a),
+        Command::Token(t) => service::token(t),
+        Command::Openapi(a) => write_or_return(&a.out, crate::http::openapi_json().trim_end().to_string()),
+        Command::Demo(a) => service::demo(a),
+    }
+}
+
+fn load_cell(path: &Path) -> Result<crate::cell::Cell, CliError> {
+    crate::domain::cell::parse_cell(&read(path)?).map_err(|e| CliError::file(path, e))
+}
+
+fn list(s: &Option<String>) -> Vec<String> {
+    s.as_deref()
+        .map(|s| s.split(',').map(|x| x.trim().to_string()).filter(|x| !x.is_empty()).collect())
+        .unwrap_or_default()
+}
+
+/// A checked option's error, named as the flag it came from (`kappa_limit` → `--kappa-limit`).
+fn option_error(e: DomainError) -> CliError {
+    CliError::arg(&format!("--{}", e.path.replace('_', "-")), e.reason)
+}
+
+/// `--index` and `--seed` of a DETMAX selection (identify, study).
+#[derive(Args, Debug)]
+pub struct DetmaxArgs {
+    /// Observability index DETMAX maximises: O1 (default) … O5.
+    #[arg(long, default_value = "O1")]
+    pub index: String,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+impl DetmaxArgs {
+    fn index(&self) -> Result<Index, CliError> {
+        observability_index(&self.index, "index").map_err(option_error)
+    }
+
+    /// A selection of `n` measurements with these settings, checked as a request's.
+    fn select(&self, n: usize) -> Result<DetmaxSelection, CliError> {
+        SelectSpec { n, index: self.index.clone(), seed: self.seed }.to_selection().map_err(option_error)
+    }
+}
+
+/// `--threads` of the commands that run many identifications in parallel (study, crossval).
+#[derive(Args, Debug)]
+pub struct ThreadsArgs {
+    /// Worker threads; default: the machine's available parallelism.
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+impl ThreadsArgs {
+    /// At least 1; default the machine's available parallelism.
+    fn count(&self) -> Result<usize, CliError> {
+        match self.threads {
+            Some(0) => Err(CliError::arg("--threads", "must be at least 1")),
+            Some(t) => Ok(t),
+            None => Ok(std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)),
+        }
+    }
+}
+
+fn read(path: &Path) -> Result<String, CliError> {
+    fs::read_to_string(path).map_err(|e| CliError(format!("{}: cannot read: {e}", path.display())))
+}
+
+/// Write `text` and a final newline to `path`.
+fn write(path: &Path, text: &str) -> Result<(), CliError> {
+    fs::write(path, format!("{text}\n")).map_err(|e| CliError(format!("{}: cannot write: {e}", path.display())))
+}
+
+fn write_or_return(out: &Option<PathBuf>, text: String) -> Result<String, CliError> {
+    match out {
+        Some(p) => {
+            write(p, &text)?;
+            Ok(format!("wrote {}", p.display()))
+        }
+        None => Ok(text),
+    }
+}
+
+/// Parse "a,b,c" into exactly `n` finite numbers.
+fn numbers(arg: &str, text: &str, n: Option<usize>) -> Result<Vec<f64>, CliError> {
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|s| {
+            let s = s.trim();
+            s.parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| CliError::arg(arg, format!("'{s}' is not a finite number")))
+        })
+        .collect::<Result<_, _>>()?;
+    if let Some(n) = n
+        && v.len() != n
+    {
+        return Err(CliError::arg(arg, format!("expected {n} comma-separated values, got {}", v.len())));
+    }
+    Ok(v)
+}
+
+fn three(arg: &str, text: &str) -> Result<[f64; 3], CliError> {
+    let v = numbers(arg, text, Some(3))?;
+    Ok([v[0], v[1], v[2]])
+}
+
+fn robot_model(arg: &str, robot: &str) -> Result<crate::kinematics::RobotModel, CliError> {
+    let is_file = robot.ends_with(".json") || Path::new(robot).exists();
+    let value: Value = if is_file {
+        let path = Path::new(robot);
+        serde_json::from_str(&read(path)?).map_err(|e| CliError(format!("{}: not JSON: {e}", path.display())))?
+    } else {
+        json!({ "preset": robot })
+    };
+    RobotSpec::from_json_value(&value)
+        .and_then(|r| r.to_model())
+        .map_err(|e| if is_file { CliError(format!("{robot}: {e}")) } else { CliError::arg(arg, e.reason) })
+}

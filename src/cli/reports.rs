@@ -1,0 +1,404 @@
+//! The reports of `robocal study` and `robocal crossval`: one typed document each, serialised as
+//! the `--out` JSON and rendered as the text tables. Lengths in mm, orientations in mrad.
+
+use serde::Serialize;
+
+use crate::domain::validation::ErrorFigures;
+use crate::identify::crossval::{Crossval, HeldOut, SizeResult};
+use crate::identify::observability::Index;
+use crate::identify::study::Study;
+use crate::units::{MM, MRAD};
+
+/// Radians → milliradians: × 1e3 exactly (`1 / MRAD` is 1e3 to the bit; ÷ MRAD would round
+/// differently from what these reports have always written).
+const PER_MRAD: f64 = 1.0 / MRAD;
+
+/// `robocal study`: per set size the quartiles over the sets, and every identification.
+#[derive(Clone, Debug, Serialize)]
+pub struct StudyReport {
+    /// Measurements in the pool DETMAX draws from.
+    pub pool: usize,
+    pub validation_sessions: Vec<String>,
+    pub sets: usize,
+    pub index: &'static str,
+    pub polish: bool,
+    pub seed: u64,
+    pub quartiles: &'static str,
+    pub rows: Vec<StudySize>,
+    pub runs: Vec<StudyRunFigures>,
+    /// Wall-clock seconds and worker threads: the text's, not the document's.
+    #[serde(skip)]
+    pub seconds: f64,
+    #[serde(skip)]
+    pub threads: usize,
+}
+
+/// One set size: quartiles (min, q1, median, q3, max) over its sets of the validation errors.
+#[derive(Clone, Debug, Serialize)]
+pub struct StudySize {
+    pub n: usize,
+    pub succeeded: usize,
+    pub refused: usize,
+    pub mean_mm_quartiles: [f64; 5],
+    pub std_mm_quartiles: [f64; 5],
+    pub max_mm_quartiles: [f64; 5],
+}
+
+/// One identification of the study (figures absent when it was refused).
+#[derive(Clone, Debug, Serialize)]
+pub struct StudyRunFigures {
+    pub n: usize,
+    pub set: usize,
+    pub seed: u64,
+    pub mean_mm: Option<f64>,
+    pub std_mm: Option<f64>,
+    pub max_mm: Option<f64>,
+    pub kappa_si: Option<f64>,
+    pub o1_si: Option<f64>,
+    pub refused: Option<String>,
+}
+
+fn finite(v: f64) -> Option<f64> {
+    v.is_finite().then_some(v)
+}
+
+fn quartiles_mm(q: &[f64; 5]) -> [f64; 5] {
+    q.map(|v| v / MM)
+}
+
+impl StudyReport {
+    pub fn new(st: &Study, sets: usize, index: Index, polish: bool, seed: u64, seconds: f64, threads: usize) -> Self {
+        StudyReport {
+            pool: st.pool,
+            validation_sessions: st.validation.clone(),
+            sets,
+            index: index.name(),
+            polish,
+            seed,
+            quartiles: "min, q1, median, q3, max over the sets of each size",
+            rows: st
+                .rows
+                .iter()
+                .map(|r| StudySize {
+                    n: r.n,
+                    succeeded: r.succeeded,
+                    refused: r.failed,
+                    mean_mm_quartiles: quartiles_mm(&r.mean),
+                    std_mm_quartiles: quartiles_mm(&r.std),
+                    max_mm_quartiles: quartiles_mm(&r.max),
+                })
+                .collect(),
+            runs: st
+                .runs
+                .iter()
+                .map(|r| StudyRunFigures {
+                    n: r.n,
+                    set: r.set,
+                    seed: r.seed,
+                    mean_mm: finite(r.mean / MM),
+                    std_mm: finite(r.std / MM),
+                    max_mm: finite(r.max / MM),
+                    kappa_si: finite(r.kappa),
+                    o1_si: finite(r.o1),
+                    refused: r.error.clone(),
+                })
+                .collect(),
+            seconds,
+            threads,
+        }
+    }
+
+    /// The summary line and the quartile table.
+    pub fn text(&self) -> String {
+        let mut text = format!(
+            "{} identifications ({} sizes × {} DETMAX-optimised sets from a pool of {}), validated on {}, in {:.1} s on {} threads\n",
+            self.runs.len(),
+            self.rows.len(),
+            self.sets,
+            self.pool,
+            self.validation_sessions.join(", "),
+            self.seconds,
+            self.threads
+        );
+        text.push_str("quartiles over the sets (min / q1 / median / q3 / max), mm\n");
+        text.push_str(&format!("{:>4} {:>7}  {:<36}  {:<36}  {:<36}\n", "n", "refused", "mean", "std", "max"));
+        let fmt = |q: &[f64; 5]| q.iter().map(|v| format!("{v:.3}")).collect::<Vec<_>>().join(" ");
+        for r in &self.rows {
+            text.push_str(&format!(
+                "{:>4} {:>7}  {:<36}  {:<36}  {:<36}\n",
+                r.n,
+                r.refused,
+                fmt(&r.mean_mm_quartiles),
+                fmt(&r.std_mm_quartiles),
+                fmt(&r.max_mm_quartiles)
+            ));
+        }
+        text
+    }
+}
+
+/// `robocal crossval`: k-fold, few-poses and transfer errors of every model.
+#[derive(Clone, Debug, Serialize)]
+pub struct CrossvalReport {
+    pub session: String,
+    pub measurements: usize,
+    pub seed: u64,
+    pub folds: usize,
+    pub draws: usize,
+    pub kfold: Vec<KfoldFigures>,
+    pub sizes: Vec<SizeFigures>,
+    pub transfer: Vec<TransferFigures>,
+    pub quartiles: &'static str,
+    /// Wall-clock seconds and worker threads: the text's, not the document's.
+    #[serde(skip)]
+    pub seconds: f64,
+    #[serde(skip)]
+    pub threads: usize,
+}
+
+/// Held-out errors of a model on a test set.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct HeldOutFigures {
+    pub n: usize,
+    #[serde(flatten)]
+    pub position: ErrorFigures,
+    pub orientation: Option<OrientationFigures>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct OrientationFigures {
+    pub mean_mrad: f64,
+    pub median_mrad: f64,
+    pub p95_mrad: f64,
+    pub max_mrad: f64,
+}
+
+/// A fit's held-out errors, or why it was refused.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum Outcome {
+    HeldOut(HeldOutFigures),
+    Refused { refused: String },
+}
+
+/// k-fold cross-validation of one model.
+#[derive(Clone, Debug, Serialize)]
+pub struct KfoldFigures {
+    pub model: String,
+    pub parameters_identified: usize,
+    pub pooled: Option<HeldOutFigures>,
+    pub per_fold: Vec<Outcome>,
+}
+
+/// One identification size of the few-poses scheme, one model.
+#[derive(Clone, Debug, Serialize)]
+pub struct SizeFigures {
+    pub model: String,
+    pub n: usize,
+    pub refused: usize,
+    pub mean_mm_over_draws: Option<f64>,
+    pub mean_mm_quartiles: Option<[f64; 5]>,
+    pub median_mm_quartiles: Option<[f64; 5]>,
+    pub orientation_mean_mrad_quartiles: Option<[f64; 5]>,
+    pub draws: Vec<Outcome>,
+    #[serde(skip)]
+    pub table: SizeTableRow,
+}
+
+/// The few-poses table's figures, computed as the table always computed them (statistics of
+/// the per-draw values in mm or mrad; the document scales the statistics of the SI values, which
+/// can differ in the last bit).
+#[derive(Clone, Debug, Default)]
+pub struct SizeTableRow {
+    pub mean_mm: Option<f64>,
+    pub range_mm: Option<[f64; 2]>,
+    pub median_mm: Option<f64>,
+    pub orientation_mrad: Option<f64>,
+}
+
+/// A transfer of the whole-session model to another session.
+#[derive(Clone, Debug, Serialize)]
+pub struct TransferFigures {
+    pub model: String,
+    pub session: String,
+    pub errors: Outcome,
+    pub kappa_scaled: Option<f64>,
+}
+
+impl HeldOutFigures {
+    fn of(h: &HeldOut) -> Self {
+        HeldOutFigures {
+            n: h.position.n,
+            position: ErrorFigures::of(&h.position),
+            orientation: h.orientation.map(|o| OrientationFigures {
+                mean_mrad: o.mean * PER_MRAD,
+                median_mrad: o.median * PER_MRAD,
+                p95_mrad: o.p95 * PER_MRAD,
+                max_mrad: o.max * PER_MRAD,
+            }),
+        }
+    }
+
+    /// mean, median, p95, max (mm) and the orientation mean (mrad), as table cells.
+    fn cells(&self) -> String {
+        let p = &self.position;
+        let o = self.orientation.as_ref().map_or("      —".to_string(), |o| format!("{:7.3}", o.mean_mrad));
+        format!("{:7.3} {:7.3} {:7.3} {:7.3} {}", p.mean_mm, p.median_mm, p.p95_mm, p.max_mm, o)
+    }
+}
+
+impl Outcome {
+    fn of(r: &Result<HeldOut, String>) -> Self {
+        match r {
+            Ok(h) => Outcome::HeldOut(HeldOutFigures::of(h)),
+            Err(e) => Outcome::Refused { refused: e.clone() },
+        }
+    }
+
+    fn refused(&self) -> Option<&str> {
+        match self {
+            Outcome::Refused { refused } => Some(refused),
+            Outcome::HeldOut(_) => None,
+        }
+    }
+}
+
+/// Every draw of the size succeeded and observed orientations.
+fn all_oriented(s: &SizeResult) -> bool {
+    s.draws.iter().all(|d| d.as_ref().is_ok_and(|h| h.orientation.is_some()))
+}
+
+impl SizeFigures {
+    fn of(s: &SizeResult) -> Self {
+        let scaled = |q: Option<[f64; 5]>, scale: f64| q.map(|q| q.map(|v| v * scale));
+        let mean_q = s.quartiles(|h| h.position.mean);
+        SizeFigures {
+            model: s.variant.clone(),
+            n: s.n,
+            refused: s.draws.iter().filter(|d| d.is_err()).count(),
+            mean_mm_over_draws: s.mean(|h| h.position.mean).map(|v| v / MM),
+            mean_mm_quartiles: scaled(mean_q, 1.0 / MM),
+            median_mm_quartiles: scaled(s.quartiles(|h| h.position.median), 1.0 / MM),
+            orientation_mean_mrad_quartiles: scaled(
+                if all_oriented(s) { s.quartiles(|h| h.orientation.map_or(f64::NAN, |o| o.mean)) } else { None },
+                PER_MRAD,
+            ),
+            draws: s.draws.iter().map(Outcome::of).collect(),
+            table: SizeTableRow {
+                mean_mm: s.mean(|h| h.position.mean / MM),
+                range_mm: mean_q.map(|q| [q[0] / MM, q[4] / MM]),
+                median_mm: s.quartiles(|h| h.position.median / MM).map(|q| q[2]),
+                orientation_mrad: if all_oriented(s) {
+                    s.mean(|h| h.orientation.map_or(f64::NAN, |o| o.mean) * PER_MRAD)
+                } else {
+                    None
+                },
+            },
+        }
+    }
+}
+
+impl CrossvalReport {
+    pub fn new(cv: &Crossval, seed: u64, folds: usize, draws: usize, seconds: f64, threads: usize) -> Self {
+        CrossvalReport {
+            session: cv.session.clone(),
+            measurements: cv.measurements,
+            seed,
+            folds,
+            draws,
+            kfold: cv
+                .folds
+                .iter()
+                .map(|f| KfoldFigures {
+                    model: f.variant.clone(),
+                    parameters_identified: f.identified,
+                    pooled: f.pooled.as_ref().map(HeldOutFigures::of),
+                    per_fold: f.per_fold.iter().map(Outcome::of).collect(),
+                })
+                .collect(),
+            sizes: cv.sizes.iter().map(SizeFigures::of).collect(),
+            transfer: cv
+                .transfer
+                .iter()
+                .map(|t| TransferFigures {
+                    model: t.variant.clone(),
+                    session: t.session.clone(),
+                    errors: Outcome::of(&t.errors),
+                    kappa_scaled: t.kappa_scaled,
+                })
+                .collect(),
+            quartiles: "min, q1, median, q3, max over the draws",
+            seconds,
+            threads,
+        }
+    }
+
+    /// The tables: k-fold, few poses, transfer (each when there is one).
+    pub fn text(&self) -> String {
+        let mut text = format!(
+            "session {} ({} measurements), {:.1} s on {} threads\n",
+            self.session, self.measurements, self.seconds, self.threads
+        );
+        if !self.kfold.is_empty() {
+            text.push_str(&format!(
+                "\n{}-fold cross-validation, pooled held-out errors (mm; orientation mrad)\n",
+                self.folds
+            ));
+            text.push_str(&format!(
+                "{:<24} {:>6} {:>7} {:>7} {:>7} {:>7} {:>7}\n",
+                "model", "params", "mean", "median", "p95", "max", "ori"
+            ));
+            for f in &self.kfold {
+                let r = match (&f.pooled, f.per_fold.iter().find_map(Outcome::refused)) {
+                    (Some(h), _) => h.cells(),
+                    (None, Some(e)) => format!("refused: {e}"),
+                    (None, None) => "—".into(),
+                };
+                text.push_str(&format!("{:<24} {:>6} {}\n", f.model, f.parameters_identified, r));
+            }
+        }
+        if !self.sizes.is_empty() {
+            text.push_str(&format!(
+                "\nfew poses: identify on n poses of a random half, test on the other half; over {} draws: mean, [min, max] of each draw's mean, median of the medians (mm); orientation mean (mrad)\n",
+                self.draws
+            ));
+            text.push_str(&format!(
+                "{:<24} {:>5} {:>7} {:>17} {:>7} {:>7} {:>7}\n",
+                "model", "n", "mean", "[min, max]", "median", "ori", "refused"
+            ));
+            let f3 = |v: Option<f64>| v.map_or_else(|| "      —".to_string(), |v| format!("{v:7.3}"));
+            for s in &self.sizes {
+                let t = &s.table;
+                let range = t.range_mm.map_or_else(|| "—".to_string(), |[lo, hi]| format!("[{lo:.3}, {hi:.3}]"));
+                text.push_str(&format!(
+                    "{:<24} {:>5} {} {:>17} {} {} {:>7}\n",
+                    s.model,
+                    s.n,
+                    f3(t.mean_mm),
+                    range,
+                    f3(t.median_mm),
+                    f3(t.orientation_mrad),
+                    s.refused
+                ));
+            }
+        }
+        if !self.transfer.is_empty() {
+            text.push_str(&format!(
+                "\ntransfer: identified on all of {}, base and tools refitted on each session (mm; orientation mrad)\n",
+                self.session
+            ));
+            text.push_str(&format!(
+                "{:<24} {:<12} {:>7} {:>7} {:>7} {:>7} {:>7} {:>8}\n",
+                "model", "session", "mean", "median", "p95", "max", "ori", "κ refit"
+            ));
+            for t in &self.transfer {
+                let r = match &t.errors {
+                    Outcome::HeldOut(h) => format!("{} {:>8.0}", h.cells(), t.kappa_scaled.unwrap_or(f64::NAN)),
+                    Outcome::Refused { refused } => format!("refused: {refused}"),
+                };
+                text.push_str(&format!("{:<24} {:<12} {}\n", t.model, t.session, r));
+            }
+        }
+        text
+    }
+}

@@ -1,0 +1,204 @@
+//! Service commands: run the server, manage its tokens, print its OpenAPI document, run the demo
+//! loop through it.
+
+use std::path::PathBuf;
+
+use clap::{Args, Subcommand};
+use serde_json::{Value, json};
+
+use super::CliError;
+
+#[derive(Args, Debug)]
+pub struct ServeArgs {
+    /// SQLite database file (created and migrated on first start).
+    #[arg(long, env = "ROBOCAL_DB", default_value = "robocal.db")]
+    pub db: PathBuf,
+    /// Address to listen on. Any non-loopback address requires bearer tokens.
+    #[arg(long, env = "ROBOCAL_BIND", default_value = "127.0.0.1:8080")]
+    pub bind: String,
+    /// Job workers (each runs one solver at a time).
+    #[arg(long, env = "ROBOCAL_WORKERS", default_value_t = 1)]
+    pub workers: usize,
+    /// Require bearer tokens on a loopback address too.
+    #[arg(long, env = "ROBOCAL_REQUIRE_AUTH")]
+    pub require_auth: bool,
+    /// Most measurements or compensation targets per request.
+    #[arg(long, env = "ROBOCAL_MAX_BATCH", default_value_t = 10_000)]
+    pub max_batch: usize,
+    /// Seconds a shutdown waits for running jobs before requeueing them.
+    #[arg(long, env = "ROBOCAL_SHUTDOWN_GRACE_S", default_value_t = 10)]
+    pub grace_s: u64,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum TokenCommand {
+    /// Create a token; prints its secret once.
+    Create {
+        #[command(flatten)]
+        db: TokenDb,
+        /// Who uses it, e.g. cell-3-pc.
+        #[arg(long)]
+        name: String,
+        /// Comma-separated: measure, calibrate, compensate, read, admin.
+        #[arg(long)]
+        scopes: String,
+    },
+    /// List tokens (never their secrets).
+    List {
+        #[command(flatten)]
+        db: TokenDb,
+    },
+    /// Revoke a token by id (a running server stops accepting it within a second; revoking
+    /// over HTTP, DELETE /v1/tokens/{id}, takes effect at once).
+    Revoke {
+        #[command(flatten)]
+        db: TokenDb,
+        id: String,
+    },
+}
+
+/// The database the token commands write (the server's, directly).
+#[derive(Args, Debug)]
+pub struct TokenDb {
+    #[arg(long, env = "ROBOCAL_DB", default_value = "robocal.db")]
+    pub db: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct OpenapiArgs {
+    /// Write here instead of printing.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+pub struct DemoArgs {
+    /// A running server (http://host:port); default: start one in-process on a temporary database.
+    #[arg(long)]
+    pub url: Option<String>,
+    /// Bearer token for --url (scopes measure, calibrate, compensate, read).
+    #[arg(long, env = "ROBOCAL_TOKEN")]
+    pub token: Option<String>,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// DETMAX-selected identification poses.
+    #[arg(long, default_value_t = 75)]
+    pub select: usize,
+    /// Compensated targets checked against the simulator's truth.
+    #[arg(long, default_value_t = 300)]
+    pub targets: usize,
+}
+
+fn runtime() -> Result<tokio::runtime::Runtime, CliError> {
+    tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| CliError(format!("cannot start the async runtime: {e}")))
+}
+
+fn init_tracing() {
+    use tracing_subscriber::EnvFilter;
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info,sqlx=warn"));
+    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+}
+
+pub(super) fn serve(a: ServeArgs) -> Result<String, CliError> {
+    use crate::server::{ServeOptions, serve, shutdown_signal};
+    let bind: std::net::SocketAddr =
+        a.bind.parse().map_err(|e| CliError::arg("--bind", format!("'{}' is not host:port ({e})", a.bind)))?;
+    if a.workers == 0 {
+        return Err(CliError::arg("--workers", "must be at least 1"));
+    }
+    if a.max_batch == 0 {
+        return Err(CliError::arg("--max-batch", "must be at least 1"));
+    }
+    init_tracing();
+    let mut opts = ServeOptions::new(a.db.clone(), bind);
+    opts.workers = a.workers;
+    opts.require_auth = a.require_auth;
+    opts.grace = std::time::Duration::from_secs(a.grace_s);
+    opts.config.max_batch = a.max_batch;
+    runtime()?.block_on(serve(opts, None, shutdown_signal())).map_err(|e| CliError(e.to_string()))?;
+    Ok("robocal stopped".into())
+}
+
+pub(super) fn token(t: TokenCommand) -> Result<String, CliError> {
+    use crate::db::tokens;
+    let rt = runtime()?;
+    rt.block_on(async {
+        let open = |TokenDb { db }: TokenDb| async move {
+            crate::db::connect(&db).await.map_err(|e| CliError(format!("{}: {e}", db.display())))
+        };
+        match t {
+            TokenCommand::Create { db, name, scopes } => {
+                let scopes = tokens::parse_scopes(&scopes).map_err(|e| CliError::arg("--scopes", e))?;
+                if name.trim().is_empty() {
+                    return Err(CliError::arg("--name", "must not be empty"));
+                }
+                let pool = open(db).await?;
+                let (row, secret) = tokens::create(&pool, name.trim(), &scopes).await.map_err(|e| CliError(e.to_string()))?;
+                pool.close().await;
+                Ok(serde_json::to_string_pretty(&json!({
+                    "id": row.id, "name": row.name, "scopes": row.scopes.split(' ').collect::<Vec<_>>(),
+                    "token": secret, "note": "the token is shown only now; send it as Authorization: Bearer <token>",
+                }))
+                .expect("json"))
+            }
+            TokenCommand::List { db } => {
+                let pool = open(db).await?;
+                let rows = tokens::list(&pool).await.map_err(|e| CliError(e.to_string()))?;
+                pool.close().await;
+                let v: Vec<Value> = rows
+                    .iter()
+                    .map(|r| json!({"id": r.id, "name": r.name, "scopes": r.scopes, "created_at": r.created_at, "revoked_at": r.revoked_at}))
+                    .collect();
+                Ok(serde_json::to_string_pretty(&v).expect("json"))
+            }
+            TokenCommand::Revoke { db, id } => {
+                let pool = open(db).await?;
+                let ok = tokens::revoke(&pool, &id).await.map_err(|e| CliError(e.to_string()))?;
+                pool.close().await;
+                if ok { Ok(format!("revoked {id}")) } else { Err(CliError(format!("no live token '{id}'"))) }
+            }
+        }
+    })
+}
+
+pub(super) fn demo(a: DemoArgs) -> Result<String, CliError> {
+    use crate::demo::{DemoOptions, run, table};
+    use crate::http::client::Client;
+    if a.select < 31 {
+        return Err(CliError::arg("--select", "at least 31 poses are needed for the 31 identifiable parameters"));
+    }
+    if a.targets == 0 {
+        return Err(CliError::arg("--targets", "must be at least 1"));
+    }
+    let opts = DemoOptions { seed: a.seed, select: a.select, targets: a.targets, ..Default::default() };
+    runtime()?.block_on(async {
+        let mut log = |s: &str| eprintln!("{s}");
+        match &a.url {
+            Some(url) => {
+                let client = Client::new(url, a.token.clone()).map_err(|e| CliError::arg("--url", e))?;
+                eprintln!("robocal demo against {url}");
+                let r = run(&client, &opts, &mut log).await.map_err(|e| CliError(e.to_string()))?;
+                Ok(table(&r))
+            }
+            None => {
+                let dir = std::env::temp_dir();
+                let db = dir.join(format!("robocal-demo-{}-{}.db", std::process::id(), crate::db::new_id()));
+                let server =
+                    crate::server::start(crate::server::ServeOptions::new(db.clone(), ([127, 0, 0, 1], 0).into()))
+                        .await
+                        .map_err(|e| CliError(e.to_string()))?;
+                eprintln!("robocal demo: in-process server at {} on {}", server.url(), db.display());
+                let client = Client::new(&server.url(), None).map_err(|e| CliError(e.to_string()))?;
+                let r = run(&client, &opts, &mut log).await;
+                let _ = server.stop().await;
+                for suffix in ["", "-wal", "-shm"] {
+                    let _ = std::fs::remove_file(format!("{}{suffix}", db.display()));
+                }
+                Ok(table(&r.map_err(|e| CliError(e.to_string()))?))
+            }
+        }
+    })
+}
