@@ -137,3 +137,128 @@ pub(super) fn validate(a: ValidateArgs) -> Result<String, CliError> {
     let v = crate::domain::validation::report_to_json(&report, a.residuals);
     write_or_return(&a.out, serde_json::to_string_pretty(&v).expect("json"))
 }
+
+#[derive(Args, Debug)]
+pub struct DiagnoseArgs {
+    /// The calibrated parameter-set file (its statuses tell which parameters were identified).
+    pub params: PathBuf,
+    /// The cell file.
+    pub cell: PathBuf,
+    /// Identification sessions (comma-separated); default: every identification session.
+    #[arg(long)]
+    pub identification: Option<String>,
+    /// Validation sessions (comma-separated); default: every validation session; `none`:
+    /// cross-validate on the identification sessions alone.
+    #[arg(long)]
+    pub validation: Option<String>,
+    /// Folds of the grouped cross-validation.
+    #[arg(long, default_value_t = 5)]
+    pub folds: usize,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Instrument model, 1σ per axis: a TriCal ball measurement (µm).
+    #[arg(long)]
+    pub trical_um: Option<f64>,
+    /// A laser-tracker reading, constant part (µm).
+    #[arg(long)]
+    pub tracker_um: Option<f64>,
+    /// …and per metre from the {W} origin (µm/m).
+    #[arg(long)]
+    pub tracker_um_per_m: Option<f64>,
+    /// The robot's positional repeatability RP, ISO 9283 (µm).
+    #[arg(long)]
+    pub repeatability_um: Option<f64>,
+    /// A measured orientation (mrad).
+    #[arg(long)]
+    pub rotation_mrad: Option<f64>,
+    /// Family-wise error rate of the screening (Holm).
+    #[arg(long)]
+    pub alpha: Option<f64>,
+    /// Level of the held-out confirmation.
+    #[arg(long)]
+    pub confirm_p: Option<f64>,
+    /// Knot spacing of joint correction tables, deg (0: about 60 knots over each joint's range).
+    #[arg(long, default_value_t = 0)]
+    pub map_step_deg: u8,
+    /// Edge of the workspace voxels, mm.
+    #[arg(long)]
+    pub voxel_mm: Option<f64>,
+    /// Sessions of other set-ups to carry the starting and the final model to, base and tools
+    /// refitted there (comma-separated).
+    #[arg(long)]
+    pub transfer: Option<String>,
+    /// κ limit of the transfer refits.
+    #[arg(long, default_value_t = 1e4)]
+    pub transfer_kappa_limit: f64,
+    /// Base or tool parameters kept in the transfer refits (comma-separated, e.g. tool_z).
+    #[arg(long)]
+    pub transfer_fix: Option<String>,
+    #[command(flatten)]
+    pub threads: super::ThreadsArgs,
+    /// Write the diagnosis (JSON) here instead of printing it.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Accept the named effects: write the parameter set of the extended model here (fitted on
+    /// the identification and validation sessions together). Fails when no effect is named.
+    #[arg(long)]
+    pub accept: Option<PathBuf>,
+}
+
+pub(super) fn diagnose(a: DiagnoseArgs) -> Result<String, CliError> {
+    use crate::domain::diagnosis::{DiagnoseSpec, NoiseSpec, accepted_doc, diagnosis_out, input_of};
+    let doc = ParameterSetDoc::from_json(&read(&a.params)?).map_err(|e| CliError::file(&a.params, e))?;
+    let cell = load_cell(&a.cell)?;
+    let d = NoiseSpec::default();
+    let validation = match a.validation.as_deref() {
+        None => None,
+        Some("none") => Some(Vec::new()),
+        Some(_) => Some(list(&a.validation)),
+    };
+    let spec = DiagnoseSpec {
+        identification: list(&a.identification),
+        validation,
+        folds: a.folds,
+        seed: a.seed,
+        noise: NoiseSpec {
+            trical_um: a.trical_um.unwrap_or(d.trical_um),
+            tracker_um: a.tracker_um.unwrap_or(d.tracker_um),
+            tracker_um_per_m: a.tracker_um_per_m.unwrap_or(d.tracker_um_per_m),
+            repeatability_um: a.repeatability_um.unwrap_or(d.repeatability_um),
+            rotation_mrad: a.rotation_mrad.unwrap_or(d.rotation_mrad),
+        },
+        alpha: a.alpha.unwrap_or(DiagnoseSpec::default().alpha),
+        confirm_p: a.confirm_p.unwrap_or(DiagnoseSpec::default().confirm_p),
+        map_step_deg: a.map_step_deg,
+        voxel_mm: a.voxel_mm.unwrap_or(DiagnoseSpec::default().voxel_mm),
+    };
+    let mut opts =
+        spec.to_options().map_err(|e| CliError::arg(&format!("--{}", e.path.replace(['_', '.'], "-")), e.reason))?;
+    opts.transfer = list(&a.transfer);
+    opts.transfer_fixed = list(&a.transfer_fix);
+    opts.transfer_kappa_limit =
+        crate::domain::identification::kappa_limit(a.transfer_kappa_limit, "transfer_kappa_limit")
+            .map_err(option_error)?;
+    opts.threads = a.threads.count()?;
+    let input = input_of(&cell, &doc);
+    let diag = crate::diagnose::diagnose(&input, &opts).map_err(|e| CliError(e.to_string()))?;
+    let out = diagnosis_out(&diag);
+    let json = serde_json::to_string_pretty(&out).expect("json");
+    let mut text = match &a.out {
+        Some(p) => {
+            write(p, &json)?;
+            format!("wrote {}: {} — {}", p.display(), out.verdict.status, out.verdict.summary)
+        }
+        None => json,
+    };
+    if let Some(p) = &a.accept {
+        let accepted = accepted_doc(&diag).ok_or_else(|| {
+            CliError::arg(
+                "--accept",
+                format!("no effect to accept: the verdict is {} ({})", out.verdict.status, out.verdict.summary),
+            )
+        })?;
+        write(p, &accepted.to_json_pretty())?;
+        text.push_str(&format!("\nwrote {} (model {})", p.display(), out.model));
+    }
+    Ok(text)
+}

@@ -180,3 +180,58 @@ pub(super) fn crossval(a: CrossvalArgs) -> Result<String, CliError> {
     }
     Ok(text.trim_end().to_string())
 }
+
+#[derive(Args, Debug)]
+pub struct BenchDiagnosisArgs {
+    /// Seeds per case (each a different virtual cell: poses and noise).
+    #[arg(long, default_value_t = 10)]
+    pub seeds: u64,
+    /// First seed.
+    #[arg(long, default_value_t = 1)]
+    pub first_seed: u64,
+    /// Only the cases whose name contains this.
+    #[arg(long)]
+    pub cases: Option<String>,
+    #[command(flatten)]
+    pub threads: ThreadsArgs,
+    /// Write every outcome as JSON here.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+pub(super) fn bench_diagnosis(a: BenchDiagnosisArgs) -> Result<String, CliError> {
+    use crate::diagnose::DiagnoseOptions;
+    use crate::experiments::withheld::{run_suite, suite};
+    use std::io::Write;
+    if a.seeds == 0 {
+        return Err(CliError::arg("--seeds", "must be at least 1"));
+    }
+    let filter = a.cases.clone().unwrap_or_default();
+    let cases: Vec<_> = suite().into_iter().filter(|c| c.name.contains(&filter)).collect();
+    if cases.is_empty() {
+        return Err(CliError::arg("--cases", format!("no case name contains '{filter}'")));
+    }
+    let seeds: Vec<u64> = (a.first_seed..a.first_seed + a.seeds).collect();
+    let threads = a.threads.count()?;
+    let started = std::time::Instant::now();
+    let progress = |done: usize, total: usize| {
+        let mut e = std::io::stderr();
+        let _ = write!(e, "\r{done}/{total} diagnoses ({:.0} s)", started.elapsed().as_secs_f64());
+        if done == total {
+            let _ = writeln!(e);
+        }
+    };
+    // One thread per case run: each diagnosis is sequential inside.
+    let outcomes = run_suite(&cases, &seeds, &DiagnoseOptions::default(), threads, &progress);
+    let elapsed = started.elapsed().as_secs_f64();
+    let report = super::reports::BenchDiagnosisReport::new(&cases, &outcomes, elapsed, threads);
+    let mut text = report.text();
+    if let Some(out) = &a.out {
+        write(out, &serde_json::to_string_pretty(&report).expect("json"))?;
+        text.push_str(&format!("wrote {}", out.display()));
+    }
+    if report.errors > 0 {
+        return Err(CliError(format!("{text}\n{} runs failed", report.errors)));
+    }
+    Ok(text.trim_end().to_string())
+}

@@ -17,9 +17,9 @@ use serde_json::{Value, json};
 use crate::domain::identification::{DetmaxSelection, SelectSpec, observability_index};
 use crate::domain::{DomainError, RobotSpec};
 use crate::identify::observability::Index;
-pub use calibrate::{IdentifyArgs, ValidateArgs};
+pub use calibrate::{DiagnoseArgs, IdentifyArgs, ValidateArgs};
 pub use data::{ImportCommand, SimulateArgs, ThreeReflectorArgs, Ur10IpaArgs};
-pub use experiments::{CrossvalArgs, StudyArgs};
+pub use experiments::{BenchDiagnosisArgs, CrossvalArgs, StudyArgs};
 pub use kinematics::{CompensateArgs, FkArgs, IkArgs, ModelArgs, NominalArgs, ToolArgs};
 pub use service::{DemoArgs, OpenapiArgs, ServeArgs, TokenCommand};
 
@@ -58,6 +58,12 @@ pub enum Command {
     /// Held-out errors on real data: k-fold cross-validation, few-pose identifications tested on a
     /// disjoint half, and transfer to other sessions with base and tools refitted.
     Crossval(CrossvalArgs),
+    /// The sim-to-real diagnosis: where the calibrated model still misses, which unmodelled
+    /// effect causes it, and how far the held-out error shrinks once it is added (JSON).
+    Diagnose(DiagnoseArgs),
+    /// The diagnosis proven on withheld effects in the virtual cell: every simulator effect
+    /// withheld in turn, with and without logs, over several seeds; the table and confusion matrix.
+    BenchDiagnosis(BenchDiagnosisArgs),
     /// Run the calibration service: HTTP API, background jobs, embedded SQLite database.
     Serve(ServeArgs),
     /// Manage the service's bearer tokens (directly in its database).
@@ -97,6 +103,8 @@ pub fn run(cli: Cli) -> Result<String, CliError> {
         Command::Validate(a) => calibrate::validate(a),
         Command::Study(a) => experiments::study(a),
         Command::Crossval(a) => experiments::crossval(a),
+        Command::Diagnose(a) => calibrate::diagnose(a),
+        Command::BenchDiagnosis(a) => experiments::bench_diagnosis(a),
         Command::Serve(a) => service::serve(a),
         Command::Token(t) => service::token(t),
         Command::Openapi(a) => write_or_return(&a.out, crate::http::openapi_json().trim_end().to_string()),

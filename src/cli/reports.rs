@@ -402,3 +402,289 @@ impl CrossvalReport {
         text
     }
 }
+
+/// `robocal bench-diagnosis`: the withheld-effect suite, per case and overall, with the confusion
+/// matrix (rows: cases; columns: what the verdict said — the first named kind, or the status).
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchDiagnosisReport {
+    pub summary: BenchSummary,
+    pub cases: Vec<BenchCase>,
+    /// Column labels of the confusion matrix, in order.
+    pub columns: Vec<String>,
+    pub confusion: Vec<ConfusionRow>,
+    pub outcomes: Vec<BenchOutcome>,
+    #[serde(skip)]
+    pub errors: usize,
+    #[serde(skip)]
+    pub threads: usize,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchSummary {
+    /// Top-1 naming on the cases whose effect these data separate: named, right kind first, right
+    /// joint (and harmonic).
+    pub separable_runs: usize,
+    pub separable_correct: usize,
+    /// Verdicts other than `none` on the no-effect cases.
+    pub no_effect_runs: usize,
+    pub false_alarms: usize,
+    /// `not_separable` where the data cannot separate the effect.
+    pub not_separable_runs: usize,
+    pub not_separable_correct: usize,
+    /// Out-of-library link bending: runs, and those named (must be none).
+    pub link_bending_runs: usize,
+    pub link_bending_named: usize,
+    /// `named` with another effect than the withheld one, over every run.
+    pub confident_wrong_names: usize,
+    /// Gap closure of the named model relative to the oracle's (true effect added): runs with an
+    /// oracle and a named effect, those at ≥ 0.8, and the median ratio.
+    pub closure_runs: usize,
+    pub closure_at_least_0_8: usize,
+    pub median_closure_ratio: Option<f64>,
+    pub runs: usize,
+    pub seconds: f64,
+    pub median_seconds_per_case: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchCase {
+    pub name: String,
+    pub effects: String,
+    pub expect: String,
+    pub runs: usize,
+    pub correct: usize,
+    pub wrong_names: usize,
+    pub heldout_mean_mm: f64,
+    pub floor_mean_mm: f64,
+    pub final_mean_mm: f64,
+    pub oracle_mean_mm: Option<f64>,
+    pub median_closure_ratio: Option<f64>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct ConfusionRow {
+    pub case: String,
+    /// Count per column of `columns`.
+    pub counts: Vec<usize>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchOutcome {
+    pub case: String,
+    pub seed: u64,
+    pub status: &'static str,
+    pub first: Option<String>,
+    pub correct: bool,
+    pub wrong_name: bool,
+    pub heldout_mean_mm: f64,
+    pub floor_mean_mm: f64,
+    pub final_mean_mm: f64,
+    pub oracle_mean_mm: Option<f64>,
+    pub closure_ratio: Option<f64>,
+    pub seconds: f64,
+    pub error: Option<String>,
+}
+
+fn median(mut v: Vec<f64>) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    Some(crate::validate::stats::quantile(&v, 0.5))
+}
+
+fn mean(v: impl Iterator<Item = f64>) -> f64 {
+    let (s, n) = v.filter(|x| x.is_finite()).fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
+    if n == 0 { f64::NAN } else { s / n as f64 }
+}
+
+/// The column of the confusion matrix an outcome falls in.
+fn column(o: &crate::experiments::withheld::Outcome) -> String {
+    use crate::diagnose::Status;
+    match o.status {
+        Status::Named => format!("named: {}", o.first.as_deref().and_then(|f| f.split(' ').next()).unwrap_or("?")),
+        s => s.as_str().to_string(),
+    }
+}
+
+impl BenchDiagnosisReport {
+    pub fn new(
+        cases: &[crate::experiments::withheld::Case],
+        outcomes: &[crate::experiments::withheld::Outcome],
+        seconds: f64,
+        threads: usize,
+    ) -> Self {
+        use crate::experiments::withheld::Expect;
+        let mut columns: Vec<String> = outcomes.iter().map(column).collect();
+        columns.sort();
+        columns.dedup();
+        let mut summary = BenchSummary {
+            separable_runs: 0,
+            separable_correct: 0,
+            no_effect_runs: 0,
+            false_alarms: 0,
+            not_separable_runs: 0,
+            not_separable_correct: 0,
+            link_bending_runs: 0,
+            link_bending_named: 0,
+            confident_wrong_names: outcomes.iter().filter(|o| o.wrong_name).count(),
+            closure_runs: 0,
+            closure_at_least_0_8: 0,
+            median_closure_ratio: median(outcomes.iter().filter_map(|o| o.closure_ratio).collect()),
+            runs: outcomes.len(),
+            seconds,
+            median_seconds_per_case: median(outcomes.iter().map(|o| o.seconds).collect()).unwrap_or(0.0),
+        };
+        let mut case_rows = Vec::new();
+        let mut confusion = Vec::new();
+        for c in cases {
+            let mine: Vec<&crate::experiments::withheld::Outcome> =
+                outcomes.iter().filter(|o| o.case == c.name).collect();
+            let correct = mine.iter().filter(|o| o.correct).count();
+            match &c.expect {
+                Expect::Named { .. } => {
+                    summary.separable_runs += mine.len();
+                    summary.separable_correct += correct;
+                    for o in &mine {
+                        if o.status == crate::diagnose::Status::Named
+                            && let Some(r) = o.closure_ratio
+                        {
+                            summary.closure_runs += 1;
+                            summary.closure_at_least_0_8 += (r >= 0.8) as usize;
+                        }
+                    }
+                }
+                Expect::None => {
+                    summary.no_effect_runs += mine.len();
+                    summary.false_alarms += mine.len() - correct;
+                }
+                Expect::NotSeparable => {
+                    summary.not_separable_runs += mine.len();
+                    summary.not_separable_correct += correct;
+                }
+                Expect::NotNamed => {
+                    summary.link_bending_runs += mine.len();
+                    summary.link_bending_named +=
+                        mine.iter().filter(|o| o.status == crate::diagnose::Status::Named).count();
+                }
+                Expect::NoWrongName => {}
+            }
+            case_rows.push(BenchCase {
+                name: c.name.clone(),
+                effects: c.effects.clone(),
+                expect: format!("{:?}", c.expect),
+                runs: mine.len(),
+                correct,
+                wrong_names: mine.iter().filter(|o| o.wrong_name).count(),
+                heldout_mean_mm: mean(mine.iter().map(|o| o.heldout_mean)) / MM,
+                floor_mean_mm: mean(mine.iter().map(|o| o.floor_mean)) / MM,
+                final_mean_mm: mean(mine.iter().map(|o| o.final_mean)) / MM,
+                oracle_mean_mm: {
+                    let m = mean(mine.iter().filter_map(|o| o.oracle_mean));
+                    m.is_finite().then_some(m / MM)
+                },
+                median_closure_ratio: median(mine.iter().filter_map(|o| o.closure_ratio).collect()),
+            });
+            confusion.push(ConfusionRow {
+                case: c.name.clone(),
+                counts: columns.iter().map(|col| mine.iter().filter(|o| column(o) == *col).count()).collect(),
+            });
+        }
+        let out = outcomes
+            .iter()
+            .map(|o| BenchOutcome {
+                case: o.case.clone(),
+                seed: o.seed,
+                status: o.status.as_str(),
+                first: o.first.clone(),
+                correct: o.correct,
+                wrong_name: o.wrong_name,
+                heldout_mean_mm: o.heldout_mean / MM,
+                floor_mean_mm: o.floor_mean / MM,
+                final_mean_mm: o.final_mean / MM,
+                oracle_mean_mm: o.oracle_mean.map(|v| v / MM),
+                closure_ratio: o.closure_ratio,
+                seconds: o.seconds,
+                error: o.error.clone(),
+            })
+            .collect();
+        BenchDiagnosisReport {
+            summary,
+            cases: case_rows,
+            columns,
+            confusion,
+            outcomes: out,
+            errors: outcomes.iter().filter(|o| o.error.is_some()).count(),
+            threads,
+        }
+    }
+
+    pub fn text(&self) -> String {
+        let s = &self.summary;
+        let pct = |a: usize, b: usize| {
+            if b == 0 { "–".to_string() } else { format!("{:.1} %", 100.0 * a as f64 / b as f64) }
+        };
+        let mut t = String::new();
+        t.push_str(&format!(
+            "{:<38} {:>4} {:>7} {:>8} {:>8} {:>8} {:>8} {:>7}\n",
+            "case", "runs", "correct", "held mm", "floor mm", "final mm", "oracle", "closure"
+        ));
+        for c in &self.cases {
+            t.push_str(&format!(
+                "{:<38} {:>4} {:>7} {:>8.4} {:>8.4} {:>8.4} {:>8} {:>7}\n",
+                c.name,
+                c.runs,
+                format!("{}/{}", c.correct, c.runs),
+                c.heldout_mean_mm,
+                c.floor_mean_mm,
+                c.final_mean_mm,
+                c.oracle_mean_mm.map_or("–".into(), |v| format!("{v:.4}")),
+                c.median_closure_ratio.map_or("–".into(), |v| format!("{v:.2}")),
+            ));
+        }
+        t.push_str("\nconfusion (rows: case; columns: the verdict — the first named kind, or the status)\n");
+        t.push_str(&format!("{:<38}", ""));
+        for c in &self.columns {
+            t.push_str(&format!(" {:>22}", c));
+        }
+        t.push('\n');
+        for r in &self.confusion {
+            t.push_str(&format!("{:<38}", r.case));
+            for n in &r.counts {
+                t.push_str(&format!(" {:>22}", if *n == 0 { ".".to_string() } else { n.to_string() }));
+            }
+            t.push('\n');
+        }
+        t.push_str(&format!(
+            "\ntop-1 naming (separable effects, right joint and harmonic): {}/{} = {}\n",
+            s.separable_correct,
+            s.separable_runs,
+            pct(s.separable_correct, s.separable_runs)
+        ));
+        t.push_str(&format!(
+            "false alarms (no effect): {}/{} = {}\n",
+            s.false_alarms,
+            s.no_effect_runs,
+            pct(s.false_alarms, s.no_effect_runs)
+        ));
+        t.push_str(&format!(
+            "not_separable where the data cannot separate: {}/{} = {}\n",
+            s.not_separable_correct,
+            s.not_separable_runs,
+            pct(s.not_separable_correct, s.not_separable_runs)
+        ));
+        t.push_str(&format!("link bending named: {}/{}\n", s.link_bending_named, s.link_bending_runs));
+        t.push_str(&format!("confident wrong names (all runs): {}/{}\n", s.confident_wrong_names, s.runs));
+        t.push_str(&format!(
+            "gap closure ≥ 0.8 of the oracle's: {}/{} (median ratio {})\n",
+            s.closure_at_least_0_8,
+            s.closure_runs,
+            s.median_closure_ratio.map_or("–".into(), |v| format!("{v:.3}"))
+        ));
+        t.push_str(&format!(
+            "{} runs in {:.1} s on {} threads (median {:.2} s per case: simulate, identify, diagnose, oracle)\n",
+            s.runs, s.seconds, self.threads, s.median_seconds_per_case
+        ));
+        t
+    }
+}

@@ -41,16 +41,17 @@ use floor::Floor;
 use library::{Candidate, Kind, Unavailable};
 use locate::Where;
 use order::ApproachSource;
-use search::{Decision, Round, SearchOptions};
+pub use search::SearchOptions;
+use search::{Decision, Round};
 
 /// Everything a diagnosis can be told.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DiagnoseOptions {
     /// Identification sessions (empty: every identification session of the cell).
     pub identification: Vec<String>,
-    /// Validation sessions (empty: every validation session; none in the cell: cross-validate
-    /// on the identification sessions).
-    pub validation: Vec<String>,
+    /// Validation sessions (`None`: every validation session of the cell; empty, or none in the
+    /// cell: cross-validate on the identification sessions).
+    pub validation: Option<Vec<String>>,
     pub noise: NoiseModel,
     pub folds: usize,
     pub seed: u64,
@@ -60,17 +61,27 @@ pub struct DiagnoseOptions {
     pub rotation_weight: f64,
     pub anchor: Anchor,
     pub search: SearchOptions,
-    /// Edge of the workspace voxels, m.
+    /// Edge of the workspace voxels, m (0: about ten tested positions per voxel on average over
+    /// the positions' bounding box).
     pub voxel_size: f64,
     /// False-discovery rate of the voxel tests.
     pub fdr: f64,
+    /// Sessions of other set-ups to carry the starting and the final model to, base and tools
+    /// refitted there (how a calibration transfers).
+    pub transfer: Vec<String>,
+    /// κ limit of those refits (base and tools are nuisance parameters there).
+    pub transfer_kappa_limit: f64,
+    /// Base or tool parameters kept at the model's values in those refits.
+    pub transfer_fixed: Vec<String>,
+    /// Threads for the held-out refits (1: sequential).
+    pub threads: usize,
 }
 
 impl Default for DiagnoseOptions {
     fn default() -> Self {
         Self {
             identification: Vec::new(),
-            validation: Vec::new(),
+            validation: None,
             noise: NoiseModel::default(),
             folds: 5,
             seed: 1,
@@ -78,8 +89,12 @@ impl Default for DiagnoseOptions {
             rotation_weight: 0.1,
             anchor: Anchor::default(),
             search: SearchOptions::default(),
-            voxel_size: 0.1,
+            voxel_size: 0.0,
             fdr: 0.05,
+            transfer: Vec::new(),
+            transfer_kappa_limit: 1e4,
+            transfer_fixed: Vec::new(),
+            threads: 1,
         }
     }
 }
@@ -214,6 +229,23 @@ pub struct Diagnosis {
     pub model: IdentifyOptions,
     /// The final model fitted on the pooled data without anchors: what accepting produces.
     pub accepted: Option<Identification>,
+    pub folds: usize,
+    pub dof: usize,
+    /// Rows of the robot whose axis is parallel to the previous one (where β belongs).
+    pub parallel_rows: usize,
+    /// The starting and the final model carried to other sessions.
+    pub transfer: Vec<Transfer>,
+}
+
+/// A model carried to another session, base and tools refitted there.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Transfer {
+    pub session: String,
+    /// `start` or `final`.
+    pub model: String,
+    pub errors: Result<ErrorStats, String>,
+    /// κ of the column-scaled Jacobian of the base-and-tools refit.
+    pub kappa_scaled: Option<f64>,
 }
 
 /// The starting model's identification options: the set's structure and values.
@@ -265,7 +297,11 @@ pub fn diagnose(input: &Input<'_>, opts: &DiagnoseOptions) -> Result<Diagnosis, 
         Ok(given.to_vec())
     };
     let identification = names(Purpose::Identification, &opts.identification)?;
-    let validation = names(Purpose::Validation, &opts.validation)?;
+    let validation = match &opts.validation {
+        None => names(Purpose::Validation, &[])?,
+        Some(v) if v.is_empty() => Vec::new(),
+        Some(v) => names(Purpose::Validation, v)?,
+    };
     if identification.is_empty() {
         return Err(DiagnoseError::Option("the cell has no identification session".into()));
     }
@@ -308,17 +344,14 @@ pub fn diagnose(input: &Input<'_>, opts: &DiagnoseOptions) -> Result<Diagnosis, 
     let base = input.set.chain().base().t;
 
     let s = search::search(&work, stage0, &folds, fl.rms * fl.rms, &opts.search)?;
-    let location = locate::locate(
-        &s.stages[0],
-        &s.baselines[0],
-        &fl,
-        &calib,
-        &calib_joints,
-        zone,
-        base,
-        opts.voxel_size,
-        opts.fdr,
-    );
+    let voxel = if opts.voxel_size > 0.0 {
+        opts.voxel_size
+    } else {
+        let pts: Vec<Vector3<f64>> = tested_obs.iter().map(|&o| pr_target(&s.stages[0], o)).collect();
+        auto_voxel(&pts)
+    };
+    let location =
+        locate::locate(&s.stages[0], &s.baselines[0], &fl, &calib, &calib_joints, zone, base, voxel, opts.fdr);
 
     // Decomposition.
     let heldout = ErrorStats::of(&s.baselines[0].norms()).expect("tested poses");
@@ -357,6 +390,46 @@ pub fn diagnose(input: &Input<'_>, opts: &DiagnoseOptions) -> Result<Diagnosis, 
         identify(&work, &o).ok().or_else(|| s.stages.last().and_then(|st| st.fit.as_ref().ok().cloned()))
     };
     let approach = approach.filter(|_| s.rounds[0].screened.iter().any(|c| c.candidate.kind == Kind::Backlash));
+    // Transfer of the starting and the final model.
+    let mut transfer = Vec::new();
+    for t in &opts.transfer {
+        if cell.session(t).is_none() {
+            return Err(DiagnoseError::Option(format!("transfer: no session named '{t}' in the cell")));
+        }
+        let start_model = start_options(input, opts, Vec::new());
+        let mut models = vec![("start", start_model.model.clone(), input.set.clone())];
+        if !s.accepted.is_empty() {
+            let fin = accepted
+                .as_ref()
+                .map(|id| id.set.clone())
+                .unwrap_or_else(|| s.stages.last().expect("a stage").set.clone());
+            models.push(("final", model.model.clone(), fin));
+        }
+        for (name, m, set) in models {
+            let mut o = IdentifyOptions {
+                model: m,
+                start: Some(set),
+                only: vec!["base".into(), "tool".into()],
+                fixed: opts.transfer_fixed.clone(),
+                kappa_limit: opts.transfer_kappa_limit,
+                rotation_weight: opts.rotation_weight,
+                ..IdentifyOptions::default()
+            };
+            o.selection.sessions = vec![t.clone()];
+            let r = identify(&work, &o).map_err(|e| e.to_string()).and_then(|id| {
+                let k = id.quality.kappa_scaled;
+                validate(&id.set, &work, std::slice::from_ref(t), Reference::Measured)
+                    .map_err(|e| e.to_string())
+                    .map(|r| (r.calibrated.position, k))
+            });
+            transfer.push(Transfer {
+                session: t.clone(),
+                model: name.into(),
+                kappa_scaled: r.as_ref().ok().map(|x| x.1),
+                errors: r.map(|x| x.0),
+            });
+        }
+    }
     Ok(Diagnosis {
         verdict,
         decomposition,
@@ -370,6 +443,10 @@ pub fn diagnose(input: &Input<'_>, opts: &DiagnoseOptions) -> Result<Diagnosis, 
         model,
         accepted,
         rounds: s.rounds,
+        folds: opts.folds,
+        dof: cell.model.dof(),
+        parallel_rows: ParamLayout::full(&cell.model).parallel_rows().len(),
+        transfer,
     })
 }
 
@@ -381,7 +458,11 @@ pub fn heldout_with(input: &Input<'_>, opts: &DiagnoseOptions, extra: &[Param]) 
         if given.is_empty() { cell.sessions_for(purpose).map(|s| s.name.clone()).collect() } else { given.to_vec() }
     };
     let identification = pick(Purpose::Identification, &opts.identification);
-    let validation = pick(Purpose::Validation, &opts.validation);
+    let validation = match &opts.validation {
+        None => pick(Purpose::Validation, &[]),
+        Some(v) if v.is_empty() => Vec::new(),
+        Some(v) => v.clone(),
+    };
     let mut sessions = identification.clone();
     sessions.extend(validation.iter().cloned());
     let mut work = cell.clone();
@@ -403,6 +484,23 @@ pub fn heldout_with(input: &Input<'_>, opts: &DiagnoseOptions, extra: &[Param]) 
     let folds = Folds::new(&joints, &tested, opts.folds, opts.seed);
     let h = cv::cross_validate(&st, &folds, None);
     ErrorStats::of(&h.norms()).ok_or_else(|| DiagnoseError::Option("no tested pose".into()))
+}
+
+fn pr_target(st: &stage::Stage, o: usize) -> Vector3<f64> {
+    st.problem.target_position(&st.problem.obs[o])
+}
+
+/// A voxel edge giving about ten positions per voxel over their bounding box, rounded to 10 mm
+/// (at least 20 mm).
+fn auto_voxel(p: &[Vector3<f64>]) -> f64 {
+    if p.is_empty() {
+        return 0.1;
+    }
+    let (lo, hi) = p.iter().fold((p[0], p[0]), |(lo, hi), x| (lo.inf(x), hi.sup(x)));
+    let d = hi - lo;
+    let volume = d.x.max(0.01) * d.y.max(0.01) * d.z.max(0.01);
+    let edge = (volume * 10.0 / p.len() as f64).cbrt();
+    ((edge / 0.01).round() * 0.01).max(0.02)
 }
 
 /// The experiment that separates two kinds of effect (DIAGNOSIS §1).

@@ -4,6 +4,7 @@
 //! naming the field path and the reason.
 
 pub mod cell;
+pub mod diagnosis;
 pub mod identification;
 pub mod measurement_csv;
 pub mod param_set;

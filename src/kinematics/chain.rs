@@ -278,22 +278,24 @@ impl Chain {
     }
 
     /// The state as the joint terms see it: with a payload error, the torques of the true payload
-    /// τ + m·∂τ/∂m.
+    /// τ + m·∂τ/∂m (a copy then; the state itself otherwise — FK is a hot path).
     #[inline]
-    fn effective(&self, s: &JointState) -> JointState {
-        let mut e = *s;
-        if self.tool_mass != 0.0 {
-            for j in 0..self.n {
-                e.tau[j] += self.tool_mass * s.tau_per_kg[j];
-            }
+    fn effective<'a>(&self, s: &'a JointState, buf: &'a mut Option<JointState>) -> &'a JointState {
+        if self.tool_mass == 0.0 {
+            return s;
         }
-        e
+        let mut e = *s;
+        for j in 0..self.n {
+            e.tau[j] += self.tool_mass * s.tau_per_kg[j];
+        }
+        buf.insert(e)
     }
 
     /// The DH joint angles θ_j = q_j + offset_j + c_j·τ_j + Σ (joint terms of j).
     #[inline]
     pub fn joint_angles(&self, s: &JointState) -> [f64; MAX_JOINTS] {
-        let s = &self.effective(s);
+        let mut eff = None;
+        let s = self.effective(s, &mut eff);
         let mut th = [0.0; MAX_JOINTS];
         for j in 0..self.n {
             th[j] = s.q[j] + self.rows[j].theta + self.compliance[j] * s.tau[j];
@@ -326,7 +328,8 @@ impl Chain {
                 }
             }
         }
-        let s = &self.effective(s);
+        let mut eff = None;
+        let s = self.effective(s, &mut eff);
         for &(j, term, v, edge) in &self.terms {
             match term {
                 JointTerm::Compliance => unreachable!("linear compliance is kept apart"),
@@ -502,7 +505,8 @@ impl Chain {
         let theta = self.joint_angles(s);
         let scale = self.length_scale(s);
         let t = self.trace_scaled(&theta, scale);
-        let s = &self.effective(s);
+        let mut eff = None;
+        let s = self.effective(s, &mut eff);
         let p = t.tcp.t;
         let nr = rows as usize;
         assert!(ld >= nr, "leading dimension smaller than the rows");

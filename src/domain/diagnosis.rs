@@ -1,0 +1,789 @@
+//! The diagnosis on the wire: its options as given (`robocal diagnose`'s flags and a diagnosis
+//! request, checked once for both), and the report in millimetres and degrees with the unit in
+//! every field name. Top-level keys: `verdict`, `decomposition`, `where`, `candidates`, `shrink`
+//! (and `rounds`, `unavailable`, `model`, `sessions`, `notes`).
+
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+use super::{DomainError, ParameterSetDoc};
+use crate::diagnose::floor::Floor;
+use crate::diagnose::library::Candidate;
+use crate::diagnose::locate::Where;
+use crate::diagnose::search::Decision;
+use crate::diagnose::{DiagnoseOptions, Diagnosis, Effect, Input, SearchOptions, Status};
+use crate::identify::{Anchor, NoiseModel};
+use crate::kinematics::{Param, Unit};
+use crate::units::{DEG, MM, UM};
+use crate::validate::stats::ErrorStats;
+
+fn five() -> usize {
+    5
+}
+fn one() -> u64 {
+    1
+}
+
+/// The instrument model, 1σ per axis (defaults: the thesis's error budget and the tracker the
+/// virtual cell simulates).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct NoiseSpec {
+    /// A TriCal ball measurement, µm.
+    pub trical_um: f64,
+    /// A laser-tracker reading: constant part, µm…
+    pub tracker_um: f64,
+    /// …plus this per metre from the {W} origin, µm/m.
+    pub tracker_um_per_m: f64,
+    /// The robot's positional repeatability RP (ISO 9283), µm.
+    pub repeatability_um: f64,
+    /// A measured orientation, mrad.
+    pub rotation_mrad: f64,
+}
+
+impl Default for NoiseSpec {
+    fn default() -> Self {
+        let n = NoiseModel::default();
+        Self {
+            trical_um: n.trical / UM,
+            tracker_um: n.tracker / UM,
+            tracker_um_per_m: n.tracker_per_m / UM,
+            repeatability_um: n.repeatability * 3.616 / UM,
+            rotation_mrad: n.rotation * 1e3,
+        }
+    }
+}
+
+impl NoiseSpec {
+    pub fn to_model(&self) -> Result<NoiseModel, DomainError> {
+        let m = NoiseModel {
+            trical: self.trical_um * UM,
+            tracker: self.tracker_um * UM,
+            tracker_per_m: self.tracker_um_per_m * UM,
+            repeatability: self.repeatability_um * UM / 3.616,
+            rotation: self.rotation_mrad * 1e-3,
+        };
+        m.check().map_err(|e| {
+            let field = ["trical", "tracker_per_m", "tracker", "repeatability", "rotation"]
+                .into_iter()
+                .find(|f| e.contains(&format!(": {f} ")))
+                .map(|f| match f {
+                    "trical" => "noise.trical_um",
+                    "tracker" => "noise.tracker_um",
+                    "tracker_per_m" => "noise.tracker_um_per_m",
+                    "repeatability" => "noise.repeatability_um",
+                    _ => "noise.rotation_mrad",
+                })
+                .unwrap_or("noise");
+            DomainError::new(field, "must be a finite, non-negative σ (positive for the instrument terms)")
+        })?;
+        Ok(m)
+    }
+}
+
+/// A diagnosis as requested. Every field has a default.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct DiagnoseSpec {
+    /// Identification sessions (names); default: every identification session.
+    #[serde(default)]
+    pub identification: Vec<String>,
+    /// Validation sessions; omitted: every validation session; `[]`: none — the identification
+    /// sessions are cross-validated on themselves.
+    #[serde(default)]
+    pub validation: Option<Vec<String>>,
+    /// Folds of the grouped cross-validation (≥ 2).
+    #[serde(default = "five")]
+    #[schema(minimum = 2, maximum = 20)]
+    pub folds: usize,
+    #[serde(default = "one")]
+    pub seed: u64,
+    #[serde(default)]
+    pub noise: NoiseSpec,
+    /// Family-wise error rate of the screening (Holm).
+    #[serde(default = "alpha")]
+    pub alpha: f64,
+    /// Level of the held-out confirmation.
+    #[serde(default = "confirm")]
+    pub confirm_p: f64,
+    /// Knot spacing of joint correction tables, deg (0: about 60 knots over each joint's range).
+    #[serde(default)]
+    #[schema(maximum = 90)]
+    pub map_step_deg: u8,
+    /// Edge of the workspace voxels, mm (0: automatic, about ten tested positions per voxel).
+    #[serde(default)]
+    pub voxel_mm: f64,
+}
+
+fn alpha() -> f64 {
+    SearchOptions::default().alpha
+}
+fn confirm() -> f64 {
+    SearchOptions::default().confirm_p
+}
+
+impl Default for DiagnoseSpec {
+    fn default() -> Self {
+        Self {
+            identification: Vec::new(),
+            validation: None,
+            folds: five(),
+            seed: one(),
+            noise: NoiseSpec::default(),
+            alpha: alpha(),
+            confirm_p: confirm(),
+            map_step_deg: 0,
+            voxel_mm: 0.0,
+        }
+    }
+}
+
+impl DiagnoseSpec {
+    /// The checked options; errors name the field.
+    pub fn to_options(&self) -> Result<DiagnoseOptions, DomainError> {
+        if !(2..=20).contains(&self.folds) {
+            return Err(DomainError::new("folds", "must be 2–20"));
+        }
+        let level = |v: f64, path: &str| {
+            if v.is_finite() && v > 0.0 && v < 0.5 {
+                Ok(v)
+            } else {
+                Err(DomainError::new(path, "must be a probability in (0, 0.5)"))
+            }
+        };
+        if !(self.voxel_mm.is_finite() && self.voxel_mm >= 0.0) {
+            return Err(DomainError::new("voxel_mm", "must be 0 (automatic) or positive"));
+        }
+        if self.map_step_deg > 90 {
+            return Err(DomainError::new("map_step_deg", "must be 0 (automatic) to 90"));
+        }
+        let search = SearchOptions {
+            alpha: level(self.alpha, "alpha")?,
+            confirm_p: level(self.confirm_p, "confirm_p")?,
+            map_step_deg: self.map_step_deg,
+            ..SearchOptions::default()
+        };
+        Ok(DiagnoseOptions {
+            identification: self.identification.clone(),
+            validation: self.validation.clone(),
+            noise: self.noise.to_model()?,
+            folds: self.folds,
+            seed: self.seed,
+            search,
+            voxel_size: self.voxel_mm * MM,
+            anchor: Anchor::default(),
+            ..DiagnoseOptions::default()
+        })
+    }
+}
+
+/// The diagnosis's input from a parameter-set document: which parameters its identification
+/// fitted (status `identified`) and which the user held fixed (kept so).
+pub fn input_of<'a>(cell: &'a crate::cell::Cell, doc: &'a ParameterSetDoc) -> Input<'a> {
+    let known = doc.status.iter().any(|s| s.is_some());
+    let identified = known.then(|| doc.status.iter().map(|s| s.as_deref() == Some("identified")).collect());
+    let fixed = doc
+        .set
+        .layout
+        .params()
+        .iter()
+        .zip(&doc.status)
+        .filter(|(_, s)| s.as_deref().is_some_and(|s| s.contains("fixed by the user")))
+        .map(|(p, _)| p.to_string())
+        .collect();
+    Input { cell, set: &doc.set, identified, fixed }
+}
+
+// ---- the report ----
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct DiagnosisOut {
+    pub verdict: VerdictOut,
+    pub decomposition: DecompositionOut,
+    #[serde(rename = "where")]
+    pub location: WhereOut,
+    /// Every candidate of every round, with its screening statistics and, for the ones
+    /// confirmed on held-out poses, their held-out figures.
+    pub candidates: Vec<CandidateOut>,
+    /// From the starting model to the last accepted one: held-out figures of each.
+    pub shrink: Vec<ShrinkOut>,
+    pub rounds: Vec<RoundOut>,
+    /// Candidates these data cannot test, and why.
+    pub unavailable: Vec<UnavailableOut>,
+    /// The final model as `identify --model` options.
+    pub model: String,
+    pub sessions: SessionsOut,
+    /// The starting and the final model carried to other sessions (base and tools refitted).
+    pub transfer: Vec<TransferOut>,
+    pub notes: Vec<String>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct TransferOut {
+    pub session: String,
+    /// `start` or `final`.
+    pub model: String,
+    pub errors: Option<StatsOut>,
+    pub error: Option<String>,
+    pub kappa_scaled: Option<f64>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct SessionsOut {
+    pub identification: Vec<String>,
+    pub validation: Vec<String>,
+    /// Whose poses the folds test: `validation`, or `identification` when there is none.
+    pub tested: String,
+    pub folds: usize,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct VerdictOut {
+    /// `named`, `none`, `not_separable` or `unknown_effect`.
+    pub status: String,
+    pub summary: String,
+    /// Named effects, most important first; for `not_separable`, the suspects.
+    pub effects: Vec<EffectOut>,
+    pub lookalike: Option<CandidateRef>,
+    pub canonical_correlation: Option<f64>,
+    /// Model parameters that absorb the suspect.
+    pub absorbed_by: Vec<AbsorbedOut>,
+    /// The experiment that would separate the effect.
+    pub experiment: Option<String>,
+    /// What remains after the named effects, when something does.
+    pub remaining: Option<RemainingOut>,
+    /// Where the joints' approach directions came from: `logged`, `time_order`, `file_order`.
+    pub approach_source: Option<String>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct RemainingOut {
+    pub status: String,
+    pub summary: String,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct AbsorbedOut {
+    pub parameter: String,
+    /// Share of the candidate the parameter absorbs.
+    pub share: f64,
+}
+
+/// Which candidate: kind and place.
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct CandidateRef {
+    /// hayati_beta, compliance, compliance_cubic, cyclic, joint_map, backlash, thermal, coupling,
+    /// tool_mass, base, tool.
+    pub name: String,
+    pub label: String,
+    /// The joint it acts on (1-based): the corrected joint, the coupling's destination, the
+    /// Hayati joint (β of `beta{j−1}` tilts joint j), the tool's index (1-based) for `tool`.
+    pub joint: Option<usize>,
+    /// Coupling source joint (1-based).
+    pub from_joint: Option<usize>,
+    /// Cyclic: the whole harmonic, when the frequency is one.
+    pub harmonic: Option<u16>,
+    /// Cyclic: cycles per revolution.
+    pub frequency_cpr: Option<f64>,
+    /// Found by the frequency scan.
+    pub scanned: bool,
+    /// Joint tables: knot spacing, deg.
+    pub step_deg: Option<u8>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct EffectOut {
+    #[serde(flatten)]
+    pub which: CandidateRef,
+    /// The effect's size in `unit`: cyclic amplitude, backlash half-play, table RMS, α, kg, …
+    pub estimate: Option<f64>,
+    pub std: Option<f64>,
+    pub unit: String,
+    pub parameters: Vec<ParamOut>,
+    /// Held-out gain when it is added: mean and RMS of |e|, mm.
+    pub gain_mean_mm: f64,
+    pub gain_rms_mm: f64,
+    /// One-sided Wilcoxon p-value of the held-out confirmation.
+    pub confirm_p: Option<f64>,
+    /// Holm-corrected screening p-value (log10).
+    pub screen_log10_p: f64,
+    /// ρ = ‖J̃_k‖/‖J_k‖.
+    pub separability: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct ParamOut {
+    pub name: String,
+    pub estimate: f64,
+    pub std: Option<f64>,
+    pub unit: String,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct StatsOut {
+    pub n: usize,
+    pub mean_mm: f64,
+    pub median_mm: f64,
+    pub rms_mm: f64,
+    pub p95_mm: f64,
+    pub max_mm: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct FloorOut {
+    pub mean_mm: f64,
+    pub rms_mm: f64,
+    pub p95_mm: f64,
+    /// Mean instrument-and-repeatability σ per axis.
+    pub instrument_sigma_mm: f64,
+    /// RMS of σ_pred(q) from the parameter covariance.
+    pub prediction_rms_mm: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct DecompositionOut {
+    /// The parameter set as given, on the validation poses (no refit).
+    pub calibrated: Option<StatsOut>,
+    /// The starting model, cross-validated (trained on the identification data and the other
+    /// folds of the validation poses).
+    pub heldout: StatsOut,
+    pub floor: FloorOut,
+    /// calibrated − held-out mean: what the calibration poses' coverage explains.
+    pub extrapolation_gap_mm: Option<f64>,
+    /// held-out − floor mean: what missing physics explains; gap closure is measured against it.
+    pub unmodelled_gap_mm: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct AxisOut {
+    pub mean_mm: f64,
+    pub std_mm: f64,
+    pub shapiro_p: Option<f64>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct PerAxisOut {
+    pub x: AxisOut,
+    pub y: AxisOut,
+    pub z: AxisOut,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct BinOut {
+    /// Bin centre in the variable's unit.
+    pub at: f64,
+    pub mean_mm: f64,
+    pub n: usize,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct AgainstOut {
+    /// distance_to_base, distance_to_zone, distance_to_nearest_calibration,
+    /// joint_distance_to_nearest_calibration, q1…, tau1…, sigma_pred.
+    pub variable: String,
+    /// The variable's unit: mm, deg, N·m.
+    pub unit: String,
+    pub r: Option<f64>,
+    pub r2: Option<f64>,
+    /// mm of |e| per unit of the variable.
+    pub slope: Option<f64>,
+    pub p_value: Option<f64>,
+    pub profile: Vec<BinOut>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct VoxelOut {
+    pub centre_mm: [f64; 3],
+    pub n: usize,
+    pub mean_mm: f64,
+    pub floor_mean_mm: f64,
+    pub p: f64,
+    /// Benjamini–Hochberg q-value.
+    pub q: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct VoxelsOut {
+    pub size_mm: f64,
+    pub tested: usize,
+    /// Voxels whose error stands above the floor at the false-discovery rate, worst first.
+    pub above_floor: Vec<VoxelOut>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct WhereOut {
+    /// The residuals used: held-out errors of the starting model at the tested poses.
+    pub n: usize,
+    pub per_axis: PerAxisOut,
+    pub against: Vec<AgainstOut>,
+    pub voxels: VoxelsOut,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct HeldoutOut {
+    pub gain_mean_mm: f64,
+    pub gain_rms_mm: f64,
+    pub p: Option<f64>,
+    /// Share of the held-out variance above the floor it explains.
+    pub share: f64,
+    pub confirmed: bool,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct CandidateOut {
+    /// Search round (1-based).
+    pub round: usize,
+    #[serde(flatten)]
+    pub which: CandidateRef,
+    /// S: drop of the weighted RSS if added (score statistic).
+    pub statistic: f64,
+    pub dof: f64,
+    pub f: f64,
+    pub log10_p: f64,
+    /// Holm-corrected p-value (and its log10, which stays meaningful below 1e-300).
+    pub p_holm: f64,
+    pub log10_p_holm: f64,
+    pub significant: bool,
+    pub separability: f64,
+    pub bic_gain: f64,
+    pub heldout: Option<HeldoutOut>,
+    pub absorbed_by: Vec<AbsorbedOut>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct ShrinkOut {
+    /// `start`, then `start + …` with each accepted effect.
+    pub model: String,
+    pub effects: Vec<String>,
+    pub n: usize,
+    pub mean_mm: f64,
+    pub rms_mm: f64,
+    pub p95_mm: f64,
+    pub max_mm: f64,
+    /// (E_start − E)/(E_start − E_floor) on the mean.
+    pub gap_closure: Option<f64>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct RoundOut {
+    pub round: usize,
+    /// `accept`, `nothing`, `not_separable` or `unknown_effect`.
+    pub decision: String,
+    pub candidate: Option<String>,
+    /// The smoother (a generic joint-space correction) against the round's model.
+    pub smoother_gain_rms_mm: f64,
+    pub smoother_p: Option<f64>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct UnavailableOut {
+    pub name: String,
+    pub reason: String,
+}
+
+fn stats(s: &ErrorStats) -> StatsOut {
+    StatsOut {
+        n: s.n,
+        mean_mm: s.mean / MM,
+        median_mm: s.median / MM,
+        rms_mm: s.rms / MM,
+        p95_mm: s.p95 / MM,
+        max_mm: s.max / MM,
+    }
+}
+
+fn floor_out(f: &Floor) -> FloorOut {
+    FloorOut {
+        mean_mm: f.mean / MM,
+        rms_mm: f.rms / MM,
+        p95_mm: f.p95 / MM,
+        instrument_sigma_mm: f.instrument_sigma / MM,
+        prediction_rms_mm: f.prediction_rms / MM,
+    }
+}
+
+pub fn candidate_ref(c: &Candidate) -> CandidateRef {
+    let q = c.quarters;
+    CandidateRef {
+        name: c.kind.name().to_string(),
+        label: c.label(),
+        joint: c.joint.map(|j| j + 1),
+        from_joint: c.from.map(|j| j + 1),
+        harmonic: q.filter(|q| q.is_multiple_of(4)).map(|q| q / 4),
+        frequency_cpr: c.frequency(),
+        scanned: c.scanned,
+        step_deg: c.step_deg,
+    }
+}
+
+/// A value in SI → its file unit.
+fn file(v: f64, unit: Unit) -> f64 {
+    v / unit.to_si()
+}
+
+fn param_out(p: Param, value: f64, std: Option<f64>) -> ParamOut {
+    let u = p.unit();
+    ParamOut {
+        name: p.to_string(),
+        estimate: file(value, u),
+        std: std.map(|s| file(s, u)),
+        unit: u.as_str().to_string(),
+    }
+}
+
+fn effect_out(e: &Effect) -> EffectOut {
+    EffectOut {
+        which: candidate_ref(&e.candidate),
+        estimate: e.estimate.map(|v| file(v, e.unit)),
+        std: e.std.map(|v| file(v, e.unit)),
+        unit: e.unit.as_str().to_string(),
+        parameters: e.parameters.iter().map(|p| param_out(p.param, p.value, p.std)).collect(),
+        gain_mean_mm: e.gain_mean / MM,
+        gain_rms_mm: e.gain_rms / MM,
+        confirm_p: e.confirm_p,
+        screen_log10_p: e.screen_log10_p,
+        separability: e.separability,
+    }
+}
+
+fn absorbed(v: &[(String, f64)]) -> Vec<AbsorbedOut> {
+    v.iter().map(|(p, s)| AbsorbedOut { parameter: p.clone(), share: *s }).collect()
+}
+
+/// The unit a "where" variable is reported in, and its SI factor.
+fn variable_unit(name: &str) -> (&'static str, f64) {
+    if name.starts_with('q') {
+        ("deg", DEG)
+    } else if name.starts_with("tau") {
+        ("N·m", 1.0)
+    } else if name.starts_with("joint_distance") {
+        ("deg", DEG)
+    } else {
+        ("mm", MM)
+    }
+}
+
+fn where_out(w: &Where) -> WhereOut {
+    let axis = |a: &crate::diagnose::locate::Axis| AxisOut {
+        mean_mm: a.mean / MM,
+        std_mm: a.std / MM,
+        shapiro_p: a.shapiro_p,
+    };
+    WhereOut {
+        n: w.n,
+        per_axis: PerAxisOut { x: axis(&w.per_axis[0]), y: axis(&w.per_axis[1]), z: axis(&w.per_axis[2]) },
+        against: w
+            .against
+            .iter()
+            .map(|a| {
+                let (unit, k) = variable_unit(&a.variable);
+                AgainstOut {
+                    variable: a.variable.clone(),
+                    unit: unit.to_string(),
+                    r: a.fit.map(|f| f.r),
+                    r2: a.fit.map(|f| f.r2),
+                    slope: a.fit.map(|f| f.slope / MM * k),
+                    p_value: a.fit.map(|f| f.p_value),
+                    profile: a.profile.iter().map(|&(x, m, n)| BinOut { at: x / k, mean_mm: m / MM, n }).collect(),
+                }
+            })
+            .collect(),
+        voxels: VoxelsOut {
+            size_mm: w.voxel_size / MM,
+            tested: w.voxels_tested,
+            above_floor: w
+                .voxels
+                .iter()
+                .map(|v| VoxelOut {
+                    centre_mm: [v.centre.x / MM, v.centre.y / MM, v.centre.z / MM],
+                    n: v.n,
+                    mean_mm: v.mean_error / MM,
+                    floor_mean_mm: v.floor_mean / MM,
+                    p: v.p,
+                    q: v.q,
+                })
+                .collect(),
+        },
+    }
+}
+
+/// The model options of the final model as `identify --model` would spell them.
+fn model_spec(d: &Diagnosis) -> String {
+    use crate::kinematics::JointTerm;
+    let m = &d.model.model;
+    let dof = d.dof;
+    // β and compliance as blocks when every joint that can have them does.
+    let all_c = (1..dof).all(|j| m.compliance || m.extra.contains(&Param::Joint(j, JointTerm::Compliance)));
+    let n_beta = m.extra.iter().filter(|p| matches!(p, Param::Beta(_))).count();
+    let all_b = m.beta || (n_beta > 0 && n_beta == d.parallel_rows);
+    let mut items: Vec<String> = Vec::new();
+    if !all_b {
+        items.push("-beta".into());
+    }
+    if !all_c {
+        items.push("-compliance".into());
+    }
+    let mut maps: Vec<(usize, u8)> = Vec::new();
+    for p in &m.extra {
+        match p {
+            Param::Beta(_) if all_b => {}
+            Param::Joint(_, JointTerm::Compliance) if all_c => {}
+            Param::Joint(j, crate::kinematics::JointTerm::Map { step_deg, .. }) => {
+                if !maps.contains(&(*j, *step_deg)) {
+                    maps.push((*j, *step_deg));
+                }
+            }
+            p => items.push(format!("+{p}")),
+        }
+    }
+    items.extend(maps.iter().map(|(j, s)| format!("+map{}_s{s}", j + 1)));
+    items.join(",")
+}
+
+pub fn diagnosis_out(d: &Diagnosis) -> DiagnosisOut {
+    let v = &d.verdict;
+    let verdict = VerdictOut {
+        status: v.status.as_str().to_string(),
+        summary: v.summary.clone(),
+        effects: v.effects.iter().map(effect_out).collect(),
+        lookalike: v.lookalike.as_ref().map(candidate_ref),
+        canonical_correlation: v.canonical_correlation,
+        absorbed_by: absorbed(&v.absorbed_by),
+        experiment: v.experiment.clone(),
+        remaining: v
+            .remaining
+            .as_ref()
+            .map(|(s, t)| RemainingOut { status: s.as_str().to_string(), summary: t.clone() }),
+        approach_source: d.approach.map(|a| a.as_str().to_string()),
+    };
+    let dc = &d.decomposition;
+    let decomposition = DecompositionOut {
+        calibrated: dc.calibrated.as_ref().map(stats),
+        heldout: stats(&dc.heldout),
+        floor: floor_out(&dc.floor),
+        extrapolation_gap_mm: dc.extrapolation_gap.map(|g| g / MM),
+        unmodelled_gap_mm: dc.unmodelled_gap / MM,
+    };
+    let mut candidates = Vec::new();
+    let mut rounds = Vec::new();
+    for (k, r) in d.rounds.iter().enumerate() {
+        for (i, s) in r.screened.iter().enumerate() {
+            let ev = r.evaluated.iter().find(|e| e.index == i);
+            candidates.push(CandidateOut {
+                round: k + 1,
+                which: candidate_ref(&s.candidate),
+                statistic: s.score.s,
+                dof: s.score.dof,
+                f: s.score.f,
+                log10_p: s.score.log10_p,
+                p_holm: 10f64.powf(s.log10_p_holm),
+                log10_p_holm: s.log10_p_holm,
+                significant: s.significant,
+                separability: s.score.rho,
+                bic_gain: if s.score.bic_gain.is_finite() { s.score.bic_gain } else { 0.0 },
+                heldout: ev.map(|e| HeldoutOut {
+                    gain_mean_mm: e.vs_model.gain_mean / MM,
+                    gain_rms_mm: e.vs_model.gain_rms / MM,
+                    p: e.vs_model.p,
+                    share: e.share,
+                    confirmed: e.confirmed,
+                }),
+                absorbed_by: absorbed(&s.absorbed_by),
+            });
+        }
+        let (decision, cand) = match &r.decision {
+            Decision::Accept(i) => ("accept", Some(r.screened[*i].candidate.label())),
+            Decision::Nothing => ("nothing", None),
+            Decision::NotSeparable { best, .. } => ("not_separable", Some(r.screened[*best].candidate.label())),
+            Decision::Unknown { best } => ("unknown_effect", best.map(|i| r.screened[i].candidate.label())),
+        };
+        rounds.push(RoundOut {
+            round: k + 1,
+            decision: decision.to_string(),
+            candidate: cand,
+            smoother_gain_rms_mm: r.smoother.gain_rms / MM,
+            smoother_p: r.smoother.p,
+        });
+    }
+    let shrink = d
+        .shrink
+        .iter()
+        .map(|s| ShrinkOut {
+            model: if s.model.is_empty() { "start".into() } else { format!("start + {}", s.model.join(" + ")) },
+            effects: s.model.clone(),
+            n: s.stats.n,
+            mean_mm: s.stats.mean / MM,
+            rms_mm: s.stats.rms / MM,
+            p95_mm: s.stats.p95 / MM,
+            max_mm: s.stats.max / MM,
+            gap_closure: s.closure,
+        })
+        .collect();
+    let mut notes = Vec::new();
+    if let Some(n) = &d.start_note {
+        notes.push(format!(
+            "the starting model does not converge on the pooled data ({n}); it is linearised at the given parameter set"
+        ));
+    }
+    if d.verdict.status == Status::Named {
+        notes.push(
+            "accepting fits the final model on the identification and validation sessions together; its held-out figures are the shrink table's"
+                .into(),
+        );
+    }
+    DiagnosisOut {
+        verdict,
+        decomposition,
+        location: where_out(&d.location),
+        candidates,
+        shrink,
+        rounds,
+        unavailable: d
+            .unavailable
+            .iter()
+            .map(|u| UnavailableOut { name: u.kind.name().to_string(), reason: u.reason.clone() })
+            .collect(),
+        model: model_spec(d),
+        sessions: SessionsOut {
+            identification: d.identification.clone(),
+            validation: d.validation.clone(),
+            tested: if d.validation.is_empty() { "identification".into() } else { "validation".into() },
+            folds: d.folds,
+        },
+        transfer: d
+            .transfer
+            .iter()
+            .map(|t| TransferOut {
+                session: t.session.clone(),
+                model: t.model.clone(),
+                errors: t.errors.as_ref().ok().map(stats),
+                error: t.errors.as_ref().err().cloned(),
+                kappa_scaled: t.kappa_scaled,
+            })
+            .collect(),
+        notes,
+    }
+}
+
+/// The parameter set an accepted diagnosis produces: the final model fitted on the pooled
+/// sessions, as a parameter-set document (statuses, std, quality report); `None` when no effect
+/// was named.
+pub fn accepted_doc(d: &Diagnosis) -> Option<ParameterSetDoc> {
+    let id = d.accepted.as_ref()?;
+    if d.verdict.status != Status::Named {
+        return None;
+    }
+    let mut sessions = d.identification.clone();
+    sessions.extend(d.validation.iter().cloned());
+    let mut doc = super::identification::identification_doc(id, &sessions, None);
+    if let Some(q) = doc.quality.as_mut().and_then(|q| q.as_object_mut()) {
+        q.insert(
+            "diagnosis".into(),
+            serde_json::json!({
+                "accepted": d.verdict.effects.iter().map(|e| e.candidate.label()).collect::<Vec<_>>(),
+                "model": model_spec(d),
+            }),
+        );
+    }
+    Some(doc)
+}
