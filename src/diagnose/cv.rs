@@ -94,65 +94,145 @@ impl Heldout {
 /// dropped rather than amplified.
 const SOLVE_TOL: f64 = 1e-13;
 
-/// Cross-validate the stage's model, plus the columns `extra` (weighted, n_rows × m, with an
-/// optional m × m penalty) when given.
-pub fn cross_validate(stage: &Stage, folds: &Folds, extra: Option<(&Mat<f64>, Option<&Mat<f64>>)>) -> Heldout {
-    let pr = &stage.problem;
-    let (n, p) = (stage.n_rows(), stage.p());
-    let m = extra.map_or(0, |(c, _)| c.ncols());
-    let w = p + m;
-    // Column-scaled design: conditioning of the Gram matrix is that of the scaled Jacobian squared.
-    let col = |r: usize, c: usize| -> f64 { if c < p { stage.j[(r, c)] } else { extra.expect("extra").0[(r, c - p)] } };
-    let mut scale = vec![0.0; w];
-    for (c, s) in scale.iter_mut().enumerate() {
-        let ss: f64 = (0..n).map(|r| col(r, c).powi(2)).sum();
-        *s = if ss > 0.0 { ss.sqrt() } else { 1.0 };
-    }
-    let a = Mat::<f64>::from_fn(n, w, |r, c| col(r, c) / scale[c]);
-    let g = at_b(a.as_ref(), a.as_ref());
-    let b = at_v(a.as_ref(), &stage.r);
-    let penalty = extra.and_then(|(_, l)| l);
+/// One fold's test rows and their share of the model's Gram matrix.
+struct FoldBase {
+    test: Vec<usize>,
+    rows: Vec<usize>,
+    /// Column-scaled J on the test rows, and its Gram and product with r there.
+    jv: Mat<f64>,
+    gv: Mat<f64>,
+    bv: Vec<f64>,
+    rv: Vec<f64>,
+}
 
-    let mut errors = Vec::new();
-    let mut pose_sq = vec![0.0; folds.n_poses];
-    for f in 0..folds.k {
-        let test: Vec<usize> = (0..pr.obs.len()).filter(|&o| folds.fold_of_obs[o] == Some(f)).collect();
-        if test.is_empty() {
-            continue;
-        }
-        let rows: Vec<usize> = test.iter().flat_map(|&o| pr.obs[o].row..pr.obs[o].row + pr.obs[o].rows).collect();
-        let av = Mat::<f64>::from_fn(rows.len(), w, |i, c| a[(rows[i], c)]);
-        let rv: Vec<f64> = rows.iter().map(|&r| stage.r[r]).collect();
-        let gv = at_b(av.as_ref(), av.as_ref());
-        let bv = at_v(av.as_ref(), &rv);
-        let mut gt = Mat::<f64>::from_fn(w, w, |i, k| g[(i, k)] - gv[(i, k)]);
-        if let Some(l) = penalty {
+/// What every cross-validation of one stage shares: the model's column-scaled Jacobian, its
+/// Gram matrix and right side, and each fold's share of them. A candidate only adds its own
+/// blocks, so confirming several candidates costs one model Gram, not one each.
+pub struct CvBase<'a> {
+    stage: &'a Stage,
+    scale: Vec<f64>,
+    js: Mat<f64>,
+    g: Mat<f64>,
+    b: Vec<f64>,
+    folds: Vec<FoldBase>,
+    n_poses: usize,
+    pose_of_obs: Vec<Option<usize>>,
+}
+
+impl<'a> CvBase<'a> {
+    pub fn new(stage: &'a Stage, folds: &Folds) -> CvBase<'a> {
+        let pr = &stage.problem;
+        let (n, p) = (stage.n_rows(), stage.p());
+        let scale: Vec<f64> = (0..p)
+            .map(|c| {
+                let ss: f64 = (0..n).map(|r| stage.j[(r, c)].powi(2)).sum();
+                if ss > 0.0 { ss.sqrt() } else { 1.0 }
+            })
+            .collect();
+        let js = Mat::<f64>::from_fn(n, p, |r, c| stage.j[(r, c)] / scale[c]);
+        let g = at_b(js.as_ref(), js.as_ref());
+        let b = at_v(js.as_ref(), &stage.r);
+        let fb = (0..folds.k)
+            .filter_map(|f| {
+                let test: Vec<usize> = (0..pr.obs.len()).filter(|&o| folds.fold_of_obs[o] == Some(f)).collect();
+                if test.is_empty() {
+                    return None;
+                }
+                let rows: Vec<usize> =
+                    test.iter().flat_map(|&o| pr.obs[o].row..pr.obs[o].row + pr.obs[o].rows).collect();
+                let jv = Mat::<f64>::from_fn(rows.len(), p, |i, c| js[(rows[i], c)]);
+                let rv: Vec<f64> = rows.iter().map(|&r| stage.r[r]).collect();
+                let gv = at_b(jv.as_ref(), jv.as_ref());
+                let bv = at_v(jv.as_ref(), &rv);
+                Some(FoldBase { test, rows, jv, gv, bv, rv })
+            })
+            .collect();
+        CvBase { stage, scale, js, g, b, folds: fb, n_poses: folds.n_poses, pose_of_obs: folds.pose_of_obs.clone() }
+    }
+
+    /// Held-out errors of the model plus `extra` columns (weighted, n_rows × m) with an optional
+    /// m × m penalty; the model alone when `None`.
+    pub fn heldout(&self, extra: Option<(&Mat<f64>, Option<&Mat<f64>>)>) -> Heldout {
+        let stage = self.stage;
+        let pr = &stage.problem;
+        let (n, p) = (stage.n_rows(), stage.p());
+        let m = extra.map_or(0, |(c, _)| c.ncols());
+        let w = p + m;
+        // The candidate's scaled columns and its blocks of the full Gram matrix.
+        let (cs, cscale) = match extra {
+            Some((c, _)) => {
+                let sc: Vec<f64> = (0..m)
+                    .map(|k| {
+                        let ss: f64 = (0..n).map(|r| c[(r, k)].powi(2)).sum();
+                        if ss > 0.0 { ss.sqrt() } else { 1.0 }
+                    })
+                    .collect();
+                (Mat::<f64>::from_fn(n, m, |r, k| c[(r, k)] / sc[k]), sc)
+            }
+            None => (Mat::<f64>::zeros(n, 0), Vec::new()),
+        };
+        let (gjc, gcc, bc) = if m > 0 {
+            (at_b(self.js.as_ref(), cs.as_ref()), at_b(cs.as_ref(), cs.as_ref()), at_v(cs.as_ref(), &stage.r))
+        } else {
+            (Mat::zeros(p, 0), Mat::zeros(0, 0), Vec::new())
+        };
+        let penalty = extra.and_then(|(_, l)| l);
+        let mut errors = Vec::new();
+        let mut pose_sq = vec![0.0; self.n_poses];
+        for fb in &self.folds {
+            let cv = Mat::<f64>::from_fn(fb.rows.len(), m, |i, k| cs[(fb.rows[i], k)]);
+            let (gjc_v, gcc_v, bc_v) = if m > 0 {
+                (at_b(fb.jv.as_ref(), cv.as_ref()), at_b(cv.as_ref(), cv.as_ref()), at_v(cv.as_ref(), &fb.rv))
+            } else {
+                (Mat::zeros(p, 0), Mat::zeros(0, 0), Vec::new())
+            };
+            let mut gt = Mat::<f64>::zeros(w, w);
+            for i in 0..p {
+                for k in 0..p {
+                    gt[(i, k)] = self.g[(i, k)] - fb.gv[(i, k)];
+                }
+                for k in 0..m {
+                    let v = gjc[(i, k)] - gjc_v[(i, k)];
+                    gt[(i, p + k)] = v;
+                    gt[(p + k, i)] = v;
+                }
+            }
             for i in 0..m {
                 for k in 0..m {
-                    gt[(p + i, p + k)] += l[(i, k)] / (scale[p + i] * scale[p + k]);
+                    gt[(p + i, p + k)] =
+                        gcc[(i, k)] - gcc_v[(i, k)] + penalty.map_or(0.0, |l| l[(i, k)] / (cscale[i] * cscale[k]));
+                }
+            }
+            let bt: Vec<f64> =
+                (0..w).map(|i| if i < p { self.b[i] - fb.bv[i] } else { bc[i - p] - bc_v[i - p] }).collect();
+            let delta = psd_solve(&gt, &bt, SOLVE_TOL);
+            let mut at = 0;
+            for &o in &fb.test {
+                let ob = &pr.obs[o];
+                let mut e = Vector3::zeros();
+                for k in 0..3 {
+                    let i = at + k;
+                    let pred: f64 = (0..p).map(|c| fb.jv[(i, c)] * delta[c]).sum::<f64>()
+                        + (0..m).map(|c| cv[(i, c)] * delta[p + c]).sum::<f64>();
+                    e[k] = (fb.rv[i] - pred) / ob.weight[0];
+                }
+                at += ob.rows;
+                errors.push((o, e));
+                if let Some(pose) = self.pose_of_obs[o] {
+                    pose_sq[pose] += e.norm_squared();
                 }
             }
         }
-        let bt: Vec<f64> = (0..w).map(|i| b[i] - bv[i]).collect();
-        let delta = psd_solve(&gt, &bt, SOLVE_TOL);
-        let mut at = 0;
-        for &o in &test {
-            let ob = &pr.obs[o];
-            let mut e = Vector3::zeros();
-            for k in 0..3 {
-                let i = at + k;
-                let pred: f64 = (0..w).map(|c| av[(i, c)] * delta[c]).sum();
-                e[k] = (rv[i] - pred) / ob.weight[0];
-            }
-            at += ob.rows;
-            errors.push((o, e));
-            if let Some(pose) = folds.pose_of_obs[o] {
-                pose_sq[pose] += e.norm_squared();
-            }
-        }
+        let _ = &self.scale;
+        errors.sort_by_key(|(o, _)| *o);
+        Heldout { errors, pose_sq }
     }
-    errors.sort_by_key(|(o, _)| *o);
-    Heldout { errors, pose_sq }
+}
+
+/// Cross-validate the stage's model, plus the columns `extra` when given (one-off: build a
+/// [`CvBase`] to confirm several candidates on one stage).
+pub fn cross_validate(stage: &Stage, folds: &Folds, extra: Option<(&Mat<f64>, Option<&Mat<f64>>)>) -> Heldout {
+    CvBase::new(stage, folds).heldout(extra)
 }
 
 /// The paired comparison of two models on the same held-out poses.

@@ -316,7 +316,10 @@ pub fn diagnose(input: &Input<'_>, opts: &DiagnoseOptions) -> Result<Diagnosis, 
     let approach = Some(order::fill_approach(&mut work, &sessions));
 
     let start = start_options(input, opts, sessions.clone());
+    let t0 = std::time::Instant::now();
     let stage0 = stage::Stage::fit(&work, start)?;
+    search::timing("stage 0", t0);
+    let t0 = std::time::Instant::now();
     let start_note = stage0.fit.as_ref().err().cloned();
     let pr = &stage0.problem;
     let tested_sessions = if validation.is_empty() { &identification } else { &validation };
@@ -343,7 +346,12 @@ pub fn diagnose(input: &Input<'_>, opts: &DiagnoseOptions) -> Result<Diagnosis, 
     };
     let base = input.set.chain().base().t;
 
-    let s = search::search(&work, stage0, &folds, fl.rms * fl.rms, &opts.search)?;
+    search::timing("folds + floor", t0);
+    let t0 = std::time::Instant::now();
+    let search_opts = SearchOptions { threads: opts.threads.max(opts.search.threads), ..opts.search.clone() };
+    let s = search::search(&work, stage0, &folds, fl.rms * fl.rms, &search_opts)?;
+    search::timing("search", t0);
+    let t0 = std::time::Instant::now();
     let voxel = if opts.voxel_size > 0.0 {
         opts.voxel_size
     } else {
@@ -379,6 +387,8 @@ pub fn diagnose(input: &Input<'_>, opts: &DiagnoseOptions) -> Result<Diagnosis, 
         shrink.push(ShrinkEntry { model: s.accepted[..k].iter().map(|c| c.label()).collect(), stats, closure });
     }
 
+    search::timing("where + decomposition", t0);
+    let t0 = std::time::Instant::now();
     let verdict = verdict(&s, &decomposition);
     let model = s.stages.last().expect("a stage").options.clone();
     let accepted = if s.accepted.is_empty() {
@@ -389,6 +399,7 @@ pub fn diagnose(input: &Input<'_>, opts: &DiagnoseOptions) -> Result<Diagnosis, 
         o.start = Some(s.stages.last().expect("a stage").set.clone());
         identify(&work, &o).ok().or_else(|| s.stages.last().and_then(|st| st.fit.as_ref().ok().cloned()))
     };
+    search::timing("verdict + accepted", t0);
     let approach = approach.filter(|_| s.rounds[0].screened.iter().any(|c| c.candidate.kind == Kind::Backlash));
     // Transfer of the starting and the final model.
     let mut transfer = Vec::new();
@@ -536,15 +547,11 @@ fn effect_of(s: &search::Search, round: usize, index: usize, stage_after: Option
     match stage_after.map(|k| &s.stages[k]) {
         Some(st) => {
             let pr = &st.problem;
-            for p in &c.params {
-                let Some(g) = pr.robot_index(*p) else { continue };
-                let value = st.x[g];
-                let std = st
-                    .fit
-                    .as_ref()
-                    .ok()
-                    .and_then(|id| id.free.iter().position(|&f| f == g).map(|col| id.quality.std[col]));
-                parameters.push(ParamEstimate { param: *p, value, std });
+            let found: Vec<(Param, usize)> =
+                c.params.iter().filter_map(|p| pr.robot_index(*p).map(|g| (*p, g))).collect();
+            let stds = st.stds_of(&found.iter().map(|f| f.1).collect::<Vec<_>>());
+            for ((p, g), std) in found.into_iter().zip(stds) {
+                parameters.push(ParamEstimate { param: p, value: st.x[g], std });
             }
         }
         None => {

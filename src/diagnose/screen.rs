@@ -79,6 +79,13 @@ pub fn score(basis: &Basis<'_>, c: MatRef<'_, f64>, penalty: Option<&Mat<f64>>) 
     let aa = at_b(a.as_ref(), a.as_ref());
     let g = Mat::<f64>::from_fn(m, m, |i, k| g0[(i, k)] - aa[(i, k)]);
     let gr = at_v(c, basis.r);
+    score_gram(basis, &g0, &g, &gr, penalty)
+}
+
+/// The score test from the candidate's Gram matrices: G₀ = J_kᵀJ_k, G = J̃_kᵀJ̃_k (after
+/// projecting off the model) and J_kᵀr̃.
+pub fn score_gram(basis: &Basis<'_>, g0: &Mat<f64>, g: &Mat<f64>, gr: &[f64], penalty: Option<&Mat<f64>>) -> Score {
+    let m = g0.nrows();
     let tr0: f64 = (0..m).map(|i| g0[(i, i)]).sum();
     let tr: f64 = (0..m).map(|i| g[(i, i)].max(0.0)).sum();
     let rho = if tr0 > 0.0 { (tr / tr0).sqrt() } else { 0.0 };
@@ -89,6 +96,7 @@ pub fn score(basis: &Basis<'_>, c: MatRef<'_, f64>, penalty: Option<&Mat<f64>>) 
     };
     // Pseudo-inverse of H on the directions the model does not absorb.
     let (vals, vecs) = psd_eigen(&h, 0.0);
+    let gr = gr.to_vec();
     let mut delta = vec![0.0; m];
     let mut dof = 0.0;
     for (k, &lam) in vals.iter().enumerate() {

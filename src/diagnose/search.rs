@@ -30,10 +30,10 @@
 
 use faer::Mat;
 
-use super::cv::{Folds, Heldout, Paired, cross_validate, paired};
+use super::cv::{CvBase, Folds, Heldout, Paired, cross_validate, paired};
 use super::library::{Candidate, Context, Kind, Unavailable, candidates, scan_multiplicity, scan_quarters};
 use super::linalg::{at_b, canonical_correlation, orthonormal_basis};
-use super::screen::{Basis, Score, score, table_penalty};
+use super::screen::{Basis, Score, score, score_gram, table_penalty};
 use super::stage::Stage;
 use super::stats::holm_log10;
 use crate::cell::Cell;
@@ -63,6 +63,8 @@ pub struct SearchOptions {
     /// explain: a candidate that predicts a sliver of a large unexplained error is fitting
     /// whatever happens to correlate with it, not naming its cause.
     pub min_share: f64,
+    /// Threads for confirming candidates (results do not depend on it).
+    pub threads: usize,
 }
 
 impl Default for SearchOptions {
@@ -78,6 +80,7 @@ impl Default for SearchOptions {
             map_step_deg: 0,
             map_smoothing: crate::identify::DEFAULT_MAP_SMOOTHING,
             min_share: 0.2,
+            threads: 1,
         }
     }
 }
@@ -167,9 +170,9 @@ pub fn search(
         let decision = round.decision.clone();
         rounds.push(round);
         let Decision::Accept(_) = decision else { break };
-        let cand = chosen.expect("an accepted candidate");
+        let (cand, cols) = chosen.expect("an accepted candidate");
         let next_opts = extend_options(&stage.options, stage, &cand);
-        let next = Stage::fit(cell, next_opts)?;
+        let next = stage.extend(cell, next_opts, &cand.params, &cand.frees, &cols, opts.map_smoothing)?;
         baselines.push(cross_validate(&next, folds, None));
         stages.push(next);
         accepted.push(cand);
@@ -178,6 +181,30 @@ pub fn search(
         }
     }
     Ok(Search { stages, baselines, rounds, accepted, unavailable })
+}
+
+/// `f` over `items` on up to `threads` scoped threads; results in item order.
+fn par_map<T: Sync, R: Send>(items: &[T], threads: usize, f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+    use std::sync::Mutex;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    if threads <= 1 || items.len() <= 1 {
+        return items.iter().map(f).collect();
+    }
+    let next = AtomicUsize::new(0);
+    let out: Mutex<Vec<Option<R>>> = Mutex::new((0..items.len()).map(|_| None).collect());
+    std::thread::scope(|scope| {
+        for _ in 0..threads.min(items.len()) {
+            scope.spawn(|| {
+                loop {
+                    let k = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(item) = items.get(k) else { break };
+                    let r = f(item);
+                    out.lock().expect("no panic while holding the lock")[k] = Some(r);
+                }
+            });
+        }
+    });
+    out.into_inner().expect("joined").into_iter().map(|r| r.expect("every item ran")).collect()
 }
 
 /// Mean squared |e| over the tested observations, m².
@@ -309,6 +336,15 @@ fn ridge(c: &Mat<f64>, rel: f64) -> Mat<f64> {
     )
 }
 
+/// The accepted candidate and its columns at the round's stage.
+type Chosen = (Candidate, Mat<f64>);
+
+pub(crate) fn timing(what: &str, t: std::time::Instant) {
+    if std::env::var_os("ROBOCAL_TIMING").is_some() {
+        eprintln!("{what}: {:.3} s", t.elapsed().as_secs_f64());
+    }
+}
+
 fn run_round(
     cell: &Cell,
     stage: &Stage,
@@ -316,7 +352,7 @@ fn run_round(
     folds: &Folds,
     floor_ms: f64,
     opts: &SearchOptions,
-) -> (Round, Vec<Unavailable>, Option<Candidate>) {
+) -> (Round, Vec<Unavailable>, Option<Chosen>) {
     let pr = &stage.problem;
     let approach = pr.obs.iter().any(|o| o.state.approach.iter().any(|&a| a != 0.0));
     let free = stage.free_layout();
@@ -325,6 +361,7 @@ fn run_round(
     let rp = Basis::project(stage.q.as_ref(), &stage.r);
     let basis = Basis { q: stage.q.as_ref(), r: &rp, rss: stage.rss, n: stage.n_obs_rows(), p: stage.p() };
 
+    let t0 = std::time::Instant::now();
     // Screening of the library.
     let mut screened: Vec<Screened> = Vec::new();
     let mut columns: Vec<(Mat<f64>, Option<Mat<f64>>)> = Vec::new();
@@ -340,6 +377,8 @@ fn run_round(
         });
         columns.push((cols, pen));
     }
+    timing("screen library", t0);
+    let t0 = std::time::Instant::now();
     // The frequency scan, one test per joint.
     let g = stage.joint_columns();
     for j in 0..pr.model.dof() {
@@ -348,15 +387,18 @@ fn run_round(
             columns.push((cols, None));
         }
     }
+    timing("scan", t0);
+    let t0 = std::time::Instant::now();
     // Holm over the family.
     let lp: Vec<f64> = screened.iter().map(|s| s.score.log10_p).collect();
     for (s, h) in screened.iter_mut().zip(holm_log10(&lp)) {
         s.log10_p_holm = h;
         s.significant = h < opts.alpha.log10() && s.score.dof > 0.0;
     }
+    let absorber = Absorber::new(stage);
     for (s, (cols, _)) in screened.iter_mut().zip(&columns) {
         if s.significant {
-            s.absorbed_by = absorbed_by(stage, cols);
+            s.absorbed_by = absorber.absorbed_by(cols);
         }
     }
 
@@ -367,11 +409,15 @@ fn run_round(
     // Bonferroni over the candidates confirmed this round; the share of the excess variance.
     let level = opts.confirm_p / order.len().max(1) as f64;
     let excess = (rms2(base) - floor_ms).max(f64::MIN_POSITIVE);
+    let cvb = CvBase::new(stage, folds);
+    let heldouts = par_map(&order, opts.threads, |&i| {
+        let (cols, pen) = &columns[i];
+        cvb.heldout(Some((cols, pen.as_ref())))
+    });
     let evaluated: Vec<Evaluated> = order
         .iter()
-        .map(|&i| {
-            let (cols, pen) = &columns[i];
-            let heldout = cross_validate(stage, folds, Some((cols, pen.as_ref())));
+        .zip(heldouts)
+        .map(|(&i, heldout)| {
             let vs_model = paired(base, &heldout);
             let share = (rms2(base) - rms2(&heldout)) / excess;
             let confirmed =
@@ -380,15 +426,19 @@ fn run_round(
         })
         .collect();
 
+    timing("absorbed + confirm", t0);
+    let t0 = std::time::Instant::now();
     // The smoother.
     let sm = smoother_columns(stage, &g);
     let sm_pen = ridge(&sm, 1e-6);
-    let smoother_heldout = cross_validate(stage, folds, Some((&sm, Some(&sm_pen))));
+    let smoother_heldout = cvb.heldout(Some((&sm, Some(&sm_pen))));
     let smoother = paired(base, &smoother_heldout);
     let smoother_ok = smoother.p.is_some_and(|p| p < opts.confirm_p)
         && smoother.gain_rms > opts.min_gain
         && (rms2(base) - rms2(&smoother_heldout)) / excess >= opts.min_share;
 
+    timing("smoother", t0);
+    let t0 = std::time::Instant::now();
     // Decide.
     let confirmed: Vec<&Evaluated> = evaluated.iter().filter(|e| e.confirmed).collect();
     let mut smoother_vs_best = None;
@@ -436,8 +486,9 @@ fn run_round(
             }
         }
     };
+    timing("decide", t0);
     let chosen = match decision {
-        Decision::Accept(i) => Some(screened[i].candidate.clone()),
+        Decision::Accept(i) => Some((screened[i].candidate.clone(), columns[i].0.clone())),
         _ => None,
     };
     (Round { screened, evaluated, smoother, smoother_heldout, smoother_vs_best, decision }, missing, chosen)
@@ -465,26 +516,72 @@ fn scan_joint(
         let t = JointTerm::cyclic(q, false).expect("non-zero");
         pr.layout.params().iter().zip(&free).any(|(p, f)| *f && *p == Param::Joint(j, t))
     };
-    let mut best: Option<(u16, Score, Mat<f64>)> = None;
-    for q in scan_quarters() {
+    // Every frequency at once, exactly: a column of the scan is joint j's column times
+    // sin(f·q_j) or cos(f·q_j), constant over an observation's rows, so its Gram entries, its
+    // product with r̃ and its projection Qᵀc are sums over observations of per-observation
+    // aggregates (Σ g², Σ g·r̃, Σ g·Q). One product (2F × n_obs)·(n_obs × p) projects all of them.
+    let nq = scan_quarters().count();
+    let n_obs = pr.obs.len();
+    let pq = stage.q.ncols();
+    let mut gg = vec![0.0; n_obs];
+    let mut gr = vec![0.0; n_obs];
+    let mut u = Mat::<f64>::zeros(n_obs, pq);
+    for (i, o) in pr.obs.iter().enumerate() {
+        for r in o.row..o.row + o.rows {
+            let gv = g[(r, j)];
+            gg[i] += gv * gv;
+            gr[i] += gv * basis.r[r];
+            for k in 0..pq {
+                u[(i, k)] += gv * stage.q[(r, k)];
+            }
+        }
+    }
+    // sin and cos of (k/4)·q for k = 1 … by the rotation recurrence (rounding ~1e-14 after 160
+    // steps), instead of 320 trigonometric calls per observation.
+    let mut t = Mat::<f64>::zeros(n_obs, 2 * nq);
+    for (i, o) in pr.obs.iter().enumerate() {
+        let (s1, c1) = (o.state.q[j] / 4.0).sin_cos();
+        let (mut s, mut c) = (0.0f64, 1.0f64);
+        for k in 0..nq {
+            (s, c) = (s * c1 + c * s1, c * c1 - s * s1);
+            t[(i, 2 * k)] = s;
+            t[(i, 2 * k + 1)] = c;
+        }
+    }
+    let a = at_b(t.as_ref(), u.as_ref());
+    let mut best: Option<(u16, Score)> = None;
+    for (k, q) in scan_quarters().enumerate() {
         if in_model(q) {
             continue;
         }
-        let f = q as f64 / 4.0;
-        let mut cols = Mat::<f64>::zeros(stage.n_rows(), 2);
-        for o in &pr.obs {
-            let (s, c) = (f * o.state.q[j]).sin_cos();
-            for r in o.row..o.row + o.rows {
-                cols[(r, 0)] = g[(r, j)] * s;
-                cols[(r, 1)] = g[(r, j)] * c;
-            }
+        let mut g0 = Mat::<f64>::zeros(2, 2);
+        let mut b = [0.0; 2];
+        for i in 0..n_obs {
+            let (s, c) = (t[(i, 2 * k)], t[(i, 2 * k + 1)]);
+            g0[(0, 0)] += gg[i] * s * s;
+            g0[(0, 1)] += gg[i] * s * c;
+            g0[(1, 1)] += gg[i] * c * c;
+            b[0] += gr[i] * s;
+            b[1] += gr[i] * c;
         }
-        let sc = score(basis, cols.as_ref(), None);
-        if best.as_ref().is_none_or(|(_, b, _)| sc.f > b.f) {
-            best = Some((q, sc, cols));
+        g0[(1, 0)] = g0[(0, 1)];
+        let proj = |x: usize, y: usize| (0..pq).map(|l| a[(2 * k + x, l)] * a[(2 * k + y, l)]).sum::<f64>();
+        let gm = Mat::<f64>::from_fn(2, 2, |x, y| g0[(x, y)] - proj(x, y));
+        let sc = score_gram(basis, &g0, &gm, &b, None);
+        if best.as_ref().is_none_or(|(_, bs)| sc.f > bs.f) {
+            best = Some((q, sc));
         }
     }
-    let (q, mut sc, cols) = best?;
+    let (q, mut sc) = best?;
+    let f = q as f64 / 4.0;
+    let mut cols = Mat::<f64>::zeros(stage.n_rows(), 2);
+    for o in &pr.obs {
+        let (s, c) = (f * o.state.q[j]).sin_cos();
+        for r in o.row..o.row + o.rows {
+            cols[(r, 0)] = g[(r, j)] * s;
+            cols[(r, 1)] = g[(r, j)] * c;
+        }
+    }
     if q == 4 || q == 8 {
         return None;
     }
@@ -602,26 +699,42 @@ fn unabsorbed(stage: &Stage, c: &Mat<f64>) -> Mat<f64> {
     Mat::<f64>::from_fn(c.nrows(), c.ncols(), |r, k| c[(r, k)] - proj[(r, k)])
 }
 
-/// The model parameters that absorb most of a candidate: the coefficients of its columns'
-/// regression on the model's (B = J⁺J_k), each parameter's share ‖J_i‖·‖B_i‖ of the total.
-fn absorbed_by(stage: &Stage, cols: &Mat<f64>) -> Vec<(String, f64)> {
-    let j = &stage.j;
-    let p = j.ncols();
-    let norms: Vec<f64> = (0..p).map(|c| (0..j.nrows()).map(|r| j[(r, c)].powi(2)).sum::<f64>().sqrt()).collect();
-    let js = Mat::<f64>::from_fn(j.nrows(), p, |r, c| j[(r, c)] / norms[c].max(f64::MIN_POSITIVE));
-    let g = at_b(js.as_ref(), js.as_ref());
-    let rhs = at_b(js.as_ref(), cols.as_ref());
-    let b: Vec<Vec<f64>> = (0..cols.ncols())
-        .map(|k| super::linalg::psd_solve(&g, &(0..p).map(|r| rhs[(r, k)]).collect::<Vec<_>>(), 1e-13))
-        .collect();
-    let mut share: Vec<(usize, f64)> =
-        (0..p).map(|i| (i, b.iter().map(|bk| bk[i] * bk[i]).sum::<f64>().sqrt())).collect();
-    let total: f64 = share.iter().map(|s| s.1).sum();
-    share.sort_by(|a, b| b.1.total_cmp(&a.1));
-    share
-        .into_iter()
-        .take(3)
-        .filter(|s| total > 0.0 && s.1 / total > 0.05)
-        .map(|(i, v)| (stage.problem.name(stage.free[i]), v / total))
-        .collect()
+struct Absorber<'a> {
+    stage: &'a Stage,
+    js: Mat<f64>,
+    /// (JsᵀJs)⁺ = V·diag(1/λ)·Vᵀ, formed once per round.
+    pinv: Mat<f64>,
+}
+
+impl<'a> Absorber<'a> {
+    fn new(stage: &'a Stage) -> Self {
+        let j = &stage.j;
+        let p = j.ncols();
+        let norms: Vec<f64> = (0..p).map(|c| (0..j.nrows()).map(|r| j[(r, c)].powi(2)).sum::<f64>().sqrt()).collect();
+        let js = Mat::<f64>::from_fn(j.nrows(), p, |r, c| j[(r, c)] / norms[c].max(f64::MIN_POSITIVE));
+        let g = at_b(js.as_ref(), js.as_ref());
+        let (vals, vecs) = super::linalg::psd_eigen(&g, 1e-13);
+        let pinv =
+            Mat::<f64>::from_fn(p, p, |a, b| (0..vals.len()).map(|k| vecs[(a, k)] * vecs[(b, k)] / vals[k]).sum());
+        Absorber { stage, js, pinv }
+    }
+
+    /// The model parameters that absorb most of a candidate: the coefficients of its columns'
+    /// regression on the model's (B = J⁺J_k, on unit-scaled columns), each parameter's share
+    /// ‖B_i‖ of the total.
+    fn absorbed_by(&self, cols: &Mat<f64>) -> Vec<(String, f64)> {
+        let rhs = at_b(self.js.as_ref(), cols.as_ref());
+        let b = super::linalg::a_b(self.pinv.as_ref(), rhs.as_ref());
+        let p = b.nrows();
+        let mut share: Vec<(usize, f64)> =
+            (0..p).map(|i| (i, (0..b.ncols()).map(|k| b[(i, k)] * b[(i, k)]).sum::<f64>().sqrt())).collect();
+        let total: f64 = share.iter().map(|s| s.1).sum();
+        share.sort_by(|a, b| b.1.total_cmp(&a.1));
+        share
+            .into_iter()
+            .take(3)
+            .filter(|s| total > 0.0 && s.1 / total > 0.05)
+            .map(|(i, v)| (self.stage.problem.name(self.stage.free[i]), v / total))
+            .collect()
+    }
 }

@@ -5,7 +5,7 @@
 
 use faer::Mat;
 
-use super::linalg::{at_v, orthonormal_basis};
+use super::linalg::{a_b, at_b, at_v, orthonormal_basis, psd_solve};
 
 use crate::cell::Cell;
 use crate::identify::{GlobalParam, Identification, IdentifyError, IdentifyOptions, Problem, identify, prepare};
@@ -92,6 +92,127 @@ impl Stage {
             })
             .sum();
         Stage { options, problem, x, free, set, fit, j, r, q, rss }
+    }
+
+    /// The model plus a candidate, as one Gauss–Newton step from this stage's solution on the
+    /// pooled data: J gains the candidate's columns (`cols`, weighted, from
+    /// [`Stage::columns`] or [`Stage::global_columns`]) and a table's regularisation rows,
+    /// the residual becomes the pooled least-squares residual of the extended linear model, Q
+    /// is extended by the candidate's unabsorbed directions.
+    ///
+    /// The step is checked against the nonlinear model: when the residual the extended model
+    /// really gives at the new point differs from the linear prediction by more than 1 % of the
+    /// weighted RSS (a large effect — a missing compliance turns joints by a degree), the
+    /// extended model is refitted in full from there instead. Small effects (tables of tenths
+    /// of a milliradian) stay linear: their second-order terms are nanometres, and a full refit
+    /// of a model with hundreds of knots costs seconds.
+    pub fn extend(
+        &self,
+        cell: &Cell,
+        options: IdentifyOptions,
+        params: &[Param],
+        frees: &[usize],
+        cols: &Mat<f64>,
+        eta: f64,
+    ) -> Result<Stage, IdentifyError> {
+        let (mut problem, remap) = self.problem.extended(params);
+        let m_new = cols.ncols();
+        // Global indices of the new columns.
+        let new_globals: Vec<usize> = if frees.is_empty() {
+            params.iter().map(|p| problem.robot_index(*p).expect("just added")).collect()
+        } else {
+            frees.iter().map(|&g| remap[g]).collect()
+        };
+        // A table's regularisation rows.
+        let tables: Vec<(i16, usize, f64)> = params
+            .iter()
+            .zip(&new_globals)
+            .enumerate()
+            .filter_map(|(c, (p, &g))| match p {
+                Param::Joint(_, crate::kinematics::JointTerm::Map { knot, .. }) => {
+                    Some((*knot, g, (0..self.n_obs_rows()).map(|r| cols[(r, c)].powi(2)).sum::<f64>()))
+                }
+                _ => None,
+            })
+            .collect();
+        let new_priors = if tables.is_empty() { Vec::new() } else { crate::identify::table_priors(&tables, eta) };
+        let old_rows = self.n_rows();
+        problem.add_priors(new_priors.clone());
+        let n = problem.n_rows;
+        let p_old = self.p();
+        let w = p_old + m_new;
+        let a = Mat::<f64>::from_fn(n, w, |r, c| {
+            if r < old_rows {
+                if c < p_old { self.j[(r, c)] } else { cols[(r, c - p_old)] }
+            } else {
+                let pr = &new_priors[r - old_rows];
+                let g = if c < p_old { usize::MAX } else { new_globals[c - p_old] };
+                pr.terms.iter().filter(|(tg, _)| *tg == g).map(|(_, v)| *v).sum()
+            }
+        });
+        let mut r0 = self.r.clone();
+        r0.resize(n, 0.0);
+        // The pooled least-squares step of the extended linear model.
+        let g = at_b(a.as_ref(), a.as_ref());
+        let scale: Vec<f64> = (0..w).map(|c| g[(c, c)].sqrt().max(f64::MIN_POSITIVE)).collect();
+        let gs = Mat::<f64>::from_fn(w, w, |i, k| g[(i, k)] / (scale[i] * scale[k]));
+        let b: Vec<f64> = at_v(a.as_ref(), &r0).iter().zip(&scale).map(|(v, s)| v / s).collect();
+        let delta: Vec<f64> = psd_solve(&gs, &b, 1e-13).iter().zip(&scale).map(|(v, s)| v / s).collect();
+        let mut r = r0.clone();
+        for (i, ri) in r.iter_mut().enumerate() {
+            *ri -= (0..w).map(|c| a[(i, c)] * delta[c]).sum::<f64>();
+        }
+        let mut free: Vec<usize> = self.free.iter().map(|&g| remap[g]).collect();
+        free.extend(&new_globals);
+        let mut x = vec![0.0; problem.n_params()];
+        for (g_old, &g_new) in remap.iter().enumerate() {
+            x[g_new] = self.x[g_old];
+        }
+        for (c, &gl) in free.iter().enumerate() {
+            x[gl] += delta[c];
+        }
+        // The nonlinear check.
+        let mut actual = vec![0.0; n];
+        problem.residual(&x, &mut actual);
+        let rss_lin: f64 = r.iter().map(|v| v * v).sum();
+        let rss_true: f64 = actual.iter().map(|v| v * v).sum();
+        if (rss_true - rss_lin).abs() > 0.01 * rss_lin {
+            let mut o = options;
+            let mut start = self.set.clone();
+            start.extend(params);
+            for (i, p) in problem.layout.params().iter().enumerate() {
+                if let Some(gl) = problem.robot_index(*p) {
+                    start.values[i] = x[gl];
+                }
+            }
+            o.start = Some(start);
+            return Stage::fit(cell, o);
+        }
+        // Q: the old basis (padded with the new prior rows) and the candidate's new directions.
+        let qpad = Mat::<f64>::from_fn(n, self.q.ncols(), |r, c| if r < old_rows { self.q[(r, c)] } else { 0.0 });
+        let an = Mat::<f64>::from_fn(n, m_new, |r, c| a[(r, p_old + c)]);
+        let proj = a_b(qpad.as_ref(), at_b(qpad.as_ref(), an.as_ref()).as_ref());
+        let rest = Mat::<f64>::from_fn(n, m_new, |r, c| an[(r, c)] - proj[(r, c)]);
+        let qn = orthonormal_basis(rest.as_ref(), 1e-10);
+        let q = Mat::<f64>::from_fn(n, qpad.ncols() + qn.ncols(), |r, c| {
+            if c < qpad.ncols() { qpad[(r, c)] } else { qn[(r, c - qpad.ncols())] }
+        });
+        let mut set = self.set.clone();
+        set.extend(params);
+        for (i, p) in problem.layout.params().iter().enumerate() {
+            if let Some(gl) = problem.robot_index(*p) {
+                set.values[i] = x[gl];
+            }
+        }
+        let rss = r[..problem.n_obs_rows].iter().map(|v| v * v).sum();
+        Ok(Stage { options, problem, x, free, set, fit: Err("extended by one linear step".into()), j: a, r, q, rss })
+    }
+
+    /// Standard deviations of free global parameters from this stage's weighted Jacobian,
+    /// √[(JᵀJ)⁻¹]_gg (the instrument model's σ, priors included); `None` for a fixed one.
+    pub fn stds_of(&self, globals: &[usize]) -> Vec<Option<f64>> {
+        let cov = super::floor::covariance(self);
+        globals.iter().map(|g| self.free.iter().position(|f| f == g).map(|c| cov[(c, c)].max(0.0).sqrt())).collect()
     }
 
     pub fn n_rows(&self) -> usize {

@@ -503,25 +503,33 @@ pub fn map_priors(problem: &Problem, j0: &Mat<f64>, eta: f64) -> Result<Vec<Prio
     let mut priors = Vec::new();
     for knots in tables.values_mut() {
         knots.sort_unstable();
-        let norm2: Vec<f64> =
-            knots.iter().map(|&(_, g)| (0..problem.n_obs_rows).map(|r| j0[(r, g)].powi(2)).sum::<f64>()).collect();
-        let mean = norm2.iter().sum::<f64>() / norm2.len() as f64;
-        if mean <= 0.0 {
-            continue; // a table the data never reach: identifiability fixes it
-        }
-        let lambda = (eta * mean).sqrt();
-        for w in knots.windows(3) {
-            if w[1].0 == w[0].0 + 1 && w[2].0 == w[1].0 + 1 {
-                priors.push(Prior {
-                    terms: vec![(w[0].1, lambda), (w[1].1, -2.0 * lambda), (w[2].1, lambda)],
-                    target: 0.0,
-                });
-            }
-        }
-        let m = mean.sqrt() / knots.len() as f64;
-        priors.push(Prior { terms: knots.iter().map(|&(_, g)| (g, m)).collect(), target: 0.0 });
+        let with_norms: Vec<(i16, usize, f64)> = knots
+            .iter()
+            .map(|&(k, g)| (k, g, (0..problem.n_obs_rows).map(|r| j0[(r, g)].powi(2)).sum::<f64>()))
+            .collect();
+        priors.extend(table_priors(&with_norms, eta));
     }
     Ok(priors)
+}
+
+/// The regularisation rows of one table: knots as (knot index, global parameter, squared norm of
+/// its weighted column), sorted by knot. See [`map_priors`].
+pub fn table_priors(knots: &[(i16, usize, f64)], eta: f64) -> Vec<Prior> {
+    let mean = knots.iter().map(|k| k.2).sum::<f64>() / knots.len().max(1) as f64;
+    if mean <= 0.0 {
+        return Vec::new(); // a table the data never reach: identifiability fixes it
+    }
+    let lambda = (eta * mean).sqrt();
+    let mut priors = Vec::new();
+    for w in knots.windows(3) {
+        if w[1].0 == w[0].0 + 1 && w[2].0 == w[1].0 + 1 {
+            priors
+                .push(Prior { terms: vec![(w[0].1, lambda), (w[1].1, -2.0 * lambda), (w[2].1, lambda)], target: 0.0 });
+        }
+    }
+    let m = mean.sqrt() / knots.len() as f64;
+    priors.push(Prior { terms: knots.iter().map(|&(_, g, _)| (g, m)).collect(), target: 0.0 });
+    priors
 }
 
 /// The candidate pool for DETMAX: every measurement of the chosen sessions, as its Jacobian

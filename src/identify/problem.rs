@@ -291,6 +291,55 @@ impl Problem {
         self.params.len()
     }
 
+    /// The same problem with further robot parameters (effect terms) in its layout: the global
+    /// vector gains them after the robot's other parameters (before the tools), and every
+    /// existing global index moves accordingly. Returns the problem and, per old global index,
+    /// its new one. Observations, weights and priors are kept (priors re-indexed).
+    pub fn extended(&self, extra: &[Param]) -> (Problem, Vec<usize>) {
+        let mut layout = self.layout.clone();
+        layout.extend(extra);
+        let base: [f64; 6] = {
+            let mut b = [0.0; 6];
+            for (g, p) in self.params.iter().enumerate() {
+                if let GlobalParam::Robot(i) = *p
+                    && let Param::Base(k) = self.layout.params()[i]
+                {
+                    b[k] = self.nominal[g];
+                }
+            }
+            b
+        };
+        let robot_nominal = layout.nominal_values(&self.model, &self.tools[0].tool, &base);
+        let mut params = Vec::new();
+        let mut nominal = Vec::new();
+        for (i, p) in layout.params().iter().enumerate() {
+            if !matches!(p, Param::Tool(_)) {
+                params.push(GlobalParam::Robot(i));
+                nominal.push(robot_nominal[i]);
+            }
+        }
+        for (t, b) in self.tools.iter().enumerate() {
+            for k in 0..6 {
+                params.push(GlobalParam::Tool { tool: t, k });
+                nominal.push(b.tool.tcp[k]);
+            }
+        }
+        // Old robot entries keep their layout index (the layout only grew at its end).
+        let remap: Vec<usize> = self
+            .params
+            .iter()
+            .map(|p| params.iter().position(|q| q == p).expect("every old parameter is still there"))
+            .collect();
+        let priors = self
+            .priors
+            .iter()
+            .map(|p| Prior { terms: p.terms.iter().map(|&(g, c)| (remap[g], c)).collect(), target: p.target })
+            .collect();
+        let mut pr = Problem { layout, params, nominal, priors, ..self.clone() };
+        pr.n_rows = pr.n_obs_rows + pr.priors.len();
+        (pr, remap)
+    }
+
     /// Weight every observation: `weight(obs)` gives the multipliers of its position and rotation
     /// rows (1/σ of each, in one common unit so the rows are comparable).
     pub fn set_weights(&mut self, mut weight: impl FnMut(&Obs) -> [f64; 2]) {

@@ -89,6 +89,7 @@ pub fn solve(problem: &Problem, free: &[usize], x0: &[f64], opts: &SolverOptions
                 rhs[r] = res[r] * w;
             }
         }
+        rhs[problem.n_obs_rows..n].copy_from_slice(&res[problem.n_obs_rows..n]);
         let mut scale = vec![0.0; m];
         for c in 0..m {
             let mut ss = 0.0;
@@ -172,13 +173,16 @@ pub fn solve(problem: &Problem, free: &[usize], x0: &[f64], opts: &SolverOptions
 /// Largest final step (unit-scaled columns) after which the last linearisation is reused.
 const REUSE_JACOBIAN_STEP: f64 = 1e-9;
 
+/// The robustly weighted cost of the measurement rows plus the prior rows (regularisation and
+/// anchors, never down-weighted).
 fn weighted_cost(problem: &Problem, res: &[f64], weights: &[f64]) -> f64 {
     problem
         .obs
         .iter()
         .zip(weights)
         .map(|(o, w)| w * res[o.row..o.row + o.rows].iter().map(|v| v * v).sum::<f64>())
-        .sum()
+        .sum::<f64>()
+        + res[problem.n_obs_rows..problem.n_rows].iter().map(|v| v * v).sum::<f64>()
 }
 
 /// Huber weights per observation on its residual norm per axis, against a robust scale (MAD of
