@@ -48,6 +48,14 @@ pub struct SimulateArgs {
     /// Record the TriCal indicator readings left after centring.
     #[arg(long)]
     pub indicators: bool,
+    /// Payload of the validation run's tool, kg (default: the TriCal's): e.g. 2.7 for the thesis's
+    /// set-up 3 with the triangular artefact tool.
+    #[arg(long)]
+    pub validation_payload_kg: Option<f64>,
+    /// Its centre of mass in the flange frame, mm (default with --validation-payload-kg: the
+    /// artefact tool's 50,25,100 of Table 3.4).
+    #[arg(long)]
+    pub validation_payload_com_mm: Option<String>,
     #[arg(long)]
     pub out: PathBuf,
     /// Write the truth (true parameters, effects, per-measurement true positions) here.
@@ -137,6 +145,22 @@ pub(super) fn simulate(a: SimulateArgs) -> Result<String, CliError> {
         }
     };
     opts.record_indicators = a.indicators;
+    match (a.validation_payload_kg, &a.validation_payload_com_mm) {
+        (None, None) => {}
+        (None, Some(_)) => {
+            return Err(CliError::arg("--validation-payload-com-mm", "needs --validation-payload-kg"));
+        }
+        (Some(m), com) => {
+            if !m.is_finite() || m < 0.0 {
+                return Err(CliError::arg("--validation-payload-kg", "must be a non-negative mass"));
+            }
+            let c = match com {
+                Some(t) => super::three("--validation-payload-com-mm", t)?,
+                None => [50.0, 25.0, 100.0],
+            };
+            opts.validation_payload = Some((m, nalgebra::Vector3::new(c[0], c[1], c[2]) * MM));
+        }
+    }
     if a.id_per_ball == 0 {
         return Err(CliError::arg("--id-per-ball", "must be at least 1"));
     }

@@ -623,33 +623,17 @@ fn verdict(s: &search::Search, d: &Decomposition) -> Verdict {
     // What the last round found (or did not).
     let (status, summary, lookalike, corr, absorbed, experiment_, suspects) = match &lr.decision {
         Decision::Accept(_) | Decision::Nothing => {
-            // Screening evidence that no held-out test could confirm: an effect the current
-            // model absorbs.
+            // An excess far above the floor that nothing predicts comes first (its cause may be
+            // untestable on these data); then screening evidence that no held-out test could
+            // confirm: an effect the current model absorbs.
+            let now = ErrorStats::of(&s.baselines.last().expect("a baseline").norms()).expect("tested poses");
             let strong = lr
                 .screened
                 .iter()
                 .filter(|c| c.significant && c.log10_p_holm < -6.0 && c.score.rho < 0.5)
                 .max_by(|a, b| a.score.bic_gain.total_cmp(&b.score.bic_gain));
             match strong {
-                Some(c) if !matches!(lr.decision, Decision::Accept(_)) => {
-                    let i = lr.screened.iter().position(|x| std::ptr::eq(x, c)).expect("from the list");
-                    (
-                        Status::NotSeparable,
-                        format!(
-                            "{} is in the data (screening p = 1e{:.0}) but the current model absorbs {:.0} % of it (ρ = {:.2}): it does not predict held-out poses better",
-                            c.candidate.label(),
-                            c.log10_p_holm,
-                            (1.0 - c.score.rho * c.score.rho) * 100.0,
-                            c.score.rho
-                        ),
-                        None,
-                        None,
-                        c.absorbed_by.clone(),
-                        Some(experiment(c.candidate.kind, None)),
-                        vec![effect_of(s, last, i, None)],
-                    )
-                }
-                _ if d.heldout.rms > EXCESS_RATIO * d.floor.rms && d.heldout.rms - d.floor.rms > EXCESS_MIN => {
+                _ if now.rms > EXCESS_RATIO * d.floor.rms && now.rms - d.floor.rms > EXCESS_MIN => {
                     let missing: Vec<String> =
                         s.unavailable.iter().map(|u| format!("{} ({})", u.kind.name(), u.reason)).collect();
                     let exp = s
@@ -668,7 +652,7 @@ fn verdict(s: &search::Search, d: &Decomposition) -> Verdict {
                         Status::NotSeparable,
                         format!(
                             "the held-out error (RMS {}) stands far above the floor ({}), but neither a candidate nor a smooth function of the configuration predicts it: an error that changes from pose to pose{}",
-                            gap(d.heldout.rms),
+                            gap(now.rms),
                             gap(d.floor.rms),
                             if missing.is_empty() {
                                 String::new()
@@ -685,6 +669,24 @@ fn verdict(s: &search::Search, d: &Decomposition) -> Verdict {
                             exp.join("; ")
                         }),
                         Vec::new(),
+                    )
+                }
+                Some(c) if !matches!(lr.decision, Decision::Accept(_)) => {
+                    let i = lr.screened.iter().position(|x| std::ptr::eq(x, c)).expect("from the list");
+                    (
+                        Status::NotSeparable,
+                        format!(
+                            "{} is in the data (screening p = 1e{:.0}) but the current model absorbs {:.0} % of it (ρ = {:.2}): it does not predict held-out poses better",
+                            c.candidate.label(),
+                            c.log10_p_holm,
+                            (1.0 - c.score.rho * c.score.rho) * 100.0,
+                            c.score.rho
+                        ),
+                        None,
+                        None,
+                        c.absorbed_by.clone(),
+                        Some(experiment(c.candidate.kind, None)),
+                        vec![effect_of(s, last, i, None)],
                     )
                 }
                 _ => (

@@ -75,7 +75,7 @@ impl Default for SearchOptions {
             min_gain: 0.5e-6,
             top: 6,
             max_effects: 5,
-            rho_min: 0.15,
+            rho_min: 0.05,
             lookalike_corr: 0.95,
             map_step_deg: 0,
             map_smoothing: crate::identify::DEFAULT_MAP_SMOOTHING,
@@ -205,6 +205,18 @@ fn par_map<T: Sync, R: Send>(items: &[T], threads: usize, f: impl Fn(&T) -> R + 
         }
     });
     out.into_inner().expect("joined").into_iter().map(|r| r.expect("every item ran")).collect()
+}
+
+/// Distinct payloads (mass and centre of mass) among the tools of the pooled data.
+fn payloads(stage: &Stage) -> usize {
+    let mut seen: Vec<(f64, [f64; 3])> = Vec::new();
+    for t in &stage.problem.tools {
+        let key = (t.tool.mass, [t.tool.com.x, t.tool.com.y, t.tool.com.z]);
+        if !seen.contains(&key) {
+            seen.push(key);
+        }
+    }
+    seen.len()
 }
 
 /// Mean squared |e| over the tested observations, m².
@@ -462,7 +474,24 @@ fn run_round(
         smoother_vs_best = Some(sb);
         if smoother_wins {
             Decision::Unknown { best: Some(best.index) }
-        } else if screened[best.index].score.rho < opts.rho_min {
+        } else if screened[best.index].candidate.kind == Kind::ToolMass && payloads(stage) < 2 {
+            // A payload error acts through the compliances: with one payload it changes every
+            // holding torque in proportion to what the compliances already scale, and what is
+            // left to tell them apart is the nominal link masses' share of the torques — a detail
+            // of the model, not of the data. It takes a second payload to separate them.
+            Decision::NotSeparable {
+                best: best.index,
+                lookalike: None,
+                canonical: None,
+                reason: "with a single payload in the data, a payload error and the joint compliances are look-alikes"
+                    .into(),
+            }
+        } else if screened[best.index].score.rho < opts.rho_min && best.vs_model.gain_rms < 0.25 * floor_ms.sqrt() {
+            // Mostly absorbed, and what is left to tell it by is a signature smaller than the
+            // noise at a pose: the name would rest on details of the model (the nominal masses
+            // behind the holding torques, say) that a look-alike could reproduce. A large effect
+            // with a small ρ (a cubic compliance next to the linear one) is still named: its
+            // unabsorbed part alone stands far above the floor.
             Decision::NotSeparable {
                 best: best.index,
                 lookalike: None,

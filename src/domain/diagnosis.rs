@@ -633,6 +633,15 @@ fn model_spec(d: &Diagnosis) -> String {
                     maps.push((*j, *step_deg));
                 }
             }
+            Param::Joint(
+                j,
+                t @ (JointTerm::Cyclic { cosine: false, .. } | JointTerm::Periodic { cosine: false, .. }),
+            ) => {
+                // A sine and its cosine are one option: +cyc2_h1, +cyc2_f7.25.
+                let name = Param::Joint(*j, *t).to_string();
+                items.push(format!("+{}", name.trim_end_matches("_sin")));
+            }
+            Param::Joint(_, JointTerm::Cyclic { cosine: true, .. } | JointTerm::Periodic { cosine: true, .. }) => {}
             p => items.push(format!("+{p}")),
         }
     }

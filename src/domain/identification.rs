@@ -194,6 +194,13 @@ pub fn identification_doc(id: &Identification, sessions: &[String], selection: O
         "tools": tools,
         "downweighted": id.downweighted.iter().map(|(s, i, w)| json!({"session": s, "index": i, "weight": w})).collect::<Vec<_>>(),
     }));
+    if q.weighted
+        && let Some(obj) = doc.quality.as_mut().and_then(|v| v.as_object_mut())
+    {
+        // Rows weighted by an instrument model: σ̂ is a ratio to the instrument's σ, not a length.
+        obj.remove("sigma_mm");
+        obj.insert("sigma_ratio".into(), json!(q.sigma));
+    }
     doc
 }
 

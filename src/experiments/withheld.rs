@@ -57,7 +57,22 @@ pub struct Case {
     pub aux: bool,
     /// Shuffle each session's measurements and drop their times (measuring order lost).
     pub shuffle: bool,
+    pub noise: NoiseVariant,
+    /// Validate with a heavier tool (the thesis's 2.7 kg artefact tool, set-up 3): a second payload.
+    pub heavy_validation: bool,
     pub expect: Expect,
+}
+
+/// How the virtual cell's instruments are simulated (the diagnosis's own instrument model
+/// stays the default: a cell measured differently than assumed must not raise false alarms).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NoiseVariant {
+    /// The centring loop, a 16 µm + 0.8 µm/m tracker (the instrument model's assumption).
+    Default,
+    /// The TriCal's pessimistic shortcut: the TCP uniform in the ε-ball.
+    UniformBall,
+    /// A tracker 50 % noisier than the instrument model assumes.
+    NoisyTracker,
 }
 
 /// The result of one case and seed.
@@ -93,35 +108,93 @@ pub fn suite() -> Vec<Case> {
     };
     let mut cases = Vec::new();
     let both = |cases: &mut Vec<Case>, name: &str, effects: &str, with: Expect, without: Expect| {
-        cases.push(Case { name: name.to_string(), effects: effects.into(), aux: true, shuffle: false, expect: with });
+        cases.push(Case {
+            name: name.to_string(),
+            effects: effects.into(),
+            aux: true,
+            shuffle: false,
+            noise: NoiseVariant::Default,
+            heavy_validation: false,
+            expect: with,
+        });
         cases.push(Case {
             name: format!("{name} (no logs)"),
             effects: effects.into(),
             aux: false,
             shuffle: false,
+            noise: NoiseVariant::Default,
+            heavy_validation: false,
             expect: without,
         });
     };
     both(&mut cases, "none", "", Expect::None, Expect::None);
+    for (name, noise) in [
+        ("none (uniform-ball centring)", NoiseVariant::UniformBall),
+        ("none (tracker +50 %)", NoiseVariant::NoisyTracker),
+    ] {
+        cases.push(Case {
+            name: name.into(),
+            effects: String::new(),
+            aux: true,
+            shuffle: false,
+            noise,
+            heavy_validation: false,
+            expect: Expect::None,
+        });
+    }
     let cyc = named(Kind::Cyclic, Some(2), None, Some(8));
     both(&mut cases, "cyclic j3 h2", "cyclic:j=3:h=2:amp_deg=0.01", cyc.clone(), cyc);
     let cyc = named(Kind::Cyclic, Some(0), None, Some(4));
     both(&mut cases, "cyclic j1 h1", "cyclic:j=1:h=1:amp_deg=0.01", cyc.clone(), cyc);
+    let cyc = named(Kind::Cyclic, Some(4), None, Some(4));
+    both(&mut cases, "cyclic j5 h1", "cyclic:j=5:h=1:amp_deg=0.02", cyc.clone(), cyc);
+    let cyc = named(Kind::Cyclic, Some(5), None, Some(8));
+    both(&mut cases, "cyclic j6 h2", "cyclic:j=6:h=2:amp_deg=0.05", cyc.clone(), cyc);
+    let cyc = named(Kind::Cyclic, Some(3), None, Some(4 * 17));
+    both(&mut cases, "cyclic j4 h17 (gear mesh)", "cyclic:j=4:h=17:amp_deg=0.02", cyc.clone(), cyc);
+    let cyc = named(Kind::Cyclic, Some(1), None, Some(4 * 23));
+    both(&mut cases, "cyclic j2 h23", "cyclic:j=2:h=23:amp_deg=0.006", cyc.clone(), cyc);
     let bl = named(Kind::Backlash, Some(1), None, None);
     both(&mut cases, "backlash j2", "backlash:j=2:deg=0.01", bl.clone(), bl);
+    let bl = named(Kind::Backlash, Some(2), None, None);
+    both(&mut cases, "backlash j3", "backlash:j=3:deg=0.008", bl.clone(), bl);
     cases.push(Case {
         name: "backlash j2 (no logs, shuffled)".into(),
         effects: "backlash:j=2:deg=0.01".into(),
         aux: false,
         shuffle: true,
+        noise: NoiseVariant::Default,
+        heavy_validation: false,
         expect: Expect::NotSeparable,
     });
     both(&mut cases, "thermal", "thermal", named(Kind::Thermal, None, None, None), Expect::NoWrongName);
     let cp = named(Kind::Coupling, Some(5), Some(4), None);
     both(&mut cases, "coupling 5→6", "coupling:from=5:to=6:ratio=0.001", cp.clone(), cp);
+    let cp = named(Kind::Coupling, Some(3), Some(2), None);
+    both(&mut cases, "coupling 3→4", "coupling:from=3:to=4:ratio=0.0005", cp.clone(), cp);
     let cc = named(Kind::ComplianceCubic, Some(1), None, None);
     both(&mut cases, "compliance_cubic j2", "compliance_cubic:j=2:d=2.5e-7", cc.clone(), cc);
+    let cc = named(Kind::ComplianceCubic, Some(2), None, None);
+    both(&mut cases, "compliance_cubic j3", "compliance_cubic:j=3:d=2e-5", cc.clone(), cc);
     both(&mut cases, "tool_mass (one payload)", "tool_mass:delta_kg=0.5", Expect::NotSeparable, Expect::NotSeparable);
+    cases.push(Case {
+        name: "tool_mass (2.7 kg validation tool)".into(),
+        effects: "tool_mass:delta_kg=0.5".into(),
+        aux: true,
+        shuffle: false,
+        noise: NoiseVariant::Default,
+        heavy_validation: true,
+        expect: named(Kind::ToolMass, None, None, None),
+    });
+    cases.push(Case {
+        name: "none (2.7 kg validation tool)".into(),
+        effects: String::new(),
+        aux: true,
+        shuffle: false,
+        noise: NoiseVariant::Default,
+        heavy_validation: true,
+        expect: Expect::None,
+    });
     both(&mut cases, "link_bending", "link_bending:deg_per_nm=0.00286", Expect::NotNamed, Expect::NotNamed);
     let hb = named(Kind::HayatiBeta, Some(2), None, None);
     both(&mut cases, "-beta", "no_beta", hb.clone(), hb);
@@ -203,7 +276,23 @@ pub fn run_case(case: &Case, seed: u64, opts: &DiagnoseOptions) -> Outcome {
         Ok(e) => e,
         Err(e) => return fail(e.to_string()),
     };
-    let sim = match simulate(&SimulateOptions { seed, effects: effects.clone(), ..SimulateOptions::default() }) {
+    let mut noise = crate::sim::instruments::Noise::default();
+    match case.noise {
+        NoiseVariant::Default => {}
+        NoiseVariant::UniformBall => noise.centring = crate::sim::instruments::Centring::UniformBall,
+        NoiseVariant::NoisyTracker => {
+            noise.tracker_sigma *= 1.5;
+            noise.tracker_sigma_per_m *= 1.5;
+        }
+    }
+    let validation_payload = case.heavy_validation.then(|| (2.7, nalgebra::Vector3::new(0.050, 0.025, 0.100)));
+    let sim = match simulate(&SimulateOptions {
+        seed,
+        effects: effects.clone(),
+        noise,
+        validation_payload,
+        ..SimulateOptions::default()
+    }) {
         Ok(s) => s,
         Err(e) => return fail(e.to_string()),
     };

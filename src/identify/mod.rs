@@ -617,7 +617,27 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
 
     let fit = solver::solve(&problem, &free, &x0, &opts.solver)?;
     let rows: Vec<(usize, usize)> = problem.obs.iter().map(|o| (o.row, o.rows)).collect();
-    let quality = Quality::of(&fit, problem.obs.len(), &rows);
+    let mut quality = Quality::of(&fit, problem.obs.len(), &rows);
+    if opts.noise.is_some() {
+        // Weighted rows: the RMS of the measurement residuals in metres, from the rows divided
+        // by their weights (and the robust weights, which the fit's residual carries too).
+        quality.weighted = true;
+        let sum: f64 = problem
+            .obs
+            .iter()
+            .zip(&fit.weights)
+            .map(|(o, hw)| {
+                let hw = hw.sqrt();
+                (0..o.rows)
+                    .map(|k| {
+                        let w = if k < 3 { o.weight[0] } else { o.weight[1] } * hw;
+                        (fit.residual[o.row + k] / w).powi(2)
+                    })
+                    .sum::<f64>()
+            })
+            .sum();
+        quality.rms_residual = (sum / problem.obs.len().max(1) as f64).sqrt();
+    }
     let combination = || {
         quality
             .weakest

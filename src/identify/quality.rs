@@ -31,6 +31,9 @@ pub struct Quality {
     pub weakest: Vec<(usize, f64)>,
     pub n_rows: usize,
     pub n_configs: usize,
+    /// The rows were weighted by an instrument model: `sigma` is then the ratio of the residual
+    /// to the instrument's σ (1 when the model and the instrument model are right), not metres.
+    pub weighted: bool,
 }
 
 impl Quality {
@@ -106,6 +109,7 @@ impl Quality {
             weakest,
             n_rows: n,
             n_configs,
+            weighted: false,
         }
     }
 }

@@ -23,6 +23,10 @@ pub struct SimulateOptions {
     pub validation: usize,
     pub noise: Noise,
     pub record_indicators: bool,
+    /// The payload of the validation run's tool when it is not the TriCal's: (mass kg, centre of
+    /// mass in the flange frame, m) — the thesis's set-up 3 validated with the 2.7 kg artefact
+    /// tool (Table 3.4) after identifying with the 1.7 kg TriCal. The reflector nests stay.
+    pub validation_payload: Option<(f64, nalgebra::Vector3<f64>)>,
 }
 
 impl Default for SimulateOptions {
@@ -36,6 +40,7 @@ impl Default for SimulateOptions {
             validation: 506,
             noise: Noise::default(),
             record_indicators: false,
+            validation_payload: None,
         }
     }
 }
@@ -80,7 +85,18 @@ pub fn simulate(opts: &SimulateOptions) -> Result<Simulated, SimulateError> {
         .iter()
         .map(|p| NestPose { q: p.q, nest: p.nest.expect("validation poses have a nest") })
         .collect();
-    let nest_tools: Vec<Tool> = layout.nests.iter().map(|n| n.tool.clone()).collect();
+    let nest_tools: Vec<Tool> = layout
+        .nests
+        .iter()
+        .map(|n| {
+            let mut t = n.tool.clone();
+            if let Some((mass, com)) = opts.validation_payload {
+                t.mass = mass;
+                t.com = com;
+            }
+            t
+        })
+        .collect();
     let rig = Rig {
         model: &layout.robot,
         base_guess: layout.base,
