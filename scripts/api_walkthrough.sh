@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Every resource of the service with curl and jq, against a running `robocal serve`
 # (default http://127.0.0.1:8080; set API, and TOKEN when the server requires one).
-# The measurements come from the virtual cell: `robocal simulate` writes them to a cell file.
+# The measurements come from the virtual cell: `robocal simulate` writes them to a cell file,
+# its true robot with a small cyclic error on joint 3 that the model lacks (the diagnosis finds it).
 #   cargo run --release -- serve &      then      scripts/api_walkthrough.sh
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -15,7 +16,7 @@ wait_job() {  # poll a job until it ends; print it
   call "$API/v1/jobs/$1"
 }
 tmp=$(mktemp -d)
-cargo run --quiet --release -- simulate --seed 1 --out "$tmp/sim.json" >/dev/null
+cargo run --quiet --release -- simulate --seed 1 --effects cyclic:j=3:h=2:amp_deg=0.01 --out "$tmp/sim.json" >/dev/null
 name="cell-$RANDOM$RANDOM"
 
 echo "== a robot (preset or custom table) with a guess of its base in the artefact's frame {W}"
@@ -55,6 +56,15 @@ echo "== validation (job) on the tracker sessions"
 JOB=$(call "$API/v1/parameter-sets/$SET/validations" -H "$J" -d '{"sessions": ["tracker-n1", "tracker-n2", "tracker-n3"]}' | jq -r .id)
 VALIDATION=$(wait_job "$JOB" | jq -r .result.validation_id)
 call "$API/v1/validations/$VALIDATION" | jq -c '.report | {mean_mm, median_mm, std_mm, max_mm, nominal_mean_mm: .nominal.mean_mm}'
+
+echo "== diagnosis (job): where the set still misses, which unmodelled effect, how far the error shrinks"
+JOB=$(call "$API/v1/parameter-sets/$SET/diagnoses" -H "$J" -d '{}' | jq -r .id)
+DIAGNOSIS=$(wait_job "$JOB" | jq -r .result.diagnosis_id)
+call "$API/v1/diagnoses/$DIAGNOSIS" | jq -c '.report | {verdict: .verdict.status, effects: [.verdict.effects[].label],
+  shrink: [.shrink[] | {model, mean_mm}]}'
+echo "== accepting it: the extended model as the next version (not activated); a verdict without an effect is a 409"
+curl -sS "${AUTH[@]}" -X POST "$API/v1/diagnoses/$DIAGNOSIS/accept" \
+  | jq -c 'if .version then {version, active, effect: [.parameter_set.parameters[].name | select(startswith("cyc"))]} else {status, detail} end'
 
 echo "== history, explicit activation, export, import"
 call "$API/v1/robots/$ROBOT/parameter-sets" | jq -c '.[] | {version, active, quality, validations: [.validations[].figures.mean_mm]}'

@@ -7,7 +7,7 @@ use sqlx::SqlitePool;
 use super::AppError;
 use crate::db::records::{self, RobotRow, SessionRow};
 use crate::domain::ToolSpec;
-use crate::domain::cell::{ArtefactSpec, CellFile, MeasurementSpec, PoseXyzAbc, SessionSpec};
+use crate::domain::cell::{ArtefactSpec, CellFile, MeasurementSpec, PoseXyzAbc, PurposeSpec, SessionSpec};
 
 /// The robot's sessions named (by id or name) in a request field; 422 naming the item when one
 /// is unknown or repeated.
@@ -31,6 +31,51 @@ pub async fn resolve_sessions(
         out.push(s);
     }
     Ok(out)
+}
+
+/// The robot's sessions named in a request field (see [`resolve_sessions`]), each of `purpose`
+/// and holding measurements; 422 naming the item otherwise.
+pub async fn checked_sessions(
+    pool: &SqlitePool,
+    robot_id: &str,
+    names: &[String],
+    purpose: PurposeSpec,
+    field: &str,
+) -> Result<Vec<SessionRow>, AppError> {
+    let sessions = resolve_sessions(pool, robot_id, names, field).await?;
+    for (i, s) in sessions.iter().enumerate() {
+        if s.purpose != purpose {
+            return Err(AppError::invalid(
+                format!("{field}[{i}]"),
+                format!(
+                    "session '{}' is a {} session; this needs {} sessions",
+                    s.name,
+                    s.purpose.as_str(),
+                    purpose.as_str()
+                ),
+            ));
+        }
+        if s.measurements == 0 {
+            return Err(AppError::invalid(
+                format!("{field}[{i}]"),
+                format!("session '{}' has no measurements", s.name),
+            ));
+        }
+    }
+    Ok(sessions)
+}
+
+/// Every session of the robot with `purpose` that holds measurements, in creation order.
+pub async fn sessions_with_purpose(
+    pool: &SqlitePool,
+    robot_id: &str,
+    purpose: PurposeSpec,
+) -> Result<Vec<SessionRow>, AppError> {
+    Ok(records::sessions_of_robot(pool, robot_id)
+        .await?
+        .into_iter()
+        .filter(|s| s.purpose == purpose && s.measurements > 0)
+        .collect())
 }
 
 /// Every stored measurement of a session, in order.

@@ -12,7 +12,8 @@ use sqlx::sqlite::SqliteExecutor;
 
 use super::{now, time_text};
 
-/// What a job does; stored (and served) as `pose_plan`, `identification`, `validation`.
+/// What a job does; stored (and served) as `pose_plan`, `identification`, `validation`,
+/// `diagnosis`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, sqlx::Type, Serialize, Deserialize)]
 #[sqlx(rename_all = "snake_case")]
 #[serde(rename_all = "snake_case")]
@@ -20,6 +21,7 @@ pub enum JobKind {
     PosePlan,
     Identification,
     Validation,
+    Diagnosis,
 }
 
 impl JobKind {
@@ -28,6 +30,7 @@ impl JobKind {
             JobKind::PosePlan => "pose_plan",
             JobKind::Identification => "identification",
             JobKind::Validation => "validation",
+            JobKind::Diagnosis => "diagnosis",
         }
     }
 }
@@ -317,5 +320,20 @@ mod tests {
             assert_eq!(serde_json::to_value(s).unwrap(), s.as_str());
         }
         assert_eq!(JobState::parse("done"), None);
+    }
+
+    /// The kind added by migration 0002 is stored as its name too (the rebuilt CHECK admits it).
+    #[tokio::test]
+    async fn the_diagnosis_kind_is_stored_as_its_name() {
+        let pool = crate::db::connect_memory().await.unwrap();
+        sqlx::query("INSERT INTO robots (id, name, model_json, created_at) VALUES ('r', 'r', '{}', 't')")
+            .execute(&pool)
+            .await
+            .unwrap();
+        insert(&pool, "d", JobKind::Diagnosis, "r", "{}").await.unwrap();
+        let text: String = sqlx::query_scalar("SELECT kind FROM jobs WHERE id = 'd'").fetch_one(&pool).await.unwrap();
+        assert_eq!(text, "diagnosis");
+        assert_eq!(get(&pool, "d").await.unwrap().unwrap().kind, JobKind::Diagnosis);
+        assert_eq!(serde_json::to_value(JobKind::Diagnosis).unwrap(), JobKind::Diagnosis.as_str());
     }
 }

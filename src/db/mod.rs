@@ -46,14 +46,70 @@ async fn open_and_migrate(path: &Path) -> Result<SqlitePool, sqlx::Error> {
         .foreign_keys(true)
         .busy_timeout(BUSY_TIMEOUT);
     let pool = SqlitePoolOptions::new().max_connections(8).acquire_timeout(BUSY_TIMEOUT).connect_with(opts).await?;
-    // Migrate holding the write lock, so two processes opening a new database at once (a server
-    // starting while `robocal token create` runs) take turns: the second waits, then finds every
-    // migration applied. sqlx's own migration lock is a no-op on SQLite. (`run_direct` is
-    // sqlx's documented way round `Acquire` lifetimes in spawned futures.)
-    let mut tx = begin_write(&pool).await?;
-    MIGRATOR.run_direct(None, &mut *tx, false).await?;
-    tx.commit().await?;
+    migrate(&pool).await?;
     Ok(pool)
+}
+
+/// Apply the pending migrations on one connection of `pool`.
+///
+/// - Holding the write lock (`BEGIN IMMEDIATE`), so two processes opening a new database at once
+///   (a server starting while `robocal token create` runs) take turns: the second waits, then
+///   finds every migration applied. sqlx's own migration lock is a no-op on SQLite. (`run_direct`
+///   is sqlx's documented way round `Acquire` lifetimes in spawned futures.)
+/// - With foreign-key enforcement off while they run: a migration that rebuilds a table (SQLite
+///   cannot alter a CHECK constraint) drops it, which the tables referencing it forbid otherwise.
+///   `PRAGMA foreign_keys` is a no-op inside a transaction, so it is switched before `BEGIN`.
+///   Before the commit `PRAGMA foreign_key_check` must find nothing, or everything is rolled
+///   back. Enforcement is switched back on before the connection returns to the pool; a
+///   connection where that cannot be confirmed is closed instead.
+async fn migrate(pool: &SqlitePool) -> Result<(), sqlx::Error> {
+    let mut conn = pool.acquire().await?;
+    sqlx::query("PRAGMA foreign_keys = OFF").execute(&mut *conn).await?;
+    let migrated = migrate_locked(&mut conn).await;
+    let restored = async {
+        sqlx::query("PRAGMA foreign_keys = ON").execute(&mut *conn).await?;
+        sqlx::query_scalar::<_, bool>("PRAGMA foreign_keys").fetch_one(&mut *conn).await
+    }
+    .await;
+    if !matches!(restored, Ok(true)) {
+        let _ = conn.close().await;
+    }
+    migrated?;
+    match restored {
+        Ok(true) => Ok(()),
+        Ok(false) => Err(migration_error("foreign-key enforcement could not be switched back on after migrating")),
+        Err(e) => Err(e),
+    }
+}
+
+async fn migrate_locked(conn: &mut sqlx::SqliteConnection) -> Result<(), sqlx::Error> {
+    let mut tx = sqlx::Connection::begin_with(&mut *conn, "BEGIN IMMEDIATE").await?;
+    MIGRATOR.run_direct(None, &mut *tx, false).await?;
+    // (table, rowid, parent table, foreign-key index) per violating row.
+    let violations: Vec<(String, Option<i64>, String, i64)> =
+        sqlx::query_as("PRAGMA foreign_key_check").fetch_all(&mut *tx).await?;
+    if !violations.is_empty() {
+        tx.rollback().await?;
+        let shown: Vec<String> = violations
+            .iter()
+            .take(5)
+            .map(|(table, rowid, parent, _)| match rowid {
+                Some(r) => format!("{table} row {r} → {parent}"),
+                None => format!("{table} → {parent}"),
+            })
+            .collect();
+        return Err(migration_error(&format!(
+            "the migrated database violates {} foreign key(s) ({}{}); nothing was migrated",
+            violations.len(),
+            shown.join(", "),
+            if violations.len() > shown.len() { ", …" } else { "" }
+        )));
+    }
+    tx.commit().await
+}
+
+fn migration_error(msg: &str) -> sqlx::Error {
+    sqlx::Error::Migrate(Box::new(sqlx::migrate::MigrateError::Execute(sqlx::Error::Protocol(msg.to_string()))))
 }
 
 /// SQLITE_BUSY ("database is locked", primary result code 5).
@@ -66,7 +122,7 @@ pub async fn connect_memory() -> Result<SqlitePool, sqlx::Error> {
     let opts = SqliteConnectOptions::from_str("sqlite::memory:")?.foreign_keys(true);
     let pool =
         SqlitePoolOptions::new().max_connections(1).idle_timeout(None).max_lifetime(None).connect_with(opts).await?;
-    MIGRATOR.run(&pool).await?;
+    migrate(&pool).await?;
     Ok(pool)
 }
 

@@ -1,4 +1,5 @@
-//! Robots, artefacts, sessions, measurements, parameter sets, validations and pose plans.
+//! Robots, artefacts, sessions, measurements, parameter sets, validations, diagnoses and pose
+//! plans.
 //! Functions take any SQLite executor: the pool for single statements, `&mut *tx` inside a
 //! transaction.
 
@@ -342,6 +343,69 @@ pub async fn validations_of_set(db: impl SqliteExecutor<'_>, set_id: &str) -> Re
         .bind(set_id)
         .fetch_all(db)
         .await
+}
+
+/// A diagnosis row.
+#[derive(Clone, Debug, PartialEq, sqlx::FromRow)]
+pub struct DiagnosisRow {
+    pub id: String,
+    pub parameter_set_id: String,
+    pub request_json: String,
+    pub sessions_json: String,
+    pub report_json: String,
+    pub accepted_doc_json: Option<String>,
+    pub accepted_parameter_set_id: Option<String>,
+    pub job_id: Option<String>,
+    pub created_at: String,
+}
+
+pub async fn insert_diagnosis(db: impl SqliteExecutor<'_>, d: &DiagnosisRow) -> Result<(), sqlx::Error> {
+    sqlx::query(
+        "INSERT INTO diagnoses (id, parameter_set_id, request_json, sessions_json, report_json, accepted_doc_json, \
+             accepted_parameter_set_id, job_id, created_at) \
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+    )
+    .bind(&d.id)
+    .bind(&d.parameter_set_id)
+    .bind(&d.request_json)
+    .bind(&d.sessions_json)
+    .bind(&d.report_json)
+    .bind(&d.accepted_doc_json)
+    .bind(&d.accepted_parameter_set_id)
+    .bind(&d.job_id)
+    .bind(&d.created_at)
+    .execute(db)
+    .await?;
+    Ok(())
+}
+
+pub async fn diagnosis(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<DiagnosisRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM diagnoses WHERE id = ?").bind(id).fetch_optional(db).await
+}
+
+/// A parameter set's diagnoses, newest first.
+pub async fn diagnoses_of_set(db: impl SqliteExecutor<'_>, set_id: &str) -> Result<Vec<DiagnosisRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM diagnoses WHERE parameter_set_id = ? ORDER BY created_at DESC, id DESC")
+        .bind(set_id)
+        .fetch_all(db)
+        .await
+}
+
+/// Record the parameter set accepting a diagnosis created; `false` when it already has one (or
+/// does not exist). Call inside the transaction that inserts the set.
+pub async fn set_diagnosis_accepted(
+    db: impl SqliteExecutor<'_>,
+    diagnosis_id: &str,
+    set_id: &str,
+) -> Result<bool, sqlx::Error> {
+    let r = sqlx::query(
+        "UPDATE diagnoses SET accepted_parameter_set_id = ? WHERE id = ? AND accepted_parameter_set_id IS NULL",
+    )
+    .bind(set_id)
+    .bind(diagnosis_id)
+    .execute(db)
+    .await?;
+    Ok(r.rows_affected() == 1)
 }
 
 /// A pose-plan row.

@@ -22,26 +22,7 @@ pub async fn checked_sessions(
     names: &[String],
     purpose: PurposeSpec,
 ) -> Result<Vec<String>, ApiError> {
-    let sessions = cells::resolve_sessions(&state.pool, robot_id, names, "sessions").await?;
-    for (i, s) in sessions.iter().enumerate() {
-        if s.purpose != purpose {
-            return Err(ApiError::invalid(
-                format!("sessions[{i}]"),
-                format!(
-                    "session '{}' is a {} session; this needs {} sessions",
-                    s.name,
-                    s.purpose.as_str(),
-                    purpose.as_str()
-                ),
-            ));
-        }
-        if s.measurements == 0 {
-            return Err(ApiError::invalid(
-                format!("sessions[{i}]"),
-                format!("session '{}' has no measurements", s.name),
-            ));
-        }
-    }
+    let sessions = cells::checked_sessions(&state.pool, robot_id, names, purpose, "sessions").await?;
     Ok(sessions.into_iter().map(|s| s.id).collect())
 }
 

@@ -20,7 +20,7 @@ use crate::jobs::{JobContext, JobError};
 #[derive(Debug, Serialize, Deserialize, ToSchema)]
 pub struct JobOut {
     pub id: String,
-    /// `pose_plan`, `identification` or `validation`.
+    /// `pose_plan`, `identification`, `validation` or `diagnosis`.
     #[schema(value_type = String)]
     pub kind: JobKind,
     pub robot_id: String,
@@ -32,7 +32,7 @@ pub struct JobOut {
     /// The request as stored (sessions resolved to ids).
     #[schema(value_type = Object)]
     pub request: Value,
-    /// Where the result lives (`parameter_set_id`, `validation_id`, `pose_plan_id`) and a summary.
+    /// Where the result lives (`parameter_set_id`, `validation_id`, `pose_plan_id`, `diagnosis_id`) and a summary.
     pub result: Option<JobResult>,
     /// Why it failed (rank deficiency, κ above the limit, divergence, …).
     pub error: Option<Problem>,

@@ -4,6 +4,7 @@
 pub mod artefacts;
 pub mod client;
 pub mod compensation;
+pub mod diagnoses;
 pub mod error;
 pub mod extract;
 pub mod identifications;
@@ -66,6 +67,7 @@ compensate, read, admin (admin implies all); a server bound to loopback accepts 
         (name = "identifications", description = "Parameter identification (job)"),
         (name = "parameter-sets", description = "Immutable, versioned parameter sets"),
         (name = "validations", description = "Validation statistics (job)"),
+        (name = "diagnoses", description = "Sim-to-real diagnosis of a parameter set (job): where it misses, which unmodelled effect, how far the error shrinks; accepting a named effect"),
         (name = "compensation", description = "Compensated (fake-target) joint targets"),
         (name = "jobs", description = "Background jobs"),
         (name = "tokens", description = "Bearer tokens (admin)"),
@@ -98,6 +100,9 @@ fn api_router() -> OpenApiRouter<AppState> {
         .routes(routes!(identifications::create))
         .routes(routes!(validations::create))
         .routes(routes!(validations::get))
+        .routes(routes!(diagnoses::create, diagnoses::list))
+        .routes(routes!(diagnoses::get))
+        .routes(routes!(diagnoses::accept))
         .routes(routes!(compensation::compensate))
         .routes(routes!(jobs::list))
         .routes(routes!(jobs::get))

@@ -65,7 +65,7 @@ fn quality_summary(doc: &Value) -> Value {
     })
 }
 
-async fn set_out(
+pub(super) async fn set_out(
     state: &AppState,
     row: &records::ParameterSetRow,
     active: bool,
@@ -108,7 +108,7 @@ async fn find(state: &AppState, id: &str) -> Result<records::ParameterSetRow, Ap
     records::parameter_set(&state.pool, id).await?.ok_or_else(|| ApiError::not_found("parameter set", id))
 }
 
-async fn is_active(state: &AppState, row: &records::ParameterSetRow) -> Result<bool, ApiError> {
+pub(super) async fn is_active(state: &AppState, row: &records::ParameterSetRow) -> Result<bool, ApiError> {
     Ok(find_robot(state, &row.robot_id).await?.active_parameter_set_id.as_deref() == Some(row.id.as_str()))
 }
 

@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use crate::domain::ToolSpec;
+use crate::domain::diagnosis::DiagnoseSpec;
 pub use crate::domain::identification::SelectSpec;
 use crate::domain::identification::{IdentifySpec, default_kappa_limit, default_rotation_weight_mm};
 
@@ -109,4 +110,14 @@ pub struct ValidationJob {
     pub parameter_set_id: String,
     #[serde(flatten)]
     pub request: ValidationRequest,
+}
+
+/// A diagnosis job as stored: the set it diagnoses and the request, its sessions resolved at
+/// submission to the ids of the robot's sessions (the defaults made explicit: every
+/// identification session, every validation session), so it runs the same after a restart.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DiagnosisJob {
+    pub parameter_set_id: String,
+    #[serde(flatten)]
+    pub request: DiagnoseSpec,
 }

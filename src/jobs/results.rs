@@ -111,6 +111,18 @@ pub struct ValidationResult {
     pub summary: ValidationJobSummary,
 }
 
+/// A diagnosis job's result: where the diagnosis is stored and its verdict in brief.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct DiagnosisResult {
+    pub diagnosis_id: String,
+    pub parameter_set_id: String,
+    /// The verdict: `named`, `none`, `not_separable` or `unknown_effect`.
+    pub status: String,
+    pub summary: String,
+    /// Labels of the named effects (for `not_separable`, the suspects), most important first.
+    pub effects: Vec<String>,
+}
+
 /// A finished job's result, by its kind.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(untagged)]
@@ -118,6 +130,7 @@ pub enum JobResult {
     PosePlan(PosePlanResult),
     Identification(IdentificationResult),
     Validation(ValidationResult),
+    Diagnosis(DiagnosisResult),
 }
 
 impl JobResult {
@@ -127,6 +140,7 @@ impl JobResult {
             JobKind::PosePlan => JobResult::PosePlan(serde_json::from_str(json)?),
             JobKind::Identification => JobResult::Identification(serde_json::from_str(json)?),
             JobKind::Validation => JobResult::Validation(serde_json::from_str(json)?),
+            JobKind::Diagnosis => JobResult::Diagnosis(serde_json::from_str(json)?),
         })
     }
 }

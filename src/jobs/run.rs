@@ -1,4 +1,4 @@
-//! The three job kinds, each in three steps: load the inputs from the store (async), compute
+//! The job kinds, each in three steps: load the inputs from the store (async), compute
 //! (blocking, off the async runtime — the same library calls the CLI makes), store the result
 //! (inside the transaction that also ends the job).
 
@@ -6,17 +6,19 @@ use serde_json::{Value, json};
 use sqlx::SqlitePool;
 
 use super::JobError;
-use super::requests::{IdentificationRequest, PosePlanRequest, SelectSpec, ValidationJob};
+use super::requests::{DiagnosisJob, IdentificationRequest, PosePlanRequest, SelectSpec, ValidationJob};
 use super::results::{
-    IdentificationResult, IdentificationSummary, JobResult, PlanNest, PlannedBallPose, PlannedTrackerPose, PosePlan,
-    PosePlanResult, ValidationJobSummary, ValidationResult,
+    DiagnosisResult, IdentificationResult, IdentificationSummary, JobResult, PlanNest, PlannedBallPose,
+    PlannedTrackerPose, PosePlan, PosePlanResult, ValidationJobSummary, ValidationResult,
 };
 use crate::app::cells;
 use crate::app::robots::{model_of, robot_base};
 use crate::cell::{Cell, Instrument, Measurement, Observation, Purpose, Session};
 use crate::db::jobs::JobKind;
-use crate::db::records::{self, RobotRow};
-use crate::domain::cell::{ArtefactSpec, CellFile};
+use crate::db::records::{self, RobotRow, SessionRow};
+use crate::diagnose::DiagnoseError;
+use crate::domain::cell::{ArtefactSpec, CellFile, PurposeSpec};
+use crate::domain::diagnosis::{DiagnoseSpec, accepted_doc, diagnosis_out, input_of};
 use crate::domain::identification::{DetmaxSelection, run_identification};
 use crate::domain::validation::ErrorFigures;
 use crate::domain::{ParameterSetDoc, ToolSpec, to_deg};
@@ -30,13 +32,73 @@ pub enum Inputs {
     PosePlan { base: [f64; 6], model: RobotModel, request: PosePlanRequest, artefact: ArtefactSpec },
     Identification { robot: RobotRow, request: IdentificationRequest, cell: CellFile, session_names: Vec<String> },
     Validation { job: ValidationJob, set_json: String, cell: CellFile, session_names: Vec<String> },
+    Diagnosis { job: DiagnosisJob, set_json: String, cell: CellFile, sessions: DiagnosisSessions },
 }
 
 /// What a job computed.
 pub enum Output {
-    PosePlan { plan: PosePlan },
-    Identification { doc_json: String, sessions_json: String, summary: IdentificationSummary, activate: bool },
-    Validation { parameter_set_id: String, report: Value, sessions_json: String, summary: ValidationJobSummary },
+    PosePlan {
+        plan: PosePlan,
+    },
+    Identification {
+        doc_json: String,
+        sessions_json: String,
+        summary: IdentificationSummary,
+        activate: bool,
+    },
+    Validation {
+        parameter_set_id: String,
+        report: Value,
+        sessions_json: String,
+        summary: ValidationJobSummary,
+    },
+    Diagnosis {
+        parameter_set_id: String,
+        sessions_json: String,
+        report_json: String,
+        accepted_doc_json: Option<String>,
+        status: String,
+        summary: String,
+        effects: Vec<String>,
+    },
+}
+
+/// The sessions a diagnosis uses, by name as the cell has them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DiagnosisSessions {
+    pub identification: Vec<String>,
+    pub validation: Vec<String>,
+}
+
+/// The robot's sessions a diagnosis names (ids or names): `identification` empty means every
+/// identification session holding measurements, `validation` `None` every validation session
+/// holding measurements, `Some([])` none. Named sessions must exist, have that purpose and hold
+/// measurements (422 at `identification[i]` / `validation[i]`); there must be at least one
+/// identification session (422 at `identification`).
+pub async fn diagnosis_sessions(
+    pool: &SqlitePool,
+    robot_id: &str,
+    identification: &[String],
+    validation: Option<&[String]>,
+) -> Result<(Vec<SessionRow>, Vec<SessionRow>), JobError> {
+    let id = if identification.is_empty() {
+        let all = cells::sessions_with_purpose(pool, robot_id, PurposeSpec::Identification).await?;
+        if all.is_empty() {
+            return Err(JobError::invalid(
+                "identification",
+                "the robot has no identification session with measurements to diagnose from",
+            ));
+        }
+        all
+    } else {
+        cells::checked_sessions(pool, robot_id, identification, PurposeSpec::Identification, "identification").await?
+    };
+    let val = match validation {
+        None => cells::sessions_with_purpose(pool, robot_id, PurposeSpec::Validation).await?,
+        Some([]) => Vec::new(),
+        Some(v) => cells::checked_sessions(pool, robot_id, v, PurposeSpec::Validation, "validation").await?,
+    };
+    Ok((id, val))
 }
 
 fn stored<T: serde::de::DeserializeOwned>(json: &str, what: &str) -> Result<T, JobError> {
@@ -74,6 +136,20 @@ pub async fn load(pool: &SqlitePool, kind: JobKind, robot_id: &str, request_json
             let cell = cells::cell_file(pool, &robot, &sessions).await?;
             let session_names = sessions.iter().map(|s| s.name.clone()).collect();
             Ok(Inputs::Validation { job, set_json: set.doc_json, cell, session_names })
+        }
+        JobKind::Diagnosis => {
+            let job: DiagnosisJob = stored(request_json, "diagnosis request")?;
+            let set = records::parameter_set(pool, &job.parameter_set_id)
+                .await?
+                .ok_or_else(|| JobError::Internal(format!("parameter set {} missing", job.parameter_set_id)))?;
+            let (id, val) =
+                diagnosis_sessions(pool, &robot.id, &job.request.identification, job.request.validation.as_deref())
+                    .await?;
+            let names = |s: &[SessionRow]| s.iter().map(|s| s.name.clone()).collect::<Vec<_>>();
+            let sessions = DiagnosisSessions { identification: names(&id), validation: names(&val) };
+            let all: Vec<SessionRow> = id.into_iter().chain(val).collect();
+            let cell = cells::cell_file(pool, &robot, &all).await?;
+            Ok(Inputs::Diagnosis { job, set_json: set.doc_json, cell, sessions })
         }
     }
 }
@@ -118,6 +194,14 @@ pub fn identify_error(e: IdentifyError) -> JobError {
             JobError::Numerical { kind: "registration", title: "The base could not be registered", detail }
         }
         IdentifyError::Problem(_) | IdentifyError::Option(_) => JobError::Invalid { detail, field: None },
+    }
+}
+
+/// A diagnosis's failure: its options as 422, the starting model's fit as an identification's.
+pub fn diagnose_error(e: DiagnoseError) -> JobError {
+    match e {
+        DiagnoseError::Option(detail) => JobError::Invalid { detail, field: None },
+        DiagnoseError::Identify(e) => identify_error(e),
     }
 }
 
@@ -169,6 +253,33 @@ pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64) + Sync)) -> Result<Output
                 report: full,
                 sessions_json: json!(session_names).to_string(),
                 summary,
+            })
+        }
+        Inputs::Diagnosis { job, set_json, cell, sessions } => {
+            let doc = ParameterSetDoc::from_json(&set_json)
+                .map_err(|e| JobError::Internal(format!("stored parameter set: {e}")))?;
+            let cell_si = cell.to_cell().map_err(|e| JobError::domain(e, "stored cell"))?;
+            // The sessions by the names the cell gives them. The held-out refits run on this
+            // worker's thread (`threads: 1`, the default): a worker is one solver thread.
+            let spec = DiagnoseSpec {
+                identification: sessions.identification.clone(),
+                validation: Some(sessions.validation.clone()),
+                ..job.request
+            };
+            let opts = spec.to_options().map_err(JobError::field)?;
+            progress(0.1);
+            let d = crate::diagnose::diagnose(&input_of(&cell_si, &doc), &opts).map_err(diagnose_error)?;
+            progress(0.9);
+            let out = diagnosis_out(&d);
+            Ok(Output::Diagnosis {
+                parameter_set_id: job.parameter_set_id,
+                sessions_json: json!({"identification": sessions.identification, "validation": sessions.validation})
+                    .to_string(),
+                report_json: serde_json::to_string(&out).expect("a diagnosis serialises"),
+                accepted_doc_json: accepted_doc(&d).map(|doc| doc.to_json_pretty()),
+                status: out.verdict.status.clone(),
+                summary: out.verdict.summary.clone(),
+                effects: out.verdict.effects.iter().map(|e| e.which.label.clone()).collect(),
             })
         }
     }
@@ -329,6 +440,35 @@ pub async fn store(
             };
             records::insert_validation(&mut *tx, &row).await?;
             Ok(JobResult::Validation(ValidationResult { validation_id: row.id, parameter_set_id, summary }))
+        }
+        Output::Diagnosis {
+            parameter_set_id,
+            sessions_json,
+            report_json,
+            accepted_doc_json,
+            status,
+            summary,
+            effects,
+        } => {
+            let row = records::DiagnosisRow {
+                id: crate::db::new_id(),
+                parameter_set_id: parameter_set_id.clone(),
+                request_json: request_json.to_string(),
+                sessions_json,
+                report_json,
+                accepted_doc_json,
+                accepted_parameter_set_id: None,
+                job_id: Some(job_id.to_string()),
+                created_at: crate::db::now(),
+            };
+            records::insert_diagnosis(&mut *tx, &row).await?;
+            Ok(JobResult::Diagnosis(DiagnosisResult {
+                diagnosis_id: row.id,
+                parameter_set_id,
+                status,
+                summary,
+                effects,
+            }))
         }
     }
 }

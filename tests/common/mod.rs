@@ -10,9 +10,10 @@ use axum::Router;
 use axum::body::Body;
 use axum::http::{HeaderMap, Method, Request, StatusCode, header};
 use http_body_util::BodyExt;
+use robocal::domain::cell::CellFile;
 use robocal::http::{AppState, ServiceConfig, app};
 use robocal::jobs::Workers;
-use serde_json::Value;
+use serde_json::{Value, json};
 use tower::ServiceExt;
 
 pub struct TestApp {
@@ -127,4 +128,44 @@ pub fn assert_problem(r: &Res, status: u16, field: Option<&str>) {
 /// The thesis's robot position (Table 5.1 nominal base) as a base guess.
 pub fn base_guess() -> Value {
     serde_json::json!({"x_mm": 160.211, "y_mm": -255.727, "z_mm": -220.548, "a_deg": 91.603, "b_deg": 0.496, "c_deg": -1.384})
+}
+
+/// A robot (the irb120 preset at the thesis's base guess); its id.
+pub async fn robot(app: &TestApp, name: &str) -> String {
+    let r =
+        app.post("/v1/robots", &json!({"name": name, "robot": {"preset": "irb120"}, "base_guess": base_guess()})).await;
+    assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
+    r.body["id"].as_str().unwrap().to_string()
+}
+
+/// A ball-triangle artefact (300 mm sides); its id.
+pub async fn artefact(app: &TestApp, name: &str) -> String {
+    let r = app
+        .post(
+            "/v1/artefacts",
+            &json!({"name": name, "distances_mm": {"d12": 300, "d13": 300, "d23": 300}, "ball_diameter_mm": 12.7}),
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
+    r.body["id"].as_str().unwrap().to_string()
+}
+
+/// Create the cell's sessions on a robot and upload their measurements; session name → id.
+pub async fn upload(app: &TestApp, robot_id: &str, artefact_id: &str, cell: &CellFile) -> Vec<(String, String)> {
+    let mut ids = Vec::new();
+    for s in &cell.sessions {
+        let r = app
+            .post(
+                &format!("/v1/robots/{robot_id}/sessions"),
+                &json!({"name": s.name, "purpose": s.purpose, "instrument": s.instrument, "tool": s.tool, "artefact_id": artefact_id}),
+            )
+            .await;
+        assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
+        let sid = r.body["id"].as_str().unwrap().to_string();
+        let r = app.post(&format!("/v1/sessions/{sid}/measurements"), &json!({"measurements": s.measurements})).await;
+        assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
+        assert_eq!(r.body["count"], s.measurements.len());
+        ids.push((s.name.clone(), sid));
+    }
+    ids
 }

@@ -1,0 +1,193 @@
+//! Migrating a database made by an earlier schema: its rows survive, its foreign keys are still
+//! enforced afterwards, and a database whose rows would violate them is refused whole.
+
+mod common;
+
+use std::path::Path;
+use std::str::FromStr;
+
+use common::fresh_dir;
+use robocal::db;
+use sqlx::SqlitePool;
+use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions};
+
+/// A database file at schema version `version` only, with foreign-key enforcement as asked.
+async fn at_version(path: &Path, version: i64, foreign_keys: bool) -> SqlitePool {
+    let opts = SqliteConnectOptions::from_str(&format!("sqlite://{}", path.display()))
+        .unwrap()
+        .create_if_missing(true)
+        .journal_mode(SqliteJournalMode::Wal)
+        .foreign_keys(foreign_keys);
+    let pool = SqlitePoolOptions::new().max_connections(1).connect_with(opts).await.unwrap();
+    db::MIGRATOR.run_to(version, &pool).await.unwrap();
+    pool
+}
+
+async fn exec(pool: &SqlitePool, sql: &str) {
+    sqlx::query(sqlx::AssertSqlSafe(sql.to_string())).execute(pool).await.unwrap_or_else(|e| panic!("{sql}: {e}"));
+}
+
+/// Rows in every table that references jobs (and one job of each kind and state), as the 0001
+/// schema stored them.
+async fn fill_v1(pool: &SqlitePool) {
+    exec(
+        pool,
+        "INSERT INTO robots (id, name, model_json, created_at) VALUES ('r1', 'cell', '{\"preset\": \"irb120\"}', 't0')",
+    )
+    .await;
+    for (id, kind, state) in [
+        ("j1", "pose_plan", "succeeded"),
+        ("j2", "identification", "succeeded"),
+        ("j3", "validation", "failed"),
+        ("j4", "identification", "queued"),
+    ] {
+        exec(
+            pool,
+            &format!(
+                "INSERT INTO jobs (id, kind, robot_id, state, progress, request_json, result_json, attempts, created_at, updated_at) \
+                 VALUES ('{id}', '{kind}', 'r1', '{state}', 0.5, '{{\"k\": \"{id}\"}}', '{{}}', 2, 't-{id}', 'u-{id}')"
+            ),
+        )
+        .await;
+    }
+    exec(pool, "INSERT INTO parameter_sets (id, robot_id, version, doc_json, sessions_json, job_id, created_at) VALUES ('s1', 'r1', 1, '{}', '[]', 'j2', 't1')").await;
+    exec(pool, "UPDATE robots SET active_parameter_set_id = 's1'").await;
+    exec(pool, "INSERT INTO validations (id, parameter_set_id, sessions_json, report_json, job_id, created_at) VALUES ('v1', 's1', '[]', '{}', 'j3', 't2')").await;
+    exec(pool, "INSERT INTO pose_plans (id, robot_id, request_json, result_json, job_id, created_at) VALUES ('p1', 'r1', '{}', '{}', 'j1', 't3')").await;
+}
+
+type JobText = (String, String, String, String, f64, String, Option<String>, i64, String, String);
+
+async fn jobs_text(pool: &SqlitePool) -> Vec<JobText> {
+    sqlx::query_as(
+        "SELECT id, kind, robot_id, state, progress, request_json, result_json, attempts, created_at, updated_at \
+         FROM jobs ORDER BY id",
+    )
+    .fetch_all(pool)
+    .await
+    .unwrap()
+}
+
+async fn applied(pool: &SqlitePool) -> i64 {
+    sqlx::query_scalar("SELECT COUNT(*) FROM _sqlx_migrations WHERE success = 1").fetch_one(pool).await.unwrap()
+}
+
+#[tokio::test]
+async fn a_version_1_database_migrates_keeps_its_rows_and_still_enforces_foreign_keys() {
+    let dir = fresh_dir("migrate");
+    let path = dir.join("robocal.db");
+    let old = at_version(&path, 1, true).await;
+    fill_v1(&old).await;
+    let before = jobs_text(&old).await;
+    old.close().await;
+
+    let pool = db::connect(&path).await.unwrap();
+    assert_eq!(applied(&pool).await, db::MIGRATOR.iter().count() as i64);
+    assert_eq!(jobs_text(&pool).await, before, "the rebuilt jobs table holds the same rows");
+    for (table, n) in [("robots", 1), ("parameter_sets", 1), ("validations", 1), ("pose_plans", 1), ("diagnoses", 0)] {
+        let count: i64 = sqlx::query_scalar(sqlx::AssertSqlSafe(format!("SELECT COUNT(*) FROM {table}")))
+            .fetch_one(&pool)
+            .await
+            .unwrap();
+        assert_eq!(count, n, "{table}");
+    }
+    // The references to jobs point at the rebuilt table, and its indexes are back.
+    let parents: Vec<String> = sqlx::query_scalar("SELECT \"table\" FROM pragma_foreign_key_list('parameter_sets')")
+        .fetch_all(&pool)
+        .await
+        .unwrap();
+    assert!(parents.contains(&"jobs".to_string()), "{parents:?}");
+    let indexes: Vec<String> =
+        sqlx::query_scalar("SELECT name FROM sqlite_master WHERE type = 'index' AND tbl_name = 'jobs' AND name NOT LIKE 'sqlite_%' ORDER BY name")
+            .fetch_all(&pool)
+            .await
+            .unwrap();
+    assert_eq!(indexes, ["jobs_by_robot", "jobs_by_state"]);
+    assert!(
+        sqlx::query_scalar::<_, Option<String>>("SELECT name FROM sqlite_master WHERE name = 'jobs_new'")
+            .fetch_optional(&pool)
+            .await
+            .unwrap()
+            .is_none()
+    );
+
+    // Every connection of the pool enforces foreign keys again.
+    let mut conns = Vec::new();
+    for _ in 0..3 {
+        let mut c = pool.acquire().await.unwrap();
+        let on: bool = sqlx::query_scalar("PRAGMA foreign_keys").fetch_one(&mut *c).await.unwrap();
+        assert!(on);
+        conns.push(c);
+    }
+    drop(conns);
+    let dangling = [
+        "INSERT INTO parameter_sets (id, robot_id, version, doc_json, sessions_json, job_id, created_at) VALUES ('s2', 'r1', 2, '{}', '[]', 'no-such-job', 't')",
+        "INSERT INTO validations (id, parameter_set_id, sessions_json, report_json, job_id, created_at) VALUES ('v2', 's1', '[]', '{}', 'no-such-job', 't')",
+        "INSERT INTO jobs (id, kind, robot_id, state, request_json, created_at, updated_at) VALUES ('j9', 'diagnosis', 'no-such-robot', 'queued', '{}', 't', 't')",
+        "INSERT INTO diagnoses (id, parameter_set_id, request_json, sessions_json, report_json, job_id, created_at) VALUES ('d1', 'no-such-set', '{}', '{}', '{}', 'j2', 't')",
+        "DELETE FROM jobs WHERE id = 'j2'",
+    ];
+    for sql in dangling {
+        let e = sqlx::query(sql).execute(&pool).await.expect_err(sql);
+        assert!(e.to_string().contains("FOREIGN KEY"), "{sql}: {e}");
+    }
+    // The widened CHECK: a diagnosis job is admitted, an unknown kind is not.
+    exec(&pool, "INSERT INTO jobs (id, kind, robot_id, state, request_json, created_at, updated_at) VALUES ('j5', 'diagnosis', 'r1', 'queued', '{}', 't', 't')").await;
+    let e = sqlx::query("INSERT INTO jobs (id, kind, robot_id, state, request_json, created_at, updated_at) VALUES ('j6', 'dance', 'r1', 'queued', '{}', 't', 't')")
+        .execute(&pool)
+        .await
+        .unwrap_err();
+    assert!(e.to_string().contains("CHECK"), "{e}");
+    exec(&pool, "INSERT INTO diagnoses (id, parameter_set_id, request_json, sessions_json, report_json, job_id, created_at) VALUES ('d1', 's1', '{}', '{}', '{}', 'j5', 't')").await;
+    pool.close().await;
+
+    // Opening the migrated database again changes nothing.
+    let pool = db::connect(&path).await.unwrap();
+    assert_eq!(applied(&pool).await, db::MIGRATOR.iter().count() as i64);
+    assert_eq!(jobs_text(&pool).await.len(), before.len() + 1);
+    pool.close().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[tokio::test]
+async fn a_database_with_dangling_references_is_not_migrated() {
+    let dir = fresh_dir("migrate-dangling");
+    let path = dir.join("robocal.db");
+    // Written with enforcement off: a validation of a job that does not exist.
+    let old = at_version(&path, 1, false).await;
+    fill_v1(&old).await;
+    exec(&old, "INSERT INTO validations (id, parameter_set_id, sessions_json, report_json, job_id, created_at) VALUES ('v2', 's1', '[]', '{}', 'gone', 't')").await;
+    old.close().await;
+
+    let e = db::connect(&path).await.expect_err("dangling references are refused");
+    let msg = e.to_string();
+    assert!(
+        msg.contains("foreign key") && msg.contains("validations") && msg.contains("nothing was migrated"),
+        "{msg}"
+    );
+    // Rolled back whole: still at version 1, the old jobs table as it was.
+    let old = at_version(&path, 1, false).await;
+    assert_eq!(applied(&old).await, 1);
+    let tables: Vec<String> =
+        sqlx::query_scalar("SELECT name FROM sqlite_master WHERE type = 'table' AND name IN ('diagnoses', 'jobs_new')")
+            .fetch_all(&old)
+            .await
+            .unwrap();
+    assert!(tables.is_empty(), "{tables:?}");
+    assert_eq!(jobs_text(&old).await.len(), 4);
+    old.close().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[tokio::test]
+async fn the_in_memory_database_is_migrated_with_foreign_keys_on() {
+    let pool = db::connect_memory().await.unwrap();
+    assert_eq!(applied(&pool).await, db::MIGRATOR.iter().count() as i64);
+    let on: bool = sqlx::query_scalar("PRAGMA foreign_keys").fetch_one(&pool).await.unwrap();
+    assert!(on);
+    let e = sqlx::query("INSERT INTO jobs (id, kind, robot_id, state, request_json, created_at, updated_at) VALUES ('j', 'diagnosis', 'none', 'queued', '{}', 't', 't')")
+        .execute(&pool)
+        .await
+        .unwrap_err();
+    assert!(e.to_string().contains("FOREIGN KEY"), "{e}");
+}
