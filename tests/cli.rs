@@ -275,3 +275,57 @@ fn simulate_identify_validate_study() {
         assert!(!ok && err.contains(name), "{args:?}: {err}");
     }
 }
+
+/// `robocal diagnose`: the JSON report with its top-level keys, the verdict schema, the accepted
+/// parameter set; accepting when nothing is named fails with the verdict in the message; bad
+/// options name their flag; `bench-diagnosis` runs a case.
+#[test]
+fn diagnose_names_accepts_and_refuses() {
+    let dir = std::env::temp_dir().join(format!("robocal-cli-diag-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = |n: &str| dir.join(n).to_string_lossy().to_string();
+    for (name, effects) in [("bl", "backlash:j=2:deg=0.01"), ("none", "")] {
+        let args = ["simulate", "--seed", "2", "--id-per-ball", "50", "--validation", "200", "--effects", effects];
+        let (ok, _, err) = robocal(&[&args[..], &["--out", &p(&format!("{name}.json"))]].concat());
+        assert!(ok, "{err}");
+        let (ok, _, err) = robocal(&["identify", &p(&format!("{name}.json")), "--out", &p(&format!("{name}-p.json"))]);
+        assert!(ok, "{err}");
+    }
+    // The report on stdout (the accepted file's note on stderr).
+    let (ok, d, err) = robocal(&["diagnose", &p("bl-p.json"), &p("bl.json"), "--accept", &p("acc.json")]);
+    assert!(ok, "{err}");
+    assert!(err.contains("acc.json"), "{err}");
+    for key in ["verdict", "decomposition", "where", "candidates", "shrink"] {
+        assert!(d.get(key).is_some(), "missing top-level key {key}");
+    }
+    assert_eq!(d["verdict"]["status"], "named");
+    let e = &d["verdict"]["effects"][0];
+    assert_eq!((e["name"].as_str(), e["joint"].as_u64()), (Some("backlash"), Some(2)));
+    let deg = e["estimate"].as_f64().unwrap();
+    assert!((deg - 0.01).abs() < 0.002 && e["std"].as_f64().unwrap() > 0.0, "{e}");
+    let shrink = d["shrink"].as_array().unwrap();
+    assert_eq!(shrink.len(), 2);
+    for s in shrink {
+        for k in ["model", "mean_mm", "rms_mm", "p95_mm", "max_mm"] {
+            assert!(s.get(k).is_some(), "shrink entry without {k}");
+        }
+    }
+    assert!(shrink[1]["mean_mm"].as_f64() < shrink[0]["mean_mm"].as_f64());
+    let acc: Value = serde_json::from_str(&std::fs::read_to_string(p("acc.json")).unwrap()).unwrap();
+    assert!(acc["parameters"].as_array().unwrap().iter().any(|q| q["name"] == "backlash2"));
+    // Nothing to accept.
+    let (ok, _, err) = robocal(&["diagnose", &p("none-p.json"), &p("none.json"), "--out", &p("none-d.json")]);
+    assert!(ok, "{err}");
+    let report: Value = serde_json::from_str(&std::fs::read_to_string(p("none-d.json")).unwrap()).unwrap();
+    assert_eq!(report["verdict"]["status"], "none");
+    let (ok, _, err) = robocal(&["diagnose", &p("none-p.json"), &p("none.json"), "--accept", &p("no.json")]);
+    assert!(!ok && err.contains("--accept") && err.contains("none"), "{err}");
+    let (ok, _, err) = robocal(&["diagnose", &p("none-p.json"), &p("none.json"), "--folds", "1"]);
+    assert!(!ok && err.contains("--folds"), "{err}");
+    let (ok, _, err) = robocal(&["diagnose", &p("none-p.json"), &p("none.json"), "--validation", "nope"]);
+    assert!(!ok && err.contains("nope"), "{err}");
+    let (ok, _, err) = robocal(&["bench-diagnosis", "--seeds", "1", "--cases", "coupling 5→6 (no logs)"]);
+    assert!(ok, "{err}");
+    let (ok, _, err) = robocal(&["bench-diagnosis", "--cases", "no such case"]);
+    assert!(!ok && err.contains("--cases"), "{err}");
+}

@@ -243,7 +243,7 @@ pub(super) fn diagnose(a: DiagnoseArgs) -> Result<String, CliError> {
     let diag = crate::diagnose::diagnose(&input, &opts).map_err(|e| CliError(e.to_string()))?;
     let out = diagnosis_out(&diag);
     let json = serde_json::to_string_pretty(&out).expect("json");
-    let mut text = match &a.out {
+    let text = match &a.out {
         Some(p) => {
             write(p, &json)?;
             format!("wrote {}: {} — {}", p.display(), out.verdict.status, out.verdict.summary)
@@ -258,7 +258,8 @@ pub(super) fn diagnose(a: DiagnoseArgs) -> Result<String, CliError> {
             )
         })?;
         write(p, &accepted.to_json_pretty())?;
-        text.push_str(&format!("\nwrote {} (model {})", p.display(), out.model));
+        // On stderr: stdout stays the report alone, parseable as JSON.
+        eprintln!("wrote {} (model {})", p.display(), out.model);
     }
     Ok(text)
 }

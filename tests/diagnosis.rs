@@ -1,0 +1,224 @@
+//! The sim-to-real diagnosis (issue 11): a fast version of `robocal bench-diagnosis` (one seed of
+//! a case of every kind: the full table over ten seeds is in BENCHMARKS.md), the real UR10 data
+//! against the figures of an independent analysis, compensation with an accepted effect on the
+//! virtual robot that has it, and the held-out refits checked against full nonlinear ones.
+
+use std::path::PathBuf;
+
+use robocal::cell::{Cell, Purpose};
+use robocal::diagnose::cv::{Folds, cross_validate};
+use robocal::diagnose::stage::Stage;
+use robocal::diagnose::{DiagnoseOptions, Input, Status, diagnose};
+use robocal::experiments::withheld::{Expect, run_suite, suite};
+use robocal::identify::{Anchor, IdentifyOptions, NoiseModel, identify};
+use robocal::import::ur10_ipa::{Ur10Options, import_cell};
+use robocal::kinematics::{Compensator, JointTerm, Param, Seed};
+use robocal::sim::effects::Effects;
+use robocal::sim::simulate::{SimulateOptions, simulate};
+
+const MM: f64 = 1e-3;
+
+/// One seed of every kind of case: separable effects named with the right joint and harmonic,
+/// no false alarm, `not_separable` where the data cannot separate, never a name for the
+/// out-of-library link bending, and the named model closing the gap as the oracle does.
+#[test]
+fn withheld_effects_one_seed_of_each_kind() {
+    let keep = [
+        "none",
+        "none (tracker +50 %)",
+        "cyclic j3 h2 (no logs)",
+        "cyclic j4 h17 (gear mesh)",
+        "backlash j2",
+        "backlash j2 (no logs)",
+        "backlash j2 (no logs, shuffled)",
+        "thermal",
+        "thermal (no logs)",
+        "coupling 5→6",
+        "compliance_cubic j2",
+        "tool_mass (one payload)",
+        "tool_mass (2.7 kg validation tool)",
+        "link_bending",
+        "-beta",
+        "-compliance",
+    ];
+    let cases: Vec<_> = suite().into_iter().filter(|c| keep.contains(&c.name.as_str())).collect();
+    assert_eq!(cases.len(), keep.len(), "every case of the fast suite is in the suite");
+    let out = run_suite(&cases, &[7], &DiagnoseOptions::default(), 2, &|_, _| {});
+    for (c, o) in cases.iter().zip(&out) {
+        assert!(o.error.is_none(), "{}: {:?}", c.name, o.error);
+        assert!(o.correct, "{}: expected {:?}, got {} ({:?})", c.name, c.expect, o.status.as_str(), o.first);
+        assert!(!o.wrong_name, "{}: a confident wrong name {:?}", c.name, o.first);
+        if let (Expect::Named { .. }, Some(r)) = (&c.expect, o.closure_ratio) {
+            assert!(r >= 0.8, "{}: gap closure {r:.3} of the oracle's", c.name);
+        }
+    }
+}
+
+fn series(letter: &str) -> PathBuf {
+    [env!("CARGO_MANIFEST_DIR"), "..", "shared", "datasets", "ur10-ipa", &format!("Series_{letter}")].iter().collect()
+}
+
+/// The UR10 (issue 11, item 9). An independent analysis of these data found that geometry
+/// leaves 0.44 mm held-out, that fine joint-angle structure on joints 1–3 (7–30 cycles per
+/// revolution, 0.2–0.36 mrad) explains most of it, and that per-joint correction tables bring the
+/// held-out error to 0.18 mm mean (p95 0.36). The diagnosis must find that from the data alone:
+/// the kind (a transmission error: tables or periodic terms) on joints 1–3, and ≤ 0.20 mm
+/// held-out mean under 5-fold cross-validation on series C; carried to series B and D (base and
+/// probe refitted there) the extended model must not do worse than the starting one.
+#[test]
+fn ur10_fine_joint_structure_on_joints_1_to_3() {
+    let cell = import_cell(
+        &[
+            (series("C"), Purpose::Identification),
+            (series("B"), Purpose::Validation),
+            (series("D"), Purpose::Validation),
+        ],
+        &Ur10Options::default(),
+    )
+    .unwrap()
+    .cell;
+    let mut id_opts = IdentifyOptions::default();
+    id_opts.selection.sessions = vec!["series-C".into()];
+    let id = identify(&cell, &id_opts).unwrap();
+    let identified: Vec<bool> = id.status.iter().map(|s| *s == "identified").collect();
+    let input = Input { cell: &cell, set: &id.set, identified: Some(identified), fixed: Vec::new() };
+    let opts = DiagnoseOptions {
+        identification: vec!["series-C".into()],
+        validation: Some(Vec::new()),
+        transfer: vec!["series-B".into(), "series-D".into()],
+        threads: 2,
+        ..DiagnoseOptions::default()
+    };
+    let d = diagnose(&input, &opts).unwrap();
+    let v = &d.verdict;
+    assert_eq!(v.status, Status::Named, "{}", v.summary);
+    let joints: Vec<usize> = v.effects.iter().filter_map(|e| e.candidate.joint).collect();
+    for e in &v.effects {
+        assert!(e.candidate.kind.is_transmission(), "{}: not a transmission error", e.candidate.label());
+        assert!(e.candidate.joint.is_some_and(|j| j < 3), "{}: not on joints 1–3", e.candidate.label());
+    }
+    for j in 0..3 {
+        assert!(joints.contains(&j), "joint {} not named: {joints:?}", j + 1);
+    }
+    // The size of the structure: table RMS or cyclic amplitude 0.1–0.5 mrad.
+    for e in &v.effects {
+        let a = e.estimate.unwrap();
+        assert!((0.1e-3..0.5e-3).contains(&a), "{}: {a:.3e} rad", e.candidate.label());
+    }
+    let start = &d.shrink[0].stats;
+    let last = &d.shrink.last().unwrap().stats;
+    assert!(
+        (0.42 * MM..0.45 * MM).contains(&start.mean),
+        "geometry + compliance held-out mean {:.4} mm",
+        start.mean / MM
+    );
+    assert!(last.mean <= 0.20 * MM, "held-out mean after the effects {:.4} mm", last.mean / MM);
+    assert!(last.p95 <= 0.40 * MM, "held-out p95 after the effects {:.4} mm", last.p95 / MM);
+    for s in ["series-B", "series-D"] {
+        let get = |m: &str| d.transfer.iter().find(|t| t.session == s && t.model == m).unwrap().errors.clone().unwrap();
+        let (a, b) = (get("start"), get("final"));
+        assert!(
+            b.mean <= a.mean,
+            "{s}: transferred {:.4} mm with the effects, {:.4} without",
+            b.mean / MM,
+            a.mean / MM
+        );
+    }
+}
+
+/// Accepting a named effect gives a parameter set whose model carries it; compensating targets
+/// with it puts the *true* robot (which has the effect) on them, where the set without the
+/// effect misses by the effect's size.
+#[test]
+fn compensation_with_an_accepted_effect_lands_on_the_virtual_robot() {
+    let effects = Effects::parse("cyclic:j=3:h=2:amp_deg=0.01", 6).unwrap();
+    let sim = simulate(&SimulateOptions { seed: 4, effects, ..SimulateOptions::default() }).unwrap();
+    let cell = sim.cell;
+    let id = identify(&cell, &IdentifyOptions::default()).unwrap();
+    let identified: Vec<bool> = id.status.iter().map(|s| *s == "identified").collect();
+    let input = Input { cell: &cell, set: &id.set, identified: Some(identified), fixed: Vec::new() };
+    let d = diagnose(&input, &DiagnoseOptions::default()).unwrap();
+    assert_eq!(d.verdict.status, Status::Named, "{}", d.verdict.summary);
+    let accepted = d.accepted.as_ref().expect("an accepted model").set.clone();
+    assert!(accepted.value(Param::Joint(2, JointTerm::Cyclic { harmonic: 2, cosine: false })).is_some());
+
+    // Targets: where the true robot's TCP is at the validation poses (TriCal tool).
+    let tool = cell.sessions[0].tool.clone();
+    let robot = sim.truth.robot(&tool);
+    let val: Vec<&Vec<f64>> =
+        cell.sessions_for(Purpose::Validation).flat_map(|s| s.measurements.iter().map(|m| &m.q)).collect();
+    let miss = |set: &robocal::kinematics::ParameterSet| -> (f64, f64) {
+        let comp = Compensator::new(set);
+        let mut errs = Vec::new();
+        for q in val.iter().step_by(5) {
+            let target = robot.tcp(&robot.state(q, &[0.0; 6], 20.0));
+            let c = comp.pose(&target, Seed::Joints(q)).unwrap();
+            let landed = robot.tcp(&robot.state(c.joints(), &[0.0; 6], 20.0));
+            errs.push((landed.t - target.t).norm());
+        }
+        let mean = errs.iter().sum::<f64>() / errs.len() as f64;
+        (mean, errs.iter().copied().fold(0.0, f64::max))
+    };
+    let (before_mean, _) = miss(&id.set);
+    let (after_mean, after_max) = miss(&accepted);
+    assert!(before_mean > 0.02 * MM, "the calibrated set without the effect misses by {:.4} mm", before_mean / MM);
+    assert!(
+        after_mean < 0.006 * MM && after_max < 0.02 * MM,
+        "with the accepted effect: mean {:.4}, max {:.4} mm",
+        after_mean / MM,
+        after_max / MM
+    );
+    assert!(after_mean < before_mean / 4.0);
+}
+
+/// The folds' one-step refits against full nonlinear identifications on the same training rows,
+/// with the same weights and anchors: the held-out errors agree to a small fraction of a
+/// micrometre (second-order terms of sub-millimetre residuals).
+#[test]
+fn linearised_folds_agree_with_nonlinear_refits() {
+    let effects = Effects::parse("backlash:j=2:deg=0.01", 6).unwrap();
+    let o = SimulateOptions { seed: 3, effects, id_per_ball: 40, validation: 150, ..SimulateOptions::default() };
+    let cell: Cell = simulate(&o).unwrap().cell;
+    let id = identify(&cell, &IdentifyOptions::default()).unwrap();
+    let mut opts = IdentifyOptions {
+        start: Some(id.set.clone()),
+        noise: Some(NoiseModel::default()),
+        anchor: Some(Anchor::default()),
+        ..IdentifyOptions::default()
+    };
+    opts.selection.sessions = cell.sessions.iter().map(|s| s.name.clone()).collect();
+    let stage = Stage::fit(&cell, opts.clone()).unwrap();
+    let pr = &stage.problem;
+    let tested: Vec<bool> = pr.obs.iter().map(|o| cell.sessions[o.session].purpose == Purpose::Validation).collect();
+    let joints: Vec<Vec<f64>> = pr.obs.iter().map(|o| o.state.q[..6].to_vec()).collect();
+    let folds = Folds::new(&joints, &tested, 3, 1);
+    let h = cross_validate(&stage, &folds, None);
+    let mut worst: f64 = 0.0;
+    for f in 0..3 {
+        let train: Vec<(String, usize)> = pr
+            .obs
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| folds.fold_of_obs[*i] != Some(f))
+            .map(|(_, o)| (cell.sessions[o.session].name.clone(), o.index))
+            .collect();
+        let mut fo = opts.clone();
+        fo.selection.subset = train;
+        let fit = identify(&cell, &fo).unwrap();
+        for (i, e) in h.errors.iter().filter(|(i, _)| folds.fold_of_obs[*i] == Some(f)) {
+            let ob = &pr.obs[*i];
+            let s = &cell.sessions[ob.session];
+            let m = &s.measurements[ob.index];
+            let chain = fit.set.chain().with_base_tool(fit.set.pose_of(Param::Base), s.tool.tcp);
+            let tau = fit.set.gravity_for(&s.tool).torques(&m.q);
+            let mut state = robocal::kinematics::JointState::with_torques(&m.q, &tau[..6]);
+            for (j, a) in m.approach.as_ref().unwrap().iter().enumerate() {
+                state.approach[j] = *a as f64;
+            }
+            let model = chain.fk(&state).t;
+            let full = cell.observed_position(m).unwrap() - model;
+            worst = worst.max((full - e).norm());
+        }
+    }
+    assert!(worst < 0.2e-6, "linearised and nonlinear held-out errors differ by {worst:.3e} m");
+}
