@@ -616,13 +616,10 @@ fn model_spec(d: &Diagnosis) -> String {
     let all_c = (1..dof).all(|j| m.compliance || m.extra.contains(&Param::Joint(j, JointTerm::Compliance)));
     let n_beta = m.extra.iter().filter(|p| matches!(p, Param::Beta(_))).count();
     let all_b = m.beta || (n_beta > 0 && n_beta == d.parallel_rows);
-    let mut items: Vec<String> = Vec::new();
-    if !all_b {
-        items.push("-beta".into());
-    }
-    if !all_c {
-        items.push("-compliance".into());
-    }
+    let mut items: Vec<String> = vec![
+        if all_b { "+beta" } else { "-beta" }.to_string(),
+        if all_c { "+compliance" } else { "-compliance" }.to_string(),
+    ];
     let mut maps: Vec<(usize, u8)> = Vec::new();
     for p in &m.extra {
         match p {
