@@ -197,6 +197,9 @@ pub struct BenchDiagnosisArgs {
     /// Write every outcome as JSON here.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Print the tables as Markdown (as in BENCHMARKS.md) instead of text.
+    #[arg(long)]
+    pub markdown: bool,
 }
 
 pub(super) fn bench_diagnosis(a: BenchDiagnosisArgs) -> Result<String, CliError> {
@@ -225,7 +228,7 @@ pub(super) fn bench_diagnosis(a: BenchDiagnosisArgs) -> Result<String, CliError>
     let outcomes = run_suite(&cases, &seeds, &DiagnoseOptions::default(), threads, &progress);
     let elapsed = started.elapsed().as_secs_f64();
     let report = super::reports::BenchDiagnosisReport::new(&cases, &outcomes, elapsed, threads);
-    let mut text = report.text();
+    let mut text = if a.markdown { report.markdown() } else { report.text() };
     if let Some(out) = &a.out {
         write(out, &serde_json::to_string_pretty(&report).expect("json"))?;
         text.push_str(&format!("wrote {}", out.display()));

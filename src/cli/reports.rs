@@ -619,6 +619,71 @@ impl BenchDiagnosisReport {
         }
     }
 
+    /// The same tables as Markdown (for BENCHMARKS.md): per case, the confusion matrix, the summary.
+    pub fn markdown(&self) -> String {
+        let s = &self.summary;
+        let mut t = String::from(
+            "| case | withheld | runs | correct | held-out mean, mm | floor, mm | final, mm | oracle, mm | closure / oracle's |\n\
+             |---|---|---:|---:|---:|---:|---:|---:|---:|\n",
+        );
+        for c in &self.cases {
+            t.push_str(&format!(
+                "| {} | `{}` | {} | {}/{} | {:.4} | {:.4} | {:.4} | {} | {} |\n",
+                c.name,
+                if c.effects.is_empty() { "–" } else { &c.effects },
+                c.runs,
+                c.correct,
+                c.runs,
+                c.heldout_mean_mm,
+                c.floor_mean_mm,
+                c.final_mean_mm,
+                c.oracle_mean_mm.map_or("–".into(), |v| format!("{v:.4}")),
+                c.median_closure_ratio.map_or("–".into(), |v| format!("{v:.2}")),
+            ));
+        }
+        t.push_str("\nConfusion matrix (rows: cases; columns: the verdict, i.e. the first named kind or the status):\n\n| case |");
+        for c in &self.columns {
+            t.push_str(&format!(" {c} |"));
+        }
+        t.push_str("\n|---|");
+        t.push_str(&"---:|".repeat(self.columns.len()));
+        t.push('\n');
+        for r in &self.confusion {
+            t.push_str(&format!("| {} |", r.case));
+            for n in &r.counts {
+                t.push_str(&format!(" {} |", if *n == 0 { ".".to_string() } else { n.to_string() }));
+            }
+            t.push('\n');
+        }
+        t.push_str(&format!(
+            "\n| overall | measured | target |\n|---|---:|---:|\n\
+             | top-1 naming, separable effects (right kind, joint, harmonic) | {}/{} | ≥ 90 % |\n\
+             | false alarms, no effect | {}/{} | ≤ 5 % |\n\
+             | `not_separable` where the data cannot separate | {}/{} | all |\n\
+             | link bending named | {}/{} | 0 |\n\
+             | confident wrong names, all runs | {}/{} | 0 |\n\
+             | gap closure ≥ 0.8 of the oracle's | {}/{} (median ratio {}) | all |\n\
+             | wall clock | {:.0} s for {} runs on {} threads | ≤ 600 s |\n",
+            s.separable_correct,
+            s.separable_runs,
+            s.false_alarms,
+            s.no_effect_runs,
+            s.not_separable_correct,
+            s.not_separable_runs,
+            s.link_bending_named,
+            s.link_bending_runs,
+            s.confident_wrong_names,
+            s.runs,
+            s.closure_at_least_0_8,
+            s.closure_runs,
+            s.median_closure_ratio.map_or("–".into(), |v| format!("{v:.3}")),
+            s.seconds,
+            s.runs,
+            self.threads
+        ));
+        t
+    }
+
     pub fn text(&self) -> String {
         let s = &self.summary;
         let pct = |a: usize, b: usize| {
