@@ -632,51 +632,50 @@ fn verdict(s: &search::Search, d: &Decomposition) -> Verdict {
                 .iter()
                 .filter(|c| c.significant && c.log10_p_holm < -6.0 && c.score.rho < 0.5)
                 .max_by(|a, b| a.score.bic_gain.total_cmp(&b.score.bic_gain));
+            // Candidates these data cannot test: named in the summary, with the log that would
+            // make them testable, whenever the verdict is not a plain `none`.
+            let missing: Vec<String> =
+                s.unavailable.iter().map(|u| format!("{} ({})", u.kind.name(), u.reason)).collect();
+            let untestable = if missing.is_empty() {
+                String::new()
+            } else {
+                format!("; not testable on these data: {}", missing.join("; "))
+            };
+            let exp = s
+                .unavailable
+                .iter()
+                .map(|u| match u.kind {
+                    Kind::Backlash => {
+                        "log each joint's approach direction, or keep the measuring order with its times".to_string()
+                    }
+                    Kind::Thermal => "log the robot's temperature".to_string(),
+                    k => experiment(k, None),
+                })
+                .collect::<Vec<_>>();
             match strong {
-                _ if now.rms > EXCESS_RATIO * d.floor.rms && now.rms - d.floor.rms > EXCESS_MIN => {
-                    let missing: Vec<String> =
-                        s.unavailable.iter().map(|u| format!("{} ({})", u.kind.name(), u.reason)).collect();
-                    let exp = s
-                        .unavailable
-                        .iter()
-                        .map(|u| match u.kind {
-                            Kind::Backlash => {
-                                "log each joint's approach direction, or keep the measuring order with its times"
-                                    .to_string()
-                            }
-                            Kind::Thermal => "log the robot's temperature".to_string(),
-                            k => experiment(k, None),
-                        })
-                        .collect::<Vec<_>>();
-                    (
-                        Status::NotSeparable,
-                        format!(
-                            "the held-out error (RMS {}) stands far above the floor ({}), but neither a candidate nor a smooth function of the configuration predicts it: an error that changes from pose to pose{}",
-                            gap(now.rms),
-                            gap(d.floor.rms),
-                            if missing.is_empty() {
-                                String::new()
-                            } else {
-                                format!("; not testable on these data: {}", missing.join("; "))
-                            }
-                        ),
-                        None,
-                        None,
-                        Vec::new(),
-                        Some(if exp.is_empty() {
-                            "repeat poses to measure the robot's repeatability, and check the instrument's noise".into()
-                        } else {
-                            exp.join("; ")
-                        }),
-                        Vec::new(),
-                    )
-                }
+                _ if now.rms > EXCESS_RATIO * d.floor.rms && now.rms - d.floor.rms > EXCESS_MIN => (
+                    Status::NotSeparable,
+                    format!(
+                        "the held-out error (RMS {}) stands far above the floor ({}), but neither a candidate nor a smooth function of the configuration predicts it: an error that changes from pose to pose{untestable}",
+                        gap(now.rms),
+                        gap(d.floor.rms),
+                    ),
+                    None,
+                    None,
+                    Vec::new(),
+                    Some(if exp.is_empty() {
+                        "repeat poses to measure the robot's repeatability, and check the instrument's noise".into()
+                    } else {
+                        exp.join("; ")
+                    }),
+                    Vec::new(),
+                ),
                 Some(c) if !matches!(lr.decision, Decision::Accept(_)) => {
                     let i = lr.screened.iter().position(|x| std::ptr::eq(x, c)).expect("from the list");
                     (
                         Status::NotSeparable,
                         format!(
-                            "{} is in the data (screening p = 1e{:.0}) but the current model absorbs {:.0} % of it (ρ = {:.2}): it does not predict held-out poses better",
+                            "{} is in the data (screening p = 1e{:.0}) but the current model absorbs {:.0} % of it (ρ = {:.2}): it does not predict held-out poses better{untestable}",
                             c.candidate.label(),
                             c.log10_p_holm,
                             (1.0 - c.score.rho * c.score.rho) * 100.0,
@@ -685,7 +684,12 @@ fn verdict(s: &search::Search, d: &Decomposition) -> Verdict {
                         None,
                         None,
                         c.absorbed_by.clone(),
-                        Some(experiment(c.candidate.kind, None)),
+                        Some(
+                            std::iter::once(experiment(c.candidate.kind, None))
+                                .chain(exp)
+                                .collect::<Vec<_>>()
+                                .join("; "),
+                        ),
                         vec![effect_of(s, last, i, None)],
                     )
                 }

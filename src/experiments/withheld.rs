@@ -83,6 +83,8 @@ pub struct Outcome {
     pub status: Status,
     /// Label of the first effect of the verdict (named or suspected).
     pub first: Option<String>,
+    /// The verdict's one-sentence summary.
+    pub summary: String,
     pub correct: bool,
     /// The named kind is another effect than the one withheld.
     pub wrong_name: bool,
@@ -262,6 +264,7 @@ pub fn run_case(case: &Case, seed: u64, opts: &DiagnoseOptions) -> Outcome {
         seed,
         status: Status::None,
         first: None,
+        summary: String::new(),
         correct: false,
         wrong_name: false,
         heldout_mean: f64::NAN,
@@ -343,6 +346,7 @@ pub fn run_case(case: &Case, seed: u64, opts: &DiagnoseOptions) -> Outcome {
         seed,
         status: v.status,
         first: first.map(|c| c.label()),
+        summary: v.summary.clone(),
         correct,
         wrong_name,
         heldout_mean,
