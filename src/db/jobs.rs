@@ -293,15 +293,21 @@ pub async fn counts(db: impl SqliteExecutor<'_>) -> Result<Vec<(JobState, i64)>,
 mod tests {
     use super::*;
 
-    /// The enums are stored as the text the column always held, so existing databases read
-    /// the same and the API serves the same strings.
-    #[tokio::test]
-    async fn kinds_and_states_are_stored_as_their_names() {
+    /// An in-memory database holding one robot, `r`, for jobs to point at.
+    async fn pool_with_robot() -> SqlitePool {
         let pool = crate::db::connect_memory().await.unwrap();
         sqlx::query("INSERT INTO robots (id, name, model_json, created_at) VALUES ('r', 'r', '{}', 't')")
             .execute(&pool)
             .await
             .unwrap();
+        pool
+    }
+
+    /// The enums are stored as the text the column always held, so existing databases read
+    /// the same and the API serves the same strings.
+    #[tokio::test]
+    async fn kinds_and_states_are_stored_as_their_names() {
+        let pool = pool_with_robot().await;
         for (i, kind) in [JobKind::PosePlan, JobKind::Identification, JobKind::Validation].into_iter().enumerate() {
             insert(&pool, &i.to_string(), kind, "r", "{}").await.unwrap();
         }
@@ -325,11 +331,7 @@ mod tests {
     /// The kind added by migration 0002 is stored as its name too (the rebuilt CHECK admits it).
     #[tokio::test]
     async fn the_diagnosis_kind_is_stored_as_its_name() {
-        let pool = crate::db::connect_memory().await.unwrap();
-        sqlx::query("INSERT INTO robots (id, name, model_json, created_at) VALUES ('r', 'r', '{}', 't')")
-            .execute(&pool)
-            .await
-            .unwrap();
+        let pool = pool_with_robot().await;
         insert(&pool, "d", JobKind::Diagnosis, "r", "{}").await.unwrap();
         let text: String = sqlx::query_scalar("SELECT kind FROM jobs WHERE id = 'd'").fetch_one(&pool).await.unwrap();
         assert_eq!(text, "diagnosis");

@@ -6,6 +6,7 @@
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
+use super::validation::ErrorFigures;
 use super::{DomainError, ParameterSetDoc};
 use crate::diagnose::floor::Floor;
 use crate::diagnose::library::Candidate;
@@ -319,14 +320,13 @@ pub struct ParamOut {
     pub unit: String,
 }
 
+/// Error magnitudes over `n` poses: the validation report's figures (mean, median, std, RMS, p95,
+/// max in mm) with their count.
 #[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
 pub struct StatsOut {
     pub n: usize,
-    pub mean_mm: f64,
-    pub median_mm: f64,
-    pub rms_mm: f64,
-    pub p95_mm: f64,
-    pub max_mm: f64,
+    #[serde(flatten)]
+    pub figures: ErrorFigures,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
@@ -482,14 +482,7 @@ pub struct UnavailableOut {
 }
 
 fn stats(s: &ErrorStats) -> StatsOut {
-    StatsOut {
-        n: s.n,
-        mean_mm: s.mean / MM,
-        median_mm: s.median / MM,
-        rms_mm: s.rms / MM,
-        p95_mm: s.p95 / MM,
-        max_mm: s.max / MM,
-    }
+    StatsOut { n: s.n, figures: ErrorFigures::of(s) }
 }
 
 fn floor_out(f: &Floor) -> FloorOut {
