@@ -110,7 +110,6 @@ struct FoldBase {
 /// blocks, so confirming several candidates costs one model Gram, not one each.
 pub struct CvBase<'a> {
     stage: &'a Stage,
-    scale: Vec<f64>,
     js: Mat<f64>,
     g: Mat<f64>,
     b: Vec<f64>,
@@ -122,14 +121,8 @@ pub struct CvBase<'a> {
 impl<'a> CvBase<'a> {
     pub fn new(stage: &'a Stage, folds: &Folds) -> CvBase<'a> {
         let pr = &stage.problem;
-        let (n, p) = (stage.n_rows(), stage.p());
-        let scale: Vec<f64> = (0..p)
-            .map(|c| {
-                let ss: f64 = (0..n).map(|r| stage.j[(r, c)].powi(2)).sum();
-                if ss > 0.0 { ss.sqrt() } else { 1.0 }
-            })
-            .collect();
-        let js = Mat::<f64>::from_fn(n, p, |r, c| stage.j[(r, c)] / scale[c]);
+        let p = stage.p();
+        let (js, _) = unit_columns(&stage.j);
         let g = at_b(js.as_ref(), js.as_ref());
         let b = at_v(js.as_ref(), &stage.r);
         let fb = (0..folds.k)
@@ -147,7 +140,7 @@ impl<'a> CvBase<'a> {
                 Some(FoldBase { test, rows, jv, gv, bv, rv })
             })
             .collect();
-        CvBase { stage, scale, js, g, b, folds: fb, n_poses: folds.n_poses, pose_of_obs: folds.pose_of_obs.clone() }
+        CvBase { stage, js, g, b, folds: fb, n_poses: folds.n_poses, pose_of_obs: folds.pose_of_obs.clone() }
     }
 
     /// Held-out errors of the model plus `extra` columns (weighted, n_rows × m) with an optional
@@ -160,15 +153,7 @@ impl<'a> CvBase<'a> {
         let w = p + m;
         // The candidate's scaled columns and its blocks of the full Gram matrix.
         let (cs, cscale) = match extra {
-            Some((c, _)) => {
-                let sc: Vec<f64> = (0..m)
-                    .map(|k| {
-                        let ss: f64 = (0..n).map(|r| c[(r, k)].powi(2)).sum();
-                        if ss > 0.0 { ss.sqrt() } else { 1.0 }
-                    })
-                    .collect();
-                (Mat::<f64>::from_fn(n, m, |r, k| c[(r, k)] / sc[k]), sc)
-            }
+            Some((c, _)) => unit_columns(c),
             None => (Mat::<f64>::zeros(n, 0), Vec::new()),
         };
         let (gjc, gcc, bc) = if m > 0 {
@@ -223,10 +208,21 @@ impl<'a> CvBase<'a> {
                 }
             }
         }
-        let _ = &self.scale;
         errors.sort_by_key(|(o, _)| *o);
         Heldout { errors, pose_sq }
     }
+}
+
+/// The columns of `a` divided by their norms (a zero column left as it is), and the norms:
+/// the Gram matrix's conditioning is then that of the scaled columns squared.
+fn unit_columns(a: &Mat<f64>) -> (Mat<f64>, Vec<f64>) {
+    let scale: Vec<f64> = (0..a.ncols())
+        .map(|c| {
+            let ss: f64 = (0..a.nrows()).map(|r| a[(r, c)].powi(2)).sum();
+            if ss > 0.0 { ss.sqrt() } else { 1.0 }
+        })
+        .collect();
+    (Mat::<f64>::from_fn(a.nrows(), a.ncols(), |r, c| a[(r, c)] / scale[c]), scale)
 }
 
 /// Cross-validate the stage's model, plus the columns `extra` when given (one-off: build a

@@ -94,6 +94,19 @@ impl Stage {
         Stage { options, problem, x, free, set, fit, j, r, q, rss }
     }
 
+    /// This stage's parameter set extended by `params`, with the values of `x` (the extended
+    /// `problem`'s vector) wherever the problem carries the parameter.
+    fn extended_set(&self, problem: &Problem, params: &[Param], x: &[f64]) -> ParameterSet {
+        let mut set = self.set.clone();
+        set.extend(params);
+        for (i, p) in problem.layout.params().iter().enumerate() {
+            if let Some(gl) = problem.robot_index(*p) {
+                set.values[i] = x[gl];
+            }
+        }
+        set
+    }
+
     /// The model plus a candidate, as one Gauss–Newton step from this stage's solution on the
     /// pooled data: J gains the candidate's columns (`cols`, weighted, from
     /// [`Stage::columns`] or [`Stage::global_columns`]) and a table's regularisation rows,
@@ -178,14 +191,7 @@ impl Stage {
         let rss_true: f64 = actual.iter().map(|v| v * v).sum();
         if (rss_true - rss_lin).abs() > 0.01 * rss_lin {
             let mut o = options;
-            let mut start = self.set.clone();
-            start.extend(params);
-            for (i, p) in problem.layout.params().iter().enumerate() {
-                if let Some(gl) = problem.robot_index(*p) {
-                    start.values[i] = x[gl];
-                }
-            }
-            o.start = Some(start);
+            o.start = Some(self.extended_set(&problem, params, &x));
             return Stage::fit(cell, o);
         }
         // Q: the old basis (padded with the new prior rows) and the candidate's new directions.
@@ -197,13 +203,7 @@ impl Stage {
         let q = Mat::<f64>::from_fn(n, qpad.ncols() + qn.ncols(), |r, c| {
             if c < qpad.ncols() { qpad[(r, c)] } else { qn[(r, c - qpad.ncols())] }
         });
-        let mut set = self.set.clone();
-        set.extend(params);
-        for (i, p) in problem.layout.params().iter().enumerate() {
-            if let Some(gl) = problem.robot_index(*p) {
-                set.values[i] = x[gl];
-            }
-        }
+        let set = self.extended_set(&problem, params, &x);
         let rss = r[..problem.n_obs_rows].iter().map(|v| v * v).sum();
         Ok(Stage { options, problem, x, free, set, fit: Err("extended by one linear step".into()), j: a, r, q, rss })
     }
