@@ -11,7 +11,7 @@ use std::path::PathBuf;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::Vector3;
-use robocal::cell::{Cell, Instrument, Measurement, Observation, Purpose, Session};
+use robocal::cell::{Cell, Instrument, Measurement, MeasuringOrder, Observation, Purpose, Session};
 use robocal::identify::{IdentifyOptions, ModelOptions, identify};
 use robocal::kinematics::model::irb120;
 use robocal::kinematics::{JointState, Tool};
@@ -42,6 +42,7 @@ fn cell(n: usize) -> Cell {
             observation: Observation::Position(meas),
             temperature_c: None,
             time_s: None,
+            sequence: None,
             approach: None,
             indicators: None,
         })
@@ -57,6 +58,7 @@ fn cell(n: usize) -> Cell {
             tool: tool(),
             identify_tcp: false,
             measurements,
+            order: MeasuringOrder::Unknown,
         }],
     }
 }

@@ -37,7 +37,7 @@ call "$API/v1/pose-plans/$PLAN" | jq -c '.plan | {candidates, first: .identifica
 
 echo "== sessions and their measurements (JSON here; text/csv works too), idempotent uploads"
 for k in 0 1 2 3; do
-  s=$(jq -c ".sessions[$k] | {name, purpose, instrument, tool}" "$tmp/sim.json")
+  s=$(jq -c ".sessions[$k] | {name, purpose, instrument, tool, order}" "$tmp/sim.json")
   SID=$(call "$API/v1/robots/$ROBOT/sessions" -H "$J" -d "$(jq -c '. + {"artefact_id": "'"$PLATE"'"}' <<<"$s")" | jq -r .id)
   jq -c "{measurements: .sessions[$k].measurements}" "$tmp/sim.json" > "$tmp/batch.json"
   call "$API/v1/sessions/$SID/measurements" -H "$J" -H "Idempotency-Key: $name-$k" -d @"$tmp/batch.json" | jq -c .

@@ -52,6 +52,36 @@ pub enum Observation {
     Pose(Frame),
 }
 
+/// The order a session's measurements are listed in, as whoever wrote them knows it. Backlash
+/// depends on the direction of each joint's last move, which consecutive measurements give only
+/// when they are consecutive stops ([`order`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum MeasuringOrder {
+    /// Listed as measured (an instrument's log, an importer keeping its file's order, the
+    /// simulator).
+    Measured,
+    /// Permuted after measuring: the list says nothing of the measuring order (`time_s` and
+    /// `sequence`, which travel with their measurements, still do).
+    Shuffled,
+    /// Drawn from measured sessions (a subset, a bootstrap sample, a selection): stops are
+    /// missing or repeated, so the move into a measurement is unknown.
+    Resampled,
+    /// Not said (cells written before the marker existed).
+    #[default]
+    Unknown,
+}
+
+impl MeasuringOrder {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            MeasuringOrder::Measured => "measured",
+            MeasuringOrder::Shuffled => "shuffled",
+            MeasuringOrder::Resampled => "resampled",
+            MeasuringOrder::Unknown => "unknown",
+        }
+    }
+}
+
 /// One measurement.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Measurement {
@@ -60,6 +90,8 @@ pub struct Measurement {
     pub observation: Observation,
     pub temperature_c: Option<f64>,
     pub time_s: Option<f64>,
+    /// Place in the measuring order of the session's run (measurements at one stop share it).
+    pub sequence: Option<u64>,
     /// Per-joint direction of the last motion (−1, 0, +1).
     pub approach: Option<Vec<i8>>,
     /// TriCal indicator readings left after centring (dx, dy, dz), m.
@@ -76,6 +108,8 @@ pub struct Session {
     /// The TCP in `tool` is only a guess (e.g. a reflector nest never measured): identify it.
     pub identify_tcp: bool,
     pub measurements: Vec<Measurement>,
+    /// Whether `measurements` are listed in measuring order.
+    pub order: MeasuringOrder,
 }
 
 /// The artefact: three balls on a plate.
@@ -115,6 +149,9 @@ impl Cell {
         }
     }
 }
+
+pub mod order;
+pub mod poses;
 
 #[cfg(test)]
 pub(crate) mod fixtures;

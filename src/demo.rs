@@ -221,7 +221,7 @@ pub async fn run(client: &Client, opts: &DemoOptions, log: &mut dyn FnMut(&str))
             .post(
                 &format!("/v1/robots/{robot_id}/sessions"),
                 &json!({"name": s.name, "purpose": s.purpose, "instrument": s.instrument, "tool": s.tool,
-                        "artefact_id": artefact_id}),
+                        "artefact_id": artefact_id, "order": s.order}),
             )
             .await?;
         let sid = session["id"].as_str().ok_or_else(|| step("session without id"))?.to_string();

@@ -337,3 +337,55 @@ fn diagnose_names_accepts_and_refuses() {
     let (ok, _, err) = robocal(&["bench-diagnosis", "--cases", "no such case"]);
     assert!(!ok && err.contains("--cases"), "{err}");
 }
+
+/// Three reflectors at the same poses through the binary: `simulate --reflector-plate` marks its
+/// sessions measured and numbers the stops; `crossval --session a,b,c` splits by pose and
+/// reports pooled and per-reflector figures (JSON and text); `validate` reports per session.
+#[test]
+fn reflector_plate_crossval_and_validate_per_session() {
+    let dir = std::env::temp_dir().join(format!("robocal-cli-plate-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = |n: &str| dir.join(n).to_string_lossy().to_string();
+    let (cell, params, cv) = (path("plate.json"), path("params.json"), path("cv.json"));
+    let sim = ["simulate", "--seed", "4", "--id-per-ball", "20", "--validation", "60", "--reflector-plate"];
+    let (ok, _, err) = robocal(&[&sim[..], &["--out", &cell]].concat());
+    assert!(ok, "{err}");
+    let c: Value = serde_json::from_str(&std::fs::read_to_string(&cell).unwrap()).unwrap();
+    let sessions = c["sessions"].as_array().unwrap();
+    assert_eq!(sessions.len(), 4);
+    assert!(sessions.iter().all(|s| s["order"] == "measured"));
+    assert_eq!(sessions[0]["measurements"][5]["sequence"], 5);
+    let reflectors = "tracker-n1,tracker-n2,tracker-n3";
+
+    let out = Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(["crossval", &cell, "--session", reflectors, "--folds", "3", "--sizes", "15", "--draws", "2"])
+        .args(["--model=", "--out", &cv])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(text.contains("at 60 poses, split by pose") && text.contains("per session"), "{text}");
+    let d: Value = serde_json::from_str(&std::fs::read_to_string(&cv).unwrap()).unwrap();
+    assert_eq!(d["session"], reflectors);
+    assert_eq!(d["poses"], 60);
+    let pooled = &d["kfold"][1]["pooled"];
+    let per: Vec<&Value> = pooled["per_session"].as_array().unwrap().iter().collect();
+    assert_eq!(
+        per.iter().map(|p| p["session"].as_str().unwrap()).collect::<Vec<_>>(),
+        reflectors.split(',').collect::<Vec<_>>()
+    );
+    let n: u64 = per.iter().map(|p| p["n"].as_u64().unwrap()).sum();
+    assert_eq!(n, pooled["n"].as_u64().unwrap());
+    assert_eq!(n, d["measurements"].as_u64().unwrap());
+    assert_eq!(d["sizes"][1]["per_session_mean_mm_over_draws"].as_array().unwrap().len(), 3);
+
+    let (ok, _, err) = robocal(&["identify", &cell, "--sessions", "trical-1", "--out", &params]);
+    assert!(ok, "{err}");
+    let (ok, v, err) = robocal(&["validate", &params, &cell]);
+    assert!(ok, "{err}");
+    let rows = v["per_session"].as_array().unwrap();
+    assert_eq!(rows.len(), 3);
+    assert_eq!(rows.iter().map(|r| r["n"].as_u64().unwrap()).sum::<u64>(), v["n"].as_u64().unwrap());
+    assert!(rows.iter().all(|r| r["purpose"] == "validation" && r["mean_mm"].as_f64().unwrap() < 0.1));
+    let _ = std::fs::remove_dir_all(&dir);
+}

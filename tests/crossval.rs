@@ -15,7 +15,7 @@ fn sim(seed: u64, noise: Noise) -> Simulated {
 
 fn options(threads: usize) -> CrossvalOptions {
     CrossvalOptions {
-        session: "trical-1".into(),
+        sessions: vec!["trical-1".into()],
         folds: 3,
         sizes: vec![30],
         draws: 2,
@@ -69,7 +69,7 @@ fn thread_count_does_not_change_the_result() {
 fn bad_options_are_refused() {
     let s = sim(5, Noise::none());
     let err = |o: CrossvalOptions| crossval(&s.cell, &o).unwrap_err().to_string();
-    assert!(err(CrossvalOptions { session: "nope".into(), ..options(1) }).contains("no session named 'nope'"));
+    assert!(err(CrossvalOptions { sessions: vec!["nope".into()], ..options(1) }).contains("no session named 'nope'"));
     assert!(err(CrossvalOptions { folds: 1, ..options(1) }).contains("--folds"));
     assert!(err(CrossvalOptions { sizes: vec![46], ..options(1) }).contains("exceeds half the session"));
     assert!(err(CrossvalOptions { transfer: vec!["trical-1".into()], ..options(1) }).contains("session identified on"));
@@ -117,4 +117,95 @@ fn reidentification_from_a_calibrated_set_refits_the_base_only() {
     // Unknown names are refused.
     let bad = IdentifyOptions { only: vec!["bass".into()], ..opts };
     assert!(identify(&cell, &bad).unwrap_err().to_string().contains("'bass'"));
+}
+
+/// A cell whose three reflectors on one plate are read at the same validation poses.
+fn plate(seed: u64, noise: Noise) -> Simulated {
+    let mut o = SimulateOptions { seed, noise, id_per_ball: 10, validation: 60, all_nests: true, ..Default::default() };
+    o.layout.nests = robocal::sim::poses::reflector_plate();
+    simulate(&o).unwrap()
+}
+
+fn reflectors() -> Vec<String> {
+    ["tracker-n1", "tracker-n2", "tracker-n3"].map(String::from).to_vec()
+}
+
+/// Three reflectors at the same poses are split by pose: no configuration is held out in one
+/// fold and trained on in it, every measurement is predicted once, and the pooled errors are
+/// the union of the per-reflector ones.
+#[test]
+fn reflectors_at_the_same_poses_are_split_by_pose() {
+    let s = plate(8, Noise::default());
+    let opts = CrossvalOptions { sessions: reflectors(), sizes: vec![15], transfer: Vec::new(), ..options(2) };
+    let cv = crossval(&s.cell, &opts).unwrap();
+    let total: usize = reflectors().iter().map(|r| s.cell.session(r).unwrap().measurements.len()).sum();
+    assert_eq!(cv.measurements, total);
+    assert!(cv.poses == 60 && total > 2 * cv.poses, "{total} measurements at {} poses", cv.poses);
+    let q = |(name, i): &(String, usize)| s.cell.session(name).unwrap().measurements[*i].q.clone();
+    let mut seen = std::collections::HashSet::new();
+    for test in &cv.kfold_test {
+        let held: Vec<Vec<f64>> = test.iter().map(q).collect();
+        for r in reflectors() {
+            for (i, m) in s.cell.session(&r).unwrap().measurements.iter().enumerate() {
+                if !test.contains(&(r.clone(), i)) {
+                    assert!(!held.contains(&m.q), "{r}[{i}] is trained on at a held-out pose");
+                }
+            }
+        }
+        assert!(test.iter().all(|t| seen.insert(t.clone())), "held out twice");
+    }
+    assert_eq!(seen.len(), total, "every measurement held out once");
+
+    let consistent = |h: &robocal::identify::crossval::HeldOut| {
+        let n: usize = h.per_session.iter().map(|x| x.position.n).sum();
+        let mean = h.per_session.iter().map(|x| x.position.n as f64 * x.position.mean).sum::<f64>() / n as f64;
+        let max = h.per_session.iter().map(|x| x.position.max).fold(0.0, f64::max);
+        assert_eq!(n, h.position.n);
+        assert!((mean - h.position.mean).abs() < 1e-15, "{mean:e} vs {:e}", h.position.mean);
+        assert_eq!(max, h.position.max);
+    };
+    for f in &cv.folds {
+        let pooled = f.pooled.as_ref().unwrap();
+        assert_eq!(pooled.position.n, total);
+        assert_eq!(pooled.per_session.iter().map(|x| x.session.clone()).collect::<Vec<_>>(), reflectors());
+        consistent(pooled);
+        f.per_fold.iter().for_each(|r| consistent(r.as_ref().unwrap()));
+    }
+    for d in &cv.sizes.iter().find(|x| x.variant == "default").unwrap().draws {
+        consistent(d.as_ref().unwrap());
+    }
+    // The calibrated model beats the nominal one on every reflector.
+    let (before, model) = (cv.folds[0].pooled.as_ref().unwrap(), cv.folds[1].pooled.as_ref().unwrap());
+    for (b, m) in before.per_session.iter().zip(&model.per_session) {
+        assert!(
+            m.position.mean < 0.5 * b.position.mean,
+            "{}: {:e} vs {:e}",
+            m.session,
+            m.position.mean,
+            b.position.mean
+        );
+    }
+}
+
+/// Without noise every reflector's held-out error vanishes, and the transfer target may be the
+/// identification session.
+#[test]
+fn noise_free_reflectors_are_predicted_exactly() {
+    let s = plate(9, Noise::none());
+    let opts =
+        CrossvalOptions { sessions: reflectors(), transfer: vec!["trical-1".into()], sizes: Vec::new(), ..options(2) };
+    let cv = crossval(&s.cell, &opts).unwrap();
+    let model = cv.folds[1].pooled.as_ref().unwrap();
+    for r in &model.per_session {
+        assert!(r.position.max < 1e-8, "{}: {:e}", r.session, r.position.max);
+    }
+    let t = cv.transfer.iter().find(|t| t.variant == "default").unwrap();
+    assert!(t.errors.as_ref().unwrap().position.max < 1e-8);
+    let err = |o: CrossvalOptions| crossval(&s.cell, &o).unwrap_err().to_string();
+    let twice = vec!["tracker-n1".to_string(), "tracker-n1".to_string()];
+    assert!(err(CrossvalOptions { sessions: twice, ..opts.clone() }).contains("named twice"));
+    assert!(
+        err(CrossvalOptions { transfer: vec!["tracker-n2".into()], ..opts.clone() }).contains("session identified on")
+    );
+    assert!(err(CrossvalOptions { folds: 61, ..opts }).contains("exceeds the 60 poses"));
 }

@@ -226,3 +226,52 @@ fn linearised_folds_agree_with_nonlinear_refits() {
     }
     assert!(worst < 0.2e-6, "linearised and nonlinear held-out errors differ by {worst:.3e} m");
 }
+
+/// A session marked shuffled is not in measuring order: the diagnosis derives no backlash
+/// direction from its list, lists backlash as untestable with the reason, says so in its notes,
+/// and names nothing; the same list unmarked is taken for the file order (what the marker is for).
+#[test]
+fn a_shuffled_session_gives_no_backlash_direction() {
+    use rand::SeedableRng;
+    use rand::seq::SliceRandom;
+    use robocal::cell::MeasuringOrder;
+    use robocal::cell::order::ApproachSource;
+    use robocal::diagnose::library::Kind;
+    let effects = Effects::parse("backlash:j=2:deg=0.01", 6).unwrap();
+    let sim = simulate(&SimulateOptions { seed: 5, id_per_ball: 40, validation: 150, effects, ..Default::default() })
+        .unwrap();
+    let mut cell = sim.cell.clone();
+    for s in &mut cell.sessions {
+        for m in &mut s.measurements {
+            (m.approach, m.time_s, m.sequence) = (None, None, None);
+        }
+        s.measurements.shuffle(&mut rand_chacha::ChaCha8Rng::seed_from_u64(11));
+        s.order = MeasuringOrder::Shuffled;
+    }
+    let run = |cell: &Cell| {
+        let id = identify(cell, &IdentifyOptions::default()).unwrap();
+        let identified: Vec<bool> = id.status.iter().map(|s| s == "identified").collect();
+        let input = Input { cell, set: &id.set, identified: Some(identified), fixed: Vec::new() };
+        diagnose(&input, &DiagnoseOptions::default()).unwrap()
+    };
+    let d = run(&cell);
+    assert_eq!(d.approach, None);
+    let u = d.unavailable.iter().find(|u| u.kind == Kind::Backlash).expect("backlash is untestable");
+    assert!(u.reason.contains("session 'trical-1' is marked shuffled"), "{}", u.reason);
+    assert_ne!(d.verdict.status, Status::Named, "{}", d.verdict.summary);
+    let out = robocal::domain::diagnosis::diagnosis_out(&d);
+    assert!(out.verdict.approach_source.is_none());
+    assert!(
+        out.notes.iter().any(|n| n.contains("'tracker-n1' are not derived") && n.contains("shuffled")),
+        "{:?}",
+        out.notes
+    );
+    assert!(out.unavailable.iter().any(|u| u.name == "backlash" && u.reason.contains("marked shuffled")));
+
+    for s in &mut cell.sessions {
+        s.order = MeasuringOrder::Unknown;
+    }
+    let d = run(&cell);
+    assert_eq!(d.approach, Some(ApproachSource::FileOrder));
+    assert!(d.unavailable.iter().all(|u| u.kind != Kind::Backlash));
+}

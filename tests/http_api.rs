@@ -318,6 +318,69 @@ async fn sessions_and_measurement_batches() {
     app.stop().await;
 }
 
+/// The measuring order survives the service: the session's marker (stored, listed, exported)
+/// and each measurement's sequence number, posted as JSON or CSV, read back in pages and in the
+/// exported cell file.
+#[tokio::test]
+async fn measuring_order_round_trips_through_the_service() {
+    let app = TestApp::new(ServiceConfig::default(), false).await;
+    let rid = robot(&app, "r").await;
+    let path = format!("/v1/robots/{rid}/sessions");
+    let tool = json!({"tcp_mm": [0, 60, 80]});
+    let sess = |name: &str| json!({"name": name, "purpose": "validation", "instrument": "laser_tracker", "tool": tool});
+    let mut measured = sess("n1");
+    measured["order"] = json!("measured");
+    let r = app.post(&path, &measured).await;
+    assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
+    assert_eq!(r.body["order"], "measured");
+    let sid = r.body["id"].as_str().unwrap().to_string();
+    let r = app.post(&path, &sess("n2")).await;
+    assert_eq!(r.body["order"], "unknown", "the default");
+    let mut bad = sess("n3");
+    bad["order"] = json!("sorted");
+    assert_problem(&app.post(&path, &bad).await, 422, Some("order"));
+    let mut shuffled = sess("n3");
+    shuffled["order"] = json!("shuffled");
+    assert_eq!(app.post(&path, &shuffled).await.body["order"], "shuffled");
+    assert_eq!(app.get(&format!("/v1/sessions/{sid}")).await.body["order"], "measured");
+    let listed: Vec<Value> = app.get(&path).await.body.as_array().unwrap().iter().map(|s| s["order"].clone()).collect();
+    assert_eq!(listed, [json!("measured"), json!("unknown"), json!("shuffled")]);
+
+    // Sequence numbers as JSON (one beyond 2^53) and as CSV, a retried batch, a bad number.
+    let mpath = format!("/v1/sessions/{sid}/measurements");
+    let m = |q: f64, seq: u64| json!({"joints_deg": [q, 10, 20, 0, 30, 0], "position_mm": [1, 2, 3], "sequence": seq});
+    let r = app.post(&mpath, &json!({"measurements": [m(0.0, 0), m(1.0, 9_007_199_254_740_993)]})).await;
+    assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
+    let csv = "q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm,time_s,sequence
+2,10,20,0,30,0,1,2,3,12.5,2
+3,10,20,0,30,0,1,2,3,,
+";
+    let r = app.raw(Method::POST, &mpath, Some("text/csv"), csv.as_bytes().to_vec(), &[]).await;
+    assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
+    let bad_csv = "q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm,sequence
+2,10,20,0,30,0,1,2,3,-4
+";
+    let r = app.raw(Method::POST, &mpath, Some("text/csv"), bad_csv.as_bytes().to_vec(), &[]).await;
+    assert_problem(&r, 422, Some("csv line 2, column sequence"));
+    let items = app.get(&format!("{mpath}?offset=0&limit=10")).await.body["items"].clone();
+    let seqs: Vec<Value> = items.as_array().unwrap().iter().map(|i| i["sequence"].clone()).collect();
+    assert_eq!(seqs, [json!(0), json!(9_007_199_254_740_993_u64), json!(2), Value::Null]);
+    assert_eq!(items[2]["time_s"], 12.5);
+
+    // The exported cell carries both, and parses back to the same SI cell.
+    let r = app.get(&format!("/v1/robots/{rid}/cell?sessions=n1")).await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    assert_eq!(r.body["sessions"][0]["order"], "measured");
+    let cell = robocal::domain::cell::parse_cell(&r.text).unwrap();
+    let s = &cell.sessions[0];
+    assert_eq!(s.order, robocal::cell::MeasuringOrder::Measured);
+    assert_eq!(
+        s.measurements.iter().map(|m| m.sequence).collect::<Vec<_>>(),
+        [Some(0), Some(9_007_199_254_740_993), Some(2), None]
+    );
+    app.stop().await;
+}
+
 /// The loop: identification, its refusal with the reason, validation, history, activation,
 /// export, import, compensation — and the server's parameter set is the CLI's, bit for bit.
 #[tokio::test]

@@ -281,11 +281,13 @@ fn assert_same_cell(a: &Cell, b: &Cell, tol: f64) {
             (&sa.name, sa.purpose, sa.instrument, sa.identify_tcp),
             (&sb.name, sb.purpose, sb.instrument, sb.identify_tcp)
         );
+        assert_eq!(sa.order, sb.order);
         assert!(sa.tool.tcp.iter().zip(&sb.tool.tcp).all(|(x, y)| (x - y).abs() < tol));
         assert_eq!(sa.measurements.len(), sb.measurements.len());
         for (ma, mb) in sa.measurements.iter().zip(&sb.measurements) {
             assert!(ma.q.iter().zip(&mb.q).all(|(x, y)| (x - y).abs() < tol));
             assert_eq!((ma.temperature_c, ma.time_s), (mb.temperature_c, mb.time_s));
+            assert_eq!(ma.sequence, mb.sequence);
             let (fa, fb) = match (&ma.observation, &mb.observation) {
                 (Observation::Pose(fa), Observation::Pose(fb)) => (*fa, *fb),
                 (Observation::Position(pa), Observation::Position(pb)) => {
@@ -549,4 +551,45 @@ fn bad_reflector_files_name_file_and_line() {
     bad_model.links[0].limits = [1.0, -1.0];
     let e = three_reflector::import(&joints, &positions, bad_model, Purpose::Identification).unwrap_err();
     assert!(matches!(e, ImportError::Model(_)), "{e:?}");
+}
+
+/// The importers keep the measuring order: sessions marked `measured`, every measurement
+/// numbered in file order — the row for the UR10 (its timestamps kept where the file has them),
+/// the pose for the three reflectors (one number per stop, skipped where a reflector was hidden)
+/// — so that backlash directions can be derived from the order where nothing logged them.
+#[test]
+fn importers_keep_the_measuring_order() {
+    use robocal::cell::MeasuringOrder;
+    use robocal::cell::order::{ApproachSource, fill_approach};
+    for letter in ["A", "C"] {
+        let (s, _) = ur10_ipa::import_series(&series(letter), &Ur10Options::default()).unwrap();
+        assert_eq!(s.order, MeasuringOrder::Measured);
+        assert!(s.measurements.iter().enumerate().all(|(i, m)| m.sequence == Some(i as u64)), "series {letter}");
+        assert_eq!(s.measurements.iter().all(|m| m.time_s.is_some()), letter == "A");
+    }
+
+    let (joints, positions) = reflector_files(Some((1, 2)));
+    let imp = three_reflector::import(&joints, &positions, irb120(), Purpose::Validation).unwrap();
+    let seqs: Vec<Vec<u64>> =
+        imp.cell.sessions.iter().map(|s| s.measurements.iter().map(|m| m.sequence.unwrap()).collect()).collect();
+    assert_eq!(seqs, [vec![0, 1, 2, 3, 4], vec![0, 1, 3, 4], vec![0, 1, 2, 3, 4]]);
+    assert!(imp.cell.sessions.iter().all(|s| s.order == MeasuringOrder::Measured));
+    let back = parse_cell(&cell_to_json(&imp.cell)).unwrap();
+    assert_same_cell(&imp.cell, &back, 1e-12);
+    // One run: reflector 2, hidden at the third pose (sequence 2), still gets the move from that
+    // pose into the fourth, which the other reflectors saw.
+    let mut cell = imp.cell.clone();
+    assert_eq!(fill_approach(&mut cell, &[]).source, Some(ApproachSource::SequenceOrder));
+    let at = |s: usize, seq: u64| {
+        cell.sessions[s].measurements.iter().find(|m| m.sequence == Some(seq)).unwrap().approach.clone().unwrap()
+    };
+    let into_fourth: Vec<i8> =
+        POSES_DEG[3].iter().zip(&POSES_DEG[2]).map(|(b, a)| (b - a).partial_cmp(&0.0).unwrap() as i8).collect();
+    assert_eq!(at(1, 3), into_fourth);
+    for seq in 0..5 {
+        if seq != 2 {
+            assert_eq!(at(0, seq), at(1, seq));
+        }
+        assert_eq!(at(0, seq), at(2, seq));
+    }
 }

@@ -191,3 +191,33 @@ async fn the_in_memory_database_is_migrated_with_foreign_keys_on() {
         .unwrap_err();
     assert!(e.to_string().contains("FOREIGN KEY"), "{e}");
 }
+
+/// 0003 gives every stored session a measuring-order marker: `unknown` for the sessions stored
+/// before it (nobody said), one of the four words only, read back by the store's queries.
+#[tokio::test]
+async fn sessions_stored_before_the_order_marker_are_unknown() {
+    let dir = fresh_dir("migrate-order");
+    let path = dir.join("robocal.db");
+    let old = at_version(&path, 2, true).await;
+    fill_v1(&old).await;
+    exec(&old, "INSERT INTO sessions (id, robot_id, name, purpose, instrument, tool_json, created_at) VALUES ('se1', 'r1', 'n1', 'validation', 'laser_tracker', '{\"tcp_mm\": [0, 0, 0]}', 't4')").await;
+    exec(&old, "INSERT INTO batches (id, session_id, request_hash, first_seq, count, created_at) VALUES ('b1', 'se1', 'h', 0, 1, 't5')").await;
+    exec(&old, "INSERT INTO measurements (session_id, seq, batch_id, spec_json) VALUES ('se1', 0, 'b1', '{\"joints_deg\": [0, 0, 0, 0, 30, 0], \"position_mm\": [1, 2, 3]}')").await;
+    old.close().await;
+
+    let pool = db::connect(&path).await.unwrap();
+    assert_eq!(applied(&pool).await, db::MIGRATOR.iter().count() as i64);
+    let s = robocal::db::records::session(&pool, "se1").await.unwrap().unwrap();
+    assert_eq!(s.order, robocal::domain::cell::OrderSpec::Unknown);
+    assert_eq!(s.measurements, 1, "the measurements are kept");
+    exec(&pool, "UPDATE sessions SET measuring_order = 'shuffled' WHERE id = 'se1'").await;
+    let s = robocal::db::records::session(&pool, "se1").await.unwrap().unwrap();
+    assert_eq!(s.order, robocal::domain::cell::OrderSpec::Shuffled);
+    let e = sqlx::query("UPDATE sessions SET measuring_order = 'sorted' WHERE id = 'se1'")
+        .execute(&pool)
+        .await
+        .unwrap_err();
+    assert!(e.to_string().contains("CHECK"), "{e}");
+    pool.close().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}

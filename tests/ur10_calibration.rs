@@ -43,7 +43,7 @@ fn compliance() -> Variant {
 
 fn options(variants: Vec<Variant>) -> CrossvalOptions {
     CrossvalOptions {
-        session: "series-C".into(),
+        sessions: vec!["series-C".into()],
         folds: 0,
         sizes: Vec::new(),
         draws: 0,

@@ -313,3 +313,41 @@ fn effect_terms_see_the_logged_state() {
     let report = validate(&sim.truth.set, &bare, &v, Reference::Truth(&sim.run)).unwrap();
     assert!(report.calibrated.position.mean > 1e-6, "{:e}", report.calibrated.position.mean);
 }
+
+/// Per session: each session's figures are exactly those of a validation on that session alone,
+/// and the pooled figures are their union (an identification session scored beside validation
+/// ones keeps its purpose).
+#[test]
+fn each_session_is_reported_apart() {
+    let sim = sim();
+    let set = &sim.truth.set;
+    let mut all = vec!["trical-1".to_string()];
+    all.extend(validation_sessions(&sim.cell));
+    let report = validate(set, &sim.cell, &all, Reference::Measured).unwrap();
+    assert_eq!(report.per_session.len(), all.len());
+    let mut n = 0;
+    let mut weighted = 0.0;
+    for (s, name) in report.per_session.iter().zip(&all) {
+        assert_eq!(&s.session, name);
+        let alone = validate(set, &sim.cell, std::slice::from_ref(name), Reference::Measured).unwrap();
+        assert_eq!(s.calibrated, alone.calibrated, "{name}");
+        assert_eq!(s.nominal, alone.nominal, "{name}");
+        assert_eq!(s.purpose, sim.cell.session(name).unwrap().purpose);
+        assert_eq!(alone.per_session.len(), 1);
+        assert_eq!(alone.per_session[0].calibrated, alone.calibrated);
+        n += s.calibrated.position.n;
+        weighted += s.calibrated.position.n as f64 * s.calibrated.position.mean;
+    }
+    assert_eq!(n, report.calibrated.position.n);
+    assert!((weighted / n as f64 - report.calibrated.position.mean).abs() < 1e-15);
+    let j = report_to_json(&report, false);
+    let rows = j["per_session"].as_array().unwrap();
+    assert_eq!(rows.len(), all.len());
+    assert_eq!(rows[0]["session"], "trical-1");
+    assert_eq!(rows[0]["purpose"], "identification");
+    assert_eq!(rows[1]["purpose"], "validation");
+    let first = &report.per_session[1].calibrated.position;
+    assert_eq!(rows[1]["n"], first.n);
+    assert!((rows[1]["mean_mm"].as_f64().unwrap() - first.mean * 1e3).abs() < 1e-12);
+    assert!(rows[1]["nominal"]["max_mm"].as_f64().unwrap() > 0.1);
+}

@@ -56,6 +56,11 @@ pub struct SimulateArgs {
     /// artefact tool's 50,25,100 of Table 3.4).
     #[arg(long)]
     pub validation_payload_com_mm: Option<String>,
+    /// Validate with three reflectors on a plate opening the same way instead of the TriCal's
+    /// three nests (which open +y, −y, −x, so each pose is read on one): every validation pose is
+    /// read on each reflector that sees the tracker, and tracker-n1..n3 share their poses.
+    #[arg(long)]
+    pub reflector_plate: bool,
     #[arg(long)]
     pub out: PathBuf,
     /// Write the truth (true parameters, effects, per-measurement true positions) here.
@@ -145,6 +150,10 @@ pub(super) fn simulate(a: SimulateArgs) -> Result<String, CliError> {
         }
     };
     opts.record_indicators = a.indicators;
+    if a.reflector_plate {
+        opts.layout.nests = crate::sim::poses::reflector_plate();
+        opts.all_nests = true;
+    }
     match (a.validation_payload_kg, &a.validation_payload_com_mm) {
         (None, None) => {}
         (None, Some(_)) => {

@@ -46,14 +46,17 @@ pub struct StudyArgs {
 pub struct CrossvalArgs {
     /// The cell file.
     pub cell: PathBuf,
-    /// The session whose measurements are split into identification and test sets.
+    /// The session whose measurements are split into identification and test sets, or several
+    /// (comma-separated) measured at the same poses — reflectors on the flange: they are split
+    /// by pose, so no pose has one reflector in training and another in test, and the held-out
+    /// errors are reported pooled and per session.
     #[arg(long)]
     pub session: String,
     /// Folds of the k-fold cross-validation (0: skip).
     #[arg(long, default_value_t = 5)]
     pub folds: usize,
     /// Identification sizes of the few-poses scheme (comma-separated; each draw identifies on n poses
-    /// of one random half of the session and tests on the other half).
+    /// of one random half of the poses and tests on the other half).
     #[arg(long, default_value = "")]
     pub sizes: String,
     /// Draws per size.
@@ -153,7 +156,7 @@ pub(super) fn crossval(a: CrossvalArgs) -> Result<String, CliError> {
         variants.push(Variant { name, options });
     }
     let opts = CrossvalOptions {
-        session: a.session.clone(),
+        sessions: list(&Some(a.session.clone())),
         folds: a.folds,
         sizes,
         draws: a.draws,

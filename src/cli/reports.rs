@@ -4,7 +4,7 @@
 use serde::Serialize;
 
 use crate::domain::validation::ErrorFigures;
-use crate::identify::crossval::{Crossval, HeldOut, SizeResult};
+use crate::identify::crossval::{Crossval, HeldOut, SessionHeldOut, SizeResult};
 use crate::identify::observability::Index;
 use crate::identify::study::Study;
 use crate::units::{MM, MRAD};
@@ -137,11 +137,18 @@ impl StudyReport {
     }
 }
 
-/// `robocal crossval`: k-fold, few-poses and transfer errors of every model.
+/// `robocal crossval`: k-fold, few-poses and transfer errors of every model. With several
+/// sessions (reflectors at the same poses), every held-out figure also carries `per_session`.
 #[derive(Clone, Debug, Serialize)]
 pub struct CrossvalReport {
+    /// The split sessions, comma-separated.
     pub session: String,
+    #[serde(skip_serializing_if = "single")]
+    pub sessions: Vec<String>,
     pub measurements: usize,
+    /// Distinct configurations: the unit of the splits.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub poses: Option<usize>,
     pub seed: u64,
     pub folds: usize,
     pub draws: usize,
@@ -156,9 +163,26 @@ pub struct CrossvalReport {
     pub threads: usize,
 }
 
-/// Held-out errors of a model on a test set.
+fn single(v: &[String]) -> bool {
+    v.len() <= 1
+}
+
+/// Held-out errors of a model on a test set: pooled over every measurement of the test poses
+/// and, when several sessions were split, per session (reflector).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct HeldOutFigures {
+    pub n: usize,
+    #[serde(flatten)]
+    pub position: ErrorFigures,
+    pub orientation: Option<OrientationFigures>,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub per_session: Vec<SessionFigures>,
+}
+
+/// One session's share of a test set's errors.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SessionFigures {
+    pub session: String,
     pub n: usize,
     #[serde(flatten)]
     pub position: ErrorFigures,
@@ -197,12 +221,22 @@ pub struct SizeFigures {
     pub n: usize,
     pub refused: usize,
     pub mean_mm_over_draws: Option<f64>,
+    /// Per session (several split): the mean over the successful draws of each draw's mean, mm.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub per_session_mean_mm_over_draws: Vec<SessionMean>,
     pub mean_mm_quartiles: Option<[f64; 5]>,
     pub median_mm_quartiles: Option<[f64; 5]>,
     pub orientation_mean_mrad_quartiles: Option<[f64; 5]>,
     pub draws: Vec<Outcome>,
     #[serde(skip)]
     pub table: SizeTableRow,
+}
+
+/// A session's mean over the draws.
+#[derive(Clone, Debug, Serialize)]
+pub struct SessionMean {
+    pub session: String,
+    pub mean_mm: Option<f64>,
 }
 
 /// The few-poses table's figures, computed as the table always computed them (statistics of
@@ -225,17 +259,41 @@ pub struct TransferFigures {
     pub kappa_scaled: Option<f64>,
 }
 
+fn orientation_figures(o: &Option<crate::validate::stats::ErrorStats>) -> Option<OrientationFigures> {
+    o.map(|o| OrientationFigures {
+        mean_mrad: o.mean * PER_MRAD,
+        median_mrad: o.median * PER_MRAD,
+        p95_mrad: o.p95 * PER_MRAD,
+        max_mrad: o.max * PER_MRAD,
+    })
+}
+
+impl SessionFigures {
+    fn of(s: &SessionHeldOut) -> Self {
+        SessionFigures {
+            session: s.session.clone(),
+            n: s.position.n,
+            position: ErrorFigures::of(&s.position),
+            orientation: orientation_figures(&s.orientation),
+        }
+    }
+
+    /// mean, median, p95, max (mm) and the orientation mean (mrad), as table cells.
+    fn cells(&self) -> String {
+        let p = &self.position;
+        let o = self.orientation.as_ref().map_or("      —".to_string(), |o| format!("{:7.3}", o.mean_mrad));
+        format!("{:7.3} {:7.3} {:7.3} {:7.3} {}", p.mean_mm, p.median_mm, p.p95_mm, p.max_mm, o)
+    }
+}
+
 impl HeldOutFigures {
-    fn of(h: &HeldOut) -> Self {
+    /// The figures of `h`; its per-session breakdown when `several` sessions were split.
+    fn of(h: &HeldOut, several: bool) -> Self {
         HeldOutFigures {
             n: h.position.n,
             position: ErrorFigures::of(&h.position),
-            orientation: h.orientation.map(|o| OrientationFigures {
-                mean_mrad: o.mean * PER_MRAD,
-                median_mrad: o.median * PER_MRAD,
-                p95_mrad: o.p95 * PER_MRAD,
-                max_mrad: o.max * PER_MRAD,
-            }),
+            orientation: orientation_figures(&h.orientation),
+            per_session: if several { h.per_session.iter().map(SessionFigures::of).collect() } else { Vec::new() },
         }
     }
 
@@ -248,9 +306,9 @@ impl HeldOutFigures {
 }
 
 impl Outcome {
-    fn of(r: &Result<HeldOut, String>) -> Self {
+    fn of(r: &Result<HeldOut, String>, several: bool) -> Self {
         match r {
-            Ok(h) => Outcome::HeldOut(HeldOutFigures::of(h)),
+            Ok(h) => Outcome::HeldOut(HeldOutFigures::of(h, several)),
             Err(e) => Outcome::Refused { refused: e.clone() },
         }
     }
@@ -269,21 +327,40 @@ fn all_oriented(s: &SizeResult) -> bool {
 }
 
 impl SizeFigures {
-    fn of(s: &SizeResult) -> Self {
+    fn of(s: &SizeResult, sessions: &[String]) -> Self {
         let scaled = |q: Option<[f64; 5]>, scale: f64| q.map(|q| q.map(|v| v * scale));
         let mean_q = s.quartiles(|h| h.position.mean);
+        let several = sessions.len() > 1;
+        let session_mean = |name: &String| {
+            let v: Vec<f64> = s
+                .draws
+                .iter()
+                .filter_map(|d| d.as_ref().ok())
+                .filter_map(|h| h.per_session.iter().find(|x| x.session == *name))
+                .map(|x| x.position.mean / MM)
+                .collect();
+            SessionMean {
+                session: name.clone(),
+                mean_mm: (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64),
+            }
+        };
         SizeFigures {
             model: s.variant.clone(),
             n: s.n,
             refused: s.draws.iter().filter(|d| d.is_err()).count(),
             mean_mm_over_draws: s.mean(|h| h.position.mean).map(|v| v / MM),
+            per_session_mean_mm_over_draws: if several {
+                sessions.iter().map(session_mean).collect()
+            } else {
+                Vec::new()
+            },
             mean_mm_quartiles: scaled(mean_q, 1.0 / MM),
             median_mm_quartiles: scaled(s.quartiles(|h| h.position.median), 1.0 / MM),
             orientation_mean_mrad_quartiles: scaled(
                 if all_oriented(s) { s.quartiles(|h| h.orientation.map_or(f64::NAN, |o| o.mean)) } else { None },
                 PER_MRAD,
             ),
-            draws: s.draws.iter().map(Outcome::of).collect(),
+            draws: s.draws.iter().map(|d| Outcome::of(d, several)).collect(),
             table: SizeTableRow {
                 mean_mm: s.mean(|h| h.position.mean / MM),
                 range_mm: mean_q.map(|q| [q[0] / MM, q[4] / MM]),
@@ -300,9 +377,12 @@ impl SizeFigures {
 
 impl CrossvalReport {
     pub fn new(cv: &Crossval, seed: u64, folds: usize, draws: usize, seconds: f64, threads: usize) -> Self {
+        let several = cv.sessions.len() > 1;
         CrossvalReport {
-            session: cv.session.clone(),
+            session: cv.sessions.join(","),
+            sessions: cv.sessions.clone(),
             measurements: cv.measurements,
+            poses: several.then_some(cv.poses),
             seed,
             folds,
             draws,
@@ -312,18 +392,18 @@ impl CrossvalReport {
                 .map(|f| KfoldFigures {
                     model: f.variant.clone(),
                     parameters_identified: f.identified,
-                    pooled: f.pooled.as_ref().map(HeldOutFigures::of),
-                    per_fold: f.per_fold.iter().map(Outcome::of).collect(),
+                    pooled: f.pooled.as_ref().map(|h| HeldOutFigures::of(h, several)),
+                    per_fold: f.per_fold.iter().map(|r| Outcome::of(r, several)).collect(),
                 })
                 .collect(),
-            sizes: cv.sizes.iter().map(SizeFigures::of).collect(),
+            sizes: cv.sizes.iter().map(|s| SizeFigures::of(s, &cv.sessions)).collect(),
             transfer: cv
                 .transfer
                 .iter()
                 .map(|t| TransferFigures {
                     model: t.variant.clone(),
                     session: t.session.clone(),
-                    errors: Outcome::of(&t.errors),
+                    errors: Outcome::of(&t.errors, false),
                     kappa_scaled: t.kappa_scaled,
                 })
                 .collect(),
@@ -333,12 +413,19 @@ impl CrossvalReport {
         }
     }
 
-    /// The tables: k-fold, few poses, transfer (each when there is one).
+    /// The tables: k-fold, few poses, transfer (each when there is one); with several sessions,
+    /// each split scheme's figures per session too.
     pub fn text(&self) -> String {
-        let mut text = format!(
-            "session {} ({} measurements), {:.1} s on {} threads\n",
-            self.session, self.measurements, self.seconds, self.threads
-        );
+        let mut text = match self.poses {
+            Some(poses) => format!(
+                "sessions {} ({} measurements at {poses} poses, split by pose), {:.1} s on {} threads\n",
+                self.session, self.measurements, self.seconds, self.threads
+            ),
+            None => format!(
+                "session {} ({} measurements), {:.1} s on {} threads\n",
+                self.session, self.measurements, self.seconds, self.threads
+            ),
+        };
         if !self.kfold.is_empty() {
             text.push_str(&format!(
                 "\n{}-fold cross-validation, pooled held-out errors (mm; orientation mrad)\n",
@@ -355,6 +442,21 @@ impl CrossvalReport {
                     (None, None) => "—".into(),
                 };
                 text.push_str(&format!("{:<24} {:>6} {}\n", f.model, f.parameters_identified, r));
+            }
+            if self.poses.is_some() {
+                text.push_str(&format!(
+                    "\n{}-fold cross-validation per session: the held-out poses' errors of each (mm; orientation mrad)\n",
+                    self.folds
+                ));
+                text.push_str(&format!(
+                    "{:<24} {:<12} {:>6} {:>7} {:>7} {:>7} {:>7} {:>7}\n",
+                    "model", "session", "n", "mean", "median", "p95", "max", "ori"
+                ));
+                for f in &self.kfold {
+                    for s in f.pooled.iter().flat_map(|h| &h.per_session) {
+                        text.push_str(&format!("{:<24} {:<12} {:>6} {}\n", f.model, s.session, s.n, s.cells()));
+                    }
+                }
             }
         }
         if !self.sizes.is_empty() {
@@ -380,6 +482,23 @@ impl CrossvalReport {
                     f3(t.orientation_mrad),
                     s.refused
                 ));
+            }
+            if self.poses.is_some() {
+                text.push_str("\nfew poses per session: mean over the draws of each draw's mean (mm)\n");
+                text.push_str(&format!(
+                    "{:<24} {:>5} {}\n",
+                    "model",
+                    "n",
+                    self.sessions.iter().map(|s| format!("{s:>12}")).collect::<String>()
+                ));
+                for s in &self.sizes {
+                    let cells: String = s
+                        .per_session_mean_mm_over_draws
+                        .iter()
+                        .map(|m| format!("{:>12}", f3(m.mean_mm).trim()))
+                        .collect();
+                    text.push_str(&format!("{:<24} {:>5} {}\n", s.model, s.n, cells));
+                }
             }
         }
         if !self.transfer.is_empty() {

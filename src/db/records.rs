@@ -5,7 +5,7 @@
 
 use sqlx::sqlite::SqliteExecutor;
 
-use crate::domain::cell::{InstrumentSpec, PurposeSpec};
+use crate::domain::cell::{InstrumentSpec, OrderSpec, PurposeSpec};
 
 /// A robot row.
 #[derive(Clone, Debug, PartialEq, sqlx::FromRow)]
@@ -95,18 +95,21 @@ pub struct SessionRow {
     pub identify_tcp: bool,
     pub artefact_id: Option<String>,
     pub created_at: String,
+    /// Whether the measurements are listed in measuring order (column `measuring_order`, 0003).
+    #[sqlx(rename = "measuring_order")]
+    pub order: OrderSpec,
     /// Measurements stored (not a column: counted on read).
     #[sqlx(default)]
     pub measurements: i64,
 }
 
 const SESSION_COLUMNS: &str = "s.id, s.robot_id, s.name, s.purpose, s.instrument, s.tool_json, s.identify_tcp, \
-     s.artefact_id, s.created_at, (SELECT COUNT(*) FROM measurements m WHERE m.session_id = s.id) AS measurements";
+     s.artefact_id, s.created_at, s.measuring_order, (SELECT COUNT(*) FROM measurements m WHERE m.session_id = s.id) AS measurements";
 
 pub async fn insert_session(db: impl SqliteExecutor<'_>, s: &SessionRow) -> Result<(), sqlx::Error> {
     sqlx::query(
-        "INSERT INTO sessions (id, robot_id, name, purpose, instrument, tool_json, identify_tcp, artefact_id, created_at) \
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+        "INSERT INTO sessions (id, robot_id, name, purpose, instrument, tool_json, identify_tcp, artefact_id, created_at, \
+         measuring_order) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
     )
     .bind(&s.id)
     .bind(&s.robot_id)
@@ -117,6 +120,7 @@ pub async fn insert_session(db: impl SqliteExecutor<'_>, s: &SessionRow) -> Resu
     .bind(s.identify_tcp)
     .bind(&s.artefact_id)
     .bind(&s.created_at)
+    .bind(s.order)
     .execute(db)
     .await?;
     Ok(())

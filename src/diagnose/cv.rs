@@ -21,6 +21,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::linalg::{at_b, at_v, psd_solve};
 use super::stage::Stage;
+use crate::cell::poses::group_poses;
 
 /// Which observations are tested in which fold.
 #[derive(Clone, Debug)]
@@ -39,24 +40,13 @@ impl Folds {
     /// Group the observations for which `tested` holds into poses (identical joint readings) and
     /// deal the poses into `k` folds in a seeded random order.
     pub fn new(joints: &[Vec<f64>], tested: &[bool], k: usize, seed: u64) -> Folds {
-        let mut keys: Vec<Vec<i64>> = Vec::new();
+        // Readings equal to 1 µrad are one pose (several reflectors measured at one stop).
+        let tested_obs: Vec<usize> = (0..joints.len()).filter(|&i| tested[i]).collect();
+        let (poses, n_poses) = group_poses(tested_obs.iter().map(|&i| joints[i].as_slice()));
         let mut pose_of_obs = vec![None; joints.len()];
-        for (i, q) in joints.iter().enumerate() {
-            if !tested[i] {
-                continue;
-            }
-            // Readings equal to 1 µrad are one pose (several reflectors measured at one stop).
-            let key: Vec<i64> = q.iter().map(|v| (v * 1e6).round() as i64).collect();
-            let p = match keys.iter().position(|k| *k == key) {
-                Some(p) => p,
-                None => {
-                    keys.push(key);
-                    keys.len() - 1
-                }
-            };
+        for (&i, &p) in tested_obs.iter().zip(&poses) {
             pose_of_obs[i] = Some(p);
         }
-        let n_poses = keys.len();
         let mut order: Vec<usize> = (0..n_poses).collect();
         order.shuffle(&mut ChaCha8Rng::seed_from_u64(seed));
         let mut fold_of_pose = vec![0; n_poses];

@@ -23,7 +23,6 @@ pub mod floor;
 pub mod library;
 pub mod linalg;
 pub mod locate;
-pub mod order;
 pub mod screen;
 pub mod search;
 pub mod stage;
@@ -31,6 +30,7 @@ pub mod stats;
 
 use nalgebra::Vector3;
 
+use crate::cell::order::{self, ApproachSource};
 use crate::cell::{Cell, Purpose};
 use crate::identify::{Anchor, Identification, IdentifyError, IdentifyOptions, ModelOptions, NoiseModel, identify};
 use crate::kinematics::{JointTerm, Param, ParamLayout, ParameterSet, Unit};
@@ -40,7 +40,6 @@ use cv::Folds;
 use floor::Floor;
 use library::{Candidate, Kind, Unavailable};
 use locate::Where;
-use order::ApproachSource;
 pub use search::SearchOptions;
 use search::{Decision, Round};
 
@@ -219,6 +218,9 @@ pub struct Diagnosis {
     pub rounds: Vec<Round>,
     pub shrink: Vec<ShrinkEntry>,
     pub approach: Option<ApproachSource>,
+    /// Where the directions came from, said in sentences (derived from the order, not logged;
+    /// sessions whose order is lost), when backlash was looked for.
+    pub approach_notes: Vec<String>,
     pub unavailable: Vec<Unavailable>,
     /// Why the starting model could not be fitted on the pooled data (it was linearised at the
     /// parameter set instead), if so.
@@ -311,9 +313,10 @@ pub fn diagnose(input: &Input<'_>, opts: &DiagnoseOptions) -> Result<Diagnosis, 
     let mut sessions = identification.clone();
     sessions.extend(validation.iter().cloned());
 
-    // The approach directions for the backlash candidate.
+    // The approach directions for the backlash candidate: logged, or derived from the measuring
+    // order where it is known (never from a shuffled or resampled session's list).
     let mut work = cell.clone();
-    let approach = Some(order::fill_approach(&mut work, &sessions));
+    let derived = order::fill_approach(&mut work, &sessions);
 
     let start = start_options(input, opts, sessions.clone());
     let t0 = std::time::Instant::now();
@@ -349,7 +352,12 @@ pub fn diagnose(input: &Input<'_>, opts: &DiagnoseOptions) -> Result<Diagnosis, 
     search::timing("folds + floor", t0);
     let t0 = std::time::Instant::now();
     let search_opts = SearchOptions { threads: opts.threads.max(opts.search.threads), ..opts.search.clone() };
-    let s = search::search(&work, stage0, &folds, fl.rms * fl.rms, &search_opts)?;
+    let mut s = search::search(&work, stage0, &folds, fl.rms * fl.rms, &search_opts)?;
+    if let Some(reason) = derived.unavailable_reason() {
+        for u in s.unavailable.iter_mut().filter(|u| u.kind == Kind::Backlash) {
+            u.reason = reason.clone();
+        }
+    }
     search::timing("search", t0);
     let t0 = std::time::Instant::now();
     let voxel = if opts.voxel_size > 0.0 {
@@ -400,7 +408,10 @@ pub fn diagnose(input: &Input<'_>, opts: &DiagnoseOptions) -> Result<Diagnosis, 
         identify(&work, &o).ok().or_else(|| s.stages.last().and_then(|st| st.fit.as_ref().ok().cloned()))
     };
     search::timing("verdict + accepted", t0);
-    let approach = approach.filter(|_| s.rounds[0].screened.iter().any(|c| c.candidate.kind == Kind::Backlash));
+    let backlash_screened = s.rounds[0].screened.iter().any(|c| c.candidate.kind == Kind::Backlash);
+    let approach = derived.source.filter(|_| backlash_screened);
+    let approach_notes =
+        if backlash_screened || derived.refused().next().is_some() { derived.notes() } else { Vec::new() };
     // Transfer of the starting and the final model.
     let mut transfer = Vec::new();
     for t in &opts.transfer {
@@ -447,6 +458,7 @@ pub fn diagnose(input: &Input<'_>, opts: &DiagnoseOptions) -> Result<Diagnosis, 
         location,
         shrink,
         approach,
+        approach_notes,
         unavailable: s.unavailable.clone(),
         start_note,
         identification,

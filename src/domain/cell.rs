@@ -7,8 +7,9 @@
 //!   "sessions": [
 //!     { "name": "trical-1", "purpose": "identification", "instrument": "trical",
 //!       "tool": {"tcp_mm": [x, y, z], "mass_kg": 1.7, "com_mm": [30, 0, 64]},
+//!       "order": "measured",
 //!       "measurements": [ {"joints_deg": [...], "ball": 1, "temperature_c": 22.0, "time_s": 0.0,
-//!                          "approach": [1, -1, 1, 1, 1, -1]}, … ] },
+//!                          "sequence": 0, "approach": [1, -1, 1, 1, 1, -1]}, … ] },
 //!     { "name": "tracker-1", "purpose": "validation", "instrument": "laser_tracker", "tool": { … },
 //!       "measurements": [ {"joints_deg": [...], "position_mm": [x, y, z]}, … ] } ] }
 //! ```
@@ -16,6 +17,11 @@
 //! A measurement is ball-constrained (`ball`, 1-based) or a measured `position_mm` in {W},
 //! optionally a full pose (`rotation_deg`, ZY'X''). Errors name the session, the measurement index
 //! and the field: `sessions[0] "trical-1" measurements[12].ball: …`.
+//!
+//! Measuring order: a session's `order` says whether its measurements are listed as measured
+//! (`measured`), permuted afterwards (`shuffled`), drawn from measured sessions (`resampled`), or
+//! nobody said (`unknown`, the default, omitted when written); a measurement's `sequence` is its
+//! place in the measuring order of its run (see [`crate::cell::order`]).
 
 use std::collections::HashSet;
 
@@ -24,7 +30,7 @@ use serde_json::Value;
 
 use super::robot::{RobotSpec, ToolSpec};
 use super::{DomainError, finite, from_json, joints_deg, to_deg};
-use crate::cell::{Artefact, Cell, Instrument, Measurement, Observation, Purpose, Session};
+use crate::cell::{Artefact, Cell, Instrument, Measurement, MeasuringOrder, Observation, Purpose, Session};
 use crate::kinematics::Frame;
 use crate::kinematics::frame::{rot_zyx, zyx_from_rot};
 use crate::metrology::{ArtefactError, BallTriangle};
@@ -171,6 +177,44 @@ impl InstrumentSpec {
     }
 }
 
+// Whether a session's measurements are listed in measuring order, as files, the wire and the
+// store spell it: `measured`, `shuffled`, `resampled`, `unknown`. (A plain comment: a doc comment
+// would change the OpenAPI schema of every type that uses it.)
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema, sqlx::Type)]
+#[serde(rename_all = "snake_case")]
+#[sqlx(rename_all = "snake_case")]
+pub enum OrderSpec {
+    Measured,
+    Shuffled,
+    Resampled,
+    #[default]
+    Unknown,
+}
+
+impl OrderSpec {
+    pub fn to_order(self) -> MeasuringOrder {
+        match self {
+            OrderSpec::Measured => MeasuringOrder::Measured,
+            OrderSpec::Shuffled => MeasuringOrder::Shuffled,
+            OrderSpec::Resampled => MeasuringOrder::Resampled,
+            OrderSpec::Unknown => MeasuringOrder::Unknown,
+        }
+    }
+
+    pub fn from_order(o: MeasuringOrder) -> Self {
+        match o {
+            MeasuringOrder::Measured => OrderSpec::Measured,
+            MeasuringOrder::Shuffled => OrderSpec::Shuffled,
+            MeasuringOrder::Resampled => OrderSpec::Resampled,
+            MeasuringOrder::Unknown => OrderSpec::Unknown,
+        }
+    }
+
+    pub fn is_unknown(&self) -> bool {
+        *self == OrderSpec::Unknown
+    }
+}
+
 #[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MeasurementSpec {
@@ -187,6 +231,10 @@ pub struct MeasurementSpec {
     pub temperature_c: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub time_s: Option<f64>,
+    /// Place in the measuring order of the session's run: increasing as measured; measurements
+    /// taken at one stop (several reflectors) share it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sequence: Option<u64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub approach: Option<Vec<i8>>,
     /// TriCal indicator readings after centring, mm.
@@ -205,6 +253,9 @@ pub struct SessionSpec {
     /// The tool's TCP is a guess to be identified (e.g. an unmeasured reflector nest).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub identify_tcp: bool,
+    /// Whether the measurements are listed in measuring order.
+    #[serde(default, skip_serializing_if = "OrderSpec::is_unknown")]
+    pub order: OrderSpec,
     pub measurements: Vec<MeasurementSpec>,
 }
 
@@ -262,6 +313,7 @@ impl CellFile {
                 tool,
                 identify_tcp: s.identify_tcp,
                 measurements,
+                order: s.order.to_order(),
             });
         }
         Ok(Cell { model, base_guess, artefact, sessions })
@@ -281,6 +333,7 @@ impl CellFile {
                     instrument: InstrumentSpec::from_instrument(s.instrument),
                     tool: ToolSpec::from_tool(&s.tool),
                     identify_tcp: s.identify_tcp,
+                    order: OrderSpec::from_order(s.order),
                     measurements: s.measurements.iter().map(measurement_spec).collect(),
                 })
                 .collect(),
@@ -362,7 +415,15 @@ pub fn measurement(
             Some([v.x, v.y, v.z])
         }
     };
-    Ok(Measurement { q, observation, temperature_c, time_s, approach: m.approach.clone(), indicators })
+    Ok(Measurement {
+        q,
+        observation,
+        temperature_c,
+        time_s,
+        sequence: m.sequence,
+        approach: m.approach.clone(),
+        indicators,
+    })
 }
 
 fn measurement_spec(m: &Measurement) -> MeasurementSpec {
@@ -381,6 +442,7 @@ fn measurement_spec(m: &Measurement) -> MeasurementSpec {
         rotation_deg,
         temperature_c: m.temperature_c,
         time_s: m.time_s,
+        sequence: m.sequence,
         approach: m.approach.clone(),
         indicators_mm: m.indicators.map(|d| [d[0] / MM, d[1] / MM, d[2] / MM]),
     }
@@ -416,6 +478,37 @@ mod tests {
         assert_eq!(back.sessions[0].measurements[0].observation, Observation::Ball(2));
         assert!(matches!(back.sessions[1].measurements[1].observation, Observation::Pose(_)));
         assert!((back.base_guess.unwrap()[3] - 91.6 * DEG).abs() < 1e-15);
+    }
+
+    /// `order` and `sequence` survive the file: the marker is written unless unknown, a sequence
+    /// number is kept exactly, an unknown marker is refused at its path.
+    #[test]
+    fn measuring_order_round_trips() {
+        let mut v = good();
+        v["sessions"][1]["order"] = json!("shuffled");
+        v["sessions"][1]["measurements"][0]["sequence"] = json!(7);
+        v["sessions"][1]["measurements"][1]["sequence"] = json!(u64::MAX);
+        let cell = parse_cell(&v.to_string()).unwrap();
+        assert_eq!(cell.sessions[0].order, MeasuringOrder::Unknown);
+        assert_eq!(cell.sessions[1].order, MeasuringOrder::Shuffled);
+        assert_eq!(cell.sessions[1].measurements[0].sequence, Some(7));
+        assert_eq!(cell.sessions[1].measurements[1].sequence, Some(u64::MAX));
+        assert_eq!(cell.sessions[0].measurements[0].sequence, None);
+        let text = cell_to_json(&cell);
+        assert_eq!(parse_cell(&text).unwrap(), cell);
+        let back: Value = serde_json::from_str(&text).unwrap();
+        assert!(back["sessions"][0].get("order").is_none(), "unknown is the default, not written");
+        assert_eq!(back["sessions"][1]["order"], "shuffled");
+        assert_eq!(back["sessions"][1]["measurements"][1]["sequence"], json!(u64::MAX));
+        for (order, want) in [("measured", MeasuringOrder::Measured), ("resampled", MeasuringOrder::Resampled)] {
+            v["sessions"][1]["order"] = json!(order);
+            assert_eq!(parse_cell(&v.to_string()).unwrap().sessions[1].order, want);
+        }
+        v["sessions"][1]["order"] = json!("sorted");
+        assert_eq!(parse_cell(&v.to_string()).unwrap_err().path, "sessions[1].order");
+        let mut v = good();
+        v["sessions"][1]["measurements"][0]["sequence"] = json!(-1);
+        assert_eq!(parse_cell(&v.to_string()).unwrap_err().path, "sessions[1].measurements[0].sequence");
     }
 
     /// One conversion for every artefact: a round trip, and errors at the spec's own fields.

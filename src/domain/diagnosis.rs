@@ -253,7 +253,8 @@ pub struct VerdictOut {
     pub experiment: Option<String>,
     /// What remains after the named effects, when something does.
     pub remaining: Option<RemainingOut>,
-    /// Where the joints' approach directions came from: `logged`, `time_order`, `file_order`.
+    /// Where the joints' approach directions came from: `logged`, or derived from the measuring
+    /// order — `time_order`, `sequence_order`, `file_order` (the notes say which sessions).
     pub approach_source: Option<String>,
 }
 
@@ -718,7 +719,7 @@ pub fn diagnosis_out(d: &Diagnosis) -> DiagnosisOut {
             gap_closure: s.closure,
         })
         .collect();
-    let mut notes = Vec::new();
+    let mut notes = d.approach_notes.clone();
     if let Some(n) = &d.start_note {
         notes.push(format!(
             "the starting model does not converge on the pooled data ({n}); it is linearised at the given parameter set"

@@ -21,8 +21,9 @@ fn invalid(path: impl Into<String>, reason: impl Into<String>) -> CsvError {
 }
 
 /// CSV columns: `q1_deg … qN_deg`, then any of `ball`, `x_mm y_mm z_mm`, `a_deg b_deg c_deg`
-/// (ZY'X'' rotation), `temperature_c`, `time_s`, `approach_1 … approach_N`, `dx_mm dy_mm dz_mm`
-/// (TriCal indicator readings). Empty cells are absent values.
+/// (ZY'X'' rotation), `temperature_c`, `time_s`, `sequence` (a whole number, the place in the
+/// measuring order), `approach_1 … approach_N`, `dx_mm dy_mm dz_mm` (TriCal indicator readings).
+/// Empty cells are absent values.
 pub fn parse_csv(text: &[u8], dof: usize) -> Result<Vec<MeasurementSpec>, CsvError> {
     let mut rdr = csv::ReaderBuilder::new().trim(csv::Trim::All).from_reader(text);
     let headers: Vec<String> = rdr
@@ -48,6 +49,7 @@ pub fn parse_csv(text: &[u8], dof: usize) -> Result<Vec<MeasurementSpec>, CsvErr
             "c_deg",
             "temperature_c",
             "time_s",
+            "sequence",
             "dx_mm",
             "dy_mm",
             "dz_mm",
@@ -57,7 +59,7 @@ pub fn parse_csv(text: &[u8], dof: usize) -> Result<Vec<MeasurementSpec>, CsvErr
         return Err(invalid(
             format!("csv column '{bad}'"),
             format!(
-                "unknown column; expected q1_deg…q{dof}_deg, ball, x_mm y_mm z_mm, a_deg b_deg c_deg, temperature_c, time_s, approach_1…approach_{dof}, dx_mm dy_mm dz_mm"
+                "unknown column; expected q1_deg…q{dof}_deg, ball, x_mm y_mm z_mm, a_deg b_deg c_deg, temperature_c, time_s, sequence, approach_1…approach_{dof}, dx_mm dy_mm dz_mm"
             ),
         ));
     }
@@ -96,6 +98,12 @@ pub fn parse_csv(text: &[u8], dof: usize) -> Result<Vec<MeasurementSpec>, CsvErr
                 num(j)?.ok_or_else(|| invalid(format!("csv line {line}, column {j}"), "a joint value is required"))?,
             );
         }
+        let sequence = match col("sequence").and_then(|c| rec.get(c)).filter(|s| !s.is_empty()) {
+            None => None,
+            Some(s) => Some(s.parse::<u64>().map_err(|_| {
+                invalid(format!("csv line {line}, column sequence"), format!("'{s}' is not a whole number ≥ 0"))
+            })?),
+        };
         let ball = match num("ball")? {
             None => None,
             Some(b) if b.fract() == 0.0 && b >= 0.0 => Some(b as usize),
@@ -130,6 +138,7 @@ pub fn parse_csv(text: &[u8], dof: usize) -> Result<Vec<MeasurementSpec>, CsvErr
             rotation_deg: three(["a_deg", "b_deg", "c_deg"])?,
             temperature_c: num("temperature_c")?,
             time_s: num("time_s")?,
+            sequence,
             approach,
             indicators_mm: three(["dx_mm", "dy_mm", "dz_mm"])?,
         });
@@ -159,5 +168,18 @@ mod tests {
             matches!(err("q1_deg,q2_deg,x_mm\n1,2,3\n"), CsvError::Invalid(e) if e.path == "csv line 2, column x_mm")
         );
         assert!(matches!(err("q1_deg,q2_deg\n1,2,3\n"), CsvError::Malformed(e) if e.path == "csv line 2"));
+    }
+
+    /// `sequence` is a whole number, kept exactly (beyond 2^53 too), absent when empty.
+    #[test]
+    fn sequence_numbers_read_exactly() {
+        let ok = "q1_deg,q2_deg,sequence,time_s\n1,2,7,\n3,4,,5\n5,6,9007199254740993,\n";
+        let m = parse_csv(ok.as_bytes(), 2).unwrap();
+        assert_eq!(m.iter().map(|x| x.sequence).collect::<Vec<_>>(), [Some(7), None, Some(9_007_199_254_740_993)]);
+        assert_eq!(m[1].time_s, Some(5.0));
+        for bad in ["-1", "2.5", "x"] {
+            let e = parse_csv(format!("q1_deg,q2_deg,sequence\n1,2,{bad}\n").as_bytes(), 2).unwrap_err();
+            assert!(matches!(&e, CsvError::Invalid(d) if d.path == "csv line 2, column sequence"), "{bad}: {e}");
+        }
     }
 }

@@ -1,7 +1,9 @@
 //! The validation report on the wire: millimetres for positions and distances, milliradians for
 //! orientation errors, the unit in every field name. Flat summary fields for the calibrated model
 //! at the top level (what a reader compares with the thesis's Table 5.2), the same fields for the
-//! nominal model under `nominal`, and optionally one row per measurement.
+//! nominal model under `nominal`, the same again for each session under `per_session` (its name
+//! and purpose, its calibrated figures flat, its nominal ones under `nominal`), and optionally
+//! one row per measurement.
 
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
@@ -9,7 +11,7 @@ use utoipa::ToSchema;
 use crate::units::{MM, MRAD};
 use crate::validate::normality::ShapiroWilk;
 use crate::validate::regression::LinearFit;
-use crate::validate::report::{AxisStats, ModelErrors, Residual, ValidationReport};
+use crate::validate::report::{AxisStats, ModelErrors, Residual, SessionErrors, ValidationReport};
 use crate::validate::stats::ErrorStats;
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -22,8 +24,31 @@ pub struct ValidationOut {
     #[serde(flatten)]
     pub calibrated: ModelErrorsOut,
     pub nominal: ModelErrorsOut,
+    /// Each session's figures (several reflectors, or sessions of different purposes, apart).
+    pub per_session: Vec<SessionErrorsOut>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub residuals: Option<Vec<ResidualOut>>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SessionErrorsOut {
+    pub session: String,
+    /// "identification" or "validation".
+    pub purpose: &'static str,
+    #[serde(flatten)]
+    pub calibrated: ModelErrorsOut,
+    pub nominal: ModelErrorsOut,
+}
+
+impl SessionErrorsOut {
+    fn from_errors(s: &SessionErrors) -> Self {
+        Self {
+            session: s.session.clone(),
+            purpose: s.purpose.as_str(),
+            calibrated: ModelErrorsOut::from_errors(&s.calibrated),
+            nominal: ModelErrorsOut::from_errors(&s.nominal),
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -135,6 +160,7 @@ impl ValidationOut {
             reference: if r.against_truth { "truth" } else { "measured" },
             calibrated: ModelErrorsOut::from_errors(&r.calibrated),
             nominal: ModelErrorsOut::from_errors(&r.nominal),
+            per_session: r.per_session.iter().map(SessionErrorsOut::from_errors).collect(),
             residuals: include_residuals.then(|| r.residuals.iter().map(ResidualOut::from_residual).collect()),
         }
     }

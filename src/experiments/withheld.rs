@@ -55,7 +55,8 @@ pub struct Case {
     pub effects: String,
     /// Keep the temperature and approach logs.
     pub aux: bool,
-    /// Shuffle each session's measurements and drop their times (measuring order lost).
+    /// Shuffle each session's measurements, drop their times and sequence numbers and mark the
+    /// sessions shuffled (measuring order lost).
     pub shuffle: bool,
     pub noise: NoiseVariant,
     /// Validate with a heavier tool (the thesis's 2.7 kg artefact tool, set-up 3): a second payload.
@@ -237,7 +238,7 @@ fn oracle_terms(e: &Effects) -> Option<Vec<Param>> {
     if e.link_bending.is_some() || p.is_empty() { None } else { Some(p) }
 }
 
-/// The cell a case's diagnosis sees: logs stripped, order shuffled.
+/// The cell a case's diagnosis sees: logs stripped, order shuffled (and marked so).
 fn prepare_cell(mut cell: Cell, case: &Case, seed: u64) -> Cell {
     for s in &mut cell.sessions {
         for m in &mut s.measurements {
@@ -247,10 +248,12 @@ fn prepare_cell(mut cell: Cell, case: &Case, seed: u64) -> Cell {
             }
             if case.shuffle {
                 m.time_s = None;
+                m.sequence = None;
             }
         }
         if case.shuffle {
             s.measurements.shuffle(&mut ChaCha8Rng::seed_from_u64(seed ^ 0x5348_5546));
+            s.order = crate::cell::MeasuringOrder::Shuffled;
         }
     }
     cell

@@ -51,7 +51,7 @@ pub const IDEMPOTENCY_KEY: &str = "idempotency-key";
         ("session_id" = String, Path, description = "Session id"),
         ("Idempotency-Key" = Option<String>, Header, description = "Makes a retried upload safe: the same key and body return the first answer")),
     request_body(description = "JSON {\"measurements\": [...]} (the cell-file measurement objects) or CSV with a header row \
-(q1_deg … qN_deg, ball, x_mm y_mm z_mm, a_deg b_deg c_deg, temperature_c, time_s, approach_1 … approach_N, dx_mm dy_mm dz_mm)",
+(q1_deg … qN_deg, ball, x_mm y_mm z_mm, a_deg b_deg c_deg, temperature_c, time_s, sequence, approach_1 … approach_N, dx_mm dy_mm dz_mm)",
         content((NewMeasurements = "application/json"), (String = "text/csv"))),
     responses(
         (status = 201, description = "Appended (or replayed)", body = BatchOut),

@@ -12,7 +12,7 @@ use super::robots::find as find_robot;
 use super::{ApiError, AppState};
 use crate::db::{self, records};
 use crate::domain::ToolSpec;
-use crate::domain::cell::{InstrumentSpec, PurposeSpec};
+use crate::domain::cell::{InstrumentSpec, OrderSpec, PurposeSpec};
 
 /// A session to create.
 #[derive(Debug, Deserialize, ToSchema)]
@@ -30,6 +30,11 @@ pub struct NewSession {
     /// The artefact whose balls a TriCal session measures (required for `trical`).
     #[serde(default)]
     pub artefact_id: Option<String>,
+    /// Whether the measurements will be appended in measuring order: `measured`, `shuffled`
+    /// (permuted afterwards), `resampled` (drawn from measured sessions) or `unknown` (default).
+    /// Backlash directions are never derived from the order of a shuffled or resampled session.
+    #[serde(default)]
+    pub order: OrderSpec,
 }
 
 /// A session.
@@ -43,6 +48,8 @@ pub struct SessionOut {
     pub tool: ToolSpec,
     pub identify_tcp: bool,
     pub artefact_id: Option<String>,
+    /// Whether the measurements are in measuring order.
+    pub order: OrderSpec,
     /// Measurements stored.
     pub measurements: i64,
     pub created_at: String,
@@ -58,6 +65,7 @@ pub fn session_out(s: &records::SessionRow) -> Result<SessionOut, ApiError> {
         tool: serde_json::from_str(&s.tool_json).map_err(|e| ApiError::Internal(format!("session {}: {e}", s.id)))?,
         identify_tcp: s.identify_tcp,
         artefact_id: s.artefact_id.clone(),
+        order: s.order,
         measurements: s.measurements,
         created_at: s.created_at.clone(),
     })
@@ -110,6 +118,7 @@ pub async fn create(
         identify_tcp: body.identify_tcp,
         artefact_id: body.artefact_id.clone(),
         created_at: db::now(),
+        order: body.order,
         measurements: 0,
     };
     records::insert_session(&state.pool, &row).await.map_err(|e| {

@@ -51,7 +51,7 @@ pub struct ValidationOut {
     pub created_at: String,
     /// `mean_mm`, `median_mm`, `std_mm`, `rms_mm`, `p95_mm`, `max_mm`, `per_axis`, `shapiro`,
     /// `vs_base_distance`, `vs_zone_distance`, `nominal` (the same for the nominal model),
-    /// `residuals`.
+    /// `per_session` (the same per session, with its name and purpose), `residuals`.
     #[schema(value_type = Object)]
     pub report: Value,
 }

@@ -1,13 +1,19 @@
-//! Held-out evaluation of a calibration on one session of real data: what a metrologist asks of
-//! a calibration before trusting it on a robot whose true parameters nobody knows.
+//! Held-out evaluation of a calibration on real data: what a metrologist asks of a calibration
+//! before trusting it on a robot whose true parameters nobody knows.
 //!
-//! - **k-fold cross-validation**: the session's measurements are shuffled (seeded) into k folds;
-//!   each fold is predicted by a model identified on the other k − 1; the pooled held-out errors
-//!   (every measurement predicted exactly once) give mean, median, p95 and max.
-//! - **Few poses**: for each size n and each draw, the session is split at random into two halves;
+//! The data are one session, or several sessions measured at the same joint configurations
+//! (several reflectors on the flange, read at each stop). Everything is split by **pose** — the
+//! measurements at one configuration, in whichever sessions ([`crate::cell::poses`]) — so that no
+//! pose has one reflector in training and another in test. Held-out errors are pooled over every
+//! measurement of the held-out poses and also broken down per session (per reflector).
+//!
+//! - **k-fold cross-validation**: the poses are shuffled (seeded) into k folds; each fold is
+//!   predicted by a model identified on the other k − 1; the pooled held-out errors (every
+//!   measurement predicted exactly once) give mean, median, p95 and max.
+//! - **Few poses**: for each size n and each draw, the poses are split at random into two halves;
 //!   n poses drawn from the first half identify the model, the whole second half (disjoint) tests
 //!   it. How many poses a calibration of this robot needs.
-//! - **Transfer**: the model identified on the whole session is carried to other sessions (other
+//! - **Transfer**: the model identified on all the data is carried to other sessions (other
 //!   days, another tracker set-up) where only the base and the tools are refitted — the
 //!   re-registration a cell does after the instrument moved — and scored there. A model that
 //!   only absorbed the first session's quirks degrades; a physically right one transfers.
@@ -17,7 +23,9 @@
 //! "uncalibrated" figure). Identification and test sets never share a measurement, and each
 //! identification sees only its own measurements — also for the base registration that starts
 //! it. Jobs are independent and run on scoped threads; every seed depends only on the job, so the
-//! result does not depend on the thread count.
+//! result does not depend on the thread count. With one session whose configurations are all
+//! distinct, pose p is measurement p, and the splits are the measurement splits of earlier
+//! versions.
 
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -27,7 +35,8 @@ use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 
 use super::{IdentifyError, IdentifyOptions, identify};
-use crate::cell::{Cell, Session};
+use crate::cell::poses::group_poses;
+use crate::cell::{Cell, MeasuringOrder, Session};
 use crate::validate::report::{Reference, validate};
 use crate::validate::stats::ErrorStats;
 
@@ -52,8 +61,9 @@ fn before_scope() -> Vec<String> {
 /// What to run.
 #[derive(Clone, Debug)]
 pub struct CrossvalOptions {
-    /// The session whose measurements are split.
-    pub session: String,
+    /// The sessions whose measurements are split by pose: one, or several measured at the same
+    /// configurations (reflectors on the flange).
+    pub sessions: Vec<String>,
     /// Folds of the cross-validation (0: skip it; otherwise ≥ 2).
     pub folds: usize,
     /// Identification sizes of the few-poses scheme (empty: skip it).
@@ -78,27 +88,64 @@ pub struct CrossvalOptions {
     pub threads: usize,
 }
 
-/// Errors of a model on a test set.
+/// Errors of a model on a test set: pooled over every measurement of its poses, and per session.
 #[derive(Clone, Debug, PartialEq)]
 pub struct HeldOut {
     /// |position error|, m.
     pub position: ErrorStats,
     /// Orientation error, rad, when the test set observed full poses.
     pub orientation: Option<ErrorStats>,
+    /// The same per session (reflector) that has test measurements, in the options' order.
+    pub per_session: Vec<SessionHeldOut>,
+}
+
+/// One session's share of a test set's errors.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SessionHeldOut {
+    pub session: String,
+    pub position: ErrorStats,
+    pub orientation: Option<ErrorStats>,
 }
 
 impl HeldOut {
-    fn of(position: &[f64], orientation: &[f64]) -> Option<HeldOut> {
-        Some(HeldOut { position: ErrorStats::of(position)?, orientation: ErrorStats::of(orientation) })
+    /// The statistics of `errors` (per test measurement: its session's index into `names`, |position
+    /// error|, orientation error when observed).
+    fn of(errors: &[Scored], names: &[String]) -> Option<HeldOut> {
+        let position: Vec<f64> = errors.iter().map(|e| e.position).collect();
+        let orientation: Vec<f64> = errors.iter().filter_map(|e| e.orientation).collect();
+        let per_session = names
+            .iter()
+            .enumerate()
+            .filter_map(|(k, name)| {
+                let mine = errors.iter().filter(|e| e.session == k);
+                let p: Vec<f64> = mine.clone().map(|e| e.position).collect();
+                let o: Vec<f64> = mine.filter_map(|e| e.orientation).collect();
+                Some(SessionHeldOut {
+                    session: name.clone(),
+                    position: ErrorStats::of(&p)?,
+                    orientation: ErrorStats::of(&o),
+                })
+            })
+            .collect();
+        Some(HeldOut { position: ErrorStats::of(&position)?, orientation: ErrorStats::of(&orientation), per_session })
     }
+}
+
+/// One test measurement's errors.
+#[derive(Clone, Copy, Debug)]
+struct Scored {
+    /// Index into the split sessions.
+    session: usize,
+    position: f64,
+    orientation: Option<f64>,
 }
 
 /// k-fold cross-validation of one variant.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FoldsResult {
     pub variant: String,
-    /// The pooled held-out errors (each measurement predicted by the fold that did not see it);
-    /// `None` when a fold failed.
+    /// The pooled held-out errors (each measurement predicted by the fold that did not see it),
+    /// with their per-session breakdown; `None` when a fold failed.
     pub pooled: Option<HeldOut>,
     pub per_fold: Vec<Result<HeldOut, String>>,
     /// Parameters identified in the first fold (the others agree unless the data are marginal).
@@ -145,68 +192,136 @@ pub struct TransferResult {
 /// Everything a cross-validation run measured.
 #[derive(Clone, Debug)]
 pub struct Crossval {
-    pub session: String,
+    /// The split sessions.
+    pub sessions: Vec<String>,
     pub measurements: usize,
+    /// Distinct configurations among them (the unit of every split).
+    pub poses: usize,
+    /// Per fold of the k-fold scheme, the measurements it held out: (session, index), sessions in
+    /// the options' order, indices increasing.
+    pub kfold_test: Vec<Vec<(String, usize)>>,
     pub folds: Vec<FoldsResult>,
     pub sizes: Vec<SizeResult>,
     pub transfer: Vec<TransferResult>,
 }
 
 /// A cell holding one session with the given measurements of `session` (the artefact, model and
-/// base guess kept).
+/// base guess kept). A proper subset is marked [`MeasuringOrder::Resampled`]: its consecutive
+/// measurements are not consecutive stops.
 pub fn subset_cell(cell: &Cell, session: &Session, indices: &[usize]) -> Cell {
+    subsets_cell(cell, &[(session, indices.to_vec())])
+}
+
+/// A cell holding, for each (session, indices), that session with those measurements (sessions
+/// left without any are dropped); proper subsets are marked resampled.
+fn subsets_cell(cell: &Cell, parts: &[(&Session, Vec<usize>)]) -> Cell {
     Cell {
         model: cell.model.clone(),
         base_guess: cell.base_guess,
         artefact: cell.artefact.clone(),
-        sessions: vec![Session {
-            measurements: indices.iter().map(|&i| session.measurements[i].clone()).collect(),
-            ..session.clone()
-        }],
+        sessions: parts
+            .iter()
+            .filter(|(_, idx)| !idx.is_empty())
+            .map(|(session, idx)| {
+                let whole = idx.len() == session.measurements.len() && idx.iter().enumerate().all(|(k, &i)| k == i);
+                Session {
+                    measurements: idx.iter().map(|&i| session.measurements[i].clone()).collect(),
+                    order: if whole { session.order } else { MeasuringOrder::Resampled },
+                    ..(*session).clone()
+                }
+            })
+            .collect(),
     }
 }
 
-/// Identify on `train` measurements of `session` and score the model on `test`.
-fn fit_and_score(
-    cell: &Cell,
-    session: &Session,
-    train: &[usize],
-    test: &[usize],
-    options: &IdentifyOptions,
-) -> Result<(HeldOut, f64), String> {
-    let e = fold_errors(cell, session, train, test, options)?;
-    let h = HeldOut::of(&e.position, &e.orientation).ok_or_else(|| "no test measurement".to_string())?;
-    Ok((h, e.kappa_scaled))
+/// The split sessions, their measurements as (session, index), and the pose of each.
+struct Split<'a> {
+    sessions: Vec<&'a Session>,
+    names: Vec<String>,
+    /// Every measurement of the sessions: (index into `sessions`, index in that session).
+    items: Vec<(usize, usize)>,
+    /// Per pose: its items (indices into `items`), in item order.
+    members: Vec<Vec<usize>>,
 }
 
-/// The errors of every measurement of `test` (positions, orientations), for pooling folds.
-fn fold_errors(
-    cell: &Cell,
-    session: &Session,
-    train: &[usize],
-    test: &[usize],
-    options: &IdentifyOptions,
-) -> Result<FoldErrors, String> {
-    let id_cell = subset_cell(cell, session, train);
-    let mut o = options.clone();
-    o.selection.sessions = vec![session.name.clone()];
-    o.selection.subset.clear();
-    let id = identify(&id_cell, &o).map_err(|e| e.to_string())?;
-    let test_cell = subset_cell(cell, session, test);
-    let r = validate(&id.set, &test_cell, std::slice::from_ref(&session.name), Reference::Measured)
-        .map_err(|e| e.to_string())?;
-    Ok(FoldErrors {
-        position: r.residuals.iter().map(|x| x.error.norm()).collect(),
-        orientation: r.residuals.iter().filter_map(|x| x.orientation_error).collect(),
-        identified: id.free_names.len(),
-        kappa_scaled: id.quality.kappa_scaled,
-    })
+impl Split<'_> {
+    /// The items of `poses`, as one index list per session (sorted).
+    fn indices(&self, poses: &[usize]) -> Vec<(&Session, Vec<usize>)> {
+        let mut per: Vec<Vec<usize>> = vec![Vec::new(); self.sessions.len()];
+        for &p in poses {
+            for &it in &self.members[p] {
+                let (s, i) = self.items[it];
+                per[s].push(i);
+            }
+        }
+        self.sessions
+            .iter()
+            .zip(per)
+            .map(|(s, mut idx)| {
+                idx.sort_unstable();
+                (*s, idx)
+            })
+            .collect()
+    }
+
+    /// Identify on the measurements of the `train` poses and score the model on those of `test`.
+    fn fit_and_score(
+        &self,
+        cell: &Cell,
+        train: &[usize],
+        test: &[usize],
+        options: &IdentifyOptions,
+    ) -> Result<(HeldOut, f64), String> {
+        let e = self.fold_errors(cell, train, test, options)?;
+        let h = HeldOut::of(&e.scored, &self.names).ok_or_else(|| "no test measurement".to_string())?;
+        Ok((h, e.kappa_scaled))
+    }
+
+    /// The errors of every measurement of the `test` poses, for pooling folds.
+    fn fold_errors(
+        &self,
+        cell: &Cell,
+        train: &[usize],
+        test: &[usize],
+        options: &IdentifyOptions,
+    ) -> Result<FoldErrors, String> {
+        let train = self.indices(train);
+        let id_cell = subsets_cell(cell, &train);
+        let mut o = options.clone();
+        o.selection.sessions = id_cell.sessions.iter().map(|s| s.name.clone()).collect();
+        o.selection.subset.clear();
+        let id = identify(&id_cell, &o).map_err(|e| e.to_string())?;
+        let test_cell = subsets_cell(cell, &self.indices(test));
+        let names: Vec<String> = test_cell.sessions.iter().map(|s| s.name.clone()).collect();
+        let r = validate(&id.set, &test_cell, &names, Reference::Measured).map_err(|e| e.to_string())?;
+        let scored = r
+            .residuals
+            .iter()
+            .map(|x| Scored {
+                session: self.names.iter().position(|n| *n == x.session).expect("a split session"),
+                position: x.error.norm(),
+                orientation: x.orientation_error,
+            })
+            .collect();
+        Ok(FoldErrors { scored, identified: id.free_names.len(), kappa_scaled: id.quality.kappa_scaled })
+    }
+}
+
+/// Identify on all the measurements of `session` with `options` and score the model there.
+fn fit_and_score_whole(cell: &Cell, session: &Session, options: &IdentifyOptions) -> Result<(HeldOut, f64), String> {
+    let all: Vec<usize> = (0..session.measurements.len()).collect();
+    let split = Split {
+        sessions: vec![session],
+        names: vec![session.name.clone()],
+        items: all.iter().map(|&i| (0, i)).collect(),
+        members: all.iter().map(|&i| vec![i]).collect(),
+    };
+    split.fit_and_score(cell, &all, &all, options)
 }
 
 /// Per-measurement errors of one fit on its test set.
 struct FoldErrors {
-    position: Vec<f64>,
-    orientation: Vec<f64>,
+    scored: Vec<Scored>,
     identified: usize,
     kappa_scaled: f64,
 }
@@ -245,50 +360,85 @@ fn shuffled(n: usize, seed: u64) -> Vec<usize> {
 
 /// Run the schemes of `opts` on `cell`.
 pub fn crossval(cell: &Cell, opts: &CrossvalOptions) -> Result<Crossval, IdentifyError> {
-    let session = cell
-        .session(&opts.session)
-        .ok_or_else(|| IdentifyError::Option(format!("no session named '{}' in the cell", opts.session)))?;
-    let n_meas = session.measurements.len();
+    if opts.sessions.is_empty() {
+        return Err(IdentifyError::Option("name at least one session to split".into()));
+    }
+    let mut sessions: Vec<&Session> = Vec::with_capacity(opts.sessions.len());
+    for name in &opts.sessions {
+        let s = cell
+            .session(name)
+            .ok_or_else(|| IdentifyError::Option(format!("no session named '{name}' in the cell")))?;
+        if sessions.iter().any(|t| t.name == *name) {
+            return Err(IdentifyError::Option(format!("session '{name}' is named twice")));
+        }
+        sessions.push(s);
+    }
+    let items: Vec<(usize, usize)> =
+        sessions.iter().enumerate().flat_map(|(s, x)| (0..x.measurements.len()).map(move |i| (s, i))).collect();
+    let (pose_of, n_poses) = group_poses(items.iter().map(|&(s, i)| sessions[s].measurements[i].q.as_slice()));
+    let mut members = vec![Vec::new(); n_poses];
+    for (it, &p) in pose_of.iter().enumerate() {
+        members[p].push(it);
+    }
+    let n_meas = items.len();
+    let split = Split { names: sessions.iter().map(|s| s.name.clone()).collect(), sessions, items, members };
+    let what = if split.sessions.len() == 1 {
+        format!("the session's {n_poses} poses")
+    } else {
+        format!("the {n_poses} poses of the sessions")
+    };
     if opts.folds == 1 {
         return Err(IdentifyError::Option("--folds must be 0 (skip) or at least 2".into()));
     }
-    if opts.folds > n_meas {
-        return Err(IdentifyError::Option(format!(
-            "--folds {} exceeds the session's {n_meas} measurements",
-            opts.folds
-        )));
+    if opts.folds > n_poses {
+        return Err(IdentifyError::Option(format!("--folds {} exceeds {what}", opts.folds)));
     }
     if !opts.sizes.is_empty() && opts.draws == 0 {
         return Err(IdentifyError::Option("--draws must be at least 1".into()));
     }
-    if let Some(&n) = opts.sizes.iter().find(|&&n| n > n_meas / 2) {
+    if let Some(&n) = opts.sizes.iter().find(|&&n| n > n_poses / 2) {
         return Err(IdentifyError::Option(format!(
-            "size {n} exceeds half the session ({} of {n_meas} measurements): identification and test halves must be disjoint",
-            n_meas / 2
+            "size {n} exceeds half the session{} ({} of {n_poses} poses): identification and test halves must be disjoint",
+            if split.sessions.len() == 1 { "" } else { "s" },
+            n_poses / 2
         )));
     }
     for t in &opts.transfer {
         if cell.session(t).is_none() {
             return Err(IdentifyError::Option(format!("--transfer: no session named '{t}' in the cell")));
         }
-        if *t == opts.session {
+        if opts.sessions.contains(t) {
             return Err(IdentifyError::Option(format!("--transfer: '{t}' is the session identified on")));
         }
     }
     let mut variants = vec![Variant::before(&opts.before)];
     variants.extend(opts.variants.iter().cloned());
+    let all_poses: Vec<usize> = (0..n_poses).collect();
 
-    // k-fold cross-validation: fold f holds the shuffled positions f, f + k, f + 2k, …
+    // k-fold cross-validation: fold f holds the shuffled poses f, f + k, f + 2k, …
     let mut folds = Vec::new();
+    let mut kfold_test = Vec::new();
     if opts.folds >= 2 {
-        let order = shuffled(n_meas, opts.seed);
+        let order = shuffled(n_poses, opts.seed);
         let k = opts.folds;
+        let tests: Vec<Vec<usize>> = (0..k)
+            .map(|f| {
+                let mut test: Vec<usize> = order.iter().skip(f).step_by(k).copied().collect();
+                test.sort_unstable();
+                test
+            })
+            .collect();
+        kfold_test = tests
+            .iter()
+            .map(|t| {
+                split.indices(t).into_iter().flat_map(|(s, idx)| idx.into_iter().map(|i| (s.name.clone(), i))).collect()
+            })
+            .collect();
         let jobs: Vec<(usize, usize)> = (0..variants.len()).flat_map(|v| (0..k).map(move |f| (v, f))).collect();
         let results = par_map(&jobs, opts.threads, |&(v, f)| {
-            let mut test: Vec<usize> = order.iter().skip(f).step_by(k).copied().collect();
-            test.sort_unstable();
-            let train: Vec<usize> = (0..n_meas).filter(|i| test.binary_search(i).is_err()).collect();
-            fold_errors(cell, session, &train, &test, &variants[v].options)
+            let test = &tests[f];
+            let train: Vec<usize> = all_poses.iter().copied().filter(|p| test.binary_search(p).is_err()).collect();
+            split.fold_errors(cell, &train, test, &variants[v].options)
         });
         for (v, variant) in variants.iter().enumerate() {
             let mine: Vec<&Result<FoldErrors, String>> =
@@ -296,17 +446,14 @@ pub fn crossval(cell: &Cell, opts: &CrossvalOptions) -> Result<Crossval, Identif
             let per_fold: Vec<Result<HeldOut, String>> = mine
                 .iter()
                 .map(|r| match r {
-                    Ok(e) => HeldOut::of(&e.position, &e.orientation).ok_or_else(|| "empty fold".to_string()),
+                    Ok(e) => HeldOut::of(&e.scored, &split.names).ok_or_else(|| "empty fold".to_string()),
                     Err(e) => Err(e.clone()),
                 })
                 .collect();
             let pooled = if mine.iter().all(|r| r.is_ok()) {
-                let (mut p, mut o) = (Vec::new(), Vec::new());
-                for e in mine.iter().filter_map(|r| r.as_ref().ok()) {
-                    p.extend_from_slice(&e.position);
-                    o.extend_from_slice(&e.orientation);
-                }
-                HeldOut::of(&p, &o)
+                let all: Vec<Scored> =
+                    mine.iter().filter_map(|r| r.as_ref().ok()).flat_map(|e| e.scored.iter().copied()).collect();
+                HeldOut::of(&all, &split.names)
             } else {
                 None
             };
@@ -315,7 +462,7 @@ pub fn crossval(cell: &Cell, opts: &CrossvalOptions) -> Result<Crossval, Identif
         }
     }
 
-    // Few poses: draw d splits the session in halves (the same split for every size and variant)
+    // Few poses: draw d splits the poses in halves (the same split for every size and variant)
     // and identifies on the first n of the shuffled first half.
     let mut sizes = Vec::new();
     if !opts.sizes.is_empty() {
@@ -323,13 +470,13 @@ pub fn crossval(cell: &Cell, opts: &CrossvalOptions) -> Result<Crossval, Identif
             .flat_map(|v| opts.sizes.iter().flat_map(move |&n| (0..opts.draws).map(move |d| (v, n, d))))
             .collect();
         let results = par_map(&jobs, opts.threads, |&(v, n, d)| {
-            let order = shuffled(n_meas, draw_seed(opts.seed, d));
-            let half = n_meas / 2;
+            let order = shuffled(n_poses, draw_seed(opts.seed, d));
+            let half = n_poses / 2;
             let mut train: Vec<usize> = order[..n].to_vec();
             train.sort_unstable();
             let mut test: Vec<usize> = order[half..].to_vec();
             test.sort_unstable();
-            fit_and_score(cell, session, &train, &test, &variants[v].options).map(|r| r.0)
+            split.fit_and_score(cell, &train, &test, &variants[v].options).map(|r| r.0)
         });
         for (v, variant) in variants.iter().enumerate() {
             for &n in &opts.sizes {
@@ -344,22 +491,22 @@ pub fn crossval(cell: &Cell, opts: &CrossvalOptions) -> Result<Crossval, Identif
         }
     }
 
-    // Transfer: identify each variant on the whole session, then refit base and tools only on
+    // Transfer: identify each variant on all the split data, then refit base and tools only on
     // each transfer session and score there.
     let mut transfer = Vec::new();
     if !opts.transfer.is_empty() {
-        let all: Vec<usize> = (0..n_meas).collect();
+        let whole = subsets_cell(cell, &split.indices(&all_poses));
         let fitted = par_map(&variants, opts.threads, |v| {
             let mut o = v.options.clone();
-            o.selection.sessions = vec![session.name.clone()];
-            identify(&subset_cell(cell, session, &all), &o).map_err(|e| e.to_string())
+            o.selection.sessions = split.names.clone();
+            identify(&whole, &o).map_err(|e| e.to_string())
         });
+        let on = split.names.join(", ");
         let jobs: Vec<(usize, usize)> =
             (0..variants.len()).flat_map(|v| (0..opts.transfer.len()).map(move |t| (v, t))).collect();
         let results = par_map(&jobs, opts.threads, |&(v, t)| {
-            let id = fitted[v].as_ref().map_err(|e| format!("identification on '{}': {e}", session.name))?;
+            let id = fitted[v].as_ref().map_err(|e| format!("identification on '{on}': {e}"))?;
             let target = cell.session(&opts.transfer[t]).expect("checked above");
-            let idx: Vec<usize> = (0..target.measurements.len()).collect();
             let mut o = IdentifyOptions {
                 start: Some(id.set.clone()),
                 only: before_scope(),
@@ -370,7 +517,7 @@ pub fn crossval(cell: &Cell, opts: &CrossvalOptions) -> Result<Crossval, Identif
             if let Some(k) = opts.transfer_kappa_limit {
                 o.kappa_limit = k;
             }
-            fit_and_score(cell, target, &idx, &idx, &o)
+            fit_and_score_whole(cell, target, &o)
         });
         for (&(v, t), r) in jobs.iter().zip(results) {
             let (errors, kappa_scaled) = match r {
@@ -386,5 +533,13 @@ pub fn crossval(cell: &Cell, opts: &CrossvalOptions) -> Result<Crossval, Identif
         }
     }
 
-    Ok(Crossval { session: session.name.clone(), measurements: n_meas, folds, sizes, transfer })
+    Ok(Crossval {
+        sessions: split.names.clone(),
+        measurements: n_meas,
+        poses: n_poses,
+        kfold_test,
+        folds,
+        sizes,
+        transfer,
+    })
 }

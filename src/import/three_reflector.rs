@@ -13,7 +13,9 @@
 //! - Numbers use a decimal point.
 //!
 //! Each reflector becomes one laser-tracker session, `reflector-1`, `reflector-2`, … in the order
-//! the files are given, with its measurements in file (measuring) order. Where a reflector sits on
+//! the files are given, with its measurements in file (measuring) order: the sessions are marked
+//! `order: measured`, and each measurement's `sequence` is its pose's index (0-based, among the
+//! pose lines), the same in every reflector's session — one stop, one number. Where a reflector sits on
 //! the flange is unknown, so its tool has a zero TCP (and no payload) with `identify_tcp` set. The
 //! cell has no base guess and no artefact.
 
@@ -22,7 +24,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::Vector3;
 
 use super::{ImportError, Imported, line_list, read_text};
-use crate::cell::{Cell, Instrument, Measurement, Observation, Purpose, Session};
+use crate::cell::{Cell, Instrument, Measurement, MeasuringOrder, Observation, Purpose, Session};
 use crate::kinematics::{RobotModel, Tool};
 use crate::units::{DEG, MM};
 
@@ -65,7 +67,7 @@ pub fn import(
         }
         let mut measurements = Vec::with_capacity(lines.len());
         let mut hidden = Vec::new();
-        for ((line, text), q) in lines.iter().zip(&poses) {
+        for (pose, ((line, text), q)) in lines.iter().zip(&poses).enumerate() {
             match position(path, *line, text)? {
                 None => hidden.push(*line),
                 Some(p) => measurements.push(Measurement {
@@ -73,6 +75,7 @@ pub fn import(
                     observation: Observation::Position(p),
                     temperature_c: None,
                     time_s: None,
+                    sequence: Some(pose as u64),
                     approach: None,
                     indicators: None,
                 }),
@@ -94,6 +97,7 @@ pub fn import(
             tool: Tool::flange(),
             identify_tcp: true,
             measurements,
+            order: MeasuringOrder::Measured,
         });
     }
     Ok(Imported { cell: Cell { model, base_guess: None, artefact: None, sessions }, notes })

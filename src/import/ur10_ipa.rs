@@ -40,7 +40,10 @@
 //! - `Trafo_TM_F_init_calib.txt` and `calibration_handeye.csv` are not read.
 //!
 //! Each row becomes one [`Measurement`] whose observation is the full probe pose in the tracker
-//! frame (`Observation::Pose`), with the temperature, and `time_s` as above. The cell uses the
+//! frame (`Observation::Pose`), with the temperature, `time_s` as above, and `sequence` = the row's
+//! place in the file (0-based): the files are the measuring program's logs, so the session is
+//! marked `order: measured`. Where the timestamps survive they are the better record of when
+//! (series A's appended rows), and the approach directions go by them. The cell uses the
 //! [`ur10`] preset with no base guess: the tracker frame is metres away from the robot and rotated
 //! arbitrarily, so the base transform has to be identified from scratch.
 
@@ -49,7 +52,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::{Matrix3, Matrix4, Vector3};
 
 use super::{ImportError, Imported, line_list, read_text};
-use crate::cell::{Cell, Instrument, Measurement, Observation, Purpose, Session};
+use crate::cell::{Cell, Instrument, Measurement, MeasuringOrder, Observation, Purpose, Session};
 use crate::kinematics::Frame;
 use crate::kinematics::frame::{rot_x, rot_y, rot_z};
 use crate::kinematics::model::{RobotModel, Tool, ur10};
@@ -166,6 +169,7 @@ pub fn import_series(dir: &Path, opts: &Ur10Options) -> Result<(Session, Vec<Str
                 Times::Seconds(t) => Some(t[i]),
                 Times::Lost { .. } => None,
             },
+            sequence: Some(i as u64),
             approach: None,
             indicators: None,
         })
@@ -177,6 +181,7 @@ pub fn import_series(dir: &Path, opts: &Ur10Options) -> Result<(Session, Vec<Str
         tool,
         identify_tcp: true,
         measurements,
+        order: MeasuringOrder::Measured,
     };
     Ok((session, notes))
 }

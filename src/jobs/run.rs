@@ -13,7 +13,7 @@ use super::results::{
 };
 use crate::app::cells;
 use crate::app::robots::{model_of, robot_base};
-use crate::cell::{Cell, Instrument, Measurement, Observation, Purpose, Session};
+use crate::cell::{Cell, Instrument, Measurement, MeasuringOrder, Observation, Purpose, Session};
 use crate::db::jobs::JobKind;
 use crate::db::records::{self, RobotRow, SessionRow};
 use crate::diagnose::DiagnoseError;
@@ -353,10 +353,12 @@ fn pose_plan(
                         observation: Observation::Ball(p.ball.expect("identification poses have a ball")),
                         temperature_c: None,
                         time_s: None,
+                        sequence: None,
                         approach: None,
                         indicators: None,
                     })
                     .collect(),
+                order: MeasuringOrder::Unknown,
             }],
         };
         let pool = DetmaxPool::new(&cell, &IdentifyOptions::default()).map_err(identify_error)?;

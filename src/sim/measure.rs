@@ -14,7 +14,11 @@
 //! (recorded as commanded); the reflector is physically at FK_true(q) + η and the tracker reads
 //! that plus its own noise. Times advance 25 s per TriCal measurement (thesis §2.3) and 10 s
 //! per tracker measurement; the temperature follows [`Effects::temperature_at`]; each joint's
-//! approach direction is the sign of its last move.
+//! approach direction is the sign of its last move. Consecutive tracker poses at the same joints
+//! are one stop read on several nests: the robot does not move, so they share the approach and
+//! the repeatability offset. Every session is in measuring order (`order` measured) and every
+//! measurement carries its stop's `sequence` number, one numbering for the whole run (TriCal
+//! stops first, then the tracker's; the nests' sessions interleave in it).
 
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
@@ -23,7 +27,7 @@ use rand_chacha::ChaCha8Rng;
 use super::effects::Effects;
 use super::instruments::{Centring, Noise};
 use super::truth::{Truth, TruthSolveError};
-use crate::cell::{Artefact, Cell, Instrument, Measurement, Observation, Purpose, Session};
+use crate::cell::{Artefact, Cell, Instrument, Measurement, MeasuringOrder, Observation, Purpose, Session};
 use crate::kinematics::{Frame, ParameterSet, RobotModel, Tool};
 use crate::metrology::TriCal;
 
@@ -196,6 +200,7 @@ pub fn measure(
             observation: Observation::Ball(p.ball),
             temperature_c: Some(temp),
             time_s: Some(t),
+            sequence: Some(i as u64),
             approach: Some(approach.iter().map(|&a| a as i8).collect()),
             indicators,
         });
@@ -214,6 +219,7 @@ pub fn measure(
         tool: rig.trical.clone(),
         identify_tcp: false,
         measurements: id,
+        order: MeasuringOrder::Measured,
     }];
     run.sessions.push(("trical-1".into(), id_truth));
 
@@ -224,18 +230,31 @@ pub fn measure(
     let mut per_nest: Vec<(Vec<Measurement>, Vec<MeasurementTruth>)> = vec![(Vec::new(), Vec::new()); rig.nests.len()];
     // Between the runs the TriCal's reflectors are fitted and the robot goes home.
     prev = *home;
+    let mut stop: Option<Stop> = None;
+    let mut next_stop = balls.len() as u64;
     for p in nests {
         let robot = robots.get(p.nest).ok_or(MeasureError::Nest(p.nest))?;
-        let approach = approach(&prev, &p.q);
+        let (approach, eta, sequence) = match stop {
+            // Another nest read at the same stop: the robot did not move.
+            Some((q, a, eta, n)) if q == p.q => (a, eta, n),
+            _ => {
+                let a = approach(&prev, &p.q);
+                let eta = rig.noise.repeatability_offset(&mut rng);
+                stop = Some((p.q, a, eta, next_stop));
+                next_stop += 1;
+                (a, eta, next_stop - 1)
+            }
+        };
         let temp = effects.temperature_at(t);
         let fk = robot.tcp(&robot.state(&p.q, &approach, temp)).t;
-        let physical = fk - rig.noise.repeatability_offset(&mut rng);
+        let physical = fk - eta;
         let reading = physical + rig.noise.tracker_error(&mut rng, (physical - tracker_w).norm());
         per_nest[p.nest].0.push(Measurement {
             q: p.q.to_vec(),
             observation: Observation::Position(reading),
             temperature_c: Some(temp),
             time_s: Some(t),
+            sequence: Some(sequence),
             approach: Some(approach.iter().map(|&a| a as i8).collect()),
             indicators: None,
         });
@@ -259,6 +278,7 @@ pub fn measure(
             tool: rig.nests[k].clone(),
             identify_tcp: false,
             measurements: ms,
+            order: MeasuringOrder::Measured,
         });
         run.sessions.push((name, tr));
     }
@@ -270,6 +290,9 @@ pub fn measure(
     };
     Ok((cell, run))
 }
+
+/// A tracker stop: its joints, the approach into it, its repeatability offset, its number.
+type Stop = ([f64; 6], [f64; 6], Vector3<f64>, u64);
 
 /// Sign of each joint's move from `from` to `to`.
 fn approach(from: &[f64; 6], to: &[f64; 6]) -> [f64; 6] {

@@ -4,7 +4,7 @@
 use super::effects::Effects;
 use super::instruments::Noise;
 use super::measure::{BallPose, MeasureError, NestPose, Rig, RunTruth, measure};
-use super::poses::{CellLayout, PlanError, plan_identification, plan_validation};
+use super::poses::{CellLayout, PlanError, PlanningCell, plan_identification, plan_validation};
 use super::truth::Truth;
 use crate::cell::Cell;
 use crate::kinematics::Tool;
@@ -27,6 +27,10 @@ pub struct SimulateOptions {
     /// mass in the flange frame, m) — the thesis's set-up 3 validated with the 2.7 kg artefact
     /// tool (Table 3.4) after identifying with the 1.7 kg TriCal. The reflector nests stay.
     pub validation_payload: Option<(f64, nalgebra::Vector3<f64>)>,
+    /// Read every validation pose on each nest that faces the tracker with a clear line of sight
+    /// (in nest order), not only on the best-facing one: with nests that open the same way
+    /// ([`reflector_plate`](super::poses::reflector_plate)) the nests' sessions share their poses.
+    pub all_nests: bool,
 }
 
 impl Default for SimulateOptions {
@@ -41,6 +45,7 @@ impl Default for SimulateOptions {
             noise: Noise::default(),
             record_indicators: false,
             validation_payload: None,
+            all_nests: false,
         }
     }
 }
@@ -81,10 +86,13 @@ pub fn simulate(opts: &SimulateOptions) -> Result<Simulated, SimulateError> {
         .iter()
         .map(|p| BallPose { q: p.q, ball: p.ball.expect("identification poses have a ball") })
         .collect();
-    let nests: Vec<NestPose> = plan_validation(layout, opts.validation, opts.seed)?
-        .iter()
-        .map(|p| NestPose { q: p.q, nest: p.nest.expect("validation poses have a nest") })
-        .collect();
+    let planned = plan_validation(layout, opts.validation, opts.seed)?;
+    let nests: Vec<NestPose> = if opts.all_nests {
+        let pc = PlanningCell::new(layout)?;
+        planned.iter().flat_map(|p| pc.visible_nests(&p.q).into_iter().map(|nest| NestPose { q: p.q, nest })).collect()
+    } else {
+        planned.iter().map(|p| NestPose { q: p.q, nest: p.nest.expect("validation poses have a nest") }).collect()
+    };
     let nest_tools: Vec<Tool> = layout
         .nests
         .iter()

@@ -103,8 +103,20 @@ pub struct ValidationReport {
     pub against_truth: bool,
     pub calibrated: ModelErrors,
     pub nominal: ModelErrors,
+    /// The same per selected session that holds measurements, in selection order (several
+    /// reflectors, or identification and validation sessions, scored apart).
+    pub per_session: Vec<SessionErrors>,
     /// One per measurement, sessions in selection order, measurements in file order.
     pub residuals: Vec<Residual>,
+}
+
+/// One session's share of a validation: both models' errors over its measurements.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SessionErrors {
+    pub session: String,
+    pub purpose: Purpose,
+    pub calibrated: ModelErrors,
+    pub nominal: ModelErrors,
 }
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -232,12 +244,27 @@ pub fn validate(
     if residuals.is_empty() {
         return Err(ValidateError::NoMeasurement);
     }
+    let calibrated = |r: &Residual| (r.error, r.orientation_error);
+    let nominal = |r: &Residual| (r.nominal_error, r.nominal_orientation_error);
+    let per_session = selected
+        .iter()
+        .filter_map(|s| {
+            let mine: Vec<Residual> = residuals.iter().filter(|r| r.session == s.name).cloned().collect();
+            (!mine.is_empty()).then(|| SessionErrors {
+                session: s.name.clone(),
+                purpose: s.purpose,
+                calibrated: model_errors(&mine, calibrated),
+                nominal: model_errors(&mine, nominal),
+            })
+        })
+        .collect();
     Ok(ValidationReport {
         sessions: selected.iter().map(|s| s.name.clone()).collect(),
         purposes: selected.iter().map(|s| s.purpose).collect(),
         against_truth: matches!(reference, Reference::Truth(_)),
-        calibrated: model_errors(&residuals, |r| (r.error, r.orientation_error)),
-        nominal: model_errors(&residuals, |r| (r.nominal_error, r.nominal_orientation_error)),
+        calibrated: model_errors(&residuals, calibrated),
+        nominal: model_errors(&residuals, nominal),
+        per_session,
         residuals,
     })
 }

@@ -150,14 +150,16 @@ pub async fn artefact(app: &TestApp, name: &str) -> String {
     r.body["id"].as_str().unwrap().to_string()
 }
 
-/// Create the cell's sessions on a robot and upload their measurements; session name → id.
+/// Create the cell's sessions on a robot (with their measuring-order marker) and upload their
+/// measurements; session name → id.
 pub async fn upload(app: &TestApp, robot_id: &str, artefact_id: &str, cell: &CellFile) -> Vec<(String, String)> {
     let mut ids = Vec::new();
     for s in &cell.sessions {
         let r = app
             .post(
                 &format!("/v1/robots/{robot_id}/sessions"),
-                &json!({"name": s.name, "purpose": s.purpose, "instrument": s.instrument, "tool": s.tool, "artefact_id": artefact_id}),
+                &json!({"name": s.name, "purpose": s.purpose, "instrument": s.instrument, "tool": s.tool, "artefact_id": artefact_id,
+                        "order": s.order}),
             )
             .await;
         assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);

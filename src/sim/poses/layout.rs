@@ -54,6 +54,14 @@ pub fn trical_nests() -> Vec<Nest> {
     .collect()
 }
 
+/// Three reflectors on a plate, all opening the same way (−x of the flange frame, away from the
+/// TriCal's TCP side), at the TriCal nests' positions (0, 60, 80), (0, −60, 80), (−60, 0, 80) mm:
+/// a tracker reads all three wherever one sees it unoccluded (`simulate --reflector-plate`), as
+/// in the three-reflector format. Payload as [`trical_nests`].
+pub fn reflector_plate() -> Vec<Nest> {
+    trical_nests().into_iter().map(|n| Nest { opening: Vector3::new(-1.0, 0.0, 0.0), ..n }).collect()
+}
+
 /// The TriCal's collision shape in the flange frame: the body, a capsule of radius 35 mm from
 /// the flange origin to (40, 0, 95) mm, 35 mm short of the TCP (40, 0, 130) mm; the contact zone,
 /// the ball of radius 35 mm about the TCP, which closes on the artefact's ball (on a ball, it

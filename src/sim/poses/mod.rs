@@ -30,7 +30,7 @@ use nalgebra::Vector3;
 use rand::Rng;
 
 pub use identification::IdentificationOptions;
-pub use layout::{CellLayout, Nest, trical_nests, trical_shape};
+pub use layout::{CellLayout, Nest, reflector_plate, trical_nests, trical_shape};
 pub use validation::{ValidationOptions, ValidationSampling};
 
 use super::collision::{Collision, CollisionModel};

@@ -107,6 +107,18 @@ impl PlanningCell {
         self.visible_nest(&trace, &placed).ok_or(Reject::NotVisible)
     }
 
+    /// Every nest facing the tracker within its acceptance and seeing it at q (in nest order):
+    /// the nests a tracker can read at that stop.
+    pub fn visible_nests(&self, q: &[f64; 6]) -> Vec<usize> {
+        let trace = self.collision.trace(q);
+        let placed = self.collision.place(&trace);
+        (0..self.layout.nests.len())
+            .filter(|&k| {
+                self.nest_angle(&trace, k) <= self.layout.nests[k].acceptance && self.line_of_sight(&trace, &placed, k)
+            })
+            .collect()
+    }
+
     /// The nest that would measure q in a validation plan, or `None` when q fails a validation
     /// check other than the path.
     pub fn validation_check(&self, q: &[f64; 6]) -> Option<usize> {
