@@ -44,6 +44,7 @@ fn cell(n: usize) -> Cell {
             time_s: None,
             approach: None,
             indicators: None,
+            sigma: None,
         })
         .collect();
     Cell {
@@ -56,6 +57,7 @@ fn cell(n: usize) -> Cell {
             instrument: Instrument::LaserTracker,
             tool: tool(),
             identify_tcp: false,
+            target: None,
             measurements,
         }],
     }

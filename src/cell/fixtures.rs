@@ -12,7 +12,7 @@ use crate::metrology::BallTriangle;
 
 /// A measurement of `observation` at joint readings `q` (rad), with nothing else logged.
 pub(crate) fn measurement(q: Vec<f64>, observation: Observation) -> Measurement {
-    Measurement { q, observation, temperature_c: None, time_s: None, approach: None, indicators: None }
+    Measurement { q, observation, temperature_c: None, time_s: None, approach: None, indicators: None, sigma: None }
 }
 
 /// A session of `measurements` taken with `tool` (its TCP declared, not to be identified).
@@ -22,7 +22,7 @@ pub(crate) fn session(name: &str, purpose: Purpose, tool: Tool, measurements: Ve
     } else {
         Instrument::LaserTracker
     };
-    Session { name: name.into(), purpose, instrument, tool, identify_tcp: false, measurements }
+    Session { name: name.into(), purpose, instrument, tool, identify_tcp: false, target: None, measurements }
 }
 
 /// The thesis cell's artefact: a 300 mm equilateral triangle of 12.7 mm balls.

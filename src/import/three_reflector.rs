@@ -14,8 +14,9 @@
 //!
 //! Each reflector becomes one laser-tracker session, `reflector-1`, `reflector-2`, … in the order
 //! the files are given, with its measurements in file (measuring) order. Where a reflector sits on
-//! the flange is unknown, so its tool has a zero TCP (and no payload) with `identify_tcp` set. The
-//! cell has no base guess and no artefact.
+//! the flange is unknown, so its tool has a zero TCP (and no payload) with `identify_tcp` set: the
+//! identification gives each reflector a TCP of its own and starts them, and the base, from an
+//! alternating registration (`identify::base`). The cell has no base guess and no artefact.
 
 use std::path::{Path, PathBuf};
 
@@ -75,6 +76,7 @@ pub fn import(
                     time_s: None,
                     approach: None,
                     indicators: None,
+                    sigma: None,
                 }),
             }
         }
@@ -93,6 +95,7 @@ pub fn import(
             instrument: Instrument::LaserTracker,
             tool: Tool::flange(),
             identify_tcp: true,
+            target: None,
             measurements,
         });
     }

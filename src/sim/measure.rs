@@ -198,6 +198,7 @@ pub fn measure(
             time_s: Some(t),
             approach: Some(approach.iter().map(|&a| a as i8).collect()),
             indicators,
+            sigma: None,
         });
         id_truth.push(MeasurementTruth {
             model_position: fk.t,
@@ -213,6 +214,7 @@ pub fn measure(
         instrument: Instrument::TriCal,
         tool: rig.trical.clone(),
         identify_tcp: false,
+        target: None,
         measurements: id,
     }];
     run.sessions.push(("trical-1".into(), id_truth));
@@ -238,6 +240,7 @@ pub fn measure(
             time_s: Some(t),
             approach: Some(approach.iter().map(|&a| a as i8).collect()),
             indicators: None,
+            sigma: None,
         });
         per_nest[p.nest].1.push(MeasurementTruth {
             model_position: fk,
@@ -258,6 +261,7 @@ pub fn measure(
             instrument: Instrument::LaserTracker,
             tool: rig.nests[k].clone(),
             identify_tcp: false,
+            target: None,
             measurements: ms,
         });
         run.sessions.push((name, tr));
