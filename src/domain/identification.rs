@@ -120,7 +120,7 @@ impl IdentifySpec {
             return Err(DomainError::new("rotation_weight_mm", "must be positive"));
         }
         let model = ModelOptions::parse(&self.model, dof).map_err(|e| DomainError::new("model", e))?;
-        if !(self.residual_ratio_limit > 1.0) {
+        if self.residual_ratio_limit.is_nan() || self.residual_ratio_limit <= 1.0 {
             return Err(DomainError::new("residual_ratio_limit", "must be above 1 (infinite: never refuse)"));
         }
         let mut selection = crate::identify::MeasurementSelection::default();
@@ -282,6 +282,21 @@ mod tests {
         assert_eq!(err(IdentifySpec { huber: Some(0.0), ..Default::default() }), "huber");
         assert_eq!(err(IdentifySpec { rotation_weight_mm: f64::NAN, ..Default::default() }), "rotation_weight_mm");
         assert_eq!(err(IdentifySpec { model: "+warp".into(), ..Default::default() }), "model");
+        for k in [f64::NAN, 1.0, -3.0] {
+            assert_eq!(err(IdentifySpec { residual_ratio_limit: k, ..Default::default() }), "residual_ratio_limit");
+        }
+        assert_eq!(o.residual_ratio_limit, crate::identify::RESIDUAL_RATIO_LIMIT);
+        assert!(o.noise.is_none(), "unweighted unless asked");
+        // Exclusions: session:index, the index after the last colon; they reach the selection.
+        let m = MeasurementRef::parse("day:2:17", "exclude").unwrap();
+        assert_eq!((m.session.as_str(), m.index), ("day:2", 17));
+        for bad in ["r1", "r1:x", ":4", "r1:-1"] {
+            assert_eq!(MeasurementRef::parse(bad, "exclude").unwrap_err().path, "exclude", "{bad}");
+        }
+        let spec = IdentifySpec { exclude: vec![m], weighted: true, ..Default::default() };
+        let o = spec.to_options(6).unwrap();
+        assert_eq!(o.selection.exclude, [("day:2".to_string(), 17)]);
+        assert_eq!(o.noise, Some(crate::identify::NoiseModel::default()));
         let s = |n: usize, index: &str| SelectSpec { n, index: index.into(), seed: 1 }.to_selection();
         assert_eq!(s(0, "O1").unwrap_err().path, "n");
         assert_eq!(s(5, "O9").unwrap_err().path, "index");

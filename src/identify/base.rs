@@ -53,8 +53,8 @@ const MAX_ALTERNATIONS: usize = 500;
 /// session, its block. With `base` given (the cell's guess), only the TCPs are fitted to it, in
 /// one linear step. Otherwise the base is registered with the declared TCPs (for a zero guess: the
 /// flange), each unknown TCP is fitted in its flange given that base, and the two alternate to
-/// convergence. Only blocks with `identify_tcp` move; a block's rotation moves only when it
-/// observed full poses (a point has no orientation).
+/// convergence. Only blocks with `identify_tcp` and no guess (a zero TCP translation) move; a
+/// block's rotation moves only when it observed full poses (a point has no orientation).
 pub fn register_base_and_tcps(
     cell: &Cell,
     picks: &[(usize, usize)],
@@ -99,7 +99,10 @@ pub fn register_base_and_tcps(
         Some(b) => Frame::from_xyzabc(&b),
         None => register_with(&tcp)?.0,
     };
-    let unknown: Vec<usize> = (0..blocks.len()).filter(|&b| blocks[b].identify_tcp).collect();
+    // A TCP is unknown when it is to be identified and its guess is the flange itself (no guess:
+    // the three-reflector import). A guess off the flange (the UR10 probe's transform) is kept: it
+    // knows more than a fit on the nominal robot, whose errors would bias the estimate.
+    let unknown: Vec<usize> = (0..blocks.len()).filter(|&b| is_unknown(&blocks[b])).collect();
     let mut iterations = 0;
     while !unknown.is_empty() && iterations < MAX_ALTERNATIONS {
         iterations += 1;
@@ -149,7 +152,7 @@ pub fn register_base_and_tcps(
         .zip(&tcp)
         .map(|(b, f)| {
             let mut chi = b.tool.tcp;
-            if b.identify_tcp {
+            if is_unknown(b) {
                 let est = f.to_xyzabc();
                 let k = if b.has_orientation { 6 } else { 3 };
                 chi[..k].copy_from_slice(&est[..k]);
@@ -158,6 +161,11 @@ pub fn register_base_and_tcps(
         })
         .collect();
     Ok(Registration { base: base.to_xyzabc(), tcps, rms, iterations })
+}
+
+/// A block whose TCP is to be identified and has no guess (zero translation).
+fn is_unknown(b: &ToolBlock) -> bool {
+    b.identify_tcp && b.tool.tcp[..3] == [0.0; 3]
 }
 
 /// The rotation nearest to `m` in the Frobenius norm (polar decomposition), or `None` for a

@@ -183,6 +183,9 @@ pub struct IdentifyOptions {
     /// Refuse a fit whose residual RMS exceeds this many times the RMS the instrument model and
     /// the measurements' own σ predict ([`RESIDUAL_RATIO_LIMIT`]); `f64::INFINITY` accepts any.
     pub residual_ratio_limit: f64,
+    /// Refuse a fit with a measurement whose residual exceeds this many times the typical one
+    /// ([`OUTLIER_FACTOR`]), unless the Huber loss down-weighted it; `f64::INFINITY` never does.
+    pub outlier_factor: f64,
 }
 
 /// The default of [`IdentifyOptions::residual_ratio_limit`]: a fit is refused when its residual RMS
@@ -243,6 +246,7 @@ impl Default for IdentifyOptions {
             free_tcp: Vec::new(),
             anchor: None,
             residual_ratio_limit: RESIDUAL_RATIO_LIMIT,
+            outlier_factor: OUTLIER_FACTOR,
         }
     }
 }
@@ -302,10 +306,10 @@ pub enum IdentifyError {
     )]
     Misfit { rms: f64, expected: f64, ratio: f64, limit: f64, worst: Vec<Worst> },
     #[error(
-        "{} outlier measurement(s), each more than {OUTLIER_FACTOR:.0} times the typical residual: {}; leave them out (identify --exclude {}, or `exclude` in a request) or fit with the Huber loss (--huber 2.5)",
+        "{} outlier measurement(s), each more than {factor:.0} times the typical residual: {}; leave them out (identify --exclude {}, or `exclude` in a request) or fit with the Huber loss (--huber 2.5)",
         outliers.len(), worst_list(outliers), outliers.iter().take(5).map(|w| format!("{}:{}", w.session, w.index)).collect::<Vec<_>>().join(",")
     )]
-    Outliers { outliers: Vec<Worst> },
+    Outliers { outliers: Vec<Worst>, factor: f64 },
 }
 
 /// A measurement with a large residual.
@@ -409,7 +413,7 @@ pub fn prepare(cell: &Cell, opts: &IdentifyOptions) -> Result<Prepared, Identify
     // unknown, else the cell's guess or one registration.
     let picks = opts.selection.picks(cell)?;
     let (blocks, session_tool) = tool_blocks(cell, &picks);
-    let registration = if blocks.iter().any(|b| b.identify_tcp) {
+    let registration = if blocks.iter().any(|b| b.identify_tcp && b.tool.tcp[..3] == [0.0; 3]) {
         Some(register_base_and_tcps(cell, &picks, &blocks, &session_tool, cell.base_guess)?)
     } else {
         None
@@ -731,11 +735,12 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
     }
 
     let mut fit = solver::solve(&problem, &free, &x0, &opts.solver)?;
-    // Identifiability is judged at the start. An unknown TCP may end far from where it started,
-    // and which of its components is one gauge with d6 and θ6 depends on where it lies (a point
-    // on the flange's y axis moves along x when θ6 turns): judge again at the solution, and refit
-    // from there when the choice changed.
-    if problem.tools.iter().any(|b| b.identify_tcp) {
+    // Identifiability is judged at the start. An unknown TCP (no guess: the flange) may end far
+    // from where the registration started it, and which of its components is one gauge with d6
+    // and θ6 depends on where it lies (a point on the flange's y axis moves along x when θ6
+    // turns): judge again at the solution, and refit from there when the choice changed. A TCP
+    // with a guess stays judged at its guess (the UR10 probe: θ6 has no effect there).
+    if problem.tools.iter().any(|b| b.identify_tcp && b.tool.tcp[..3] == [0.0; 3]) {
         let all: Vec<usize> = (0..problem.n_params()).collect();
         let mut j = Mat::<f64>::zeros(problem.n_rows, all.len());
         let mut r = vec![0.0; problem.n_rows];
@@ -770,7 +775,7 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
     }
     // Does the model describe the data? The residual against the noise the instrument predicts.
     let noise = opts.noise.clone().unwrap_or_default();
-    let fitness = Fitness::of(&problem, cell, &noise, &fit);
+    let fitness = Fitness::of(&problem, cell, &noise, &fit, opts.outlier_factor);
     quality.expected_rms = fitness.expected_rms;
     quality.residual_ratio = fitness.ratio;
     if fitness.ratio > opts.residual_ratio_limit {
@@ -783,7 +788,7 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
         });
     }
     if !fitness.outliers.is_empty() {
-        return Err(IdentifyError::Outliers { outliers: fitness.outliers });
+        return Err(IdentifyError::Outliers { outliers: fitness.outliers, factor: opts.outlier_factor });
     }
 
     let combination = || {
@@ -898,7 +903,7 @@ impl Fitness {
     /// outlier, unless the Huber loss down-weighted it. (Without τ, where the model's misses
     /// dominate, a reading with a small σ would look like an outlier for an ordinary residual.) Outliers are left out of ρ, so that one bad line reads as an outlier,
     /// not as a model that does not fit.
-    fn of(problem: &Problem, cell: &Cell, noise: &NoiseModel, fit: &Fit) -> Fitness {
+    fn of(problem: &Problem, cell: &Cell, noise: &NoiseModel, fit: &Fit, outlier_factor: f64) -> Fitness {
         let sigmas = row_sigmas(problem, cell, noise);
         let chains = problem.chains(&fit.x);
         let rw = problem.rotation_weight;
@@ -938,7 +943,7 @@ impl Fitness {
             })
             .collect();
         let typical = median(per.iter().map(|p| p.2).collect()).max(1e-300);
-        let threshold = OUTLIER_FACTOR * typical.max(1.0);
+        let threshold = outlier_factor * typical.max(1.0);
         let worst_of = |i: usize| {
             let o = &problem.obs[i];
             Worst {

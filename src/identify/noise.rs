@@ -25,11 +25,20 @@ pub struct NoiseModel {
     pub repeatability: f64,
     /// A measured orientation, per axis, rad.
     pub rotation: f64,
+    /// Use a measurement's own σ (`sigma_mm`) where it has one; `false`: the model's everywhere.
+    pub own: bool,
 }
 
 impl Default for NoiseModel {
     fn default() -> Self {
-        Self { trical: 5e-6, tracker: 16e-6, tracker_per_m: 0.8e-6, repeatability: 10e-6 / 3.616, rotation: 1e-4 }
+        Self {
+            trical: 5e-6,
+            tracker: 16e-6,
+            tracker_per_m: 0.8e-6,
+            repeatability: 10e-6 / 3.616,
+            rotation: 1e-4,
+            own: true,
+        }
     }
 }
 
@@ -51,7 +60,7 @@ impl NoiseModel {
     pub fn row_sigmas(&self, instrument: Instrument, position: &Vector3<f64>, own: Option<&Sigma>) -> [f64; 6] {
         let model = self.position_sigma(instrument, position);
         let mut s = [model, model, model, self.rotation, self.rotation, self.rotation];
-        if let Some(own) = own {
+        if let Some(own) = own.filter(|_| self.own) {
             for k in 0..3 {
                 s[k] = own.position[k].hypot(self.repeatability);
             }
@@ -115,5 +124,10 @@ mod tests {
         assert_eq!(s[3..], [1e-4; 3]);
         let own = Sigma { rotation: Some([2e-5, 3e-5, 4e-5]), ..own };
         assert_eq!(n.row_sigmas(Instrument::LaserTracker, &at, Some(&own))[3..], [2e-5, 3e-5, 4e-5]);
+        let model_only = NoiseModel { own: false, ..n.clone() };
+        assert_eq!(
+            model_only.row_sigmas(Instrument::LaserTracker, &at, Some(&own)),
+            [model, model, model, 1e-4, 1e-4, 1e-4]
+        );
     }
 }
