@@ -62,10 +62,7 @@ impl NoiseSpec {
             tracker_per_m: self.tracker_um_per_m * UM,
             repeatability: self.repeatability_um * UM / 3.616,
             rotation: self.rotation_mrad * 1e-3,
-            // The diagnosis weighs and sets its floor by the instrument model, not by the readings'
-            // own σ: on the UR10 (series B–D carry the tracker's σ) those made the extended model
-            // transfer worse to series B (0.541 mm against 0.458 without the effects).
-            own: false,
+            own: true,
         };
         m.check().map_err(|e| {
             let field = ["trical", "tracker_per_m", "tracker", "repeatability", "rotation"]
