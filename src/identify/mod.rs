@@ -193,9 +193,9 @@ pub struct IdentifyOptions {
 ///
 /// Why 50. The ratio ρ = RMS(residual)/RMS(σ) is 1 when the model and the noise model are right
 /// (χ²/dof = ρ²). A real robot's calibrated model leaves effects it lacks, and a nominal model
-/// more: ρ = 13 for the UR10 of series C calibrated with the default model and 27 for its nominal
-/// model with base and probe fitted (tracker σ from the default instrument model), 2.3 for the
-/// virtual IRB 120 identified without β. A structure error leaves residuals of the size of the
+/// more: against the tracker's own σ, ρ = 20 for the UR10 of series C calibrated with the default
+/// model (13 for series B) and 40 for its nominal model with base and probe fitted (crossval's
+/// "before" reference is exempt); 2.3 for the virtual IRB 120 identified without β. A structure error leaves residuals of the size of the
 /// error itself: one TCP for the three nests of the virtual cell (60–85 mm apart) leaves ρ = 118,
 /// the IRB 120 of issue 13 with three reflectors ~100 mm apart ρ ≈ 2,700 (86.8 mm against a
 /// tracker's ~0.03 mm). At ρ > 50 the unexplained variance is 2,500 times the instrument's: no
@@ -204,8 +204,8 @@ pub const RESIDUAL_RATIO_LIMIT: f64 = 50.0;
 
 /// A measurement is an outlier when its residual, in units of its own σ, exceeds this many times
 /// the median measurement's (and 10σ of the instrument). Unmodelled effects are smooth over the
-/// workspace and move neighbouring poses alike: their residuals' tail reaches 3–5 times the median
-/// (UR10 series C: the largest is 4.4 times). A reading 10 times the median is a gross error — a
+/// workspace and move neighbouring poses alike: their residuals' tail reaches 3–6 times the median
+/// (UR10 calibrated: the largest is 3.6 times in series C, 5.8 in series B). A reading 10 times the median is a gross error — a
 /// swapped line, a reflector that slipped, a broken beam — which least squares would spread over
 /// every parameter.
 pub const OUTLIER_FACTOR: f64 = 10.0;
