@@ -45,6 +45,7 @@ fn cell(n: usize) -> Cell {
             sequence: None,
             approach: None,
             indicators: None,
+            sigma: None,
         })
         .collect();
     Cell {
@@ -57,6 +58,7 @@ fn cell(n: usize) -> Cell {
             instrument: Instrument::LaserTracker,
             tool: tool(),
             identify_tcp: false,
+            target: None,
             measurements,
             order: MeasuringOrder::Unknown,
         }],

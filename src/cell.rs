@@ -96,6 +96,19 @@ pub struct Measurement {
     pub approach: Option<Vec<i8>>,
     /// TriCal indicator readings left after centring (dx, dy, dz), m.
     pub indicators: Option<[f64; 3]>,
+    /// The instrument's own standard uncertainty of this reading, 1σ per axis of {W}: position (m)
+    /// and, for a full pose, rotation (rad, per axis of the world rotation vector). `None`: the
+    /// instrument model's σ applies (`identify::NoiseModel`).
+    pub sigma: Option<Sigma>,
+}
+
+/// A measurement's own standard uncertainty (what a laser tracker reports with each reading).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sigma {
+    /// 1σ of the position along X_W, Y_W, Z_W, m.
+    pub position: [f64; 3],
+    /// 1σ of the orientation about X_W, Y_W, Z_W, rad (full-pose measurements only).
+    pub rotation: Option<[f64; 3]>,
 }
 
 /// A set of measurements taken with one tool.
@@ -107,6 +120,11 @@ pub struct Session {
     pub tool: Tool,
     /// The TCP in `tool` is only a guess (e.g. a reflector nest never measured): identify it.
     pub identify_tcp: bool,
+    /// The physical target (reflector, nest, probe) the session measured, when sessions share
+    /// one: sessions naming the same target are fitted with one TCP. Without a name, a session
+    /// whose TCP is identified has a TCP of its own, and sessions with the same declared tool
+    /// share it.
+    pub target: Option<String>,
     pub measurements: Vec<Measurement>,
     /// Whether `measurements` are listed in measuring order.
     pub order: MeasuringOrder,

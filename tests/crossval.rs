@@ -96,7 +96,10 @@ fn reidentification_from_a_calibrated_set_refits_the_base_only() {
     let opts = IdentifyOptions {
         start: Some(calibrated.set.clone()),
         only: vec!["base".into(), "tool".into()],
-        selection: robocal::identify::MeasurementSelection { sessions: vec!["tracker-n1".into()], subset: vec![] },
+        selection: robocal::identify::MeasurementSelection {
+            sessions: vec!["tracker-n1".into()],
+            ..Default::default()
+        },
         ..Default::default()
     };
     let id = identify(&cell, &opts).unwrap();

@@ -12,7 +12,16 @@ use crate::metrology::BallTriangle;
 
 /// A measurement of `observation` at joint readings `q` (rad), with nothing else logged.
 pub(crate) fn measurement(q: Vec<f64>, observation: Observation) -> Measurement {
-    Measurement { q, observation, temperature_c: None, time_s: None, sequence: None, approach: None, indicators: None }
+    Measurement {
+        q,
+        observation,
+        temperature_c: None,
+        time_s: None,
+        sequence: None,
+        approach: None,
+        indicators: None,
+        sigma: None,
+    }
 }
 
 /// A session of `measurements` taken with `tool` (its TCP declared, not to be identified).
@@ -28,6 +37,7 @@ pub(crate) fn session(name: &str, purpose: Purpose, tool: Tool, measurements: Ve
         instrument,
         tool,
         identify_tcp: false,
+        target: None,
         measurements,
         order: Default::default(),
     }

@@ -46,6 +46,18 @@ pub struct IdentifyArgs {
     /// `--start calibrated.json --only base,tool` re-registers a calibrated robot in a new cell.
     #[arg(long)]
     pub only: Option<String>,
+    /// Measurements left out of the fit, `session:index` (0-based), comma-separated: the outliers
+    /// a refused fit names.
+    #[arg(long)]
+    pub exclude: Option<String>,
+    /// Weighted least squares: each residual row by 1/σ — the measurement's own sigma_mm where it
+    /// has one, the instrument model's otherwise.
+    #[arg(long)]
+    pub weighted: bool,
+    /// Refuse a fit whose residual RMS exceeds this many times the RMS the instrument's noise
+    /// predicts (`inf`: never).
+    #[arg(long, default_value_t = crate::domain::identification::default_residual_ratio_limit())]
+    pub residual_ratio_limit: f64,
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -70,8 +82,13 @@ pub struct ValidateArgs {
 }
 
 pub(super) fn identify(a: IdentifyArgs) -> Result<String, CliError> {
-    use crate::domain::identification::{IdentifySpec, run_identification};
+    use crate::domain::identification::{IdentifySpec, MeasurementRef, run_identification};
     let cell = load_cell(&a.cell)?;
+    let exclude = list(&a.exclude)
+        .iter()
+        .map(|m| MeasurementRef::parse(m, "exclude"))
+        .collect::<Result<_, _>>()
+        .map_err(option_error)?;
     let spec = IdentifySpec {
         model: a.model.clone(),
         fix: list(&a.fix),
@@ -79,6 +96,9 @@ pub(super) fn identify(a: IdentifyArgs) -> Result<String, CliError> {
         huber: a.huber,
         rotation_weight_mm: a.rotation_weight_mm,
         only: list(&a.only),
+        exclude,
+        weighted: a.weighted,
+        residual_ratio_limit: a.residual_ratio_limit,
     };
     let mut opts = spec.to_options(cell.model.dof()).map_err(option_error)?;
     if let Some(p) = &a.start {
@@ -103,7 +123,7 @@ pub(super) fn identify(a: IdentifyArgs) -> Result<String, CliError> {
     let q = &id.quality;
     write(&a.out, &doc.to_json_pretty())?;
     Ok(format!(
-        "wrote {}: {} parameters identified from {} measurements in {} iterations; κ {:.1} (scaled) / {:.1} (SI), O1 {:.4}, residual RMS {:.4} mm",
+        "wrote {}: {} parameters identified from {} measurements in {} iterations; κ {:.1} (scaled) / {:.1} (SI), O1 {:.4}, residual RMS {:.4} mm ({:.1} times the {:.4} mm the instrument predicts)",
         a.out.display(),
         id.free_names.len(),
         q.n_configs,
@@ -111,7 +131,9 @@ pub(super) fn identify(a: IdentifyArgs) -> Result<String, CliError> {
         q.kappa_scaled,
         q.kappa,
         q.observability.o1,
-        q.rms_residual / MM
+        q.rms_residual / MM,
+        q.residual_ratio,
+        q.expected_rms / MM
     ))
 }
 

@@ -86,6 +86,10 @@ pub struct CrossvalArgs {
     /// Length weighting orientation residuals of full-pose measurements, mm per rad.
     #[arg(long, default_value_t = crate::domain::identification::default_rotation_weight_mm())]
     pub rotation_weight_mm: f64,
+    /// Weighted least squares in every model: each residual row by 1/σ, the measurement's own
+    /// sigma_mm where it has one, the instrument model's otherwise.
+    #[arg(long)]
+    pub weighted: bool,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     #[command(flatten)]
@@ -138,6 +142,7 @@ pub(super) fn crossval(a: CrossvalArgs) -> Result<String, CliError> {
         fix: list(&a.fix),
         kappa_limit: a.kappa_limit,
         rotation_weight_mm: a.rotation_weight_mm,
+        weighted: a.weighted,
         ..Default::default()
     };
     let base = spec.to_options(cell.model.dof()).map_err(option_error)?;

@@ -189,7 +189,7 @@ impl<'a> CvBase<'a> {
                     let i = at + k;
                     let pred: f64 = (0..p).map(|c| fb.jv[(i, c)] * delta[c]).sum::<f64>()
                         + (0..m).map(|c| cv[(i, c)] * delta[p + c]).sum::<f64>();
-                    e[k] = (fb.rv[i] - pred) / ob.weight[0];
+                    e[k] = (fb.rv[i] - pred) / ob.weight[k];
                 }
                 at += ob.rows;
                 errors.push((o, e));

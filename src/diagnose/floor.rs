@@ -55,7 +55,7 @@ pub fn floor(stage: &Stage, cell: &Cell, tested: &[usize], noise: &NoiseModel, s
     for &o in tested {
         let ob = &pr.obs[o];
         // Unweighted position rows of J (3 × p).
-        let jo = Mat::<f64>::from_fn(3, p, |r, c| stage.j[(ob.row + r, c)] / ob.weight[0]);
+        let jo = Mat::<f64>::from_fn(3, p, |r, c| stage.j[(ob.row + r, c)] / ob.weight[r]);
         let mut pred = Matrix3::zeros();
         for a in 0..3 {
             for b in 0..3 {

@@ -249,7 +249,7 @@ impl Stage {
             chains[o.tool].jacobian_columns_into(&o.state, &layout, rows, idx.iter().copied().zip(0..m), &mut buf, 6);
             for c in 0..m {
                 for r in 0..o.rows {
-                    let w = if r >= 3 { pr.rotation_weight * o.weight[1] } else { o.weight[0] };
+                    let w = if r >= 3 { pr.rotation_weight * o.weight[r] } else { o.weight[r] };
                     out[(o.row + r, c)] = buf[c * 6 + r] * w;
                 }
             }

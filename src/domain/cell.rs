@@ -30,7 +30,7 @@ use serde_json::Value;
 
 use super::robot::{RobotSpec, ToolSpec};
 use super::{DomainError, finite, from_json, joints_deg, to_deg};
-use crate::cell::{Artefact, Cell, Instrument, Measurement, MeasuringOrder, Observation, Purpose, Session};
+use crate::cell::{Artefact, Cell, Instrument, Measurement, MeasuringOrder, Observation, Purpose, Session, Sigma};
 use crate::kinematics::Frame;
 use crate::kinematics::frame::{rot_zyx, zyx_from_rot};
 use crate::metrology::{ArtefactError, BallTriangle};
@@ -241,6 +241,16 @@ pub struct MeasurementSpec {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     #[schema(min_items = 3, max_items = 3)]
     pub indicators_mm: Option<[f64; 3]>,
+    /// The instrument's standard uncertainty of this position, 1σ along X, Y, Z of {W}, mm (e.g.
+    /// what a laser tracker reports with each reading). Without it the instrument model applies.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(min_items = 3, max_items = 3)]
+    pub sigma_mm: Option<[f64; 3]>,
+    /// The same for the orientation of a full pose, 1σ about X, Y, Z of {W}, deg; needs
+    /// `rotation_deg` and `sigma_mm`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(min_items = 3, max_items = 3)]
+    pub sigma_rotation_deg: Option<[f64; 3]>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -256,6 +266,11 @@ pub struct SessionSpec {
     /// Whether the measurements are listed in measuring order.
     #[serde(default, skip_serializing_if = "OrderSpec::is_unknown")]
     pub order: OrderSpec,
+    /// The physical target (reflector, nest) measured: sessions naming the same target share one
+    /// TCP and must declare the same tool. Without it, a session whose TCP is identified gets a
+    /// TCP of its own.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target: Option<String>,
     pub measurements: Vec<MeasurementSpec>,
 }
 
@@ -287,6 +302,7 @@ impl CellFile {
         let base_guess = self.base_guess.as_ref().map(|b| b.to_si("base_guess")).transpose()?;
         let artefact = self.artefact.as_ref().map(|a| a.to_artefact().map_err(|e| e.within("artefact"))).transpose()?;
         let mut names = HashSet::new();
+        let mut targets: std::collections::HashMap<&str, (usize, &ToolSpec)> = Default::default();
         let mut sessions = Vec::with_capacity(self.sessions.len());
         for (si, s) in self.sessions.iter().enumerate() {
             let at = format!("sessions[{si}] \"{}\"", s.name);
@@ -297,6 +313,26 @@ impl CellFile {
                 return Err(DomainError::new(format!("{at}.name"), "another session has this name"));
             }
             let tool = s.tool.to_tool().map_err(|e| e.within(&format!("{at}.tool")))?;
+            if let Some(t) = &s.target {
+                if t.trim().is_empty() {
+                    return Err(DomainError::new(format!("{at}.target"), "must not be empty"));
+                }
+                match targets.get(t.as_str()) {
+                    Some((first, other)) if *other != &s.tool => {
+                        return Err(DomainError::new(
+                            format!("{at}.target"),
+                            format!(
+                                "session \"{}\" names target '{t}' with another tool: sessions sharing a target declare the same tool",
+                                self.sessions[*first].name
+                            ),
+                        ));
+                    }
+                    Some(_) => {}
+                    None => {
+                        targets.insert(t, (si, &s.tool));
+                    }
+                }
+            }
             let instrument = s.instrument.to_instrument();
             if instrument == Instrument::TriCal && artefact.is_none() {
                 return Err(DomainError::new(format!("{at}.instrument"), "a trical session needs the cell's artefact"));
@@ -312,6 +348,7 @@ impl CellFile {
                 instrument,
                 tool,
                 identify_tcp: s.identify_tcp,
+                target: s.target.clone(),
                 measurements,
                 order: s.order.to_order(),
             });
@@ -334,6 +371,7 @@ impl CellFile {
                     tool: ToolSpec::from_tool(&s.tool),
                     identify_tcp: s.identify_tcp,
                     order: OrderSpec::from_order(s.order),
+                    target: s.target.clone(),
                     measurements: s.measurements.iter().map(measurement_spec).collect(),
                 })
                 .collect(),
@@ -415,6 +453,23 @@ pub fn measurement(
             Some([v.x, v.y, v.z])
         }
     };
+    let sigma = match (m.sigma_mm, m.sigma_rotation_deg) {
+        (None, None) => None,
+        (None, Some(_)) => {
+            return Err(DomainError::new("sigma_rotation_deg", "give sigma_mm too (the position's σ)"));
+        }
+        (Some(p), r) => {
+            let position = positive3(p, MM, "sigma_mm")?;
+            let rotation = match r {
+                None => None,
+                Some(_) if !matches!(observation, Observation::Pose(_)) => {
+                    return Err(DomainError::new("sigma_rotation_deg", "only a full pose (rotation_deg) has one"));
+                }
+                Some(r) => Some(positive3(r, DEG, "sigma_rotation_deg")?),
+            };
+            Some(Sigma { position, rotation })
+        }
+    };
     Ok(Measurement {
         q,
         observation,
@@ -423,7 +478,20 @@ pub fn measurement(
         sequence: m.sequence,
         approach: m.approach.clone(),
         indicators,
+        sigma,
     })
+}
+
+/// Three standard deviations in file units → SI, each finite and positive.
+fn positive3(v: [f64; 3], unit: f64, path: &str) -> Result<[f64; 3], DomainError> {
+    let mut out = [0.0; 3];
+    for i in 0..3 {
+        if !(v[i].is_finite() && v[i] > 0.0) {
+            return Err(DomainError::new(format!("{path}[{i}]"), "must be a positive number (1σ)"));
+        }
+        out[i] = v[i] * unit;
+    }
+    Ok(out)
 }
 
 fn measurement_spec(m: &Measurement) -> MeasurementSpec {
@@ -445,6 +513,8 @@ fn measurement_spec(m: &Measurement) -> MeasurementSpec {
         sequence: m.sequence,
         approach: m.approach.clone(),
         indicators_mm: m.indicators.map(|d| [d[0] / MM, d[1] / MM, d[2] / MM]),
+        sigma_mm: m.sigma.map(|s| s.position.map(|v| v / MM)),
+        sigma_rotation_deg: m.sigma.and_then(|s| s.rotation).map(|r| r.map(|v| v / DEG)),
     }
 }
 
@@ -509,6 +579,53 @@ mod tests {
         let mut v = good();
         v["sessions"][1]["measurements"][0]["sequence"] = json!(-1);
         assert_eq!(parse_cell(&v.to_string()).unwrap_err().path, "sessions[1].measurements[0].sequence");
+    }
+
+    /// A shared target and per-measurement σ read, convert and round-trip; their errors name the
+    /// field.
+    #[test]
+    fn targets_and_sigmas() {
+        let mut v = good();
+        v["sessions"][1]["target"] = json!("nest-1");
+        v["sessions"][1]["identify_tcp"] = json!(true);
+        v["sessions"][1]["measurements"][1]["sigma_mm"] = json!([0.01, 0.02, 0.005]);
+        v["sessions"][1]["measurements"][1]["sigma_rotation_deg"] = json!([0.001, 0.002, 0.003]);
+        let cell = parse_cell(&v.to_string()).unwrap();
+        assert_eq!(cell.sessions[1].target.as_deref(), Some("nest-1"));
+        let s = cell.sessions[1].measurements[1].sigma.unwrap();
+        assert!((s.position[1] - 20e-6).abs() < 1e-18 && (s.rotation.unwrap()[2] - 0.003 * DEG).abs() < 1e-18);
+        assert_eq!(cell_to_json(&parse_cell(&cell_to_json(&cell)).unwrap()), cell_to_json(&cell));
+        assert!(cell_to_json(&cell).contains("\"sigma_mm\""));
+
+        let check = |edit: &dyn Fn(&mut Value), path: &str, needle: &str| {
+            let mut w = v.clone();
+            edit(&mut w);
+            let e = parse_cell(&w.to_string()).unwrap_err();
+            assert_eq!(e.path, path, "{e}");
+            assert!(e.reason.contains(needle), "{e}");
+        };
+        let m1 = "sessions[1] \"tracker-1\".measurements[1]";
+        check(
+            &|w| w["sessions"][1]["measurements"][1]["sigma_mm"][2] = json!(0.0),
+            &format!("{m1}.sigma_mm[2]"),
+            "positive",
+        );
+        check(
+            &|w| w["sessions"][1]["measurements"][0]["sigma_rotation_deg"] = json!([1, 1, 1]),
+            "sessions[1] \"tracker-1\".measurements[0].sigma_rotation_deg",
+            "sigma_mm",
+        );
+        check(
+            &|w| {
+                w["sessions"][1]["measurements"][0]["sigma_mm"] = json!([1, 1, 1]);
+                w["sessions"][1]["measurements"][0]["sigma_rotation_deg"] = json!([1, 1, 1]);
+            },
+            "sessions[1] \"tracker-1\".measurements[0].sigma_rotation_deg",
+            "full pose",
+        );
+        // Sessions sharing a target declare one tool.
+        check(&|w| w["sessions"][0]["target"] = json!("nest-1"), "sessions[1] \"tracker-1\".target", "same tool");
+        check(&|w| w["sessions"][1]["target"] = json!(" "), "sessions[1] \"tracker-1\".target", "empty");
     }
 
     /// One conversion for every artefact: a round trip, and errors at the spec's own fields.

@@ -63,6 +63,7 @@ impl NoiseSpec {
             tracker_per_m: self.tracker_um_per_m * UM,
             repeatability: self.repeatability_um * UM / 3.616,
             rotation: self.rotation_mrad * 1e-3,
+            own: true,
         };
         m.check().map_err(|e| {
             let field = ["trical", "tracker_per_m", "tracker", "repeatability", "rotation"]

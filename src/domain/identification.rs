@@ -11,7 +11,9 @@ use utoipa::ToSchema;
 use super::{DomainError, ParameterSetDoc};
 use crate::cell::Cell;
 use crate::identify::observability::Index;
-use crate::identify::{Identification, IdentifyError, IdentifyOptions, ModelOptions, SolverOptions};
+use crate::identify::{
+    Identification, IdentifyError, IdentifyOptions, ModelOptions, NoiseModel, RESIDUAL_RATIO_LIMIT, SolverOptions,
+};
 use crate::units::{DEG, MM};
 
 /// The κ limit when none is given: the identification's own (thesis §4.2.3, κ ≤ 1000).
@@ -34,6 +36,37 @@ pub fn observability_index(name: &str, path: &str) -> Result<Index, DomainError>
     Index::parse(name).ok_or_else(|| DomainError::new(path, format!("'{name}' is not O1…O5")))
 }
 
+/// The refusal limit of the residual against the instrument's noise when none is given.
+pub fn default_residual_ratio_limit() -> f64 {
+    RESIDUAL_RATIO_LIMIT
+}
+
+/// One measurement of a session: its name and 0-based index (as the quality report's `worst` and
+/// `downweighted` entries name it). `robocal identify --exclude` writes it `session:index`.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct MeasurementRef {
+    pub session: String,
+    pub index: usize,
+}
+
+impl MeasurementRef {
+    /// `reflector-2:40` (the index after the last colon, so session names may hold colons).
+    pub fn parse(text: &str, path: &str) -> Result<MeasurementRef, DomainError> {
+        let (session, index) = text
+            .rsplit_once(':')
+            .ok_or_else(|| DomainError::new(path, format!("'{text}' is not session:index (e.g. reflector-2:40)")))?;
+        let index = index
+            .trim()
+            .parse()
+            .map_err(|_| DomainError::new(path, format!("'{index}' in '{text}' is not a measurement index")))?;
+        if session.trim().is_empty() {
+            return Err(DomainError::new(path, format!("'{text}' names no session")));
+        }
+        Ok(MeasurementRef { session: session.trim().to_string(), index })
+    }
+}
+
 /// The options of an identification as given, in file units. `robocal identify`'s flags and an
 /// identification request both become one, and [`IdentifySpec::to_options`] checks it; errors
 /// name the option (`kappa_limit`, `huber`, `rotation_weight_mm`, `model`).
@@ -51,6 +84,13 @@ pub struct IdentifySpec {
     pub rotation_weight_mm: f64,
     /// Free only these parameters (names, or the groups `base` and `tool`); empty: all.
     pub only: Vec<String>,
+    /// Measurements left out of the fit (outliers).
+    pub exclude: Vec<MeasurementRef>,
+    /// Weight each residual row by 1/σ: the measurement's own σ where it has one, the default
+    /// instrument model's otherwise.
+    pub weighted: bool,
+    /// Refuse a fit whose residual RMS exceeds this many times the instrument's expected noise.
+    pub residual_ratio_limit: f64,
 }
 
 impl Default for IdentifySpec {
@@ -62,6 +102,9 @@ impl Default for IdentifySpec {
             huber: None,
             rotation_weight_mm: default_rotation_weight_mm(),
             only: Vec::new(),
+            exclude: Vec::new(),
+            weighted: false,
+            residual_ratio_limit: default_residual_ratio_limit(),
         }
     }
 }
@@ -77,7 +120,20 @@ impl IdentifySpec {
             return Err(DomainError::new("rotation_weight_mm", "must be positive"));
         }
         let model = ModelOptions::parse(&self.model, dof).map_err(|e| DomainError::new("model", e))?;
+        if self.residual_ratio_limit.is_nan() || self.residual_ratio_limit <= 1.0 {
+            return Err(DomainError::new("residual_ratio_limit", "must be above 1 (infinite: never refuse)"));
+        }
+        let mut selection = crate::identify::MeasurementSelection::default();
+        for (i, m) in self.exclude.iter().enumerate() {
+            if m.session.trim().is_empty() {
+                return Err(DomainError::new(format!("exclude[{i}].session"), "must name a session"));
+            }
+            selection.exclude.push((m.session.clone(), m.index));
+        }
         Ok(IdentifyOptions {
+            selection,
+            noise: self.weighted.then(NoiseModel::default),
+            residual_ratio_limit: self.residual_ratio_limit,
             model,
             fixed: self.fix.clone(),
             kappa_limit,
@@ -193,6 +249,9 @@ pub fn identification_doc(id: &Identification, sessions: &[String], selection: O
         "correlation": corr,
         "tools": tools,
         "downweighted": id.downweighted.iter().map(|(s, i, w)| json!({"session": s, "index": i, "weight": w})).collect::<Vec<_>>(),
+        "expected_rms_mm": q.expected_rms / MM,
+        "residual_ratio": q.residual_ratio,
+        "worst": id.worst.iter().map(|w| json!({"session": w.session, "index": w.index, "residual_mm": w.residual / MM, "ratio": w.ratio})).collect::<Vec<_>>(),
     }));
     if q.weighted
         && let Some(obj) = doc.quality.as_mut().and_then(|v| v.as_object_mut())
@@ -223,6 +282,21 @@ mod tests {
         assert_eq!(err(IdentifySpec { huber: Some(0.0), ..Default::default() }), "huber");
         assert_eq!(err(IdentifySpec { rotation_weight_mm: f64::NAN, ..Default::default() }), "rotation_weight_mm");
         assert_eq!(err(IdentifySpec { model: "+warp".into(), ..Default::default() }), "model");
+        for k in [f64::NAN, 1.0, -3.0] {
+            assert_eq!(err(IdentifySpec { residual_ratio_limit: k, ..Default::default() }), "residual_ratio_limit");
+        }
+        assert_eq!(o.residual_ratio_limit, crate::identify::RESIDUAL_RATIO_LIMIT);
+        assert!(o.noise.is_none(), "unweighted unless asked");
+        // Exclusions: session:index, the index after the last colon; they reach the selection.
+        let m = MeasurementRef::parse("day:2:17", "exclude").unwrap();
+        assert_eq!((m.session.as_str(), m.index), ("day:2", 17));
+        for bad in ["r1", "r1:x", ":4", "r1:-1"] {
+            assert_eq!(MeasurementRef::parse(bad, "exclude").unwrap_err().path, "exclude", "{bad}");
+        }
+        let spec = IdentifySpec { exclude: vec![m], weighted: true, ..Default::default() };
+        let o = spec.to_options(6).unwrap();
+        assert_eq!(o.selection.exclude, [("day:2".to_string(), 17)]);
+        assert_eq!(o.noise, Some(crate::identify::NoiseModel::default()));
         let s = |n: usize, index: &str| SelectSpec { n, index: index.into(), seed: 1 }.to_selection();
         assert_eq!(s(0, "O1").unwrap_err().path, "n");
         assert_eq!(s(5, "O9").unwrap_err().path, "index");

@@ -22,8 +22,9 @@ fn invalid(path: impl Into<String>, reason: impl Into<String>) -> CsvError {
 
 /// CSV columns: `q1_deg … qN_deg`, then any of `ball`, `x_mm y_mm z_mm`, `a_deg b_deg c_deg`
 /// (ZY'X'' rotation), `temperature_c`, `time_s`, `sequence` (a whole number, the place in the
-/// measuring order), `approach_1 … approach_N`, `dx_mm dy_mm dz_mm` (TriCal indicator readings).
-/// Empty cells are absent values.
+/// measuring order), `approach_1 … approach_N`, `dx_mm dy_mm dz_mm` (TriCal indicator readings),
+/// `sigma_x_mm sigma_y_mm sigma_z_mm` and `sigma_rx_deg sigma_ry_deg sigma_rz_deg` (the reading's
+/// own 1σ, about the axes of {W}). Empty cells are absent values.
 pub fn parse_csv(text: &[u8], dof: usize) -> Result<Vec<MeasurementSpec>, CsvError> {
     let mut rdr = csv::ReaderBuilder::new().trim(csv::Trim::All).from_reader(text);
     let headers: Vec<String> = rdr
@@ -53,13 +54,19 @@ pub fn parse_csv(text: &[u8], dof: usize) -> Result<Vec<MeasurementSpec>, CsvErr
             "dx_mm",
             "dy_mm",
             "dz_mm",
+            "sigma_x_mm",
+            "sigma_y_mm",
+            "sigma_z_mm",
+            "sigma_rx_deg",
+            "sigma_ry_deg",
+            "sigma_rz_deg",
         ])
         .collect();
     if let Some(bad) = headers.iter().find(|h| !known.contains(&h.as_str())) {
         return Err(invalid(
             format!("csv column '{bad}'"),
             format!(
-                "unknown column; expected q1_deg…q{dof}_deg, ball, x_mm y_mm z_mm, a_deg b_deg c_deg, temperature_c, time_s, sequence, approach_1…approach_{dof}, dx_mm dy_mm dz_mm"
+                "unknown column; expected q1_deg…q{dof}_deg, ball, x_mm y_mm z_mm, a_deg b_deg c_deg, temperature_c, time_s, sequence, approach_1…approach_{dof}, dx_mm dy_mm dz_mm, sigma_x_mm sigma_y_mm sigma_z_mm, sigma_rx_deg sigma_ry_deg sigma_rz_deg"
             ),
         ));
     }
@@ -141,6 +148,8 @@ pub fn parse_csv(text: &[u8], dof: usize) -> Result<Vec<MeasurementSpec>, CsvErr
             sequence,
             approach,
             indicators_mm: three(["dx_mm", "dy_mm", "dz_mm"])?,
+            sigma_mm: three(["sigma_x_mm", "sigma_y_mm", "sigma_z_mm"])?,
+            sigma_rotation_deg: three(["sigma_rx_deg", "sigma_ry_deg", "sigma_rz_deg"])?,
         });
     }
     Ok(out)

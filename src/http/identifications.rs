@@ -43,7 +43,22 @@ pub async fn create(
 ) -> Result<Response, ApiError> {
     let robot = find_robot(&state, &robot_id).await?;
     let model = model_of(&robot)?;
-    body.sessions = checked_sessions(&state, &robot.id, &body.sessions, PurposeSpec::Identification).await?;
+    let rows = cells::checked_sessions(&state.pool, &robot.id, &body.sessions, PurposeSpec::Identification, "sessions")
+        .await?;
+    // Excluded measurements name their session as the cell the job builds does: by name.
+    for (i, m) in body.exclude.iter_mut().enumerate() {
+        let s = rows.iter().find(|s| s.id == m.session || s.name == m.session).ok_or_else(|| {
+            ApiError::invalid(format!("exclude[{i}].session"), format!("'{}' is not one of the sessions", m.session))
+        })?;
+        if m.index as i64 >= s.measurements {
+            return Err(ApiError::invalid(
+                format!("exclude[{i}].index"),
+                format!("session '{}' has {} measurements", s.name, s.measurements),
+            ));
+        }
+        m.session = s.name.clone();
+    }
+    body.sessions = rows.into_iter().map(|s| s.id).collect();
     run::identify_options(&body, model.dof(), Vec::new())?;
     if let Some(s) = &body.select {
         run::selection(s)?;

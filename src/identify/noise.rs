@@ -9,7 +9,7 @@
 
 use nalgebra::Vector3;
 
-use crate::cell::Instrument;
+use crate::cell::{Instrument, Sigma};
 
 /// 1σ per axis of each source, SI units.
 #[derive(Clone, Debug, PartialEq)]
@@ -25,11 +25,20 @@ pub struct NoiseModel {
     pub repeatability: f64,
     /// A measured orientation, per axis, rad.
     pub rotation: f64,
+    /// Use a measurement's own σ (`sigma_mm`) where it has one; `false`: the model's everywhere.
+    pub own: bool,
 }
 
 impl Default for NoiseModel {
     fn default() -> Self {
-        Self { trical: 5e-6, tracker: 16e-6, tracker_per_m: 0.8e-6, repeatability: 10e-6 / 3.616, rotation: 1e-4 }
+        Self {
+            trical: 5e-6,
+            tracker: 16e-6,
+            tracker_per_m: 0.8e-6,
+            repeatability: 10e-6 / 3.616,
+            rotation: 1e-4,
+            own: true,
+        }
     }
 }
 
@@ -42,6 +51,24 @@ impl NoiseModel {
             Instrument::LaserTracker => self.tracker + self.tracker_per_m * position.norm(),
         };
         inst.hypot(self.repeatability)
+    }
+
+    /// σ of each residual row of a measurement (positions along X, Y, Z of {W}, then the
+    /// rotation about them), repeatability included: the measurement's own σ where it carries one
+    /// (a tracker's per-reading standard deviation), the instrument model's where not. Position m,
+    /// rotation rad.
+    pub fn row_sigmas(&self, instrument: Instrument, position: &Vector3<f64>, own: Option<&Sigma>) -> [f64; 6] {
+        let model = self.position_sigma(instrument, position);
+        let mut s = [model, model, model, self.rotation, self.rotation, self.rotation];
+        if let Some(own) = own.filter(|_| self.own) {
+            for k in 0..3 {
+                s[k] = own.position[k].hypot(self.repeatability);
+            }
+            if let Some(r) = own.rotation {
+                s[3..].copy_from_slice(&r);
+            }
+        }
+        s
     }
 
     /// Checks: every σ finite and positive (the repeatability and the distance term may be zero).
@@ -79,6 +106,28 @@ mod tests {
         assert!((s - (25e-12f64 + (10e-6f64 / 3.616).powi(2)).sqrt()).abs() < 1e-15);
         assert!(n.check().is_ok());
         assert!(NoiseModel { tracker: 0.0, ..n.clone() }.check().unwrap_err().contains("tracker"));
-        assert!(NoiseModel { repeatability: f64::NAN, ..n }.check().unwrap_err().contains("repeatability"));
+        assert!(NoiseModel { repeatability: f64::NAN, ..n.clone() }.check().unwrap_err().contains("repeatability"));
+    }
+
+    /// A reading's own σ replaces the instrument's (the repeatability still adds); without one,
+    /// the instrument model's σ on every position row and the rotation σ on the rotation rows.
+    #[test]
+    fn own_sigmas_replace_the_instruments() {
+        let n = NoiseModel::default();
+        let at = Vector3::new(1.0, 0.0, 0.0);
+        let model = n.position_sigma(Instrument::LaserTracker, &at);
+        assert_eq!(n.row_sigmas(Instrument::LaserTracker, &at, None), [model, model, model, 1e-4, 1e-4, 1e-4]);
+        let own = Sigma { position: [4e-6, 30e-6, 1e-6], rotation: None };
+        let s = n.row_sigmas(Instrument::LaserTracker, &at, Some(&own));
+        assert_eq!(s[1], 30e-6f64.hypot(n.repeatability));
+        assert!(s[2] > n.repeatability && s[2] < 1.1 * n.repeatability, "the repeatability bounds σ below");
+        assert_eq!(s[3..], [1e-4; 3]);
+        let own = Sigma { rotation: Some([2e-5, 3e-5, 4e-5]), ..own };
+        assert_eq!(n.row_sigmas(Instrument::LaserTracker, &at, Some(&own))[3..], [2e-5, 3e-5, 4e-5]);
+        let model_only = NoiseModel { own: false, ..n.clone() };
+        assert_eq!(
+            model_only.row_sigmas(Instrument::LaserTracker, &at, Some(&own)),
+            [model, model, model, 1e-4, 1e-4, 1e-4]
+        );
     }
 }

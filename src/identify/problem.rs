@@ -2,9 +2,11 @@
 //! Jacobian (eq. 4.12–4.15) of a parameter vector.
 //!
 //! Parameters form one global vector: the robot's (geometry, β, compliance, effect terms, base —
-//! the [`ParamLayout`] without its tool entries) followed by six per distinct tool (x, y, z, a, b,
-//! c of T_T^6). Sessions measured with the same tool share its block; every measurement is
-//! evaluated with the chain of its own tool.
+//! the [`ParamLayout`] without its tool entries) followed by six per tool block (x, y, z, a, b,
+//! c of T_T^6). A tool block is one physical target ([`tool_blocks`]): the sessions that name
+//! the same `target`; else a session whose TCP is identified, alone (three reflectors with the
+//! same zero guess are three points on the flange, not one); else the sessions with the same
+//! declared tool. Every measurement is evaluated with the chain of its own block.
 //!
 //! Rows per measurement: 3 for a ball or a position, 6 for a full pose — the rotation rows are the
 //! world rotation vector of R_meas·R_modelᵀ times a length (`rotation_weight`, m/rad) so position
@@ -66,9 +68,10 @@ pub struct Obs {
     /// First row in the stacked residual.
     pub row: usize,
     pub rows: usize,
-    /// Row multipliers (1/σ in a common unit) of the position rows and of the rotation rows: 1
-    /// unless the caller weights the problem by an instrument model ([`Problem::set_weights`]).
-    pub weight: [f64; 2],
+    /// Row multipliers (1/σ in a common unit) of the position rows (X, Y, Z of {W}) and of the
+    /// rotation rows: 1 unless the caller weights the problem by an instrument model
+    /// ([`Problem::set_weights`]).
+    pub weight: [f64; 6],
 }
 
 /// A linear pseudo-observation Σ coef·x ≈ target on global parameters: the regularisation rows
@@ -87,6 +90,8 @@ pub struct MeasurementSelection {
     pub sessions: Vec<String>,
     /// A subset of measurements as (session name, index); empty = all of the chosen sessions.
     pub subset: Vec<(String, usize)>,
+    /// Measurements left out (session name, 0-based index in the session): outliers.
+    pub exclude: Vec<(String, usize)>,
 }
 
 impl MeasurementSelection {
@@ -125,6 +130,17 @@ impl MeasurementSelection {
                 picks.push((s, *i));
             }
         }
+        for (name, i) in &self.exclude {
+            let s = cell
+                .sessions
+                .iter()
+                .position(|s| &s.name == name)
+                .ok_or_else(|| ProblemError::UnknownSession(name.clone()))?;
+            if *i >= cell.sessions[s].measurements.len() {
+                return Err(ProblemError::UnknownMeasurement { session: name.clone(), index: *i });
+            }
+            picks.retain(|&p| p != (s, *i));
+        }
         if picks.is_empty() {
             return Err(ProblemError::Empty);
         }
@@ -146,6 +162,57 @@ pub enum ProblemError {
     Empty,
     #[error("a ball measurement needs the cell's artefact")]
     NoArtefact,
+}
+
+/// The tool blocks of the picked measurements (in order of first appearance) and, per session of
+/// the cell, its block (`usize::MAX` when none of its measurements is picked). One block per
+/// physical target: sessions naming the same `target` share one; a session whose TCP is identified
+/// and that names no target has its own; the other sessions share a block when their declared
+/// tools are equal (their TCPs are fixed: sharing changes nothing but the names).
+pub fn tool_blocks(cell: &Cell, picks: &[(usize, usize)]) -> (Vec<ToolBlock>, Vec<usize>) {
+    #[derive(PartialEq)]
+    enum Key<'a> {
+        Target(&'a str),
+        Own(usize),
+        Tool(&'a Tool),
+    }
+    let key = |s: usize| {
+        let sess = &cell.sessions[s];
+        match (&sess.target, sess.identify_tcp) {
+            (Some(t), _) => Key::Target(t),
+            (None, true) => Key::Own(s),
+            (None, false) => Key::Tool(&sess.tool),
+        }
+    };
+    let mut tools: Vec<ToolBlock> = Vec::new();
+    let mut keys: Vec<Key> = Vec::new();
+    let mut session_tool = vec![usize::MAX; cell.sessions.len()];
+    for &(s, _) in picks {
+        if session_tool[s] != usize::MAX {
+            continue;
+        }
+        let sess: &Session = &cell.sessions[s];
+        let k = key(s);
+        let t = match keys.iter().position(|x| *x == k) {
+            Some(t) => t,
+            None => {
+                keys.push(k);
+                tools.push(ToolBlock {
+                    tool: sess.tool.clone(),
+                    sessions: Vec::new(),
+                    identify_tcp: false,
+                    has_orientation: false,
+                });
+                tools.len() - 1
+            }
+        };
+        tools[t].sessions.push(sess.name.clone());
+        tools[t].identify_tcp |= sess.identify_tcp;
+        tools[t].has_orientation |=
+            picks.iter().any(|&(ps, i)| ps == s && matches!(sess.measurements[i].observation, Observation::Pose(_)));
+        session_tool[s] = t;
+    }
+    (tools, session_tool)
 }
 
 /// The identification problem of a cell.
@@ -181,30 +248,7 @@ impl Problem {
     ) -> Result<Problem, ProblemError> {
         let model = cell.model.clone();
         let picks = selection.picks(cell)?;
-        // Distinct tools.
-        let mut tools: Vec<ToolBlock> = Vec::new();
-        let mut session_tool = vec![usize::MAX; cell.sessions.len()];
-        for &(s, _) in &picks {
-            if session_tool[s] != usize::MAX {
-                continue;
-            }
-            let sess: &Session = &cell.sessions[s];
-            let t = match tools.iter().position(|b| b.tool == sess.tool) {
-                Some(t) => t,
-                None => {
-                    tools.push(ToolBlock {
-                        tool: sess.tool.clone(),
-                        sessions: Vec::new(),
-                        identify_tcp: false,
-                        has_orientation: false,
-                    });
-                    tools.len() - 1
-                }
-            };
-            tools[t].sessions.push(sess.name.clone());
-            tools[t].identify_tcp |= sess.identify_tcp;
-            session_tool[s] = t;
-        }
+        let (tools, session_tool) = tool_blocks(cell, &picks);
         // Global parameters.
         let mut params = Vec::new();
         let mut nominal = Vec::new();
@@ -263,13 +307,10 @@ impl Problem {
                     }
                 }
                 (Observation::Position(p), _) => Target::Point(*p),
-                (Observation::Pose(f), _) => {
-                    tools[t].has_orientation = true;
-                    Target::Pose(*f)
-                }
+                (Observation::Pose(f), _) => Target::Pose(*f),
             };
             let rows = if matches!(target, Target::Pose(_)) { 6 } else { 3 };
-            obs.push(Obs { session: s, index: i, tool: t, state, target, row, rows, weight: [1.0; 2] });
+            obs.push(Obs { session: s, index: i, tool: t, state, target, row, rows, weight: [1.0; 6] });
             row += rows;
         }
         Ok(Problem {
@@ -340,9 +381,9 @@ impl Problem {
         (pr, remap)
     }
 
-    /// Weight every observation: `weight(obs)` gives the multipliers of its position and rotation
-    /// rows (1/σ of each, in one common unit so the rows are comparable).
-    pub fn set_weights(&mut self, mut weight: impl FnMut(&Obs) -> [f64; 2]) {
+    /// Weight every observation: `weight(obs)` gives the multipliers of its position rows and
+    /// rotation rows (1/σ of each, in one common unit so the rows are comparable).
+    pub fn set_weights(&mut self, mut weight: impl FnMut(&Obs) -> [f64; 6]) {
         for o in &mut self.obs {
             o.weight = weight(o);
         }
@@ -449,11 +490,11 @@ impl Problem {
     fn write_residual(&self, o: &Obs, f: &Frame, out: &mut [f64]) {
         let (d, rot) = self.error(o, f);
         for k in 0..3 {
-            out[k] = d[k] * o.weight[0];
+            out[k] = d[k] * o.weight[k];
         }
         if let Some(w) = rot {
             for k in 0..3 {
-                out[3 + k] = w[k] * self.rotation_weight * o.weight[1];
+                out[3 + k] = w[k] * self.rotation_weight * o.weight[3 + k];
             }
         }
     }
@@ -497,7 +538,7 @@ impl Problem {
             self.write_residual(o, &f, &mut res[o.row..o.row + o.rows]);
             for &(_, c) in &wanted[o.tool] {
                 for r in 0..o.rows {
-                    let w = if r >= 3 { self.rotation_weight * o.weight[1] } else { o.weight[0] };
+                    let w = if r >= 3 { self.rotation_weight * o.weight[r] } else { o.weight[r] };
                     jac[(o.row + r, c)] = buf[c * 6 + r] * w;
                 }
             }
@@ -534,7 +575,7 @@ impl Problem {
             };
             if let Some(i) = i {
                 for r in 0..o.rows {
-                    let w = if r >= 3 { self.rotation_weight * o.weight[1] } else { o.weight[0] };
+                    let w = if r >= 3 { self.rotation_weight * o.weight[r] } else { o.weight[r] };
                     out[r * free.len() + c] = buf[i * 6 + r] * w;
                 }
             }
@@ -630,15 +671,57 @@ mod tests {
         assert_eq!(p.nominal[p.robot_index(Param::Base(3)).unwrap()], BASE[3]);
 
         // The validation session, named, alone.
-        let only = MeasurementSelection { sessions: vec!["check".into()], subset: Vec::new() };
+        let only = MeasurementSelection { sessions: vec!["check".into()], ..Default::default() };
         let p = problem(&cell, &only).unwrap();
         assert_eq!((p.obs.len(), p.n_rows, p.tools.len()), (4, 12, 1));
         // A subset, in its own order.
         let subset =
-            MeasurementSelection { sessions: Vec::new(), subset: vec![("poses".into(), 1), ("balls".into(), 2)] };
+            MeasurementSelection { subset: vec![("poses".into(), 1), ("balls".into(), 2)], ..Default::default() };
         let p = problem(&cell, &subset).unwrap();
         assert_eq!(p.obs.iter().map(|o| (o.session, o.index, o.row)).collect::<Vec<_>>(), [(2, 1, 0), (0, 2, 6)]);
         assert_eq!(p.tools[0].tool, nest());
+    }
+
+    /// One TCP per physical target: sessions whose TCP is identified get one each even with equal
+    /// (zero) guesses; sessions naming one target share it; declared equal tools share as before.
+    /// An excluded measurement is not in the problem, an unknown one is an error.
+    #[test]
+    fn tool_blocks_are_physical_targets() {
+        let q = random_configurations(6, 3);
+        let point = |i: usize| measurement(q[i].clone(), Observation::Position(Vector3::new(0.5, 0.1, 0.3)));
+        let reflector = |name: &str, i: usize| {
+            let mut s = session(name, Purpose::Identification, Tool::flange(), vec![point(i), point(i + 1)]);
+            s.identify_tcp = true;
+            s
+        };
+        let mut cell = irb120_cell(vec![
+            reflector("r1", 0),
+            reflector("r2", 2),
+            reflector("r3", 4),
+            session("declared-a", Purpose::Identification, nest(), vec![point(0)]),
+            session("declared-b", Purpose::Identification, nest(), vec![point(1)]),
+        ]);
+        let blocks = |cell: &Cell| {
+            let p = problem(cell, &MeasurementSelection::default()).unwrap();
+            p.tools.iter().map(|b| (b.sessions.join("+"), b.identify_tcp)).collect::<Vec<_>>()
+        };
+        let own = |s: &str| (s.to_string(), true);
+        assert_eq!(blocks(&cell), [own("r1"), own("r2"), own("r3"), ("declared-a+declared-b".into(), false)]);
+        cell.sessions[0].target = Some("nest-1".into());
+        cell.sessions[2].target = Some("nest-1".into());
+        assert_eq!(blocks(&cell), [own("r1+r3"), own("r2"), ("declared-a+declared-b".into(), false)]);
+        cell.sessions[4].target = Some("nest-2".into());
+        assert_eq!(blocks(&cell)[2..], [("declared-a".into(), false), ("declared-b".into(), false)]);
+
+        let sel = MeasurementSelection { exclude: vec![("r2".into(), 1)], ..Default::default() };
+        let p = problem(&cell, &sel).unwrap();
+        assert_eq!(p.obs.len(), 7);
+        assert!(!p.obs.iter().any(|o| o.session == 1 && o.index == 1));
+        let sel = MeasurementSelection { exclude: vec![("r2".into(), 2)], ..Default::default() };
+        assert_eq!(
+            problem(&cell, &sel).unwrap_err(),
+            ProblemError::UnknownMeasurement { session: "r2".into(), index: 2 }
+        );
     }
 
     #[test]
@@ -647,6 +730,7 @@ mod tests {
         let sel = |sessions: &[&str], subset: &[(&str, usize)]| MeasurementSelection {
             sessions: sessions.iter().map(|s| s.to_string()).collect(),
             subset: subset.iter().map(|(s, i)| (s.to_string(), *i)).collect(),
+            exclude: Vec::new(),
         };
         assert_eq!(problem(&cell, &sel(&["nope"], &[])).unwrap_err(), ProblemError::UnknownSession("nope".into()));
         assert_eq!(

@@ -34,6 +34,11 @@ pub struct Quality {
     /// The rows were weighted by an instrument model: `sigma` is then the ratio of the residual
     /// to the instrument's σ (1 when the model and the instrument model are right), not metres.
     pub weighted: bool,
+    /// RMS of the noise the instrument model and the measurements' own σ predict for the
+    /// measurement residuals (outliers left out), m; 0 until the identification sets it.
+    pub expected_rms: f64,
+    /// The residual RMS over `expected_rms` (1 when model and noise model are right).
+    pub residual_ratio: f64,
 }
 
 impl Quality {
@@ -110,6 +115,8 @@ impl Quality {
             n_rows: n,
             n_configs,
             weighted: false,
+            expected_rms: 0.0,
+            residual_ratio: f64::NAN,
         }
     }
 }

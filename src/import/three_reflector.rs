@@ -16,8 +16,9 @@
 //! the files are given, with its measurements in file (measuring) order: the sessions are marked
 //! `order: measured`, and each measurement's `sequence` is its pose's index (0-based, among the
 //! pose lines), the same in every reflector's session — one stop, one number. Where a reflector sits on
-//! the flange is unknown, so its tool has a zero TCP (and no payload) with `identify_tcp` set. The
-//! cell has no base guess and no artefact.
+//! the flange is unknown, so its tool has a zero TCP (and no payload) with `identify_tcp` set: the
+//! identification gives each reflector a TCP of its own and starts them, and the base, from an
+//! alternating registration (`identify::base`). The cell has no base guess and no artefact.
 
 use std::path::{Path, PathBuf};
 
@@ -78,6 +79,7 @@ pub fn import(
                     sequence: Some(pose as u64),
                     approach: None,
                     indicators: None,
+                    sigma: None,
                 }),
             }
         }
@@ -96,6 +98,7 @@ pub fn import(
             instrument: Instrument::LaserTracker,
             tool: Tool::flange(),
             identify_tcp: true,
+            target: None,
             measurements,
             order: MeasuringOrder::Measured,
         });

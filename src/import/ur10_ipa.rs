@@ -20,9 +20,11 @@
 //!   - `measurement_x/y/z`: the probe position in the tracker frame, mm.
 //!   - `measurement_rx/ry/rz`: the probe orientation in the tracker frame, degrees, **intrinsic**
 //!     XYZ Euler angles: `R = Rx(rx) · Ry(ry) · Rz(rz)`.
+//!   - `measurement_std_x/y/z/rx/ry/rz` (series B–D): the tracker's standard deviation of each
+//!     reading, carried as the measurement's own σ (`sigma_mm`, and `sigma_rotation_deg` about the
+//!     axes of {W}, propagated from the Euler angles'; see [`own_sigma`]).
 //!   - Ignored: `Goal x/y/z/roll/pitch/yaw` (the commanded TCP pose, m and rad, extrinsic xyz, in
-//!     ROS's `base_link`, which is the UR base frame turned 180° about z) and `measurement_std_*`
-//!     (the tracker's standard deviations; the cell has no place for them).
+//!     ROS's `base_link`, which is the UR base frame turned 180° about z).
 //! - `Trafo_TM_F_init.txt`: a 4×4 homogeneous matrix in mm, four whitespace-separated lines. Its
 //!   translation, about (0, 0.087, −109) mm, shows that it is the **flange pose in a probe
 //!   frame**: its inverse puts that frame at (0, 0, +109) mm on the flange's z axis, rotated
@@ -52,7 +54,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::{Matrix3, Matrix4, Vector3};
 
 use super::{ImportError, Imported, line_list, read_text};
-use crate::cell::{Cell, Instrument, Measurement, MeasuringOrder, Observation, Purpose, Session};
+use crate::cell::{Cell, Instrument, Measurement, MeasuringOrder, Observation, Purpose, Session, Sigma};
 use crate::kinematics::Frame;
 use crate::kinematics::frame::{rot_x, rot_y, rot_z};
 use crate::kinematics::model::{RobotModel, Tool, ur10};
@@ -68,6 +70,15 @@ const TIME_COLUMN: &str = "Timestamp";
 const TEMPERATURE_COLUMN: &str = "measurement_temperature";
 const POSITION_COLUMNS: [&str; 3] = ["measurement_x", "measurement_y", "measurement_z"];
 const ROTATION_COLUMNS: [&str; 3] = ["measurement_rx", "measurement_ry", "measurement_rz"];
+/// The tracker's standard deviations (series B–D): position mm, then rotation deg (of rx, ry, rz).
+const STD_COLUMNS: [&str; 6] = [
+    "measurement_std_x",
+    "measurement_std_y",
+    "measurement_std_z",
+    "measurement_std_rx",
+    "measurement_std_ry",
+    "measurement_std_rz",
+];
 
 /// How to import a series.
 #[derive(Clone, Debug, PartialEq)]
@@ -151,9 +162,15 @@ pub fn import_series(dir: &Path, opts: &Ur10Options) -> Result<(Session, Vec<Str
         probe.orthogonality_defect,
         tool.mass
     ));
-    notes.push(format!(
-        "{name}: the Goal columns and the tracker's standard deviations (measurement_std_*) are not carried into the cell"
-    ));
+    let with_std = rows.iter().filter(|r| r.std.is_some()).count();
+    notes.push(if with_std > 0 {
+        format!(
+            "{name}: the Goal columns are not carried into the cell; the tracker's standard deviations \
+             (measurement_std_*) are, as each measurement's sigma_mm and sigma_rotation_deg ({with_std} rows)"
+        )
+    } else {
+        format!("{name}: the Goal columns are not carried into the cell; no measurement_std_* columns")
+    });
 
     let measurements = rows
         .iter()
@@ -172,6 +189,7 @@ pub fn import_series(dir: &Path, opts: &Ur10Options) -> Result<(Session, Vec<Str
             sequence: Some(i as u64),
             approach: None,
             indicators: None,
+            sigma: r.std.map(|s| own_sigma(&s, &r.rotation_deg)),
         })
         .collect();
     let session = Session {
@@ -180,6 +198,7 @@ pub fn import_series(dir: &Path, opts: &Ur10Options) -> Result<(Session, Vec<Str
         instrument: Instrument::LaserTracker,
         tool,
         identify_tcp: true,
+        target: None,
         measurements,
         order: MeasuringOrder::Measured,
     };
@@ -351,6 +370,19 @@ fn measurements_file(dir: &Path) -> Result<PathBuf, ImportError> {
     }
 }
 
+/// A row's standard deviations as the cell's per-measurement σ: the position's per axis of the
+/// tracker frame ({W}), and the rotation's per axis of {W} from those of the intrinsic XYZ Euler
+/// angles. With R = Rx(a)·Ry(b)·Rz(c) the world rotation vector moves by δω = E·(δa, δb, δc),
+/// E = [x, Rx(a)·y, Rx(a)·Ry(b)·z]; its covariance E·diag(σ²)·Eᵀ (the tracker reports no
+/// correlations) has the diagonal taken here.
+fn own_sigma(std: &[f64; 6], rotation_deg: &[f64; 3]) -> Sigma {
+    let (a, b) = (rotation_deg[0] * DEG, rotation_deg[1] * DEG);
+    let e = [Vector3::x(), rot_x(a) * Vector3::y(), rot_x(a) * rot_y(b) * Vector3::z()];
+    let rotation =
+        std::array::from_fn(|axis| (0..3).map(|k| (e[k][axis] * std[3 + k] * DEG).powi(2)).sum::<f64>().sqrt());
+    Sigma { position: [std[0] * MM, std[1] * MM, std[2] * MM], rotation: Some(rotation) }
+}
+
 /// One parsed row, in file units except the joints (rad).
 struct Row {
     line: u64,
@@ -361,6 +393,8 @@ struct Row {
     temperature: f64,
     position_mm: [f64; 3],
     rotation_deg: [f64; 3],
+    /// The tracker's standard deviations (x, y, z mm; rx, ry, rz deg), when the file has them.
+    std: Option<[f64; 6]>,
 }
 
 /// Column indices of the fields the importer reads.
@@ -370,6 +404,8 @@ struct Columns {
     temperature: usize,
     position: [usize; 3],
     rotation: [usize; 3],
+    /// All six standard-deviation columns, or none.
+    std: Option<[usize; 6]>,
 }
 
 impl Columns {
@@ -397,6 +433,15 @@ impl Columns {
             temperature: find(TEMPERATURE_COLUMN)?,
             position: three(POSITION_COLUMNS)?,
             rotation: three(ROTATION_COLUMNS)?,
+            std: if STD_COLUMNS.iter().any(|c| header.contains(c)) {
+                let mut std = [0; 6];
+                for (k, name) in STD_COLUMNS.iter().enumerate() {
+                    std[k] = find(name)?;
+                }
+                Some(std)
+            } else {
+                None
+            },
         })
     }
 }
@@ -453,7 +498,25 @@ fn read_rows(path: &Path, model: &RobotModel) -> Result<Vec<Row>, ImportError> {
         }
         let position_mm = [number(cols.position[0])?, number(cols.position[1])?, number(cols.position[2])?];
         let rotation_deg = [number(cols.rotation[0])?, number(cols.rotation[1])?, number(cols.rotation[2])?];
-        rows.push(Row { line, stamp, q, temperature, position_mm, rotation_deg });
+        let std = match cols.std {
+            None => None,
+            Some(c) => {
+                let mut v = [0.0; 6];
+                for k in 0..6 {
+                    v[k] = number(c[k])?;
+                    if v[k] <= 0.0 {
+                        return Err(ImportError::value(
+                            path,
+                            line,
+                            STD_COLUMNS[k],
+                            format!("{} is not a positive σ", v[k]),
+                        ));
+                    }
+                }
+                Some(v)
+            }
+        };
+        rows.push(Row { line, stamp, q, temperature, position_mm, rotation_deg, std });
     }
     Ok(rows)
 }

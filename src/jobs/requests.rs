@@ -7,7 +7,9 @@ use utoipa::ToSchema;
 use crate::domain::ToolSpec;
 use crate::domain::diagnosis::DiagnoseSpec;
 pub use crate::domain::identification::SelectSpec;
-use crate::domain::identification::{IdentifySpec, default_kappa_limit, default_rotation_weight_mm};
+use crate::domain::identification::{
+    IdentifySpec, MeasurementRef, default_kappa_limit, default_residual_ratio_limit, default_rotation_weight_mm,
+};
 
 fn per_ball() -> usize {
     120
@@ -77,6 +79,19 @@ pub struct IdentificationRequest {
     /// Make the new parameter set the robot's active one when the job succeeds.
     #[serde(default)]
     pub activate: bool,
+    /// Measurements left out of the fit (outliers a refused fit named): session (id or name) and
+    /// 0-based index.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub exclude: Vec<MeasurementRef>,
+    /// Weighted least squares: each residual row by 1/σ, the measurement's own `sigma_mm` where it
+    /// has one, the default instrument model's otherwise.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub weighted: bool,
+    /// Refuse a fit whose residual RMS exceeds this many times the RMS the instrument's noise
+    /// predicts (default 50).
+    #[serde(default = "default_residual_ratio_limit")]
+    #[schema(exclusive_minimum = 1.0)]
+    pub residual_ratio_limit: f64,
 }
 
 impl IdentificationRequest {
@@ -89,6 +104,9 @@ impl IdentificationRequest {
             huber: self.huber,
             rotation_weight_mm: self.rotation_weight_mm,
             only: Vec::new(),
+            exclude: self.exclude.clone(),
+            weighted: self.weighted,
+            residual_ratio_limit: self.residual_ratio_limit,
         }
     }
 }

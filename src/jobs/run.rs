@@ -193,6 +193,12 @@ pub fn identify_error(e: IdentifyError) -> JobError {
         IdentifyError::Registration(_) => {
             JobError::Numerical { kind: "registration", title: "The base could not be registered", detail }
         }
+        IdentifyError::Misfit { .. } => {
+            JobError::Numerical { kind: "misfit", title: "The model does not describe these data", detail }
+        }
+        IdentifyError::Outliers { .. } => {
+            JobError::Numerical { kind: "outliers", title: "Outlier measurements", detail }
+        }
         IdentifyError::Problem(_) | IdentifyError::Option(_) => JobError::Invalid { detail, field: None },
     }
 }
@@ -346,6 +352,7 @@ fn pose_plan(
                 instrument: Instrument::TriCal,
                 tool,
                 identify_tcp: false,
+                target: None,
                 measurements: identification
                     .iter()
                     .map(|p| Measurement {
@@ -356,6 +363,7 @@ fn pose_plan(
                         sequence: None,
                         approach: None,
                         indicators: None,
+                        sigma: None,
                     })
                     .collect(),
                 order: MeasuringOrder::Unknown,

@@ -203,6 +203,7 @@ pub fn measure(
             sequence: Some(i as u64),
             approach: Some(approach.iter().map(|&a| a as i8).collect()),
             indicators,
+            sigma: None,
         });
         id_truth.push(MeasurementTruth {
             model_position: fk.t,
@@ -218,6 +219,7 @@ pub fn measure(
         instrument: Instrument::TriCal,
         tool: rig.trical.clone(),
         identify_tcp: false,
+        target: None,
         measurements: id,
         order: MeasuringOrder::Measured,
     }];
@@ -257,6 +259,7 @@ pub fn measure(
             sequence: Some(sequence),
             approach: Some(approach.iter().map(|&a| a as i8).collect()),
             indicators: None,
+            sigma: None,
         });
         per_nest[p.nest].1.push(MeasurementTruth {
             model_position: fk,
@@ -277,6 +280,7 @@ pub fn measure(
             instrument: Instrument::LaserTracker,
             tool: rig.nests[k].clone(),
             identify_tcp: false,
+            target: None,
             measurements: ms,
             order: MeasuringOrder::Measured,
         });
