@@ -73,7 +73,7 @@
 //! # Cost
 //! On 2 cores of a Xeon (one used), O1: 75 of 360 TriCal candidates in about 9 ms (6.6 ms without
 //! the exchange scan), 100 of 10,000 random configurations in about 0.5 s (0.17 s); see
-//! `benches/identify.rs`. The prediction criterion, 75 of 360: about 0.1 s (its exchange scan
+//! `benches/identify.rs`. The prediction criterion, 75 of 360: 0.1–0.2 s (its exchange scan
 //! scores every pair by a Woodbury update, without the determinant's pruning and GEMM).
 //!
 //! # Files
