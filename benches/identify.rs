@@ -6,7 +6,9 @@
 //! - `detmax/100_of_10000_random`: 100 of 10,000 configurations drawn within the joint limits.
 //!
 //! Each also `…_detmax_alone`: the thesis's DETMAX without the final exchange scan
-//! (`DetmaxOptions::polish = false`).
+//! (`DetmaxOptions::polish = false`). And `detmax/75_of_360_trical_prediction`: the same 75 of 360
+//! chosen by the prediction criterion (`detmax_prediction`) over 500 configurations drawn within
+//! the joint limits.
 //!
 //! Run: `cargo bench --bench identify`. Before criterion's timings it prints, per pool, the
 //! selection's O1 and κ and the number of exchanges.
@@ -17,7 +19,7 @@ use std::hint::black_box;
 use criterion::{Criterion, criterion_group, criterion_main};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use robocal::identify::detmax::{Block, DetmaxOptions, detmax, selection_observability};
+use robocal::identify::detmax::{Block, DetmaxOptions, Workspace, detmax, detmax_prediction, selection_observability};
 use robocal::kinematics::frame::wrap_pi;
 use robocal::kinematics::thesis::{irb120_table_5_1, trical_tool};
 use robocal::kinematics::{JointState, ParameterSet, Rows};
@@ -102,10 +104,25 @@ fn detmax_bench(c: &mut Criterion) {
         report("100 of 10,000 random", &random, &o);
     }
 
+    let workspace = Workspace::new(&random_pool(&set, 500, 2), M).unwrap();
+    let p = detmax_prediction(&trical, M, &workspace, &o75).unwrap();
+    println!(
+        "75 of 360 TriCal, prediction criterion: prediction RMS per σ {:.3} (random start {:.3}; O1 selection {:.3}), O1 {:.4}, {} exchanges ({} by the exchange scan)",
+        p.index_final,
+        p.index_initial,
+        workspace.prediction_rms(&trical, &detmax(&trical, M, &o75).unwrap().selected),
+        selection_observability(&trical, M, &p.selected).o1,
+        p.exchanges,
+        p.polish_exchanges
+    );
+
     let mut g = c.benchmark_group("detmax");
     for (name, o) in [("75_of_360_trical", o75), ("75_of_360_trical_detmax_alone", thesis(o75))] {
         g.bench_function(name, |b| b.iter(|| black_box(detmax(black_box(&trical), M, &o).unwrap())));
     }
+    g.bench_function("75_of_360_trical_prediction", |b| {
+        b.iter(|| black_box(detmax_prediction(black_box(&trical), M, &workspace, &o75).unwrap()))
+    });
     g.sample_size(10);
     for (name, o) in [("100_of_10000_random", o100), ("100_of_10000_random_detmax_alone", thesis(o100))] {
         g.bench_function(name, |b| b.iter(|| black_box(detmax(black_box(&random), M, &o).unwrap())));

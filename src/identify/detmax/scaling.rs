@@ -101,6 +101,13 @@ impl Scaled {
         a
     }
 
+    /// An m × m matrix W in the units of the blocks as given, in the scaled units: S⁻¹ W S⁻¹
+    /// (so that tr(W M_SI⁻¹) = tr(W̃ M̃⁻¹)).
+    pub(super) fn weight(&self, w: &[f64]) -> Vec<f64> {
+        let (m, s) = (self.m, &self.scale);
+        (0..m * m).map(|k| w[k] / (s[k / m] * s[k % m])).collect()
+    }
+
     /// Σ_{i∈set} B_iᵀB_i of the blocks as given (unscaled), m × m row-major.
     pub(super) fn information_si(&self, set: &[usize]) -> Vec<f64> {
         let m = self.m;

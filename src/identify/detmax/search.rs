@@ -18,9 +18,10 @@ pub(super) const RIDGE: f64 = 1e-9;
 /// What the search maximises.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Mode {
-    /// ln det M (O1, and every index while the set is singular).
+    /// ln det M (O1, and every criterion while the set is singular).
     LogDet,
-    /// −ln tr(M_SI⁻¹) (O5).
+    /// −ln tr(W̃ M̃⁻¹), a weighted trace of the inverse: O5 (W̃ = diag(1/s_c²), i.e. tr M_SI⁻¹) and
+    /// the prediction variance over a workspace (W̃ = S⁻¹ W S⁻¹, W = Σ_w J_wᵀJ_w in SI).
     Trace,
     /// ln of O2, O3 or O4 of M_SI.
     Eigen(Index),
@@ -29,7 +30,10 @@ pub(super) enum Mode {
 /// The state of one search.
 pub(super) struct Search<'a> {
     pub(super) p: &'a Scaled,
-    pub(super) index: Index,
+    /// The criterion once the set is nonsingular ([`Self::mode`] adds the ridged start).
+    pub(super) goal: Mode,
+    /// [`Mode::Trace`]: W̃, m × m (symmetric, positive semi-definite, scaled units); empty otherwise.
+    pub(super) weight: Vec<f64>,
     pub(super) in_set: Vec<bool>,
     /// Ridge added to the scaled M while the set is singular; 0 otherwise.
     pub(super) ridge: f64,
@@ -37,7 +41,7 @@ pub(super) struct Search<'a> {
     pub(super) minv: Vec<f64>,
     /// D_i = B̃_i M̃⁻¹ B̃_iᵀ for every candidate.
     pub(super) d: Vec<f64>,
-    /// O5: G_i = B̃_i M̃⁻¹ W M̃⁻¹ B̃_iᵀ, W = diag(1/s_c²), and T = tr(W M̃⁻¹) = tr M_SI⁻¹.
+    /// [`Mode::Trace`]: G_i = B̃_i M̃⁻¹ W̃ M̃⁻¹ B̃_iᵀ for every candidate and T = tr(W̃ M̃⁻¹).
     pub(super) g: Vec<f64>,
     pub(super) trace: f64,
     /// O2–O4: M_SI, m × m row-major.
@@ -49,19 +53,42 @@ pub(super) struct Search<'a> {
 }
 
 impl<'a> Search<'a> {
+    /// A search maximising an observability index.
     pub(super) fn new(p: &'a Scaled, index: Index, start: &[usize]) -> Self {
+        match index {
+            Index::O1 => Self::build(p, Mode::LogDet, Vec::new(), start),
+            Index::O5 => {
+                let m = p.m;
+                let mut w = vec![0.0; m * m];
+                for (c, s) in p.scale.iter().enumerate() {
+                    w[c * m + c] = 1.0 / (s * s);
+                }
+                Self::build(p, Mode::Trace, w, start)
+            }
+            idx => Self::build(p, Mode::Eigen(idx), Vec::new(), start),
+        }
+    }
+
+    /// A search minimising tr(W̃ M̃⁻¹), `weight` W̃ m × m in the pool's scaled units.
+    pub(super) fn with_weight(p: &'a Scaled, weight: Vec<f64>, start: &[usize]) -> Self {
+        assert_eq!(weight.len(), p.m * p.m, "an m × m weight");
+        Self::build(p, Mode::Trace, weight, start)
+    }
+
+    fn build(p: &'a Scaled, goal: Mode, weight: Vec<f64>, start: &[usize]) -> Self {
         let mut in_set = vec![false; p.len()];
         for &i in start {
             in_set[i] = true;
         }
         let mut s = Self {
             p,
-            index,
+            goal,
+            weight,
             in_set,
             ridge: 0.0,
             minv: vec![0.0; p.m * p.m],
             d: vec![0.0; p.sq_start[p.len()]],
-            g: if index == Index::O5 { vec![0.0; p.sq_start[p.len()]] } else { Vec::new() },
+            g: if goal == Mode::Trace { vec![0.0; p.sq_start[p.len()]] } else { Vec::new() },
             trace: 0.0,
             info_si: Vec::new(),
             since_refresh: 0,
@@ -77,12 +104,7 @@ impl<'a> Search<'a> {
     }
 
     pub(super) fn mode(&self) -> Mode {
-        match self.index {
-            _ if self.ridge > 0.0 => Mode::LogDet,
-            Index::O1 => Mode::LogDet,
-            Index::O5 => Mode::Trace,
-            idx => Mode::Eigen(idx),
-        }
+        if self.ridge > 0.0 { Mode::LogDet } else { self.goal }
     }
 
     pub(super) fn members(&self) -> Vec<usize> {
@@ -210,13 +232,13 @@ impl<'a> Search<'a> {
         let p = self.p;
         let m = p.m;
         let mode = self.mode();
-        let o5 = mode == Mode::Trace;
-        let up = self.prepare(a, 1.0, o5)?;
+        let traced = mode == Mode::Trace;
+        let up = self.prepare(a, 1.0, traced)?;
         let (base, info_a) = match mode {
             Mode::Eigen(idx) => (self.eigen_merit(&self.info_si, &[], idx), Some(self.info_with(a, 1.0))),
             _ => (0.0, None),
         };
-        let trace_a = if o5 { self.trace + Self::trace_change(&up) } else { 0.0 };
+        let trace_a = if traced { self.trace + Self::trace_change(&up) } else { 0.0 };
         let mut best: Option<(usize, f64)> = None;
         for j in self.members().into_iter().filter(|&j| consider(j)) {
             let rj = p.rows(j);
@@ -226,11 +248,11 @@ impl<'a> Search<'a> {
                     let (pj, qj) = pq.split_at_mut(rj * up.r);
                     let mut x = vec![0.0; rj * up.r];
                     let mut d = self.d_of(j).to_vec();
-                    let mut g = if o5 { self.g_of(j).to_vec() } else { Vec::new() };
-                    up.project(p.block(j), m, pj, o5.then_some(&mut *qj));
-                    up.update(pj, o5.then_some(&*qj), &mut d, o5.then_some(&mut g), &mut x);
+                    let mut g = if traced { self.g_of(j).to_vec() } else { Vec::new() };
+                    up.project(p.block(j), m, pj, traced.then_some(&mut *qj));
+                    up.update(pj, traced.then_some(&*qj), &mut d, traced.then_some(&mut g), &mut x);
                     let mut work = vec![0.0; 2 * rj * rj];
-                    if o5 {
+                    if traced {
                         let mut c = vec![0.0; rj * rj];
                         match inverse_shifted(&d, rj, -1.0, &mut work, &mut c) {
                             Some(()) => {
@@ -302,46 +324,55 @@ impl<'a> Search<'a> {
 mod tests {
     use super::*;
     use crate::identify::detmax::Block;
-    use crate::identify::detmax::test_pools::{random_pool, realistic_pool, to_dmatrix};
+    use crate::identify::detmax::test_pools::{random_pool, realistic_pool, to_dmatrix, workspace_info};
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 
     /// Every addition score, and every removal score after the best addition, of a search whose
     /// M⁻¹ and D_i have followed `swaps` Woodbury exchanges since the last recomputation, against
     /// directly formed matrices (nalgebra): ln det of the information matrix (LU) for O1, the
-    /// trace of the inverse of the unscaled one for O5. Differences of logarithms within 1e-9,
+    /// trace of the inverse of the unscaled one for O5, and tr(W M⁻¹) (unscaled) for the
+    /// prediction variance over the `workspace` blocks. Differences of logarithms within 1e-9,
     /// i.e. determinant and trace ratios to a relative 1e-9.
-    fn check_scores(pool: &[Block], m: usize, start: &[usize], swaps: &[(usize, usize)]) {
+    fn check_scores(pool: &[Block], m: usize, start: &[usize], swaps: &[(usize, usize)], workspace: &[Block]) {
         let scaled = Scaled::new(pool, m).unwrap();
         let mut set = start.to_vec();
         for &(i, j) in swaps {
             set.retain(|&k| k != j);
             set.push(i);
         }
+        let w = workspace_info(workspace, m);
         let log_det = |s: &[usize]| to_dmatrix(&scaled.information(s, 0.0), m).determinant().ln();
-        let log_tr = |s: &[usize]| to_dmatrix(&scaled.information_si(s), m).try_inverse().unwrap().trace().ln();
-        for index in [Index::O1, Index::O5] {
-            let mut search = Search::new(&scaled, index, start);
+        let inv_si = |s: &[usize]| to_dmatrix(&scaled.information_si(s), m).try_inverse().unwrap();
+        let log_tr = |s: &[usize]| inv_si(s).trace().ln();
+        let log_wtr = |s: &[usize]| (to_dmatrix(&w, m) * inv_si(s)).trace().ln();
+        for criterion in ["O1", "O5", "prediction"] {
+            let mut search = match criterion {
+                "O1" => Search::new(&scaled, Index::O1, start),
+                "O5" => Search::new(&scaled, Index::O5, start),
+                _ => Search::with_weight(&scaled, scaled.weight(&w), start),
+            };
             for &(i, j) in swaps {
                 search.commit(i, 1.0);
                 search.commit(j, -1.0);
             }
             assert_eq!(search.since_refresh, 2 * swaps.len());
-            let direct = |s: &[usize]| match index {
-                Index::O1 => log_det(s) - log_det(&set),
-                _ => log_tr(&set) - log_tr(s),
+            let direct = |s: &[usize]| match criterion {
+                "O1" => log_det(s) - log_det(&set),
+                "O5" => log_tr(&set) - log_tr(s),
+                _ => log_wtr(&set) - log_wtr(s),
             };
             let gains = search.addition_gains();
             for i in (0..pool.len()).filter(|i| !set.contains(i)) {
                 let d = direct(&[set.clone(), vec![i]].concat());
-                assert!((gains[i] - d).abs() < 1e-9, "{index}: adding {i}: {} vs {d}", gains[i]);
+                assert!((gains[i] - d).abs() < 1e-9, "{criterion}: adding {i}: {} vs {d}", gains[i]);
             }
             let (a, gain) = search.best_addition().unwrap();
             for &j in &set {
                 let (_, net) = search.best_removal(a, gain, |k| k == j).unwrap();
                 let swapped: Vec<usize> = set.iter().map(|&k| if k == j { a } else { k }).collect();
                 let d = direct(&swapped);
-                assert!((net - d).abs() < 1e-9, "{index}: exchanging {a} for {j}: {net} vs {d}");
+                assert!((net - d).abs() < 1e-9, "{criterion}: exchanging {a} for {j}: {net} vs {d}");
             }
         }
     }
@@ -350,27 +381,32 @@ mod tests {
     fn scores_match_direct_determinants_and_traces() {
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         let m = 9;
+        let mut ws_rng = ChaCha8Rng::seed_from_u64(30);
         for rows in [1, 3, 6] {
             let pool = random_pool(&mut rng, 30, rows, m);
+            // A workspace of fewer rows than m: W is singular, which the criterion allows.
+            let workspace = random_pool(&mut ws_rng, 2, 3, m);
             let n0 = m.div_ceil(rows) + 2;
             let start: Vec<usize> = (0..n0).collect();
-            check_scores(&pool, m, &start, &[]);
-            check_scores(&pool, m, &start, &[(n0, 0), (n0 + 3, 1), (n0 + 5, n0), (0, 2)]);
+            check_scores(&pool, m, &start, &[], &workspace);
+            check_scores(&pool, m, &start, &[(n0, 0), (n0 + 3, 1), (n0 + 5, n0), (0, 2)], &workspace);
         }
         // Mixed 3- and 6-row blocks.
         let mut pool = random_pool(&mut rng, 30, 3, m);
         for b in pool.iter_mut().step_by(4) {
             *b = random_pool(&mut rng, 1, 6, m).remove(0);
         }
-        check_scores(&pool, m, &[0, 1, 2, 3, 5], &[(6, 1), (8, 2), (9, 6)]);
+        let workspace = random_pool(&mut ws_rng, 10, 3, m);
+        check_scores(&pool, m, &[0, 1, 2, 3, 5], &[(6, 1), (8, 2), (9, 6)], &workspace);
     }
 
     #[test]
     fn scores_match_direct_determinants_on_realistic_blocks() {
         let pool = realistic_pool(60, 9);
+        let workspace = realistic_pool(50, 10);
         let start: Vec<usize> = (0..15).collect();
         let swaps: Vec<(usize, usize)> = (0..9).map(|k| (20 + 3 * k, k)).collect();
-        check_scores(&pool, 31, &start, &swaps[..0]);
-        check_scores(&pool, 31, &start, &swaps);
+        check_scores(&pool, 31, &start, &swaps[..0], &workspace);
+        check_scores(&pool, 31, &start, &swaps, &workspace);
     }
 }

@@ -13,6 +13,16 @@ pub(super) fn random_pool(rng: &mut ChaCha8Rng, n: usize, rows: usize, m: usize)
         .collect()
 }
 
+/// W = Σ_w B_wᵀB_w of a workspace's blocks, m × m row-major (units of the blocks).
+pub(super) fn workspace_info(blocks: &[Block], m: usize) -> Vec<f64> {
+    let mut w = DMatrix::<f64>::zeros(m, m);
+    for b in blocks {
+        let j = DMatrix::from_row_slice(b.rows, m, &b.data);
+        w += j.transpose() * j;
+    }
+    (0..m * m).map(|k| w[(k / m, k % m)]).collect()
+}
+
 pub(super) fn to_dmatrix(a: &[f64], m: usize) -> DMatrix<f64> {
     DMatrix::from_row_slice(m, m, a)
 }
@@ -20,6 +30,12 @@ pub(super) fn to_dmatrix(a: &[f64], m: usize) -> DMatrix<f64> {
 /// Blocks of the thesis's IRB 120 (Table 5.1, TriCal tool): position rows of the 31 identified
 /// parameters (SI) at random configurations within the joint limits.
 pub(super) fn realistic_pool(count: usize, seed: u64) -> Vec<Block> {
+    realistic_pool_within(count, seed, 1.0)
+}
+
+/// [`realistic_pool`] with every joint drawn within the central `share` of its range: a pool
+/// confined to part of the workspace, as the TriCal's candidates near the balls are.
+pub(super) fn realistic_pool_within(count: usize, seed: u64, share: f64) -> Vec<Block> {
     use crate::kinematics::thesis::{irb120_table_5_1, trical_tool};
     use crate::kinematics::{JointState, Rows};
     let names = [
@@ -34,7 +50,15 @@ pub(super) fn realistic_pool(count: usize, seed: u64) -> Vec<Block> {
     let mut buf = vec![0.0; 3 * set.layout.len()];
     let mut out = Vec::new();
     while out.len() < count {
-        let q: Vec<f64> = set.model.links.iter().map(|l| rng.random_range(l.limits[0]..l.limits[1])).collect();
+        let q: Vec<f64> = set
+            .model
+            .links
+            .iter()
+            .map(|l| {
+                let (mid, half) = (0.5 * (l.limits[0] + l.limits[1]), 0.5 * share * (l.limits[1] - l.limits[0]));
+                rng.random_range(mid - half..mid + half)
+            })
+            .collect();
         if q[4].abs() < 0.05 {
             continue;
         }

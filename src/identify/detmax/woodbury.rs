@@ -1,13 +1,12 @@
-//! The rank-r Woodbury update of M⁻¹ and of every candidate's D_i (and G_i for O5) after an
-//! accepted addition or removal, and their recomputation from scratch every [`super::REFRESH_EVERY`]
-//! updates.
+//! The rank-r Woodbury update of M⁻¹ and of every candidate's D_i (and G_i for the trace criteria,
+//! O5 and the prediction variance) after an accepted addition or removal, and their recomputation
+//! from scratch every [`super::REFRESH_EVERY`] updates.
 
 use faer::MatRef;
 
 use super::SINGULAR_PIVOT;
 use super::kernels::{add_outer, cholesky, cholesky_inverse, dot, gemm, inverse_shifted, symmetrise_lower};
-use super::search::{RIDGE, Search};
-use crate::identify::observability::Index;
+use super::search::{Mode, RIDGE, Search};
 
 /// A rank-r change M → M + sign·BᵀB of the scaled information matrix, prepared from the current
 /// M⁻¹: everything the candidates' D_i and G_i need.
@@ -18,7 +17,7 @@ pub(super) struct Update {
     pub(super) u: Vec<f64>,
     /// C = (I + sign·B M⁻¹ Bᵀ)⁻¹, r × r.
     pub(super) c: Vec<f64>,
-    /// O5: V = M⁻¹ W U (m × r column-major) and H = Uᵀ W U = G_b (r × r).
+    /// Trace criteria: V = M⁻¹ W̃ U (m × r column-major) and H = Uᵀ W̃ U = G_b (r × r).
     pub(super) v: Vec<f64>,
     pub(super) h: Vec<f64>,
 }
@@ -59,7 +58,7 @@ impl Update {
         }
     }
 
-    /// D_i ← D_i − sign·P C Pᵀ and, for O5, G_i ← G_i − sign·(Q Xᵀ + X Qᵀ) + X H Xᵀ with
+    /// D_i ← D_i − sign·P C Pᵀ and, for the trace criteria, G_i ← G_i − sign·(Q Xᵀ + X Qᵀ) + X H Xᵀ with
     /// X = P C, in place, from this block's P (and Q), r_i × r row-major. `x` holds r_i·r.
     pub(super) fn update(&self, p: &[f64], q: Option<&[f64]>, d: &mut [f64], g: Option<&mut [f64]>, x: &mut [f64]) {
         let r = self.r;
@@ -115,23 +114,32 @@ impl Search<'_> {
         let rows = p.total_rows();
         let mut y = vec![0.0; m * rows];
         gemm(&mut y, MatRef::from_column_major_slice(&self.minv, m, m), p.bt(0..rows));
-        let o5 = self.index == Index::O5;
-        let w: Vec<f64> = p.scale.iter().map(|s| 1.0 / (s * s)).collect();
+        let traced = self.goal == Mode::Trace;
+        // Column q of W̃Y = W̃ M⁻¹ b_q.
+        let mut wy = Vec::new();
+        if traced {
+            wy = vec![0.0; m * rows];
+            gemm(
+                &mut wy,
+                MatRef::from_column_major_slice(&self.weight, m, m),
+                MatRef::from_column_major_slice(&y, m, rows),
+            );
+        }
         for i in 0..p.len() {
             let (q0, ri, off) = (p.row_start[i], p.rows(i), p.sq_start[i]);
             for k in 0..ri {
                 let yk = &y[(q0 + k) * m..(q0 + k + 1) * m];
                 for l in 0..ri {
                     self.d[off + k * ri + l] = dot(yk, &p.data[(q0 + l) * m..(q0 + l + 1) * m]);
-                    if o5 {
-                        let yl = &y[(q0 + l) * m..(q0 + l + 1) * m];
-                        self.g[off + k * ri + l] = (0..m).map(|c| yk[c] * w[c] * yl[c]).sum();
+                    if traced {
+                        self.g[off + k * ri + l] = dot(yk, &wy[(q0 + l) * m..(q0 + l + 1) * m]);
                     }
                 }
             }
         }
-        self.trace = (0..m).map(|c| w[c] * self.minv[c * m + c]).sum();
-        if matches!(self.index, Index::O2 | Index::O3 | Index::O4) {
+        // tr(W̃ M̃⁻¹), both symmetric.
+        self.trace = if traced { dot(&self.weight, &self.minv) } else { 0.0 };
+        if matches!(self.goal, Mode::Eigen(_)) {
             self.info_si = p.information_si(&members);
         }
         self.since_refresh = 0;
@@ -139,7 +147,7 @@ impl Search<'_> {
 
     /// The change M → M + sign·B_bᵀB_b prepared from the current state; `None` when I + sign·D_b
     /// is not positive definite (a removal that would leave the set singular).
-    pub(super) fn prepare(&self, b: usize, sign: f64, o5: bool) -> Option<Update> {
+    pub(super) fn prepare(&self, b: usize, sign: f64, traced: bool) -> Option<Update> {
         let p = self.p;
         let m = p.m;
         let r = p.rows(b);
@@ -152,10 +160,11 @@ impl Search<'_> {
                 u[k * m + col] = dot(row, bk);
             }
         }
-        let (v, h) = if o5 {
+        let (v, h) = if traced {
             let mut v = vec![0.0; m * r];
             for k in 0..r {
-                let wu: Vec<f64> = (0..m).map(|col| u[k * m + col] / (p.scale[col] * p.scale[col])).collect();
+                let uk = &u[k * m..(k + 1) * m];
+                let wu: Vec<f64> = self.weight.chunks_exact(m).map(|row| dot(row, uk)).collect();
                 for (col, row) in self.minv.chunks_exact(m).enumerate() {
                     v[k * m + col] = dot(row, &wu);
                 }
@@ -177,8 +186,8 @@ impl Search<'_> {
     pub(super) fn commit(&mut self, b: usize, sign: f64) {
         let p = self.p;
         let m = p.m;
-        let o5 = self.index == Index::O5;
-        let Some(up) = self.prepare(b, sign, o5) else {
+        let traced = self.goal == Mode::Trace;
+        let Some(up) = self.prepare(b, sign, traced) else {
             // Only a removal the scores ruled out could get here; recompute instead.
             self.in_set[b] = sign > 0.0;
             self.refresh();
@@ -191,7 +200,7 @@ impl Search<'_> {
             add_outer(&mut self.minv, &up.u[k * m..(k + 1) * m], &yk, -sign);
         }
         symmetrise_lower(&mut self.minv, m);
-        if o5 {
+        if traced {
             self.trace += Self::trace_change(&up);
         }
         // Row q of P = B̃ U (column q of Pᵀ = Uᵀ B̃ᵀ), and of Q = B̃ V, for every pool row.
@@ -202,7 +211,7 @@ impl Search<'_> {
             out
         };
         let pt = project(&up.u);
-        let qt = if o5 { project(&up.v) } else { Vec::new() };
+        let qt = if traced { project(&up.v) } else { Vec::new() };
         let mut x = vec![0.0; 6 * r];
         for i in 0..p.len() {
             let (q0, q1, ri) = (p.row_start[i], p.row_start[i + 1], p.rows(i));
@@ -210,8 +219,8 @@ impl Search<'_> {
                 x.resize(ri * r, 0.0);
             }
             let (s0, s1) = (p.sq_start[i], p.sq_start[i + 1]);
-            let q = o5.then(|| &qt[q0 * r..q1 * r]);
-            let g = if o5 { Some(&mut self.g[s0..s1]) } else { None };
+            let q = traced.then(|| &qt[q0 * r..q1 * r]);
+            let g = if traced { Some(&mut self.g[s0..s1]) } else { None };
             up.update(&pt[q0 * r..q1 * r], q, &mut self.d[s0..s1], g, &mut x);
         }
         if !self.info_si.is_empty() {
@@ -227,7 +236,8 @@ mod tests {
     use super::*;
     use crate::identify::detmax::REFRESH_EVERY;
     use crate::identify::detmax::scaling::Scaled;
-    use crate::identify::detmax::test_pools::random_pool;
+    use crate::identify::detmax::test_pools::{random_pool, workspace_info};
+    use crate::identify::observability::Index;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 
@@ -239,8 +249,13 @@ mod tests {
         let pool = random_pool(&mut rng, 40, 3, m);
         let scaled = Scaled::new(&pool, m).unwrap();
         let start: Vec<usize> = (0..10).collect();
-        for index in [Index::O1, Index::O5] {
-            let mut s = Search::new(&scaled, index, &start);
+        let w = scaled.weight(&workspace_info(&random_pool(&mut rng, 15, 3, m), m));
+        for criterion in ["O1", "O5", "prediction"] {
+            let mut s = match criterion {
+                "O1" => Search::new(&scaled, Index::O1, &start),
+                "O5" => Search::new(&scaled, Index::O5, &start),
+                _ => Search::with_weight(&scaled, w.clone(), &start),
+            };
             for step in 0..(REFRESH_EVERY / 2 - 1) {
                 let (a, b) = (10 + step, step);
                 s.commit(a, 1.0);
@@ -255,7 +270,7 @@ mod tests {
             };
             assert!(rel(&minv, &s.minv) < 1e-10, "M⁻¹ drift {}", rel(&minv, &s.minv));
             assert!(rel(&d, &s.d) < 1e-10, "D drift {}", rel(&d, &s.d));
-            if index == Index::O5 {
+            if criterion != "O1" {
                 assert!(rel(&g, &s.g) < 1e-10, "G drift {}", rel(&g, &s.g));
                 assert!((t - s.trace).abs() < 1e-10 * s.trace);
             }
