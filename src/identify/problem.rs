@@ -16,11 +16,14 @@
 
 use faer::Mat;
 use nalgebra::Vector3;
+use rayon::prelude::*;
 
 use crate::cell::{Cell, Measurement, Observation, Purpose, Session};
 use crate::kinematics::frame::rotation_vector;
 use crate::kinematics::params::REFERENCE_TEMPERATURE_C;
-use crate::kinematics::{Chain, Frame, GravityModel, JointState, Param, ParamLayout, RobotModel, Rows, Tool};
+use crate::kinematics::{
+    Chain, Frame, GravityModel, JointState, MAX_JOINTS, Param, ParamLayout, RobotModel, Rows, Tool,
+};
 use crate::metrology::TriCal;
 
 /// One parameter of the global vector.
@@ -72,6 +75,8 @@ pub struct Obs {
     /// rotation rows: 1 unless the caller weights the problem by an instrument model
     /// ([`Problem::set_weights`]).
     pub weight: [f64; 6],
+    /// (sin, cos) of the joint readings, computed once ([`Chain::joint_sincos`]).
+    q_sc: [(f64, f64); MAX_JOINTS],
 }
 
 /// A linear pseudo-observation Σ coef·x ≈ target on global parameters: the regularisation rows
@@ -280,12 +285,22 @@ impl Problem {
             })
             .collect();
         let trical = TriCal::default();
+        // The holding torques with the tool and with a kilogram more, in parallel (two recursions
+        // a measurement: the longest part of building a large problem).
+        let torques: Vec<_> = picks
+            .par_iter()
+            .with_min_len(PAR_MIN_OBS)
+            .map(|&(s, i)| {
+                let q = &cell.sessions[s].measurements[i].q;
+                let t = session_tool[s];
+                (gravity[t].torques(q), heavier[t].torques(q))
+            })
+            .collect();
         let mut obs = Vec::with_capacity(picks.len());
         let mut row = 0;
-        for (s, i) in picks {
+        for ((s, i), (tau, t1)) in picks.into_iter().zip(torques) {
             let m: &Measurement = &cell.sessions[s].measurements[i];
             let t = session_tool[s];
-            let tau = gravity[t].torques(&m.q);
             let mut state = JointState::with_torques(&m.q, &tau[..model.dof()]);
             if let Some(a) = &m.approach {
                 for (j, &v) in a.iter().enumerate() {
@@ -293,7 +308,6 @@ impl Problem {
                 }
             }
             state.temperature_c = m.temperature_c.unwrap_or(REFERENCE_TEMPERATURE_C);
-            let t1 = heavier[t].torques(&m.q);
             for j in 0..model.dof() {
                 state.tau_per_kg[j] = t1[j] - tau[j];
             }
@@ -310,7 +324,11 @@ impl Problem {
                 (Observation::Pose(f), _) => Target::Pose(*f),
             };
             let rows = if matches!(target, Target::Pose(_)) { 6 } else { 3 };
-            obs.push(Obs { session: s, index: i, tool: t, state, target, row, rows, weight: [1.0; 6] });
+            let mut q_sc = [(0.0, 1.0); MAX_JOINTS];
+            for (sc, q) in q_sc.iter_mut().zip(&m.q) {
+                *sc = q.sin_cos();
+            }
+            obs.push(Obs { session: s, index: i, tool: t, state, target, row, rows, weight: [1.0; 6], q_sc });
             row += rows;
         }
         Ok(Problem {
@@ -456,10 +474,13 @@ impl Problem {
     /// Residual (target − model) of every row at `x`.
     pub fn residual(&self, x: &[f64], out: &mut [f64]) {
         let chains = self.chains(x);
-        for o in &self.obs {
-            let f = chains[o.tool].fk(&o.state);
-            self.write_residual(o, &f, &mut out[o.row..o.row + o.rows]);
-        }
+        let (obs_out, _) = out.split_at_mut(self.n_obs_rows);
+        par_rows(&self.obs, obs_out, &|part, first, out: &mut [f64]| {
+            for o in part {
+                let f = chains[o.tool].fk_cached(&o.state, &o.q_sc);
+                self.write_residual(o, &f, &mut out[o.row - first..o.row - first + o.rows]);
+            }
+        });
         self.write_priors(x, out);
     }
 
@@ -524,25 +545,34 @@ impl Problem {
             .iter()
             .map(|cols| cols.iter().enumerate().filter_map(|(i, c)| c.map(|c| (i, c))).collect())
             .collect();
-        let mut buf = vec![0.0; 6 * free.len().max(1)];
-        for o in &self.obs {
-            let rows = if o.rows == 6 { Rows::Pose } else { Rows::Position };
-            let f = chains[o.tool].jacobian_columns_into(
-                &o.state,
-                &self.layout,
-                rows,
-                wanted[o.tool].iter().copied(),
-                &mut buf,
-                6,
-            );
-            self.write_residual(o, &f, &mut res[o.row..o.row + o.rows]);
-            for &(_, c) in &wanted[o.tool] {
-                for r in 0..o.rows {
-                    let w = if r >= 3 { self.rotation_weight * o.weight[r] } else { o.weight[r] };
-                    jac[(o.row + r, c)] = buf[c * 6 + r] * w;
+        // The measurement rows, in parallel over contiguous parts of the observations: each part
+        // writes its own rows of J and r.
+        let (obs_jac, _) = jac.as_mut().split_at_row_mut(self.n_obs_rows);
+        let (obs_res, _) = res.split_at_mut(self.n_obs_rows);
+        let parts = JacRows { jac: obs_jac, res: obs_res };
+        par_rows(&self.obs, parts, &|part, first, mut rows_out: JacRows| {
+            let mut buf = vec![0.0; 6 * free.len().max(1)];
+            for o in part {
+                let rows = if o.rows == 6 { Rows::Pose } else { Rows::Position };
+                let f = chains[o.tool].jacobian_columns_cached(
+                    &o.state,
+                    &o.q_sc,
+                    &self.layout,
+                    rows,
+                    wanted[o.tool].iter().copied(),
+                    &mut buf,
+                    6,
+                );
+                let at = o.row - first;
+                self.write_residual(o, &f, &mut rows_out.res[at..at + o.rows]);
+                for &(_, c) in &wanted[o.tool] {
+                    for r in 0..o.rows {
+                        let w = if r >= 3 { self.rotation_weight * o.weight[r] } else { o.weight[r] };
+                        rows_out.jac[(at + r, c)] = buf[c * 6 + r] * w;
+                    }
                 }
             }
-        }
+        });
         if !self.priors.is_empty() {
             self.write_priors(x, res);
             let col: std::collections::HashMap<usize, usize> = free.iter().enumerate().map(|(c, &g)| (g, c)).collect();
@@ -582,6 +612,49 @@ impl Problem {
         }
         out
     }
+}
+
+/// Observations per part below which the work is not split further across threads (handing a
+/// part to another thread costs a few microseconds; one observation's FK and Jacobian about half
+/// of one).
+const PAR_MIN_OBS: usize = 256;
+
+/// The rows of the stacked system that a part of the observations writes: a row range of J and r.
+struct JacRows<'a> {
+    jac: faer::MatMut<'a, f64>,
+    res: &'a mut [f64],
+}
+
+/// Output that splits at a row (counted from its first row) into two independent parts.
+trait SplitRows: Send + Sized {
+    fn split(self, row: usize) -> (Self, Self);
+}
+
+impl SplitRows for &mut [f64] {
+    fn split(self, row: usize) -> (Self, Self) {
+        self.split_at_mut(row)
+    }
+}
+
+impl SplitRows for JacRows<'_> {
+    fn split(self, row: usize) -> (Self, Self) {
+        let (j1, j2) = self.jac.split_at_row_mut(row);
+        let (r1, r2) = self.res.split_at_mut(row);
+        (JacRows { jac: j1, res: r1 }, JacRows { jac: j2, res: r2 })
+    }
+}
+
+/// Run `f(part, first_row, out)` on contiguous parts of `obs` in parallel, each part with the
+/// rows of `out` it owns (`out` starts at `obs[0].row`; the observations' rows are contiguous and
+/// in order). Small problems run on the calling thread.
+fn par_rows<O: SplitRows>(obs: &[Obs], out: O, f: &(dyn Fn(&[Obs], usize, O) + Sync)) {
+    if obs.len() < 2 * PAR_MIN_OBS || rayon::current_num_threads() < 2 {
+        f(obs, obs.first().map_or(0, |o| o.row), out);
+        return;
+    }
+    let mid = obs.len() / 2;
+    let (a, b) = out.split(obs[mid].row - obs[0].row);
+    rayon::join(|| par_rows(&obs[..mid], a, f), || par_rows(&obs[mid..], b, f));
 }
 
 #[cfg(test)]
@@ -643,6 +716,49 @@ mod tests {
         let mut r = vec![0.0; p.n_rows];
         p.residual(x, &mut r);
         r
+    }
+
+    /// A problem large enough to be split across threads (1,200 measurements, mixed position and
+    /// pose rows, two tools) linearises to exactly what each observation's block computes on its
+    /// own through the uncached kinematics, and its residual is the same in both passes.
+    #[test]
+    fn parallel_linearisation_matches_each_observation() {
+        let q = random_configurations(1200, 5);
+        let points =
+            (0..700).map(|i| measurement(q[i].clone(), Observation::Position(Vector3::new(0.4, 0.1, 0.5)))).collect();
+        let poses =
+            (700..1200).map(|i| measurement(q[i].clone(), Observation::Pose(nominal_fk(&nest(), &q[i])))).collect();
+        let cell = irb120_cell(vec![
+            session("points", Purpose::Identification, trical_tool(), points),
+            session("poses", Purpose::Identification, nest(), poses),
+        ]);
+        let p = problem(&cell, &MeasurementSelection::default()).unwrap();
+        assert!(p.obs.len() >= 2 * PAR_MIN_OBS);
+        let free: Vec<usize> = (0..p.n_params()).collect();
+        let mut x = p.nominal.clone();
+        for (k, v) in x.iter_mut().enumerate() {
+            *v += 1e-4 * ((k % 7) as f64 - 3.0);
+        }
+        let mut jac = Mat::<f64>::zeros(p.n_rows, free.len());
+        let mut res = vec![0.0; p.n_rows];
+        p.linearise(&x, &free, &mut jac, &mut res);
+        let chains = p.chains(&x);
+        for o in &p.obs {
+            let b = p.block(&chains, o, &free);
+            for r in 0..o.rows {
+                for c in 0..free.len() {
+                    let (got, want) = (jac[(o.row + r, c)], b[r * free.len() + c]);
+                    assert!((got - want).abs() <= 1e-12 * (1.0 + want.abs()), "obs {} row {r} col {c}", o.index);
+                }
+            }
+            let f = chains[o.tool].fk(&o.state);
+            let mut want = [0.0; 6];
+            p.write_residual(o, &f, &mut want[..o.rows]);
+            for r in 0..o.rows {
+                assert!((res[o.row + r] - want[r]).abs() < 1e-14);
+            }
+        }
+        assert_eq!(residual(&p, &x), res);
     }
 
     /// Rows: 3 per ball or position, 6 per pose, stacked in selection order; the validation

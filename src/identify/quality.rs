@@ -48,13 +48,7 @@ impl Quality {
         // J = Q·R with Q orthonormal: J and R have the same singular values and right singular
         // vectors, and the same column norms, so both SVDs run on the m×m R instead of the tall
         // n×m J (the two tall SVDs were half of a 5,000-pose identification).
-        let r = if n >= m {
-            let qr = j.qr();
-            let r = qr.thin_R();
-            Mat::<f64>::from_fn(m, m, |a, b| if a <= b { r[(a, b)] } else { 0.0 })
-        } else {
-            j.clone()
-        };
+        let r = if n >= m { super::solver::r_factor(j.as_ref()) } else { j.clone() };
         let svd = r.thin_svd().expect("SVD of the Jacobian");
         let s: Vec<f64> = (0..m).map(|i| if i < svd.S().dim() { svd.S().column_vector()[i] } else { 0.0 }).collect();
         let v = svd.V();

@@ -69,7 +69,20 @@ struct Row {
     cb: f64,
     sb: f64,
     theta: f64,
+    /// cos and sin of the offset `theta`.
+    ct: f64,
+    st: f64,
     d: f64,
+}
+
+/// (sin, cos) of the first `n` angles.
+#[inline]
+fn sincos(theta: &[f64; MAX_JOINTS], n: usize) -> [(f64, f64); MAX_JOINTS] {
+    let mut sc = [(0.0, 1.0); MAX_JOINTS];
+    for j in 0..n {
+        sc[j] = theta[j].sin_cos();
+    }
+    sc
 }
 
 /// A rotation kept as its three columns (the frame's axes in the parent frame).
@@ -229,6 +242,7 @@ impl Chain {
             (r.sa, r.ca) = alpha[j].sin_cos();
             r.has_beta = beta[j].is_some();
             (r.sb, r.cb) = beta[j].unwrap_or(0.0).sin_cos();
+            (r.st, r.ct) = r.theta.sin_cos();
         }
         chain.base = Frame::from_xyzabc(&chain.base_chi);
         chain.tool = Frame::from_xyzabc(&chain.tool_chi);
@@ -304,6 +318,43 @@ impl Chain {
             th[j] += v * basis_at(term, j, s, edge);
         }
         th
+    }
+
+    /// (sin θ_j, cos θ_j) of the DH joint angles at a state, from (sin q_j, cos q_j) computed once
+    /// by a caller that evaluates the same state many times (an identification: every iteration).
+    /// θ_j = q_j + offset_j + δ_j: the offset's sine and cosine are the chain's, and δ_j (compliance
+    /// and effect terms, micro- to milliradians) takes a short series; the angle sums cost a few
+    /// multiplications against two `sin_cos` calls, which were a quarter of a large identification.
+    #[inline]
+    pub fn joint_sincos(&self, s: &JointState, q_sc: &[(f64, f64); MAX_JOINTS]) -> [(f64, f64); MAX_JOINTS] {
+        let mut eff = None;
+        let s = self.effective(s, &mut eff);
+        let mut delta = [0.0; MAX_JOINTS];
+        for j in 0..self.n {
+            delta[j] = self.compliance[j] * s.tau[j];
+        }
+        for &(j, term, v, edge) in &self.terms {
+            delta[j] += v * basis_at(term, j, s, edge);
+        }
+        let mut out = [(0.0, 1.0); MAX_JOINTS];
+        for j in 0..self.n {
+            let (sq, cq) = q_sc[j];
+            let r = &self.rows[j];
+            let (mut sn, mut cs) = (sq * r.ct + cq * r.st, cq * r.ct - sq * r.st);
+            let d = delta[j];
+            if d != 0.0 {
+                let (sd, cd) = if d.abs() < 1e-3 {
+                    // Taylor to d⁷/7! < 2e-25 (sine) and d⁸/8! < 3e-29 (cosine): exact in f64.
+                    let d2 = d * d;
+                    (d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0)), 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0)))
+                } else {
+                    d.sin_cos()
+                };
+                (sn, cs) = (sn * cd + cs * sd, cs * cd - sn * sd);
+            }
+            out[j] = (sn, cs);
+        }
+        out
     }
 
     /// The joint-angle error the effect terms add to joint j at a state (compliance included),
@@ -382,6 +433,17 @@ impl Chain {
 
     /// TCP pose from DH joint angles with every link length scaled by `scale`.
     pub fn fk_theta_scaled(&self, theta: &[f64; MAX_JOINTS], scale: f64) -> Frame {
+        self.fk_sincos_scaled(&sincos(theta, self.n), scale)
+    }
+
+    /// T_T^W at a configuration whose readings' (sin, cos) the caller keeps (see
+    /// [`Self::joint_sincos`]).
+    pub fn fk_cached(&self, s: &JointState, q_sc: &[(f64, f64); MAX_JOINTS]) -> Frame {
+        self.fk_sincos_scaled(&self.joint_sincos(s, q_sc), self.length_scale(s))
+    }
+
+    /// TCP pose from the (sin, cos) of the DH joint angles, link lengths scaled by `scale`.
+    fn fk_sincos_scaled(&self, sc: &[(f64, f64); MAX_JOINTS], scale: f64) -> Frame {
         let mut ax = Axes::from_matrix(&self.base.r);
         let mut o = self.base.t;
         for j in 0..self.n {
@@ -392,7 +454,7 @@ impl Chain {
                 ax.rot_y(r.cb, r.sb);
             }
             o += ax.z * (r.d * scale);
-            let (s, c) = theta[j].sin_cos();
+            let (s, c) = sc[j];
             ax.rot_z(c, s);
         }
         let flange = Frame::new(ax.to_matrix(), o);
@@ -432,6 +494,11 @@ impl Chain {
 
     /// [`Self::trace`] with every link length scaled by `scale`.
     pub fn trace_scaled(&self, theta: &[f64; MAX_JOINTS], scale: f64) -> Trace {
+        self.trace_sincos_scaled(&sincos(theta, self.n), scale)
+    }
+
+    /// [`Self::trace_scaled`] from the (sin, cos) of the DH joint angles.
+    fn trace_sincos_scaled(&self, sc: &[(f64, f64); MAX_JOINTS], scale: f64) -> Trace {
         let z0 = Vector3::zeros();
         let mut t = Trace {
             n: self.n,
@@ -461,7 +528,7 @@ impl Chain {
             o += ax.z * (r.d * scale);
             t.z[j] = ax.z;
             t.o[j] = o;
-            let (s, c) = theta[j].sin_cos();
+            let (s, c) = sc[j];
             ax.rot_z(c, s);
             t.link_r[j] = ax.to_matrix();
         }
@@ -502,9 +569,41 @@ impl Chain {
         out: &mut [f64],
         ld: usize,
     ) -> Frame {
-        let theta = self.joint_angles(s);
         let scale = self.length_scale(s);
-        let t = self.trace_scaled(&theta, scale);
+        let t = self.trace_scaled(&self.joint_angles(s), scale);
+        self.columns_from_trace(s, &t, scale, layout, rows, columns, out, ld)
+    }
+
+    /// [`Self::jacobian_columns_into`] at a state whose readings' (sin, cos) the caller keeps
+    /// (see [`Self::joint_sincos`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn jacobian_columns_cached(
+        &self,
+        s: &JointState,
+        q_sc: &[(f64, f64); MAX_JOINTS],
+        layout: &ParamLayout,
+        rows: Rows,
+        columns: impl Iterator<Item = (usize, usize)>,
+        out: &mut [f64],
+        ld: usize,
+    ) -> Frame {
+        let scale = self.length_scale(s);
+        let t = self.trace_sincos_scaled(&self.joint_sincos(s, q_sc), scale);
+        self.columns_from_trace(s, &t, scale, layout, rows, columns, out, ld)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn columns_from_trace(
+        &self,
+        s: &JointState,
+        t: &Trace,
+        scale: f64,
+        layout: &ParamLayout,
+        rows: Rows,
+        columns: impl Iterator<Item = (usize, usize)>,
+        out: &mut [f64],
+        ld: usize,
+    ) -> Frame {
         let mut eff = None;
         let s = self.effective(s, &mut eff);
         let p = t.tcp.t;
@@ -837,6 +936,69 @@ mod tests {
                 assert!((tr.tcp.t - a.t).norm() < 1e-15);
                 let d = chain.fk_deformed(&s, &[]);
                 assert!((d.t - a.t).norm() < 1e-14 && (d.r - a.r).abs().max() < 1e-14);
+                // From the readings' cached (sin, cos): the same angles, FK and Jacobian.
+                let mut q_sc = [(0.0, 1.0); MAX_JOINTS];
+                for j in 0..model.dof() {
+                    q_sc[j] = s.q[j].sin_cos();
+                }
+                let (theta, sc) = (chain.joint_angles(&s), chain.joint_sincos(&s, &q_sc));
+                for j in 0..model.dof() {
+                    let (sn, cs) = theta[j].sin_cos();
+                    // To the rounding of the sum θ = q + offset + δ itself (a few ε·|θ|).
+                    let tol = 4.0 * f64::EPSILON * (s.q[j].abs() + theta[j].abs() + 1.0);
+                    assert!((sc[j].0 - sn).abs() < tol && (sc[j].1 - cs).abs() < tol, "{j}: {:?} vs {sn}, {cs}", sc[j]);
+                }
+                let c = chain.fk_cached(&s, &q_sc);
+                assert!((c.t - a.t).norm() < 1e-14 && (c.r - a.r).abs().max() < 1e-14);
+                let m = layout.len();
+                let (mut j1, mut j2) = (vec![0.0; 6 * m], vec![0.0; 6 * m]);
+                chain.jacobian_into(&s, &layout, Rows::Pose, &mut j1, 6);
+                chain.jacobian_columns_cached(&s, &q_sc, &layout, Rows::Pose, (0..m).map(|i| (i, i)), &mut j2, 6);
+                // Columns such as the cubic compliance's carry τ³ (up to ~1e6 here) times lever arms
+                // known to ~1e-16 m: agreement to 1e-10 of the value is agreement to rounding.
+                for (i, (x, y)) in j1.iter().zip(&j2).enumerate() {
+                    assert!(
+                        (x - y).abs() <= 1e-10 * (1.0 + x.abs()),
+                        "{} row {}: {x} vs {y}",
+                        layout.params()[i / 6],
+                        i % 6
+                    );
+                }
+            }
+        }
+    }
+
+    /// The short series for small angle corrections: deflections of 1e-9 to 1e-3 rad give the
+    /// library's sin and cos of θ to the rounding of the sum θ = q + offset + δ.
+    #[test]
+    fn small_corrections_take_the_series_exactly() {
+        let model = irb120();
+        let layout = ParamLayout::full(&model);
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for e in [-9, -7, -5, -4, -3] {
+            let mut values = layout.nominal_values(
+                &model,
+                &crate::kinematics::Tool { tcp: [0.0; 6], mass: 0.0, com: Vector3::zeros() },
+                &[0.0; 6],
+            );
+            for j in 0..model.dof() {
+                values[layout.index_of(Param::Joint(j, JointTerm::Compliance)).unwrap()] = 10f64.powi(e);
+            }
+            let chain = Chain::new(&model, &layout, &values);
+            for _ in 0..100 {
+                let q: Vec<f64> = (0..model.dof()).map(|_| rng.random_range(-3.0..3.0)).collect();
+                let tau: Vec<f64> = (0..model.dof()).map(|_| rng.random_range(-0.99..0.99)).collect();
+                let s = JointState::with_torques(&q, &tau);
+                let mut q_sc = [(0.0, 1.0); MAX_JOINTS];
+                for j in 0..model.dof() {
+                    q_sc[j] = q[j].sin_cos();
+                }
+                let (theta, sc) = (chain.joint_angles(&s), chain.joint_sincos(&s, &q_sc));
+                for j in 0..model.dof() {
+                    let (sn, cs) = theta[j].sin_cos();
+                    let tol = 4.0 * f64::EPSILON * (q[j].abs() + theta[j].abs() + 1.0);
+                    assert!((sc[j].0 - sn).abs() < tol && (sc[j].1 - cs).abs() < tol, "1e{e}, {j}");
+                }
             }
         }
     }
