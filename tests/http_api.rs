@@ -381,6 +381,76 @@ async fn measuring_order_round_trips_through_the_service() {
     app.stop().await;
 }
 
+/// A session's physical target: stored, returned, exported; sessions naming one target declare
+/// one tool; a blank target is refused. An identification request's exclusions are checked
+/// against the sessions and applied: the excluded reading is not in the fit.
+#[tokio::test]
+async fn targets_and_exclusions_through_the_service() {
+    let app = TestApp::default().await;
+    let rid = robot(&app, "r").await;
+    let aid = artefact(&app, "plate").await;
+    let path = format!("/v1/robots/{rid}/sessions");
+    let sess = |name: &str, tcp: [f64; 3], target: &str| {
+        json!({"name": name, "purpose": "validation", "instrument": "laser_tracker", "tool": {"tcp_mm": tcp},
+               "identify_tcp": true, "target": target})
+    };
+    let r = app.post(&path, &sess("day-1", [0.0, 0.0, 0.0], " nest-1 ")).await;
+    assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
+    assert_eq!(r.body["target"], "nest-1", "trimmed");
+    let sid = r.body["id"].as_str().unwrap().to_string();
+    assert_eq!(app.post(&path, &sess("day-2", [0.0, 0.0, 0.0], "nest-1")).await.status, StatusCode::CREATED);
+    let r = app.post(&path, &sess("day-3", [0.0, 60.0, 80.0], "nest-1")).await;
+    assert_problem(&r, 422, Some("target"));
+    assert!(r.body["detail"].as_str().unwrap().contains("same tool"), "{}", r.text);
+    assert_problem(&app.post(&path, &sess("day-4", [0.0, 0.0, 0.0], "  ")).await, 422, Some("target"));
+    let mut plain = sess("other", [0.0, 0.0, 0.0], "x");
+    plain.as_object_mut().unwrap().remove("target");
+    let r = app.post(&path, &plain).await;
+    assert!(r.body.get("target").is_none(), "no target, none written: {}", r.text);
+    assert_eq!(app.get(&format!("/v1/sessions/{sid}")).await.body["target"], "nest-1");
+    let m = json!({"joints_deg": [0, 10, 20, 0, 30, 0], "position_mm": [400, 0, 500]});
+    assert_eq!(
+        app.post(&format!("/v1/sessions/{sid}/measurements"), &json!({"measurements": [m]})).await.status,
+        StatusCode::CREATED
+    );
+    let r = app.get(&format!("/v1/robots/{rid}/cell?sessions=day-1")).await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    let cell = robocal::domain::cell::parse_cell(&r.text).unwrap();
+    assert_eq!(cell.sessions[0].target.as_deref(), Some("nest-1"));
+
+    // Exclusions: checked at submission, applied in the fit.
+    let cell = small_cell(3);
+    let ids = upload(&app, &rid, &aid, &cell).await;
+    let trical = ids.iter().find(|(n, _)| n == "trical-1").unwrap().1.clone();
+    let n = cell.sessions.iter().find(|s| s.name == "trical-1").unwrap().measurements.len();
+    let path = format!("/v1/robots/{rid}/identifications");
+    let req = |exclude: Value| json!({"sessions": ["trical-1"], "exclude": exclude, "weighted": true});
+    assert_problem(
+        &app.post(&path, &req(json!([{"session": "nope", "index": 0}]))).await,
+        422,
+        Some("exclude[0].session"),
+    );
+    assert_problem(
+        &app.post(&path, &req(json!([{"session": "trical-1", "index": n}]))).await,
+        422,
+        Some("exclude[0].index"),
+    );
+    let all = app.wait(&app.post(&path, &req(json!([]))).await.body).await;
+    let one_out = app.wait(&app.post(&path, &req(json!([{"session": trical, "index": 7}]))).await.body).await;
+    assert_eq!(
+        (all["state"].as_str(), one_out["state"].as_str()),
+        (Some("succeeded"), Some("succeeded")),
+        "{all} {one_out}"
+    );
+    let measurements = async |j: &Value| {
+        let set = j["result"]["parameter_set_id"].as_str().unwrap();
+        app.get(&format!("/v1/parameter-sets/{set}")).await.body["quality"]["measurements"].as_u64()
+    };
+    assert_eq!(measurements(&all).await, Some(n as u64));
+    assert_eq!(measurements(&one_out).await, Some(n as u64 - 1), "the excluded reading is not in the fit");
+    app.stop().await;
+}
+
 /// The loop: identification, its refusal with the reason, validation, history, activation,
 /// export, import, compensation — and the server's parameter set is the CLI's, bit for bit.
 #[tokio::test]

@@ -221,3 +221,26 @@ async fn sessions_stored_before_the_order_marker_are_unknown() {
     pool.close().await;
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// 0004 gives sessions a physical target: none for the sessions stored before it (each identified
+/// TCP its own, as they were identified), read back by the store's queries; a blank one is refused.
+#[tokio::test]
+async fn sessions_stored_before_targets_have_none() {
+    let dir = fresh_dir("migrate-target");
+    let path = dir.join("robocal.db");
+    let old = at_version(&path, 3, true).await;
+    fill_v1(&old).await;
+    exec(&old, "INSERT INTO sessions (id, robot_id, name, purpose, instrument, tool_json, created_at) VALUES ('se1', 'r1', 'n1', 'validation', 'laser_tracker', '{\"tcp_mm\": [0, 0, 0]}', 't4')").await;
+    old.close().await;
+
+    let pool = db::connect(&path).await.unwrap();
+    assert_eq!(applied(&pool).await, db::MIGRATOR.iter().count() as i64);
+    let s = robocal::db::records::session(&pool, "se1").await.unwrap().unwrap();
+    assert_eq!(s.target, None);
+    exec(&pool, "UPDATE sessions SET target = 'nest-1' WHERE id = 'se1'").await;
+    assert_eq!(robocal::db::records::session(&pool, "se1").await.unwrap().unwrap().target.as_deref(), Some("nest-1"));
+    let e = sqlx::query("UPDATE sessions SET target = '  ' WHERE id = 'se1'").execute(&pool).await.unwrap_err();
+    assert!(e.to_string().contains("CHECK"), "{e}");
+    pool.close().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}

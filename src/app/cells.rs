@@ -133,8 +133,7 @@ pub async fn cell_file(pool: &SqlitePool, robot: &RobotRow, sessions: &[SessionR
             tool: serde_json::from_str::<ToolSpec>(&s.tool_json).map_err(|e| internal("tool", e))?,
             identify_tcp: s.identify_tcp,
             order: s.order,
-            // The service's sessions name no shared target: each identified TCP is its own.
-            target: None,
+            target: s.target.clone(),
             measurements: session_measurements(pool, &s.id).await?,
         });
     }

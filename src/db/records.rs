@@ -98,18 +98,20 @@ pub struct SessionRow {
     /// Whether the measurements are listed in measuring order (column `measuring_order`, 0003).
     #[sqlx(rename = "measuring_order")]
     pub order: OrderSpec,
+    /// The physical target measured (column `target`, 0004): sessions naming one share a TCP.
+    pub target: Option<String>,
     /// Measurements stored (not a column: counted on read).
     #[sqlx(default)]
     pub measurements: i64,
 }
 
 const SESSION_COLUMNS: &str = "s.id, s.robot_id, s.name, s.purpose, s.instrument, s.tool_json, s.identify_tcp, \
-     s.artefact_id, s.created_at, s.measuring_order, (SELECT COUNT(*) FROM measurements m WHERE m.session_id = s.id) AS measurements";
+     s.artefact_id, s.created_at, s.measuring_order, s.target, (SELECT COUNT(*) FROM measurements m WHERE m.session_id = s.id) AS measurements";
 
 pub async fn insert_session(db: impl SqliteExecutor<'_>, s: &SessionRow) -> Result<(), sqlx::Error> {
     sqlx::query(
         "INSERT INTO sessions (id, robot_id, name, purpose, instrument, tool_json, identify_tcp, artefact_id, created_at, \
-         measuring_order) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+         measuring_order, target) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
     )
     .bind(&s.id)
     .bind(&s.robot_id)
@@ -121,6 +123,7 @@ pub async fn insert_session(db: impl SqliteExecutor<'_>, s: &SessionRow) -> Resu
     .bind(&s.artefact_id)
     .bind(&s.created_at)
     .bind(s.order)
+    .bind(&s.target)
     .execute(db)
     .await?;
     Ok(())

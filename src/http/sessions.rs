@@ -35,6 +35,11 @@ pub struct NewSession {
     /// Backlash directions are never derived from the order of a shuffled or resampled session.
     #[serde(default)]
     pub order: OrderSpec,
+    /// The physical target measured (a reflector, a nest), e.g. `nest-1`. Sessions of a robot
+    /// naming the same target share one identified TCP and must declare the same tool; without
+    /// it, a session whose TCP is identified gets a TCP of its own.
+    #[serde(default)]
+    pub target: Option<String>,
 }
 
 /// A session.
@@ -50,6 +55,9 @@ pub struct SessionOut {
     pub artefact_id: Option<String>,
     /// Whether the measurements are in measuring order.
     pub order: OrderSpec,
+    /// The physical target measured, when the session names one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub target: Option<String>,
     /// Measurements stored.
     pub measurements: i64,
     pub created_at: String,
@@ -66,6 +74,7 @@ pub fn session_out(s: &records::SessionRow) -> Result<SessionOut, ApiError> {
         identify_tcp: s.identify_tcp,
         artefact_id: s.artefact_id.clone(),
         order: s.order,
+        target: s.target.clone(),
         measurements: s.measurements,
         created_at: s.created_at.clone(),
     })
@@ -108,17 +117,36 @@ pub async fn create(
     {
         return Err(ApiError::invalid("artefact_id", format!("no artefact '{a}'")));
     }
+    let target = match &body.target {
+        None => None,
+        Some(t) if t.trim().is_empty() => return Err(ApiError::invalid("target", "must not be empty")),
+        Some(t) => Some(t.trim().to_string()),
+    };
+    let tool_json = serde_json::to_string(&body.tool).expect("serialises");
+    if let Some(t) = &target {
+        let sharing = records::sessions_of_robot(&state.pool, &robot.id).await?;
+        if let Some(other) = sharing.iter().find(|s| s.target.as_deref() == Some(t) && s.tool_json != tool_json) {
+            return Err(ApiError::invalid(
+                "target",
+                format!(
+                    "session '{}' measured target '{t}' with another tool: sessions sharing a target declare the same tool",
+                    other.name
+                ),
+            ));
+        }
+    }
     let row = records::SessionRow {
         id: db::new_id(),
         robot_id: robot.id.clone(),
         name: name.to_string(),
         purpose: body.purpose,
         instrument: body.instrument,
-        tool_json: serde_json::to_string(&body.tool).expect("serialises"),
+        tool_json,
         identify_tcp: body.identify_tcp,
         artefact_id: body.artefact_id.clone(),
         created_at: db::now(),
         order: body.order,
+        target,
         measurements: 0,
     };
     records::insert_session(&state.pool, &row).await.map_err(|e| {

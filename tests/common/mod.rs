@@ -150,7 +150,8 @@ pub async fn artefact(app: &TestApp, name: &str) -> String {
     r.body["id"].as_str().unwrap().to_string()
 }
 
-/// Create the cell's sessions on a robot (with their measuring-order marker) and upload their
+/// Create the cell's sessions on a robot (with their measuring-order marker, identified TCP and
+/// target) and upload their
 /// measurements; session name → id.
 pub async fn upload(app: &TestApp, robot_id: &str, artefact_id: &str, cell: &CellFile) -> Vec<(String, String)> {
     let mut ids = Vec::new();
@@ -159,7 +160,7 @@ pub async fn upload(app: &TestApp, robot_id: &str, artefact_id: &str, cell: &Cel
             .post(
                 &format!("/v1/robots/{robot_id}/sessions"),
                 &json!({"name": s.name, "purpose": s.purpose, "instrument": s.instrument, "tool": s.tool, "artefact_id": artefact_id,
-                        "order": s.order}),
+                        "order": s.order, "identify_tcp": s.identify_tcp, "target": s.target}),
             )
             .await;
         assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
