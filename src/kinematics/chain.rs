@@ -443,6 +443,7 @@ impl Chain {
     }
 
     /// TCP pose from the (sin, cos) of the DH joint angles, link lengths scaled by `scale`.
+    #[inline]
     fn fk_sincos_scaled(&self, sc: &[(f64, f64); MAX_JOINTS], scale: f64) -> Frame {
         let mut ax = Axes::from_matrix(&self.base.r);
         let mut o = self.base.t;
@@ -498,6 +499,7 @@ impl Chain {
     }
 
     /// [`Self::trace_scaled`] from the (sin, cos) of the DH joint angles.
+    #[inline]
     fn trace_sincos_scaled(&self, sc: &[(f64, f64); MAX_JOINTS], scale: f64) -> Trace {
         let z0 = Vector3::zeros();
         let mut t = Trace {
@@ -593,6 +595,7 @@ impl Chain {
     }
 
     #[allow(clippy::too_many_arguments)]
+    #[inline]
     fn columns_from_trace(
         &self,
         s: &JointState,
