@@ -8,8 +8,11 @@ fn main() -> std::process::ExitCode {
             std::process::ExitCode::SUCCESS
         }
         Err(e) => {
+            if let Some(out) = e.output.as_deref().filter(|o| !o.is_empty()) {
+                println!("{out}");
+            }
             eprintln!("error: {e}");
-            std::process::ExitCode::from(2)
+            std::process::ExitCode::from(e.exit_status())
         }
     }
 }

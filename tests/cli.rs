@@ -12,6 +12,11 @@ fn robocal(args: &[&str]) -> (bool, Value, String) {
     (out.status.success(), v, stderr)
 }
 
+/// The exit status: 0 success, 1 ran and reported a failure, 2 input refused.
+fn status(args: &[&str]) -> i32 {
+    Command::new(env!("CARGO_BIN_EXE_robocal")).args(args).output().expect("runs").status.code().unwrap()
+}
+
 fn tmp(name: &str, contents: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("robocal-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -57,6 +62,16 @@ fn fk_then_ik_round_trips_through_the_command_line() {
         robocal(&["ik", "--robot", "irb120", "--position-mm", &pos, "--rotation-deg", &rot, "--tcp-mm", "40,0,130"]);
     assert!(ok);
     assert_eq!(all["solutions"].as_array().unwrap().len(), 8);
+    // Out of reach: the reason is printed as before, and the status is 1, with one branch or all.
+    let far = ["ik", "--robot", "irb120", "--position-mm", "4000,0,500", "--rotation-deg", "0,90,0"];
+    let (ok, out, err) = robocal(&[&far[..], &["--cfx", "1"]].concat());
+    assert!(!ok && out["error"].as_str().unwrap().contains("out of reach") && err.starts_with("error: "), "{err}");
+    assert_eq!(status(&[&far[..], &["--cfx", "1"]].concat()), 1);
+    let (ok, out, err) = robocal(&far);
+    assert!(!ok && out["solutions"].as_array().unwrap().len() == 8 && err.contains("no branch reaches"), "{err}");
+    assert_eq!(status(&far), 1);
+    // Refused input stays status 2.
+    assert_eq!(status(&["ik", "--robot", "irb120", "--position-mm", "400,0", "--rotation-deg", "0,0,0"]), 2);
 }
 
 #[test]
@@ -107,8 +122,11 @@ fn compensate_writes_joints_and_fake_poses() {
         {"id": "far", "position_mm": [2000, 0, 0], "rotation_deg": [0, 0, 0], "cfx": 0}]});
     let pp = tmp("params.json", &params.to_string());
     let tp = tmp("targets.json", &targets.to_string());
-    let (ok, out, err) = robocal(&["compensate", "--params", pp.to_str().unwrap(), "--targets", tp.to_str().unwrap()]);
-    assert!(ok, "{err}");
+    let args = ["compensate", "--params", pp.to_str().unwrap(), "--targets", tp.to_str().unwrap()];
+    // Two targets fail: the results are printed all the same, the status is 1 and says which.
+    let (ok, out, err) = robocal(&args);
+    assert!(!ok && err.contains("2 of 4 targets not compensated (bad, far)"), "{err}");
+    assert_eq!(status(&args), 1);
     let r = out["results"].as_array().unwrap();
     assert_eq!(out["failed"], 2);
     assert!(r[0]["residual_mm"].as_f64().unwrap() < 1e-6);
@@ -119,6 +137,10 @@ fn compensate_writes_joints_and_fake_poses() {
     assert!(d > 0.05 && d < 5.0, "{d}");
     assert!(r[2]["error"].as_str().unwrap().contains("targets[2].cfx"), "{}", r[2]["error"]);
     assert!(r[3]["error"].as_str().unwrap().contains("out of reach"), "{}", r[3]["error"]);
+    // All good: status 0.
+    let good = json!({"targets": [targets["targets"][0], targets["targets"][1]]});
+    let gp = tmp("good_targets.json", &good.to_string());
+    assert_eq!(status(&["compensate", "--params", pp.to_str().unwrap(), "--targets", gp.to_str().unwrap()]), 0);
     // A bad parameter file names its field.
     let bad = tmp("bad.json", r#"{"robot": {"preset": "irb120"}, "parameters": [{"name": "a9", "value": 1}]}"#);
     let (ok, _, err) = robocal(&["compensate", "--params", bad.to_str().unwrap(), "--targets", tp.to_str().unwrap()]);
@@ -236,6 +258,14 @@ fn simulate_identify_validate_study() {
         let q = nums(&row["mean_mm_quartiles"]);
         assert!(q.windows(2).all(|w| w[0] <= w[1]) && q[0] > 0.0, "{q:?}");
     }
+    // A validation session that is not there is refused up front (status 2), not a table of NaN.
+    let out = Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(["study", &cell, "--sizes", "20", "--sets", "1", "--validation", "nope"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("no session 'nope'") && out.stdout.is_empty(), "{err}");
 
     // Cross-validation on the TriCal session, transfer to the tracker session (base refitted).
     let cv = path("cv.json");

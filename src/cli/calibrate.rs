@@ -119,7 +119,7 @@ pub(super) fn identify(a: IdentifyArgs) -> Result<String, CliError> {
         }
         Some(other) => return Err(CliError::arg("--select", format!("'{other}' is not a selection method (detmax)"))),
     };
-    let (id, doc) = run_identification(&cell, opts, select, &|| ()).map_err(|e| CliError(e.to_string()))?;
+    let (id, doc) = run_identification(&cell, opts, select, &|| ()).map_err(|e| CliError::msg(e.to_string()))?;
     let q = &id.quality;
     write(&a.out, &doc.to_json_pretty())?;
     Ok(format!(
@@ -262,7 +262,7 @@ pub(super) fn diagnose(a: DiagnoseArgs) -> Result<String, CliError> {
             .map_err(option_error)?;
     opts.threads = a.threads.count()?;
     let input = input_of(&cell, &doc);
-    let diag = crate::diagnose::diagnose(&input, &opts).map_err(|e| CliError(e.to_string()))?;
+    let diag = crate::diagnose::diagnose(&input, &opts).map_err(|e| CliError::msg(e.to_string()))?;
     let out = diagnosis_out(&diag);
     let json = serde_json::to_string_pretty(&out).expect("json");
     let text = match &a.out {

@@ -173,7 +173,7 @@ pub(super) fn simulate(a: SimulateArgs) -> Result<String, CliError> {
     if a.id_per_ball == 0 {
         return Err(CliError::arg("--id-per-ball", "must be at least 1"));
     }
-    let sim = crate::sim::simulate::simulate(&opts).map_err(|e| CliError(e.to_string()))?;
+    let sim = crate::sim::simulate::simulate(&opts).map_err(|e| CliError::msg(e.to_string()))?;
     let text = crate::domain::cell::cell_to_json(&sim.cell);
     write(&a.out, &text)?;
     let mut report = format!(
@@ -228,7 +228,7 @@ pub(super) fn import_ur10(a: Ur10IpaArgs) -> Result<String, CliError> {
         tool_mass_kg: a.tool_mass_kg,
         tool_com_mm: a.tool_com_mm.as_deref().map(|s| three("--tool-com-mm", s)).transpose()?,
     };
-    let imported = crate::import::ur10_ipa::import_cell(&series, &opts).map_err(|e| CliError(e.to_string()))?;
+    let imported = crate::import::ur10_ipa::import_cell(&series, &opts).map_err(|e| CliError::msg(e.to_string()))?;
     write_imported(&a.out, imported)
 }
 
@@ -236,6 +236,6 @@ pub(super) fn import_three(a: ThreeReflectorArgs) -> Result<String, CliError> {
     let model = robot_model("--robot", &a.robot)?;
     let p = purpose("--purpose", &a.purpose)?;
     let imported = crate::import::three_reflector::import(&a.joints, &a.positions, model, p)
-        .map_err(|e| CliError(e.to_string()))?;
+        .map_err(|e| CliError::msg(e.to_string()))?;
     write_imported(&a.out, imported)
 }

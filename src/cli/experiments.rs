@@ -123,7 +123,7 @@ pub(super) fn study(a: StudyArgs) -> Result<String, CliError> {
         identify,
     };
     let started = std::time::Instant::now();
-    let st = study(&cell, &opts).map_err(|e| CliError(e.to_string()))?;
+    let st = study(&cell, &opts).map_err(|e| CliError::msg(e.to_string()))?;
     let elapsed = started.elapsed().as_secs_f64();
     let report = StudyReport::new(&st, a.sets, index, a.polish, a.detmax.seed, elapsed, threads);
     let mut text = report.text();
@@ -131,7 +131,24 @@ pub(super) fn study(a: StudyArgs) -> Result<String, CliError> {
         write(out, &serde_json::to_string_pretty(&report).expect("json"))?;
         text.push_str(&format!("wrote {}", out.display()));
     }
-    Ok(text.trim_end().to_string())
+    let text = text.trim_end().to_string();
+    // Refused fits are part of a study's result (the table counts them); a study none of whose
+    // identifications gave a result has failed.
+    let failed: Vec<&crate::identify::study::StudyRun> = st.runs.iter().filter(|r| r.error.is_some()).collect();
+    if let Some(first) = failed.first().filter(|_| failed.len() == st.runs.len()) {
+        return Err(CliError::failed(
+            Some(text),
+            format!(
+                "{} of {} identifications failed (first: n = {}, set {}: {})",
+                failed.len(),
+                st.runs.len(),
+                first.n,
+                first.set,
+                first.error.as_deref().unwrap_or_default()
+            ),
+        ));
+    }
+    Ok(text)
 }
 
 pub(super) fn crossval(a: CrossvalArgs) -> Result<String, CliError> {
@@ -177,7 +194,7 @@ pub(super) fn crossval(a: CrossvalArgs) -> Result<String, CliError> {
     if let Some(k) = a.transfer_kappa_limit {
         kappa_limit(k, "transfer_kappa_limit").map_err(option_error)?;
     }
-    let cv = crossval(&cell, &opts).map_err(|e| CliError(e.to_string()))?;
+    let cv = crossval(&cell, &opts).map_err(|e| CliError::msg(e.to_string()))?;
     let elapsed = started.elapsed().as_secs_f64();
 
     let report = CrossvalReport::new(&cv, a.seed, a.folds, a.draws, elapsed, threads);
@@ -242,7 +259,7 @@ pub(super) fn bench_diagnosis(a: BenchDiagnosisArgs) -> Result<String, CliError>
         text.push_str(&format!("wrote {}", out.display()));
     }
     if report.errors > 0 {
-        return Err(CliError(format!("{text}\n{} runs failed", report.errors)));
+        return Err(CliError::msg(format!("{text}\n{} runs failed", report.errors)));
     }
     Ok(text.trim_end().to_string())
 }

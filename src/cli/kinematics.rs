@@ -259,7 +259,12 @@ pub(super) fn ik(a: IkArgs) -> Result<String, CliError> {
         let Target::Pose { choice, .. } = spec.to_target(set.dof()).map_err(flag)? else {
             unreachable!("a spec without joints_deg is a pose target")
         };
-        one(choice.seed())
+        let v = one(choice.seed());
+        if let Some(e) = v.get("error").and_then(Value::as_str) {
+            let e = e.to_string();
+            return Err(CliError::failed(Some(serde_json::to_string_pretty(&v).expect("json")), e));
+        }
+        v
     } else {
         if !comp.has_closed_form() {
             return Err(CliError::arg(
@@ -275,7 +280,14 @@ pub(super) fn ik(a: IkArgs) -> Result<String, CliError> {
                 v
             })
             .collect();
-        json!({ "position_mm": position_mm(&target.t), "solutions": solutions })
+        let out = json!({ "position_mm": position_mm(&target.t), "solutions": solutions });
+        if solutions.iter().all(|v| v.get("error").is_some()) {
+            return Err(CliError::failed(
+                Some(serde_json::to_string_pretty(&out).expect("json")),
+                format!("no branch reaches the target: {}", solutions[0]["error"].as_str().unwrap_or_default()),
+            ));
+        }
+        out
     };
     Ok(serde_json::to_string_pretty(&out).expect("json"))
 }
@@ -293,9 +305,25 @@ pub(super) fn compensate(a: CompensateArgs) -> Result<String, CliError> {
     let comp = Compensator::new(&set);
     let dof = set.dof();
     let results = compensate_targets(&comp, dof, &file.targets);
-    let failed = results.iter().filter(|r| r.error.is_some()).count();
-    let text = serde_json::to_string_pretty(&json!({ "results": results, "failed": failed })).expect("json");
-    write_or_return(&a.out, text)
+    let failed: Vec<String> = results
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| r.error.is_some())
+        .map(|(i, r)| r.id.clone().unwrap_or_else(|| format!("targets[{i}]")))
+        .collect();
+    let text = serde_json::to_string_pretty(&json!({ "results": results, "failed": failed.len() })).expect("json");
+    let out = write_or_return(&a.out, text)?;
+    if failed.is_empty() {
+        return Ok(out);
+    }
+    // The results are written either way (the good targets are usable); the status says not all are.
+    let shown = failed.iter().take(5).cloned().collect::<Vec<_>>().join(", ");
+    let more = if failed.len() > 5 { format!(" and {} more", failed.len() - 5) } else { String::new() };
+    let printed = if a.out.is_some() { None } else { Some(out) };
+    Err(CliError::failed(
+        printed,
+        format!("{} of {} targets not compensated ({shown}{more}): see their \"error\"", failed.len(), results.len()),
+    ))
 }
 
 pub(super) fn nominal(a: NominalArgs) -> Result<String, CliError> {

@@ -76,17 +76,35 @@ pub enum Command {
     Demo(DemoArgs),
 }
 
-/// A command-line failure: the argument (or file and field) and the reason.
+/// A command-line failure: the argument (or file and field) and the reason — input refused, exit
+/// status 2 — or a command that ran and whose output reports a failure (a target out of reach, a
+/// compensation with failed targets): the output is still printed (or written) and the status is 1,
+/// so that a script or a cell PC can tell success from failure without parsing it.
 #[derive(Debug, thiserror::Error)]
-#[error("{0}")]
-pub struct CliError(pub String);
+#[error("{message}")]
+pub struct CliError {
+    pub message: String,
+    /// The command's output, printed to stdout before the message (a `Failed` run).
+    pub output: Option<String>,
+}
 
 impl CliError {
+    pub fn msg(message: impl Into<String>) -> Self {
+        CliError { message: message.into(), output: None }
+    }
     fn arg(arg: &str, reason: impl std::fmt::Display) -> Self {
-        CliError(format!("{arg}: {reason}"))
+        CliError::msg(format!("{arg}: {reason}"))
     }
     fn file(path: &Path, e: DomainError) -> Self {
-        CliError(format!("{}: {e}", path.display()))
+        CliError::msg(format!("{}: {e}", path.display()))
+    }
+    /// The command ran; its output (already written when it went to a file) reports a failure.
+    fn failed(output: Option<String>, message: impl Into<String>) -> Self {
+        CliError { message: message.into(), output: Some(output.unwrap_or_default()) }
+    }
+    /// The exit status: 1 when the command ran and reported a failure, 2 when input was refused.
+    pub fn exit_status(&self) -> u8 {
+        if self.output.is_some() { 1 } else { 2 }
     }
 }
 
@@ -168,12 +186,12 @@ impl ThreadsArgs {
 }
 
 fn read(path: &Path) -> Result<String, CliError> {
-    fs::read_to_string(path).map_err(|e| CliError(format!("{}: cannot read: {e}", path.display())))
+    fs::read_to_string(path).map_err(|e| CliError::msg(format!("{}: cannot read: {e}", path.display())))
 }
 
 /// Write `text` and a final newline to `path`.
 fn write(path: &Path, text: &str) -> Result<(), CliError> {
-    fs::write(path, format!("{text}\n")).map_err(|e| CliError(format!("{}: cannot write: {e}", path.display())))
+    fs::write(path, format!("{text}\n")).map_err(|e| CliError::msg(format!("{}: cannot write: {e}", path.display())))
 }
 
 fn write_or_return(out: &Option<PathBuf>, text: String) -> Result<String, CliError> {
@@ -215,11 +233,11 @@ fn robot_model(arg: &str, robot: &str) -> Result<crate::kinematics::RobotModel, 
     let is_file = robot.ends_with(".json") || Path::new(robot).exists();
     let value: Value = if is_file {
         let path = Path::new(robot);
-        serde_json::from_str(&read(path)?).map_err(|e| CliError(format!("{}: not JSON: {e}", path.display())))?
+        serde_json::from_str(&read(path)?).map_err(|e| CliError::msg(format!("{}: not JSON: {e}", path.display())))?
     } else {
         json!({ "preset": robot })
     };
     RobotSpec::from_json_value(&value)
         .and_then(|r| r.to_model())
-        .map_err(|e| if is_file { CliError(format!("{robot}: {e}")) } else { CliError::arg(arg, e.reason) })
+        .map_err(|e| if is_file { CliError::msg(format!("{robot}: {e}")) } else { CliError::arg(arg, e.reason) })
 }

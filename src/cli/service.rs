@@ -93,7 +93,7 @@ fn runtime() -> Result<tokio::runtime::Runtime, CliError> {
     tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
-        .map_err(|e| CliError(format!("cannot start the async runtime: {e}")))
+        .map_err(|e| CliError::msg(format!("cannot start the async runtime: {e}")))
 }
 
 fn init_tracing() {
@@ -118,7 +118,7 @@ pub(super) fn serve(a: ServeArgs) -> Result<String, CliError> {
     opts.require_auth = a.require_auth;
     opts.grace = std::time::Duration::from_secs(a.grace_s);
     opts.config.max_batch = a.max_batch;
-    runtime()?.block_on(serve(opts, None, shutdown_signal())).map_err(|e| CliError(e.to_string()))?;
+    runtime()?.block_on(serve(opts, None, shutdown_signal())).map_err(|e| CliError::msg(e.to_string()))?;
     Ok("robocal stopped".into())
 }
 
@@ -127,7 +127,7 @@ pub(super) fn token(t: TokenCommand) -> Result<String, CliError> {
     let rt = runtime()?;
     rt.block_on(async {
         let open = |TokenDb { db }: TokenDb| async move {
-            crate::db::connect(&db).await.map_err(|e| CliError(format!("{}: {e}", db.display())))
+            crate::db::connect(&db).await.map_err(|e| CliError::msg(format!("{}: {e}", db.display())))
         };
         match t {
             TokenCommand::Create { db, name, scopes } => {
@@ -136,7 +136,7 @@ pub(super) fn token(t: TokenCommand) -> Result<String, CliError> {
                     return Err(CliError::arg("--name", "must not be empty"));
                 }
                 let pool = open(db).await?;
-                let (row, secret) = tokens::create(&pool, name.trim(), &scopes).await.map_err(|e| CliError(e.to_string()))?;
+                let (row, secret) = tokens::create(&pool, name.trim(), &scopes).await.map_err(|e| CliError::msg(e.to_string()))?;
                 pool.close().await;
                 Ok(serde_json::to_string_pretty(&json!({
                     "id": row.id, "name": row.name, "scopes": row.scopes.split(' ').collect::<Vec<_>>(),
@@ -146,7 +146,7 @@ pub(super) fn token(t: TokenCommand) -> Result<String, CliError> {
             }
             TokenCommand::List { db } => {
                 let pool = open(db).await?;
-                let rows = tokens::list(&pool).await.map_err(|e| CliError(e.to_string()))?;
+                let rows = tokens::list(&pool).await.map_err(|e| CliError::msg(e.to_string()))?;
                 pool.close().await;
                 let v: Vec<Value> = rows
                     .iter()
@@ -156,9 +156,9 @@ pub(super) fn token(t: TokenCommand) -> Result<String, CliError> {
             }
             TokenCommand::Revoke { db, id } => {
                 let pool = open(db).await?;
-                let ok = tokens::revoke(&pool, &id).await.map_err(|e| CliError(e.to_string()))?;
+                let ok = tokens::revoke(&pool, &id).await.map_err(|e| CliError::msg(e.to_string()))?;
                 pool.close().await;
-                if ok { Ok(format!("revoked {id}")) } else { Err(CliError(format!("no live token '{id}'"))) }
+                if ok { Ok(format!("revoked {id}")) } else { Err(CliError::msg(format!("no live token '{id}'"))) }
             }
         }
     })
@@ -180,7 +180,7 @@ pub(super) fn demo(a: DemoArgs) -> Result<String, CliError> {
             Some(url) => {
                 let client = Client::new(url, a.token.clone()).map_err(|e| CliError::arg("--url", e))?;
                 eprintln!("robocal demo against {url}");
-                let r = run(&client, &opts, &mut log).await.map_err(|e| CliError(e.to_string()))?;
+                let r = run(&client, &opts, &mut log).await.map_err(|e| CliError::msg(e.to_string()))?;
                 Ok(table(&r))
             }
             None => {
@@ -189,15 +189,15 @@ pub(super) fn demo(a: DemoArgs) -> Result<String, CliError> {
                 let server =
                     crate::server::start(crate::server::ServeOptions::new(db.clone(), ([127, 0, 0, 1], 0).into()))
                         .await
-                        .map_err(|e| CliError(e.to_string()))?;
+                        .map_err(|e| CliError::msg(e.to_string()))?;
                 eprintln!("robocal demo: in-process server at {} on {}", server.url(), db.display());
-                let client = Client::new(&server.url(), None).map_err(|e| CliError(e.to_string()))?;
+                let client = Client::new(&server.url(), None).map_err(|e| CliError::msg(e.to_string()))?;
                 let r = run(&client, &opts, &mut log).await;
                 let _ = server.stop().await;
                 for suffix in ["", "-wal", "-shm"] {
                     let _ = std::fs::remove_file(format!("{}{suffix}", db.display()));
                 }
-                Ok(table(&r.map_err(|e| CliError(e.to_string()))?))
+                Ok(table(&r.map_err(|e| CliError::msg(e.to_string()))?))
             }
         }
     })

@@ -102,6 +102,23 @@ pub fn study(cell: &Cell, opts: &StudyOptions) -> Result<Study, IdentifyError> {
     if validation.is_empty() {
         return Err(IdentifyError::Option("the cell has no validation session to score the study on".into()));
     }
+    // Named sessions are checked once here, not discovered as a failure of every run.
+    for name in &opts.validation {
+        match cell.session(name) {
+            None => {
+                let known = validation_sessions(cell).join(", ");
+                return Err(IdentifyError::Option(format!(
+                    "validation: no session '{name}' in the cell (its validation sessions: {known})"
+                )));
+            }
+            Some(s) if s.purpose != crate::cell::Purpose::Validation => {
+                return Err(IdentifyError::Option(format!(
+                    "validation: '{name}' is an identification session, not a validation one"
+                )));
+            }
+            Some(_) => {}
+        }
+    }
     let pool = DetmaxPool::new(cell, &opts.identify)?;
     if let Some(&n) = opts.sizes.iter().find(|&&n| n >= pool.len()) {
         return Err(IdentifyError::Option(format!(
