@@ -73,6 +73,13 @@ async fn robots_and_artefacts() {
     assert_eq!(r.body["parameters"], 43);
     assert_eq!(r.body["robot"], json!({"preset": "irb120"}));
     assert!(r.body["active_parameter_set_id"].is_null());
+    // A missing or an unknown field is named in the problem document, nested ones by their path.
+    assert_problem(&app.post("/v1/robots", &json!({"robot": {"preset": "irb120"}})).await, 422, Some("name"));
+    assert_problem(
+        &app.post("/v1/artefacts", &json!({"name": "p", "distances_mm": {"d12": 300, "d13": 300}})).await,
+        422,
+        Some("distances_mm.d23"),
+    );
     assert_problem(
         &app.post("/v1/robots", &json!({"name": "cell-1", "robot": {"preset": "irb120"}})).await,
         409,
@@ -83,7 +90,7 @@ async fn robots_and_artefacts() {
         422,
         Some("robot.preset"),
     );
-    assert_problem(&app.post("/v1/robots", &json!({"name": "x"})).await, 422, None);
+    assert_problem(&app.post("/v1/robots", &json!({"name": "x"})).await, 422, Some("robot"));
     assert_problem(
         &app.post("/v1/robots", &json!({"name": "x", "robot": {"preset": "ur10"}, "colour": 1})).await,
         422,
@@ -92,7 +99,7 @@ async fn robots_and_artefacts() {
     assert_problem(
         &app.post("/v1/robots", &json!({"name": "x", "robot": {"preset": "ur10"}, "base_guess": {"x_mm": 1}})).await,
         422,
-        Some("base_guess"),
+        Some("base_guess.y_mm"),
     );
     assert_problem(
         &app.raw(Method::POST, "/v1/robots", Some("application/json"), b"{\"name\": ".to_vec(), &[]).await,
@@ -535,6 +542,35 @@ async fn identification_validation_and_compensation() {
     assert!(res[1]["fake_pose"]["position_mm"].is_array());
     assert!(res[2]["error"].as_str().unwrap().contains("reach"), "{}", res[2]);
     assert!(res[3]["error"].as_str().unwrap().starts_with("targets[3].cfx"), "{}", res[3]);
+    // The response states its frame; a fake pose comes back in the Euler family the target used.
+    assert_eq!(r.body["frame"]["kind"], "world");
+    assert!(r.body["frame"]["description"].as_str().unwrap().contains("nominal base"), "{}", r.body["frame"]);
+    let rot: Vec<f64> =
+        res[0]["fake_pose"]["rotation_deg"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    assert!((rot[1] - 180.0).abs() < 2.0 && rot[0].abs() < 2.0 && rot[2].abs() < 2.0, "{rot:?}");
+    // A quaternion rounded as a program stores it is normalised, and the answer says so; the
+    // same target in the base frame and relative to a work object is answered in those frames.
+    let q = json!([{"id": "q", "position_mm": [150, 80, 120], "quaternion": [0, 0, 1.0004, 0], "cfx": 0}]);
+    let r = app.post(&cpath, &json!({"targets": q, "parameter_set_id": set_id})).await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    let note = r.body["results"][0]["notes"][0].as_str().unwrap_or_default();
+    assert!(note.contains("normalised") && note.contains("1.0004"), "{}", r.text);
+    assert_eq!(r.body["results"][0]["joints_deg"], res[0]["joints_deg"], "the same rotation as [0, 180, 0]");
+    let r = app.post(&cpath, &json!({"targets": q, "parameter_set_id": set_id, "frame": "base"})).await;
+    assert_eq!((r.status, &r.body["frame"]["kind"]), (StatusCode::OK, &json!("base")), "{}", r.text);
+    let wobj = json!({"name": "fixture-2", "position_mm": [0, 0, 0], "rotation_deg": [0, 0, 0]});
+    let r = app
+        .post(&cpath, &json!({"targets": q, "parameter_set_id": set_id, "frame": "base", "work_object": wobj}))
+        .await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    assert_eq!(r.body["frame"]["work_object"], "fixture-2");
+    let bad = json!({"name": "w", "position_mm": [0, 0, 0], "quaternion": [0, 0, 2, 0]});
+    let r = app.post(&cpath, &json!({"targets": q, "parameter_set_id": set_id, "work_object": bad})).await;
+    assert_problem(&r, 422, Some("work_object.quaternion"));
+    let r = app
+        .post(&cpath, &json!({"targets": q, "parameter_set_id": set_id, "frame": "world", "work_object": wobj}))
+        .await;
+    assert_problem(&r, 422, Some("work_object"));
     assert_problem(
         &app.post(&cpath, &json!({"targets": [], "parameter_set_id": "none"})).await,
         422,
@@ -564,9 +600,34 @@ async fn identification_validation_and_compensation() {
     assert_eq!(rep["n"], 60);
     assert!(rep["mean_mm"].as_f64().unwrap() < 0.1 && rep["nominal"]["mean_mm"].as_f64().unwrap() > 1.0, "{rep}");
     assert_eq!(rep["residuals"].as_array().unwrap().len(), 60);
-    for k in ["median_mm", "std_mm", "rms_mm", "p95_mm", "max_mm", "per_axis"] {
+    for k in ["median_mm", "std_mm", "rms_mm", "p95_mm", "max_mm", "per_axis", "vs_zone_distance"] {
         assert!(!rep[k].is_null(), "{k}");
     }
+    // The two front ends give the same report: `robocal validate` on the exported cell (whose
+    // artefact places the calibration zone) prints what the service stored, field for field.
+    let exported = app.get(&format!("/v1/robots/{rid}/cell?sessions=trical-1,tracker-n1,tracker-n2,tracker-n3")).await;
+    assert_eq!(exported.status, StatusCode::OK, "{}", exported.text);
+    let (cell_path, set_path) = (app.dir.join("validate_cell.json"), app.dir.join("validate_set.json"));
+    std::fs::write(&cell_path, &exported.text).unwrap();
+    std::fs::write(&set_path, &app.get(&format!("/v1/parameter-sets/{set_id}/export")).await.text).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .arg("validate")
+        .args([&set_path, &cell_path])
+        .args([
+            "--session",
+            "tracker-n1",
+            "--session",
+            "tracker-n2",
+            "--session",
+            "tracker-n3",
+            "--residuals",
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let cli: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(&cli, rep, "the CLI's validation report is the service's");
     assert_problem(&app.get("/v1/validations/none").await, 404, None);
 
     // History with validation figures; explicit activation; the active set.

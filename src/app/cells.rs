@@ -48,9 +48,9 @@ pub async fn checked_sessions(
             return Err(AppError::invalid(
                 format!("{field}[{i}]"),
                 format!(
-                    "session '{}' is a {} session; this needs {} sessions",
+                    "session '{}' is {} session; this needs {} sessions",
                     s.name,
-                    s.purpose.as_str(),
+                    crate::domain::with_article(s.purpose.as_str()),
                     purpose.as_str()
                 ),
             ));
@@ -138,4 +138,19 @@ pub async fn cell_file(pool: &SqlitePool, robot: &RobotRow, sessions: &[SessionR
         });
     }
     Ok(CellFile { robot: robot_json, base_guess, artefact, sessions: specs })
+}
+
+/// The artefact the robot was calibrated on: the one its identification sessions use, when they
+/// all use the same one. A validation on sessions without an artefact (a laser tracker's) places
+/// its calibration zone (the ball triangle's centroid) with it, as a cell file does.
+pub async fn calibration_artefact(pool: &SqlitePool, robot_id: &str) -> Result<Option<ArtefactSpec>, AppError> {
+    let sessions = sessions_with_purpose(pool, robot_id, PurposeSpec::Identification).await?;
+    let mut ids: Vec<&str> = sessions.iter().filter_map(|s| s.artefact_id.as_deref()).collect();
+    ids.sort_unstable();
+    ids.dedup();
+    let [id] = ids[..] else { return Ok(None) };
+    let row = records::artefact(pool, id).await?.ok_or_else(|| AppError::Internal(format!("artefact {id} missing")))?;
+    serde_json::from_str::<ArtefactSpec>(&row.spec_json)
+        .map(Some)
+        .map_err(|e| AppError::Internal(format!("artefact {id}: {e}")))
 }

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use super::{CliError, DetmaxArgs, list, load_cell, option_error, read, write, write_or_return};
+use super::{CliError, DetmaxArgs, OutputFormat, list, load_cell, option_error, read, write, write_or_return};
 use crate::domain::ParameterSetDoc;
 use crate::units::MM;
 
@@ -74,11 +74,19 @@ pub struct ValidateArgs {
     /// Score against the true positions of a simulated cell (its --truth-out file) instead of the readings.
     #[arg(long)]
     pub truth: Option<PathBuf>,
-    /// Include the per-measurement residuals.
+    /// Include the per-measurement residuals (in the JSON report).
     #[arg(long)]
     pub residuals: bool,
+    /// Write the JSON report here (the table is still printed on a terminal).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// `text`: the before/after table and per-axis statistics; `json`: the full report; `auto`: the
+    /// table on a terminal, JSON when piped.
+    #[arg(long, value_enum, default_value_t)]
+    pub format: OutputFormat,
+    /// The same as `--format json`.
+    #[arg(long, conflicts_with = "format")]
+    pub json: bool,
 }
 
 pub(super) fn identify(a: IdentifyArgs) -> Result<String, CliError> {
@@ -155,9 +163,42 @@ pub(super) fn validate(a: ValidateArgs) -> Result<String, CliError> {
         Some(run) => Reference::Truth(run),
         None => Reference::Measured,
     };
-    let report = validate(&doc.set, &cell, &sessions, reference).map_err(|e| CliError::arg("--session", e))?;
-    let v = crate::domain::validation::report_to_json(&report, a.residuals);
-    write_or_return(&a.out, serde_json::to_string_pretty(&v).expect("json"))
+    let report = validate(&doc.set, &cell, &sessions, reference).map_err(|e| validate_error(&a, e))?;
+    let json =
+        serde_json::to_string_pretty(&crate::domain::validation::report_to_json(&report, a.residuals)).expect("json");
+    if !a.format.text(a.json) {
+        return write_or_return(&a.out, json);
+    }
+    let mut text = super::validation_text::text(&crate::domain::validation::ValidationOut::from_report(&report, false));
+    if let Some(out) = &a.out {
+        write(out, &json)?;
+        text.push_str(&format!("\nwrote {}", out.display()));
+    }
+    Ok(text)
+}
+
+/// A validation refused, blamed on what caused it: the sessions named (or the cell's lack of
+/// validation sessions when none was named), the two files' robots, the truth file, or the cell.
+fn validate_error(a: &ValidateArgs, e: crate::validate::report::ValidateError) -> CliError {
+    use crate::validate::report::ValidateError as E;
+    match e {
+        E::NoSession if a.session.is_empty() => CliError::msg(format!(
+            "{}: the cell has no validation session; name the sessions to validate on with --session",
+            a.cell.display()
+        )),
+        E::NoSession | E::UnknownSession(_) | E::DuplicateSession(_) => CliError::arg("--session", e),
+        E::NoMeasurement if a.session.is_empty() => {
+            CliError::msg(format!("{}: the cell's validation sessions hold no measurement", a.cell.display()))
+        }
+        E::NoMeasurement => CliError::arg("--session", e),
+        E::RobotMismatch { .. } => {
+            CliError::msg(format!("{} and {} do not match: {e}", a.params.display(), a.cell.display()))
+        }
+        E::TruthMissing(_) | E::TruthCount { .. } => CliError::arg("--truth", e),
+        E::JointCount { .. } | E::NoBall { .. } | E::NotFinite { .. } => {
+            CliError::msg(format!("{}: {e}", a.cell.display()))
+        }
+    }
 }
 
 #[derive(Args, Debug)]

@@ -7,12 +7,19 @@ use clap::Args;
 use serde_json::{Value, json};
 
 use super::{CliError, numbers, read, robot_model, three, write_or_return};
-use crate::domain::pose::{compensate_targets, frame_from_parts, position_mm};
+use crate::domain::pose::{
+    FrameKind, TargetFrames, WorkObjectSpec, compensate_targets, frame_from_parts_noted, position_mm,
+};
 use crate::domain::{
     DomainError, ParameterSetDoc, PoseOut, Target, TargetSpec, ToolSpec, from_json, joints_deg, to_deg,
 };
 use crate::kinematics::{AnalyticIk, Branch, Compensator, IkError, JointState, ParameterSet, Seed, Tool};
-use crate::units::{DEG, MM};
+use crate::units::{DEG, MM, OUT_DEG, OUT_MM, OUT_NM, round_all, round_to};
+
+/// Degrees rounded to the output resolution.
+fn round_deg(v: &[f64]) -> Vec<f64> {
+    v.iter().map(|x| round_to(*x, OUT_DEG)).collect()
+}
 
 /// Which model to evaluate.
 #[derive(Args, Debug)]
@@ -182,11 +189,11 @@ pub(super) fn fk(a: FkArgs) -> Result<String, CliError> {
     let pose = PoseOut::from_frame(&f);
     let mut out = json!({
         "model": if calibrated { "calibrated" } else { "nominal" },
-        "joints_deg": to_deg(&q),
+        "joints_deg": round_deg(&to_deg(&q)),
         "position_mm": pose.position_mm,
         "rotation_deg": pose.rotation_deg,
         "quaternion": pose.quaternion,
-        "gravity_torques_nm": &tau[..n],
+        "gravity_torques_nm": tau[..n].iter().map(|t| round_to(*t, OUT_NM)).collect::<Vec<_>>(),
     });
     let chain = set.nominal_chain();
     if let Ok(ik) = AnalyticIk::new(&set.model, chain.base(), chain.tool()) {
@@ -238,12 +245,12 @@ pub(super) fn ik(a: IkArgs) -> Result<String, CliError> {
         seed_joints_deg,
         ..Default::default()
     };
-    let target = frame_from_parts(position, rotation, quaternion).map_err(flag)?;
+    let (target, note) = frame_from_parts_noted(position, rotation, quaternion).map_err(flag)?;
     let comp = Compensator::new(&set);
     let one = |seed: Seed<'_>| -> Value {
         match comp.pose(&target, seed) {
             Ok(c) => json!({
-                "joints_deg": to_deg(c.joints()),
+                "joints_deg": round_deg(&to_deg(c.joints())),
                 "confdata": c.confdata.map(|d| [d.cf1, d.cf4, d.cf6, d.cfx.cfx() as i32]),
                 "residual_mm": c.residual_position / MM,
                 "residual_urad": c.residual_rotation * 1e6,
@@ -259,7 +266,10 @@ pub(super) fn ik(a: IkArgs) -> Result<String, CliError> {
         let Target::Pose { choice, .. } = spec.to_target(set.dof()).map_err(flag)? else {
             unreachable!("a spec without joints_deg is a pose target")
         };
-        let v = one(choice.seed());
+        let mut v = one(choice.seed());
+        if let Some(n) = &note {
+            v["notes"] = json!([n]);
+        }
         if let Some(e) = v.get("error").and_then(Value::as_str) {
             let e = e.to_string();
             return Err(CliError::failed(Some(serde_json::to_string_pretty(&v).expect("json")), e));
@@ -280,7 +290,10 @@ pub(super) fn ik(a: IkArgs) -> Result<String, CliError> {
                 v
             })
             .collect();
-        let out = json!({ "position_mm": position_mm(&target.t), "solutions": solutions });
+        let mut out = json!({ "position_mm": round_all(position_mm(&target.t), OUT_MM), "solutions": solutions });
+        if let Some(n) = &note {
+            out["notes"] = json!([n]);
+        }
         if solutions.iter().all(|v| v.get("error").is_some()) {
             return Err(CliError::failed(
                 Some(serde_json::to_string_pretty(&out).expect("json")),
@@ -295,6 +308,11 @@ pub(super) fn ik(a: IkArgs) -> Result<String, CliError> {
 #[derive(serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 struct TargetsFile {
+    /// `world` (default) or `base`, as in the service's compensation request.
+    #[serde(default)]
+    frame: Option<FrameKind>,
+    #[serde(default)]
+    work_object: Option<WorkObjectSpec>,
     targets: Vec<TargetSpec>,
 }
 
@@ -304,14 +322,18 @@ pub(super) fn compensate(a: CompensateArgs) -> Result<String, CliError> {
     let set = doc.set;
     let comp = Compensator::new(&set);
     let dof = set.dof();
-    let results = compensate_targets(&comp, dof, &file.targets);
+    let frames =
+        TargetFrames::new(&comp, file.frame, file.work_object.as_ref()).map_err(|e| CliError::file(&a.targets, e))?;
+    let results = compensate_targets(&comp, dof, &frames, &file.targets);
     let failed: Vec<String> = results
         .iter()
         .enumerate()
         .filter(|(_, r)| r.error.is_some())
         .map(|(i, r)| r.id.clone().unwrap_or_else(|| format!("targets[{i}]")))
         .collect();
-    let text = serde_json::to_string_pretty(&json!({ "results": results, "failed": failed.len() })).expect("json");
+    let text =
+        serde_json::to_string_pretty(&json!({ "frame": frames.out, "results": results, "failed": failed.len() }))
+            .expect("json");
     let out = write_or_return(&a.out, text)?;
     if failed.is_empty() {
         return Ok(out);

@@ -7,6 +7,7 @@ mod experiments;
 mod kinematics;
 mod reports;
 mod service;
+mod validation_text;
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -201,6 +202,28 @@ fn write_or_return(out: &Option<PathBuf>, text: String) -> Result<String, CliErr
             Ok(format!("wrote {}", p.display()))
         }
         None => Ok(text),
+    }
+}
+
+/// How a report is printed: a table for a person, JSON for a program.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum OutputFormat {
+    /// A table when standard output is a terminal, JSON when it is piped or redirected.
+    #[default]
+    Auto,
+    Text,
+    Json,
+}
+
+impl OutputFormat {
+    /// Whether to print the table (resolving `auto` by the terminal, or `--json`).
+    fn text(self, json_flag: bool) -> bool {
+        use std::io::IsTerminal;
+        match (json_flag, self) {
+            (true, _) | (false, OutputFormat::Json) => false,
+            (false, OutputFormat::Text) => true,
+            (false, OutputFormat::Auto) => std::io::stdout().is_terminal(),
+        }
     }
 }
 

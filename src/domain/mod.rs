@@ -74,17 +74,32 @@ pub fn from_json<T: DeserializeOwned>(text: &str) -> Result<T, DomainError> {
     let de = &mut serde_json::Deserializer::from_str(text);
     serde_path_to_error::deserialize(de).map_err(|e| {
         let path = e.path().to_string();
-        let path = if path == "." { String::new() } else { path };
-        DomainError::new(path, e.into_inner().to_string())
+        let reason = e.into_inner().to_string();
+        DomainError::new(field_path(&path, &reason), reason)
     })
+}
+
+/// The path of the field a deserialisation error is about. serde_path_to_error stops at the
+/// object for a missing field ("." at the top level); the field's own name is in the message
+/// ("missing field `name`"), so it is appended: `name`, `tool.tcp_mm`.
+pub fn field_path(path: &str, reason: &str) -> String {
+    let path = if path == "." { "" } else { path };
+    // (An unknown field is already in the path.)
+    let named =
+        reason.strip_prefix("missing field `").and_then(|rest| rest.split('`').next()).filter(|f| !f.is_empty());
+    match named {
+        Some(f) if path.is_empty() => f.to_string(),
+        Some(f) => format!("{path}.{f}"),
+        None => path.to_string(),
+    }
 }
 
 /// Deserialize an already-parsed JSON value, with paths.
 pub fn from_value<T: DeserializeOwned>(v: &serde_json::Value) -> Result<T, DomainError> {
     serde_path_to_error::deserialize(v).map_err(|e| {
         let path = e.path().to_string();
-        let path = if path == "." { String::new() } else { path };
-        DomainError::new(path, e.into_inner().to_string())
+        let reason = e.into_inner().to_string();
+        DomainError::new(field_path(&path, &reason), reason)
     })
 }
 
@@ -112,4 +127,41 @@ pub fn joints_deg(v: &[f64], dof: usize, path: &str) -> Result<Vec<f64>, DomainE
 /// Radians → degrees for output.
 pub fn to_deg(v: &[f64]) -> Vec<f64> {
     v.iter().map(|x| x / DEG).collect()
+}
+
+/// `word` with its indefinite article: "an identification", "a validation".
+pub fn with_article(word: &str) -> String {
+    let vowel = word.chars().next().is_some_and(|c| "aeiouAEIOU".contains(c));
+    format!("{} {word}", if vowel { "an" } else { "a" })
+}
+
+#[cfg(test)]
+mod field_path_tests {
+    use super::*;
+
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Inner {
+        a: f64,
+    }
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Outer {
+        name: String,
+        inner: Vec<Inner>,
+    }
+
+    /// Missing and unknown fields are named by their own path, not their parent's.
+    #[test]
+    fn missing_and_unknown_fields_are_named() {
+        assert_eq!(from_json::<Outer>(r#"{"inner": []}"#).unwrap_err().path, "name");
+        assert_eq!(from_json::<Outer>(r#"{"name": "n", "inner": [{"a": 1}, {}]}"#).unwrap_err().path, "inner[1].a");
+        assert_eq!(from_json::<Outer>(r#"{"name": "n", "inner": [], "x": 1}"#).unwrap_err().path, "x");
+        assert_eq!(from_json::<Outer>(r#"{"name": 3, "inner": []}"#).unwrap_err().path, "name");
+        assert_eq!(field_path(".", "invalid type"), "");
+        assert_eq!(with_article("identification"), "an identification");
+        assert_eq!(with_article("validation"), "a validation");
+    }
 }

@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 use super::{DomainError, finite, joints_deg, to_deg, vec3_mm};
 use crate::kinematics::frame::{quaternion_from_rot, rot_from_quaternion, rot_zyx, zyx_from_rot};
 use crate::kinematics::{Branch, Compensated, Compensator, Confdata, Frame, IkError, Seed};
-use crate::units::{DEG, MM};
+use crate::units::{DEG, MM, OUT_DEG, OUT_MM, OUT_UNIT, round_all, round_to};
 
 /// A TCP pose in {W}.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -22,13 +22,31 @@ pub struct PoseSpec {
     pub quaternion: Option<[f64; 4]>,
 }
 
+/// How far from unit norm a quaternion may be and still be taken, normalised and with a note:
+/// robot programs store 4–5 decimals, whose rounding moves the norm by up to ~1e-4.
+pub const QUATERNION_NORM_TOLERANCE: f64 = 1e-3;
+/// Below this deviation from unit norm a quaternion is normalised silently (double-precision
+/// noise, or a quaternion printed at the 1e-9 output resolution).
+const QUATERNION_NORM_SILENT: f64 = 1e-8;
+
 /// Turn `position_mm` + (`rotation_deg` | `quaternion`) into a frame; exactly one orientation.
 pub fn frame_from_parts(
     position_mm: [f64; 3],
     rotation_deg: Option<[f64; 3]>,
     quaternion: Option<[f64; 4]>,
 ) -> Result<Frame, DomainError> {
+    frame_from_parts_noted(position_mm, rotation_deg, quaternion).map(|(f, _)| f)
+}
+
+/// [`frame_from_parts`], with the note to pass on when the input was mended (a quaternion within
+/// [`QUATERNION_NORM_TOLERANCE`] of unit norm, normalised).
+pub fn frame_from_parts_noted(
+    position_mm: [f64; 3],
+    rotation_deg: Option<[f64; 3]>,
+    quaternion: Option<[f64; 4]>,
+) -> Result<(Frame, Option<String>), DomainError> {
     let t = vec3_mm(position_mm, "position_mm")?;
+    let mut note = None;
     let r = match (rotation_deg, quaternion) {
         (Some(_), Some(_)) => {
             return Err(DomainError::new("rotation_deg", "give rotation_deg or quaternion, not both"));
@@ -50,13 +68,25 @@ pub fn frame_from_parts(
                 finite(*v, &format!("quaternion[{i}]"))?;
             }
             let n = q.iter().map(|v| v * v).sum::<f64>().sqrt();
-            if (n - 1.0).abs() > 1e-6 {
-                return Err(DomainError::new("quaternion", format!("must be a unit quaternion, its norm is {n:.9}")));
+            if n == 0.0 {
+                return Err(DomainError::new("quaternion", "must not be zero"));
+            }
+            if (n - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
+                return Err(DomainError::new(
+                    "quaternion",
+                    format!(
+                        "must be a unit quaternion: its norm is {n:.9}, more than {QUATERNION_NORM_TOLERANCE} \
+                         from 1 (a rounded unit quaternion is normalised; this one is not a rotation)"
+                    ),
+                ));
+            }
+            if (n - 1.0).abs() > QUATERNION_NORM_SILENT {
+                note = Some(format!("quaternion normalised: its norm was {n:.9}"));
             }
             rot_from_quaternion(q).ok_or_else(|| DomainError::new("quaternion", "must not be zero"))?
         }
     };
-    Ok(Frame::new(r, t))
+    Ok((Frame::new(r, t), note))
 }
 
 impl PoseSpec {
@@ -77,12 +107,40 @@ pub struct PoseOut {
 }
 
 impl PoseOut {
+    /// A frame for output, rounded to the output resolution (`units::OUT_*`); Euler angles in the
+    /// principal branch (b in [−90°, 90°]), the quaternion with w ≥ 0.
     pub fn from_frame(f: &Frame) -> Self {
-        let [a, b, c] = zyx_from_rot(&f.r);
+        Self::like(f, None, None)
+    }
+
+    /// A frame for output in the representation a request used: the ZY'X'' triple of the two
+    /// equivalent families, (a, b, c) and (a + 180°, 180° − b, c + 180°), and of their whole turns,
+    /// nearest to `rotation_deg`; the quaternion of the sign nearest to `quaternion`. A target
+    /// given as [0, 180, 0] comes back as [0.23, 180.14, 0.01], not [−179.77, −0.14, −179.99].
+    pub fn like(f: &Frame, rotation_deg: Option<[f64; 3]>, quaternion: Option<[f64; 4]>) -> Self {
+        let [a, b, c] = zyx_from_rot(&f.r).map(|v| v / DEG);
+        let rotation = match rotation_deg {
+            None => [a, b, c],
+            Some(hint) => {
+                let near = |v: f64, h: f64| v + 360.0 * ((h - v) / 360.0).round();
+                let pick =
+                    |e: [f64; 3]| -> [f64; 3] { [near(e[0], hint[0]), near(e[1], hint[1]), near(e[2], hint[2])] };
+                let cost = |e: &[f64; 3]| e.iter().zip(&hint).map(|(v, h)| (v - h) * (v - h)).sum::<f64>();
+                let first = pick([a, b, c]);
+                let second = pick([a + 180.0, 180.0 - b, c + 180.0]);
+                if cost(&second) < cost(&first) { second } else { first }
+            }
+        };
+        let mut q = quaternion_from_rot(&f.r);
+        if let Some(h) = quaternion
+            && q.iter().zip(&h).map(|(a, b)| a * b).sum::<f64>() < 0.0
+        {
+            q = q.map(|v| -v);
+        }
         PoseOut {
-            position_mm: [f.t.x / MM, f.t.y / MM, f.t.z / MM],
-            rotation_deg: [a / DEG, b / DEG, c / DEG],
-            quaternion: quaternion_from_rot(&f.r),
+            position_mm: round_all([f.t.x / MM, f.t.y / MM, f.t.z / MM], OUT_MM),
+            rotation_deg: round_all(rotation, OUT_DEG),
+            quaternion: round_all(q, OUT_UNIT),
         }
     }
 }
@@ -121,7 +179,12 @@ pub struct TargetSpec {
 /// A validated target.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Target {
-    Pose { pose: Frame, choice: Choice },
+    /// A pose, how to pick its solution, and the note of a mended input (a normalised quaternion).
+    Pose {
+        pose: Frame,
+        choice: Choice,
+        note: Option<String>,
+    },
     NominalJoints(Vec<f64>),
 }
 
@@ -164,7 +227,7 @@ impl TargetSpec {
                 "a target needs position_mm (with an orientation) or joints_deg",
             ));
         };
-        let pose = frame_from_parts(p, self.rotation_deg, self.quaternion)?;
+        let (pose, note) = frame_from_parts_noted(p, self.rotation_deg, self.quaternion)?;
         let choice = match (self.cfx, self.confdata, &self.seed_joints_deg) {
             (Some(c), None, None) => {
                 Choice::Branch(Branch::new(c).ok_or_else(|| DomainError::new("cfx", format!("must be 0–7, got {c}")))?)
@@ -185,7 +248,7 @@ impl TargetSpec {
             }
             _ => return Err(DomainError::new("cfx", "give only one of cfx, confdata, seed_joints_deg")),
         };
-        Ok(Target::Pose { pose, choice })
+        Ok(Target::Pose { pose, choice, note })
     }
 }
 
@@ -211,19 +274,24 @@ pub struct CompensationResult {
     pub iterations: Option<usize>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
+    /// What was mended in the target before solving (a quaternion normalised).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
 }
 
 impl CompensationResult {
-    pub fn ok(id: Option<String>, c: &Compensated) -> Self {
+    /// A solved target; `fake_pose` already in the output frame and representation.
+    pub fn ok(id: Option<String>, c: &Compensated, fake_pose: PoseOut) -> Self {
         Self {
             id,
-            joints_deg: Some(to_deg(c.joints())),
-            fake_pose: Some(PoseOut::from_frame(&c.fake_pose)),
+            joints_deg: Some(to_deg(c.joints()).into_iter().map(|v| round_to(v, OUT_DEG)).collect()),
+            fake_pose: Some(fake_pose),
             confdata: c.confdata.map(|d| [d.cf1, d.cf4, d.cf6, d.cfx.cfx() as i32]),
             residual_mm: Some(c.residual_position / MM),
             residual_urad: Some(c.residual_rotation * 1e6),
             iterations: Some(c.iterations),
             error: None,
+            notes: Vec::new(),
         }
     }
 
@@ -237,6 +305,7 @@ impl CompensationResult {
             residual_urad: None,
             iterations: None,
             error: Some(error),
+            notes: Vec::new(),
         }
     }
 
@@ -250,21 +319,162 @@ pub fn position_mm(t: &Vector3<f64>) -> [f64; 3] {
     [t.x / MM, t.y / MM, t.z / MM]
 }
 
+/// The frame a compensation request reads its targets in and writes its fake poses in.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum FrameKind {
+    /// {W}, the measurement (artefact) frame the robot was calibrated in.
+    #[default]
+    World,
+    /// The robot's base frame: targets in the calibrated base, fake poses in the controller's
+    /// (nominal) base frame, i.e. `wobj0`.
+    Base,
+}
+
+/// A work object as declared on the controller: a name and its frame in the robot's base frame
+/// (ABB `uframe`, object frame included).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct WorkObjectSpec {
+    pub name: String,
+    #[schema(min_items = 3, max_items = 3)]
+    pub position_mm: [f64; 3],
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(min_items = 3, max_items = 3)]
+    pub rotation_deg: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(min_items = 4, max_items = 4)]
+    pub quaternion: Option<[f64; 4]>,
+}
+
+/// The frame a compensation answered in, stated in every response.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct FrameOut {
+    /// `world`, `base` or `work_object`.
+    pub kind: String,
+    /// The work object's name, when the poses are relative to one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub work_object: Option<String>,
+    /// What the targets and the fake poses are expressed in, and how to program the fake poses.
+    pub description: String,
+}
+
+/// Where targets come from and fake poses go: the frame changes around the solver, which works
+/// in {W}.
+#[derive(Clone, Debug)]
+pub struct TargetFrames {
+    /// Request frame → {W} on the real (calibrated) robot.
+    into_world: Frame,
+    /// {W} through the nominal base → the frame the controller is programmed in.
+    out_of_world: Frame,
+    pub out: FrameOut,
+}
+
+impl TargetFrames {
+    /// Targets and fake poses in {W}.
+    pub fn world() -> Self {
+        TargetFrames {
+            into_world: Frame::identity(),
+            out_of_world: Frame::identity(),
+            out: FrameOut {
+                kind: "world".into(),
+                work_object: None,
+                description: "targets and fake poses in {W}, the measurement (artefact) frame the robot was \
+                              calibrated in. A fake pose is the nominal forward kinematics of joints_deg placed \
+                              by the parameter set's nominal base T_0^W, not the calibrated one: program it in a \
+                              work object equal to that nominal base, or ask for frame \"base\" (wobj0), or \
+                              command joints_deg"
+                    .into(),
+            },
+        }
+    }
+
+    /// The frames of a request (`frame`, `work_object`), for a compensator's calibrated and
+    /// nominal bases. Errors name `frame` or `work_object…`.
+    pub fn new(
+        comp: &Compensator,
+        frame: Option<FrameKind>,
+        work_object: Option<&WorkObjectSpec>,
+    ) -> Result<Self, DomainError> {
+        let calibrated_base = *comp.calibrated_chain().base();
+        let nominal_base = *comp.nominal_chain().base();
+        match (frame, work_object) {
+            (None | Some(FrameKind::World), None) => Ok(Self::world()),
+            (Some(FrameKind::World), Some(_)) => Err(DomainError::new(
+                "work_object",
+                "a work object is declared in the robot's base frame; drop \"frame\": \"world\" (or say \"base\")",
+            )),
+            (Some(FrameKind::Base), None) => Ok(TargetFrames {
+                into_world: calibrated_base,
+                out_of_world: nominal_base.inverse(),
+                out: FrameOut {
+                    kind: "base".into(),
+                    work_object: None,
+                    description: "targets in the robot's base frame as calibrated (the identified T_0^W); fake \
+                                  poses in the controller's base frame (its nominal model, wobj0): program them \
+                                  with wobj0 and the tool the request named"
+                        .into(),
+                },
+            }),
+            (None | Some(FrameKind::Base), Some(w)) => {
+                let name = w.name.trim();
+                if name.is_empty() {
+                    return Err(DomainError::new("work_object.name", "must not be empty"));
+                }
+                let wobj = frame_from_parts(w.position_mm, w.rotation_deg, w.quaternion)
+                    .map_err(|e| e.within("work_object"))?;
+                Ok(TargetFrames {
+                    into_world: calibrated_base.compose(&wobj),
+                    out_of_world: wobj.inverse().compose(&nominal_base.inverse()),
+                    out: FrameOut {
+                        kind: "work_object".into(),
+                        work_object: Some(name.to_string()),
+                        description: format!(
+                            "targets relative to work object '{name}' placed in the robot's calibrated base \
+                             frame; fake poses relative to the same work object declared on the controller \
+                             (its frame in the nominal base frame, as given here): program them with \
+                             '{name}' and the tool the request named"
+                        ),
+                    },
+                })
+            }
+        }
+    }
+}
+
 /// Compensate one target of a batch (index `i`): its own error, validation or solver, names
-/// `targets[i]`. Shared by the CLI and the service.
-pub fn compensate_target(comp: &Compensator, dof: usize, i: usize, t: &TargetSpec) -> CompensationResult {
+/// `targets[i]`. Shared by the CLI and the service. The target is read in `frames`' request
+/// frame; the fake pose is written in its output frame, in the target's own representation.
+pub fn compensate_target(
+    comp: &Compensator,
+    dof: usize,
+    frames: &TargetFrames,
+    i: usize,
+    t: &TargetSpec,
+) -> CompensationResult {
     let id = t.id.clone();
     let target = match t.to_target(dof) {
         Ok(t) => t,
         Err(e) => return CompensationResult::failed(id, e.within(&format!("targets[{i}]")).to_string()),
     };
-    let res = match &target {
-        Target::NominalJoints(q) => comp.joints(q),
-        Target::Pose { pose, choice } => comp.pose(pose, choice.seed()),
+    let (res, note) = match &target {
+        Target::NominalJoints(q) => (comp.joints(q), None),
+        Target::Pose { pose, choice, note } => {
+            (comp.pose(&frames.into_world.compose(pose), choice.seed()), note.clone())
+        }
     };
     match res {
-        Ok(c) => CompensationResult::ok(id, &c),
-        Err(e) => CompensationResult::from_ik_error(id, &e),
+        Ok(c) => {
+            let fake = PoseOut::like(&frames.out_of_world.compose(&c.fake_pose), t.rotation_deg, t.quaternion);
+            let mut r = CompensationResult::ok(id, &c, fake);
+            r.notes.extend(note);
+            r
+        }
+        Err(e) => {
+            let mut r = CompensationResult::from_ik_error(id, &e);
+            r.notes.extend(note);
+            r
+        }
     }
 }
 
@@ -272,15 +482,26 @@ pub fn compensate_target(comp: &Compensator, dof: usize, i: usize, t: &TargetSpe
 const TARGETS_PER_THREAD: usize = 256;
 
 /// Compensate a batch, split across the machine's cores when it is large; results in order.
-pub fn compensate_targets(comp: &Compensator, dof: usize, targets: &[TargetSpec]) -> Vec<CompensationResult> {
+pub fn compensate_targets(
+    comp: &Compensator,
+    dof: usize,
+    frames: &TargetFrames,
+    targets: &[TargetSpec],
+) -> Vec<CompensationResult> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    compensate_on(comp, dof, targets, cores.min(targets.len() / TARGETS_PER_THREAD).max(1))
+    compensate_on(comp, dof, frames, targets, cores.min(targets.len() / TARGETS_PER_THREAD).max(1))
 }
 
 /// Compensate a batch on `threads` threads (contiguous chunks); results in order.
-fn compensate_on(comp: &Compensator, dof: usize, targets: &[TargetSpec], threads: usize) -> Vec<CompensationResult> {
+fn compensate_on(
+    comp: &Compensator,
+    dof: usize,
+    frames: &TargetFrames,
+    targets: &[TargetSpec],
+    threads: usize,
+) -> Vec<CompensationResult> {
     if threads <= 1 {
-        return targets.iter().enumerate().map(|(i, t)| compensate_target(comp, dof, i, t)).collect();
+        return targets.iter().enumerate().map(|(i, t)| compensate_target(comp, dof, frames, i, t)).collect();
     }
     let chunk = targets.len().div_ceil(threads);
     std::thread::scope(|s| {
@@ -291,7 +512,7 @@ fn compensate_on(comp: &Compensator, dof: usize, targets: &[TargetSpec], threads
                 s.spawn(move || {
                     part.iter()
                         .enumerate()
-                        .map(|(i, t)| compensate_target(comp, dof, c * chunk + i, t))
+                        .map(|(i, t)| compensate_target(comp, dof, frames, c * chunk + i, t))
                         .collect::<Vec<_>>()
                 })
             })
@@ -317,7 +538,8 @@ mod tests {
         let b = PoseSpec { position_mm: out.position_mm, rotation_deg: None, quaternion: Some(out.quaternion) }
             .to_frame()
             .unwrap();
-        assert!((a.r - b.r).abs().max() < 1e-15 && (a.t - b.t).norm() < 1e-15);
+        // Outputs are rounded (0.1 µm, 1e-9 per quaternion component): the round trip holds to that.
+        assert!((a.r - b.r).abs().max() < 5e-9 && (a.t - b.t).norm() < 1e-10);
         assert!((out.rotation_deg[1] + 20.0).abs() < 1e-12);
         let e = from_json::<PoseSpec>(r#"{"position_mm": [0, 0, 0]}"#).unwrap().to_frame().unwrap_err();
         assert_eq!(e.path, "rotation_deg");
@@ -369,9 +591,11 @@ mod tests {
                 TargetSpec { id: Some(i.to_string()), joints_deg: Some(joints), ..Default::default() }
             })
             .collect();
-        let split = compensate_on(&comp, 6, &targets, 3);
-        assert_eq!(compensate_targets(&comp, 6, &targets), split);
-        let sequential: Vec<_> = targets.iter().enumerate().map(|(i, t)| compensate_target(&comp, 6, i, t)).collect();
+        let w = TargetFrames::world();
+        let split = compensate_on(&comp, 6, &w, &targets, 3);
+        assert_eq!(compensate_targets(&comp, 6, &w, &targets), split);
+        let sequential: Vec<_> =
+            targets.iter().enumerate().map(|(i, t)| compensate_target(&comp, 6, &w, i, t)).collect();
         assert_eq!(split, sequential);
         assert_eq!(split.len(), 1500);
         for (i, r) in split.iter().enumerate() {
@@ -383,5 +607,130 @@ mod tests {
                 assert!(r.error.is_none() && r.residual_mm.unwrap() < 1e-6, "{r:?}");
             }
         }
+    }
+
+    /// A quaternion rounded as programs store it is normalised with a note; one off by more than
+    /// 1e-3 is refused, naming the field.
+    #[test]
+    #[allow(clippy::approx_constant)] // 0.70711 is the point: 1/√2 as a program stores it
+    fn rounded_quaternions_are_normalised_and_said_so() {
+        let (f, note) = frame_from_parts_noted([300.0, 0.0, 500.0], None, Some([0.0, 0.70711, 0.70711, 0.0])).unwrap();
+        let note = note.expect("a note");
+        assert!(note.contains("normalised") && note.contains("1.000004"), "{note}");
+        let exact = rot_from_quaternion([0.0, 0.5f64.sqrt(), 0.5f64.sqrt(), 0.0]).unwrap();
+        assert!((f.r - exact).abs().max() < 1e-5);
+        assert!(crate::kinematics::frame::rotation_angle(&(f.r.transpose() * f.r)) < 1e-15, "orthonormal");
+        // Unit to double precision: no note.
+        let (_, note) = frame_from_parts_noted([0.0; 3], None, Some([0.5, 0.5, 0.5, 0.5])).unwrap();
+        assert!(note.is_none());
+        let e = frame_from_parts([0.0; 3], None, Some([0.0, 0.7, 0.7, 0.0])).unwrap_err();
+        assert_eq!(e.path, "quaternion");
+        assert!(e.reason.contains("0.98994"), "{}", e.reason);
+        assert_eq!(frame_from_parts([0.0; 3], None, Some([0.0; 4])).unwrap_err().path, "quaternion");
+    }
+
+    /// The fake pose comes back in the Euler family and the turns the request used, the same
+    /// rotation either way.
+    #[test]
+    fn outputs_follow_the_requests_representation() {
+        let r = rot_zyx(0.23 * DEG, -0.14 * DEG, 0.01 * DEG) * rot_zyx(0.0, 180.0 * DEG, 0.0);
+        let f = Frame::new(r, Vector3::new(0.3, 0.0, 0.5));
+        let principal = PoseOut::from_frame(&f);
+        assert!(principal.rotation_deg[1].abs() < 1.0 && principal.rotation_deg[0].abs() > 179.0, "{principal:?}");
+        let like = PoseOut::like(&f, Some([0.0, 180.0, 0.0]), None);
+        assert!(like.rotation_deg.iter().zip([0.0, 180.0, 0.0]).all(|(v, h)| (v - h).abs() < 1.0), "{like:?}");
+        let back = |e: [f64; 3]| rot_zyx(e[0] * DEG, e[1] * DEG, e[2] * DEG);
+        assert!((back(like.rotation_deg) - f.r).abs().max() < 1e-7);
+        assert!((back(principal.rotation_deg) - f.r).abs().max() < 1e-7);
+        // Whole turns follow the request too: a target at a = 350° is answered near 350°.
+        let g = Frame::new(rot_zyx(-10.0 * DEG, 20.0 * DEG, 30.0 * DEG), Vector3::zeros());
+        assert_eq!(PoseOut::like(&g, Some([350.0, 20.0, 30.0]), None).rotation_deg, [350.0, 20.0, 30.0]);
+        // The quaternion takes the request's sign.
+        let q = PoseOut::from_frame(&g).quaternion;
+        let neg = q.map(|v| -v);
+        assert_eq!(PoseOut::like(&g, None, Some(neg)).quaternion, neg);
+    }
+
+    /// Base and work-object frames: the target moves into {W} through the calibrated base (and
+    /// the work object), the fake pose out through the nominal one; for a nominal set both agree,
+    /// so the fake pose equals the target.
+    #[test]
+    fn frames_map_targets_in_and_fake_poses_out() {
+        let set = irb120_table_5_1(Tool::flange());
+        let comp = Compensator::new(&set);
+        let target = TargetSpec {
+            position_mm: Some([300.0, 50.0, 400.0]),
+            rotation_deg: Some([10.0, 80.0, 5.0]),
+            cfx: Some(0),
+            ..Default::default()
+        };
+        let wobj = WorkObjectSpec {
+            name: "fixture".into(),
+            position_mm: [100.0, -50.0, 20.0],
+            rotation_deg: Some([30.0, 0.0, 0.0]),
+            quaternion: None,
+        };
+        let in_base = TargetFrames::new(&comp, Some(FrameKind::Base), None).unwrap();
+        let in_wobj = TargetFrames::new(&comp, None, Some(&wobj)).unwrap();
+        let world = TargetFrames::world();
+        let w = compensate_target(&comp, 6, &world, 0, &target);
+        let b = compensate_target(&comp, 6, &in_base, 0, &target);
+        // The same target in {W} and in the calibrated base differ by the calibrated base: the joints differ…
+        assert_ne!(w.joints_deg, b.joints_deg);
+        // …and a target given in {W} equals, in the base frame, calibrated_base⁻¹ · target.
+        let t_w = frame_from_parts([300.0, 50.0, 400.0], Some([10.0, 80.0, 5.0]), None).unwrap();
+        let t_b = comp.calibrated_chain().base().inverse().compose(&t_w);
+        let pb = PoseOut::from_frame(&t_b);
+        let via_base = TargetFrames::new(&comp, Some(FrameKind::Base), None).unwrap();
+        let spec_b = TargetSpec {
+            position_mm: Some(pb.position_mm),
+            quaternion: Some(pb.quaternion),
+            cfx: Some(0),
+            ..Default::default()
+        };
+        let b2 = compensate_target(&comp, 6, &via_base, 0, &spec_b);
+        for (x, y) in w.joints_deg.as_ref().unwrap().iter().zip(b2.joints_deg.as_ref().unwrap()) {
+            assert!((x - y).abs() < 1e-5, "{x} vs {y}");
+        }
+        // The base-frame fake pose is the controller's nominal FK of the joints (base excluded).
+        let q: Vec<f64> = b2.joints_deg.as_ref().unwrap().iter().map(|v| v * DEG).collect();
+        let nominal = comp.nominal_chain();
+        let fk = nominal
+            .base()
+            .inverse()
+            .compose(&nominal.fk(&crate::kinematics::JointState::with_torques(&q, &comp.gravity().torques(&q)[..6])));
+        let fp = b2.fake_pose.as_ref().unwrap();
+        for k in 0..3 {
+            assert!((fp.position_mm[k] - fk.t[k] / MM).abs() < 2e-4, "{fp:?} vs {:?}", fk.t);
+        }
+        // A work object: the fake pose relative to it is wobj⁻¹ · (base-frame fake pose).
+        let target_in_wobj = {
+            let wf = frame_from_parts(wobj.position_mm, wobj.rotation_deg, None).unwrap();
+            let p = PoseOut::from_frame(&wf.inverse().compose(&t_b));
+            TargetSpec {
+                position_mm: Some(p.position_mm),
+                quaternion: Some(p.quaternion),
+                cfx: Some(0),
+                ..Default::default()
+            }
+        };
+        let o = compensate_target(&comp, 6, &in_wobj, 0, &target_in_wobj);
+        for (x, y) in w.joints_deg.as_ref().unwrap().iter().zip(o.joints_deg.as_ref().unwrap()) {
+            assert!((x - y).abs() < 1e-5, "{x} vs {y}");
+        }
+        let wf = frame_from_parts(wobj.position_mm, wobj.rotation_deg, None).unwrap();
+        let fake_b = frame_from_parts(fp.position_mm, None, Some(fp.quaternion)).unwrap();
+        let expect = PoseOut::from_frame(&wf.inverse().compose(&fake_b));
+        let got = o.fake_pose.as_ref().unwrap();
+        for k in 0..3 {
+            assert!((got.position_mm[k] - expect.position_mm[k]).abs() < 5e-4, "{got:?} vs {expect:?}");
+        }
+        assert_eq!(in_wobj.out.work_object.as_deref(), Some("fixture"));
+        // Refusals name the field.
+        assert_eq!(TargetFrames::new(&comp, Some(FrameKind::World), Some(&wobj)).unwrap_err().path, "work_object");
+        let unnamed = WorkObjectSpec { name: " ".into(), ..wobj.clone() };
+        assert_eq!(TargetFrames::new(&comp, None, Some(&unnamed)).unwrap_err().path, "work_object.name");
+        let bad = WorkObjectSpec { rotation_deg: None, ..wobj };
+        assert_eq!(TargetFrames::new(&comp, None, Some(&bad)).unwrap_err().path, "work_object.rotation_deg");
     }
 }

@@ -11,7 +11,7 @@ use utoipa::ToSchema;
 use super::extract::{Authorized, COMPENSATE, JsonBody};
 use super::robots::find as find_robot;
 use super::{ApiError, AppState};
-use crate::domain::pose::{compensate_target, compensate_targets};
+use crate::domain::pose::{FrameKind, FrameOut, TargetFrames, WorkObjectSpec, compensate_target, compensate_targets};
 use crate::domain::{CompensationResult, TargetSpec, ToolSpec};
 use crate::kinematics::{Compensator, Param, ParameterSet, Tool};
 
@@ -25,6 +25,15 @@ pub struct CompensationRequest {
     /// The tool the targets are for; default: the parameter set's own (identified) tool.
     #[serde(default)]
     pub tool: Option<ToolSpec>,
+    /// The frame targets are given in and fake poses returned in: `world` (default; {W}, the
+    /// measurement frame, fake poses through the nominal base) or `base` (targets in the
+    /// calibrated base frame, fake poses in the controller's base frame, wobj0).
+    #[serde(default)]
+    pub frame: Option<FrameKind>,
+    /// Targets and fake poses relative to this work object, declared in the robot's base frame
+    /// as on the controller.
+    #[serde(default)]
+    pub work_object: Option<WorkObjectSpec>,
     pub targets: Vec<TargetSpec>,
 }
 
@@ -33,8 +42,12 @@ pub struct CompensationRequest {
 pub struct CompensationOut {
     pub parameter_set_id: String,
     pub version: i64,
-    /// One per target, in order: joints_deg, fake_pose, confdata, residual_mm, residual_urad,
-    /// iterations — or error.
+    /// The frame the targets were read in and the fake poses are written in, and how to program
+    /// them.
+    pub frame: FrameOut,
+    /// One per target, in order: joints_deg, fake_pose (in `frame`, in the target's own Euler
+    /// family and quaternion sign), confdata, residual_mm, residual_urad, iterations — or error;
+    /// notes when the target was mended (a quaternion within 1e-3 of unit norm, normalised).
     pub results: Vec<CompensationResult>,
     /// Targets that could not be compensated.
     pub failed: usize,
@@ -102,12 +115,16 @@ pub async fn compensate(
         None => None,
         Some(t) => Some(with_tool(&compiled.set, t.to_tool().map_err(|e| ApiError::domain(e, "tool"))?)),
     };
+    let frames = TargetFrames::new(&compiled.compensator, body.frame, body.work_object.as_ref())
+        .map_err(|e| ApiError::domain(e, ""))?;
+    let frame = frames.out.clone();
     let targets = body.targets;
     let results = if custom.is_none() && targets.len() <= INLINE_TARGETS {
         // A few solves (~4 µs each) cost less than handing them to the blocking pool.
         let dof = compiled.set.dof();
-        targets.iter().enumerate().map(|(i, t)| compensate_target(&compiled.compensator, dof, i, t)).collect()
+        targets.iter().enumerate().map(|(i, t)| compensate_target(&compiled.compensator, dof, &frames, i, t)).collect()
     } else {
+        let frames = frames.clone();
         let compiled = compiled.clone();
         tokio::task::spawn_blocking(move || {
             let own;
@@ -118,7 +135,7 @@ pub async fn compensate(
                     (&own, set.dof())
                 }
             };
-            compensate_targets(comp, dof, &targets)
+            compensate_targets(comp, dof, &frames, &targets)
         })
         .await?
     };
@@ -126,6 +143,7 @@ pub async fn compensate(
     Ok(Json(CompensationOut {
         parameter_set_id: compiled.row.id.clone(),
         version: compiled.row.version,
+        frame,
         results,
         failed,
     }))

@@ -43,8 +43,9 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
         serde_json::from_slice(bytes).map_err(|e| ApiError::malformed(None, format!("malformed JSON: {e}")))?;
     serde_path_to_error::deserialize(value).map_err(|e| {
         let path = e.path().to_string();
-        let field = (path != ".").then_some(path);
-        ApiError::Invalid { detail: e.into_inner().to_string(), field }
+        let detail = e.into_inner().to_string();
+        let field = crate::domain::field_path(&path, &detail);
+        ApiError::Invalid { detail, field: (!field.is_empty()).then_some(field) }
     })
 }
 

@@ -133,7 +133,11 @@ pub async fn load(pool: &SqlitePool, kind: JobKind, robot_id: &str, request_json
                 .await?
                 .ok_or_else(|| JobError::Internal(format!("parameter set {} missing", job.parameter_set_id)))?;
             let sessions = cells::resolve_sessions(pool, &robot.id, &job.request.sessions, "sessions").await?;
-            let cell = cells::cell_file(pool, &robot, &sessions).await?;
+            let mut cell = cells::cell_file(pool, &robot, &sessions).await?;
+            if cell.artefact.is_none() {
+                // The calibration zone of `vs_zone_distance`, as the CLI has it from the cell file.
+                cell.artefact = cells::calibration_artefact(pool, &robot.id).await?;
+            }
             let session_names = sessions.iter().map(|s| s.name.clone()).collect();
             Ok(Inputs::Validation { job, set_json: set.doc_json, cell, session_names })
         }
