@@ -240,6 +240,16 @@ fn simulate_is_deterministic_and_names_bad_effects() {
     assert!(!ok && err.contains("--effects") && err.contains("joint number"), "{err}");
     let (ok, _, err) = robocal(&["simulate", "--seed", "1", "--epsilon-mm", "-1", "--out", &out("c.json")]);
     assert!(!ok && err.contains("--epsilon-mm"), "{err}");
+    // The service's bounds, shared: beyond them the CLI asks for --force, with the run's cost, and
+    // writes nothing.
+    let big = ["simulate", "--seed", "1", "--id-per-ball", "100000", "--out", &out("big.json")];
+    let (ok, _, err) = robocal(&big);
+    assert!(!ok && err.starts_with("error: --id-per-ball: must be 1–2000, got 100000"), "{err}");
+    assert!(err.contains("--force") && err.contains(" s and write ~"), "{err}");
+    assert_eq!(status(&big), 2);
+    assert!(!std::path::Path::new(&out("big.json")).exists());
+    let (ok, _, err) = robocal(&["simulate", "--seed", "1", "--validation", "10001", "--out", &out("big.json")]);
+    assert!(!ok && err.contains("--validation: must be 0–10000"), "{err}");
 }
 
 /// simulate → identify (DETMAX 75) → validate → study, through the binary: the identified values

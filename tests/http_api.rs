@@ -778,6 +778,40 @@ async fn pose_plans() {
         })
         .collect();
     assert!(pc.check_sequence(&poses).is_ok());
+    // `robocal plan` with the same request writes the same plan (base guess and artefact are the
+    // CLI's defaults: the thesis's lab, 300 mm sides, 12.7 mm balls).
+    let cli_plan = app.dir.join("plan.json");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(["plan", "--tcp-mm", "40,0,130", "--payload-kg", "1.7", "--payload-com-mm", "30,0,64"])
+        .args([
+            "--per-ball",
+            "20",
+            "--validation",
+            "12",
+            "--select",
+            "35",
+            "--select-seed",
+            "4",
+            "--seed",
+            "2",
+            "--out",
+        ])
+        .arg(&cli_plan)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(stdout.contains("35 identification poses (a DETMAX selection of 60"), "{stdout}");
+    let written: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&cli_plan).unwrap()).unwrap();
+    assert_eq!(&written, plan, "the CLI's plan is the service's");
+    // The CLI applies the service's bounds, or asks for --force with what the run would cost.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(["plan", "--per-ball", "100000"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("--per-ball: must be 1–2000") && err.contains("--force") && err.contains(" MB"), "{err}");
     assert_problem(&app.get("/v1/pose-plans/none").await, 404, None);
     app.stop().await;
 }

@@ -23,6 +23,9 @@ pub struct SimulateArgs {
     /// Laser-tracker validation poses.
     #[arg(long, default_value_t = 506)]
     pub validation: usize,
+    /// Run counts beyond the service's bounds (2,000 per ball, 10,000 validation poses).
+    #[arg(long)]
+    pub force: bool,
     /// The true parameter set (or a truth file from --truth-out); default: thesis Table 5.1.
     #[arg(long)]
     pub truth: Option<PathBuf>,
@@ -170,9 +173,7 @@ pub(super) fn simulate(a: SimulateArgs) -> Result<String, CliError> {
             opts.validation_payload = Some((m, nalgebra::Vector3::new(c[0], c[1], c[2]) * MM));
         }
     }
-    if a.id_per_ball == 0 {
-        return Err(CliError::arg("--id-per-ball", "must be at least 1"));
-    }
+    super::check_counts(a.id_per_ball, "--id-per-ball", a.validation, "--validation", a.force)?;
     let sim = crate::sim::simulate::simulate(&opts).map_err(|e| CliError::msg(e.to_string()))?;
     let text = crate::domain::cell::cell_to_json(&sim.cell);
     write(&a.out, &text)?;

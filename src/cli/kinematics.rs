@@ -120,7 +120,7 @@ pub struct NominalArgs {
     pub out: Option<PathBuf>,
 }
 
-fn tool(a: &ToolArgs) -> Result<Tool, CliError> {
+pub(super) fn tool(a: &ToolArgs) -> Result<Tool, CliError> {
     if let Some(p) = &a.tool {
         return from_json::<ToolSpec>(&read(p)?).and_then(|t| t.to_tool()).map_err(|e| CliError::file(p, e));
     }

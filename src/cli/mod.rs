@@ -5,6 +5,7 @@ mod calibrate;
 mod data;
 mod experiments;
 mod kinematics;
+mod plan;
 mod reports;
 mod service;
 mod validation_text;
@@ -50,6 +51,9 @@ pub enum Command {
     Import(ImportCommand),
     /// Simulate the virtual cell: plan the TriCal and tracker runs, measure a true robot, write the cell file.
     Simulate(SimulateArgs),
+    /// Plan the measuring poses (as the service's pose plans): TriCal candidates, an optional DETMAX
+    /// selection in measuring order, laser-tracker validation poses.
+    Plan(plan::PlanArgs),
     /// Identify the robot's parameters from a cell's measurements.
     Identify(IdentifyArgs),
     /// Validate a parameter set on a cell's sessions: error statistics of the calibrated and nominal models.
@@ -118,6 +122,7 @@ pub fn run(cli: Cli) -> Result<String, CliError> {
         Command::Import(ImportCommand::Ur10Ipa(a)) => data::import_ur10(a),
         Command::Import(ImportCommand::ThreeReflector(a)) => data::import_three(a),
         Command::Simulate(a) => data::simulate(a),
+        Command::Plan(a) => plan::plan(a),
         Command::Identify(a) => calibrate::identify(a),
         Command::Validate(a) => calibrate::validate(a),
         Command::Study(a) => experiments::study(a),
@@ -202,6 +207,40 @@ fn write_or_return(out: &Option<PathBuf>, text: String) -> Result<String, CliErr
             Ok(format!("wrote {}", p.display()))
         }
         None => Ok(text),
+    }
+}
+
+/// Candidate and validation counts within the service's bounds (`domain::limits`, one
+/// definition), or beyond them with `--force`: the refusal says what the run would cost.
+fn check_counts(
+    per_ball: usize,
+    per_ball_arg: &str,
+    validation: usize,
+    validation_arg: &str,
+    force: bool,
+) -> Result<(), CliError> {
+    use crate::domain::limits;
+    if per_ball == 0 {
+        return Err(CliError::arg(per_ball_arg, "must be at least 1"));
+    }
+    let over = [limits::per_ball(per_ball, per_ball_arg).err(), limits::validation(validation, validation_arg).err()];
+    match over.into_iter().flatten().next() {
+        Some(e) if !force => {
+            let (s, mb) = limits::estimate(per_ball, validation);
+            Err(CliError::arg(
+                &e.path,
+                format!(
+                    "{} (the service's bound); this run would take ~{s:.0} s and write ~{mb:.0} MB: pass --force to run it anyway",
+                    e.reason
+                ),
+            ))
+        }
+        Some(e) => {
+            let (s, mb) = limits::estimate(per_ball, validation);
+            eprintln!("note: {}: {}, forced: expect ~{s:.0} s and ~{mb:.0} MB", e.path, e.reason);
+            Ok(())
+        }
+        None => Ok(()),
     }
 }
 

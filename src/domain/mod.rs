@@ -6,6 +6,7 @@
 pub mod cell;
 pub mod diagnosis;
 pub mod identification;
+pub mod limits;
 pub mod measurement_csv;
 pub mod param_set;
 pub mod pose;

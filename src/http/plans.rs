@@ -16,13 +16,10 @@ use crate::app::robots::{model_of, robot_base};
 use crate::db::jobs::JobKind;
 use crate::db::records;
 use crate::domain::cell::ArtefactSpec;
+use crate::domain::limits;
 use crate::jobs::requests::PosePlanRequest;
 use crate::jobs::results::PosePlan;
 use crate::jobs::run;
-
-/// Largest candidate count per ball and validation count a plan may ask for.
-pub const MAX_PER_BALL: usize = 2000;
-pub const MAX_VALIDATION: usize = 10_000;
 
 /// Start a pose plan (a job; its result is a pose plan).
 #[utoipa::path(post, path = "/v1/robots/{robot_id}/pose-plans", tag = "pose-plans",
@@ -45,12 +42,8 @@ pub async fn create(
         .await?
         .ok_or_else(|| ApiError::invalid("artefact_id", format!("no artefact '{}'", body.artefact_id)))?;
     let artefact: ArtefactSpec = serde_json::from_str(&row.spec_json).map_err(|e| ApiError::Internal(e.to_string()))?;
-    if body.per_ball == 0 || body.per_ball > MAX_PER_BALL {
-        return Err(ApiError::invalid("per_ball", format!("must be 1–{MAX_PER_BALL}")));
-    }
-    if body.validation > MAX_VALIDATION {
-        return Err(ApiError::invalid("validation", format!("must be 0–{MAX_VALIDATION}")));
-    }
+    limits::per_ball(body.per_ball, "per_ball").map_err(|e| ApiError::domain(e, ""))?;
+    limits::validation(body.validation, "validation").map_err(|e| ApiError::domain(e, ""))?;
     if let Some(s) = &body.select {
         run::selection(s)?;
         if s.n >= 3 * body.per_ball {

@@ -329,6 +329,17 @@ fn pose_plan(
     artefact: &ArtefactSpec,
     progress: &(dyn Fn(f64) + Sync),
 ) -> Result<Output, JobError> {
+    plan_poses(model, base, request, artefact, progress).map(|plan| Output::PosePlan { plan })
+}
+
+/// A pose plan: the job's work, and `robocal plan`'s, so both give the same plan.
+pub fn plan_poses(
+    model: &RobotModel,
+    base: [f64; 6],
+    request: &PosePlanRequest,
+    artefact: &ArtefactSpec,
+    progress: &(dyn Fn(f64) + Sync),
+) -> Result<PosePlan, JobError> {
     let pc = planning_cell(model, base, request, artefact)?;
     let id_opts = IdentificationOptions { per_ball: request.per_ball, ..Default::default() };
     let candidates = pc.plan_identification(&id_opts, request.seed).map_err(plan_error)?;
@@ -402,7 +413,7 @@ fn pose_plan(
             .collect(),
         home_deg: to_deg(&pc.layout().home),
     };
-    Ok(Output::PosePlan { plan })
+    Ok(plan)
 }
 
 /// Write a job's output; returns the job's result.
