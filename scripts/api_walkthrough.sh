@@ -4,6 +4,8 @@
 # The measurements come from the virtual cell: `robocal simulate` writes them to a cell file,
 # its true robot with a small cyclic error on joint 3 that the model lacks (the diagnosis finds it).
 #   cargo run --release -- serve &      then      scripts/api_walkthrough.sh
+# (tests/readme.rs runs it against a server, and checks that README.md's service block is an
+# excerpt of it, line for line.)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 API=${API:-http://127.0.0.1:8080}
@@ -16,7 +18,9 @@ wait_job() {  # poll a job until it ends; print it
   call "$API/v1/jobs/$1"
 }
 tmp=$(mktemp -d)
-cargo run --quiet --release -- simulate --seed 1 --effects cyclic:j=3:h=2:amp_deg=0.01 --out "$tmp/sim.json" >/dev/null
+# The robocal binary: $ROBOCAL when set (the test sets it to its build), else cargo's release build.
+robocal() { if [[ -n "${ROBOCAL:-}" ]]; then "$ROBOCAL" "$@"; else cargo run --quiet --release -- "$@"; fi; }
+robocal simulate --seed 1 --effects cyclic:j=3:h=2:amp_deg=0.01 --out "$tmp/sim.json" >/dev/null
 name="cell-$RANDOM$RANDOM"
 
 echo "== a robot (preset or custom table) with a guess of its base in the artefact's frame {W}"
