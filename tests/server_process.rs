@@ -1,6 +1,6 @@
 //! The real `robocal serve` process over a real socket: graceful shutdown on SIGTERM, and a job
 //! running when the server is killed (SIGKILL) completes after a restart; processes opening a
-//! new database together.
+//! new database together; one server per database, enforced.
 
 mod common;
 
@@ -11,6 +11,8 @@ use std::time::{Duration, Instant};
 
 use axum::http::Method;
 use robocal::http::client::Client;
+use robocal::server::lock::LockError;
+use robocal::server::{ServeError, ServeOptions};
 use serde_json::{Value, json};
 
 fn free_port() -> u16 {
@@ -195,4 +197,75 @@ async fn processes_opening_a_new_database_together_take_turns() {
         signal(&server, "-TERM");
         assert!(wait_exit(&mut server, Duration::from_secs(30)).success());
     }
+}
+
+/// One server per database: a second `serve` on a database that a running server holds exits at
+/// once, status 2, naming the first one's PID and address; the first is not disturbed. Once the
+/// first is killed (SIGKILL: no cleanup of any kind) the OS has released its lock and a new server
+/// starts on the database; after a clean stop the lock file is left empty.
+#[tokio::test]
+async fn a_second_server_on_one_database_is_refused_until_the_first_is_gone() {
+    let dir = common::fresh_dir("one-server");
+    let db = dir.join("robocal.db");
+    let (port, other_port) = (free_port(), free_port());
+    let mut first = start(&db, port);
+    let client = Client::new(&format!("http://127.0.0.1:{port}"), None).unwrap();
+    ready(&client).await;
+
+    let t = Instant::now();
+    let second = Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(["serve", "--db", db.to_str().unwrap(), "--bind", &format!("127.0.0.1:{other_port}")])
+        .env("RUST_LOG", "warn")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&second.stderr);
+    assert!(t.elapsed() < Duration::from_secs(10), "refused at once, took {:?}", t.elapsed());
+    assert_eq!(second.status.code(), Some(2), "{err}");
+    let real_db = std::fs::canonicalize(&dir).unwrap().join("robocal.db");
+    for expected in [
+        format!("error: the database {} is served by another robocal process", real_db.display()),
+        format!("PID {}", first.id()),
+        format!("listening on 127.0.0.1:{port}"),
+        "one server per database".to_string(),
+    ] {
+        assert!(err.contains(&expected), "{expected:?} not in: {err}");
+    }
+    // It never listened, and the first one still serves.
+    assert!(std::net::TcpStream::connect(("127.0.0.1", other_port)).is_err());
+    let r = client.send(Method::GET, "/readyz", None, &[]).await.unwrap();
+    assert!(r.status.is_success());
+
+    first.kill().unwrap(); // SIGKILL
+    let _ = first.wait();
+    let mut next = start(&db, other_port);
+    let next_client = Client::new(&format!("http://127.0.0.1:{other_port}"), None).unwrap();
+    ready(&next_client).await;
+    let lock: Value = serde_json::from_str(&std::fs::read_to_string(dir.join("robocal.db.lock")).unwrap()).unwrap();
+    assert_eq!(lock["pid"], next.id());
+    assert_eq!(lock["addr"], format!("127.0.0.1:{other_port}"));
+    assert!(lock["since"].as_str().unwrap().ends_with('Z'), "{lock}");
+    signal(&next, "-TERM");
+    assert!(wait_exit(&mut next, Duration::from_secs(30)).success());
+    assert_eq!(std::fs::read_to_string(dir.join("robocal.db.lock")).unwrap(), "", "emptied on a clean stop");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// In one process (the demo's and the tests' in-process servers): a server whose address is
+/// refused releases the database's lock, so the next one starts; while that one runs, another on
+/// the same database is refused with `ServeError::Locked`.
+#[tokio::test]
+async fn a_refused_address_releases_the_database_lock() {
+    let dir = common::fresh_dir("bind-refused");
+    let db = dir.join("robocal.db");
+    let taken = TcpListener::bind("127.0.0.1:0").unwrap();
+    let e = robocal::server::start(ServeOptions::new(db.clone(), taken.local_addr().unwrap())).await.err().unwrap();
+    assert!(matches!(e, ServeError::Bind { .. }), "{e}");
+    let running = robocal::server::start(ServeOptions::new(db.clone(), ([127, 0, 0, 1], 0).into())).await.unwrap();
+    let e = robocal::server::start(ServeOptions::new(db.clone(), ([127, 0, 0, 1], 0).into())).await.err().unwrap();
+    assert!(matches!(e, ServeError::Locked(LockError::Held { .. })), "{e}");
+    assert!(e.to_string().contains(&format!("listening on {}", running.addr)), "{e}");
+    running.stop().await.unwrap();
+    let again = robocal::server::start(ServeOptions::new(db.clone(), ([127, 0, 0, 1], 0).into())).await.unwrap();
+    again.stop().await.unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
 }

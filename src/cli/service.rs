@@ -194,7 +194,7 @@ pub(super) fn demo(a: DemoArgs) -> Result<String, CliError> {
                 let client = Client::new(&server.url(), None).map_err(|e| CliError::msg(e.to_string()))?;
                 let r = run(&client, &opts, &mut log).await;
                 let _ = server.stop().await;
-                for suffix in ["", "-wal", "-shm"] {
+                for suffix in ["", "-wal", "-shm", ".lock"] {
                     let _ = std::fs::remove_file(format!("{}{suffix}", db.display()));
                 }
                 Ok(table(&r.map_err(|e| CliError::msg(e.to_string()))?))
