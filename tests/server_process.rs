@@ -1,6 +1,7 @@
 //! The real `robocal serve` process over a real socket: graceful shutdown on SIGTERM, and a job
 //! running when the server is killed (SIGKILL) completes after a restart; processes opening a
-//! new database together; one server per database, enforced.
+//! new database together; one server per database, enforced; logs without colour codes when
+//! stderr is not a terminal, and as JSON lines.
 
 mod common;
 
@@ -268,4 +269,63 @@ async fn a_refused_address_releases_the_database_lock() {
     let again = robocal::server::start(ServeOptions::new(db.clone(), ([127, 0, 0, 1], 0).into())).await.unwrap();
     again.stop().await.unwrap();
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A server's stderr (its log) from start to a clean stop, with one request carrying the
+/// request id `rid` in between; `RUST_LOG` lets through tower-http's per-request events.
+async fn log_of_one_request(tag: &str, extra: &[&str], rid: &str) -> String {
+    let dir = common::fresh_dir(tag);
+    let db = dir.join("robocal.db");
+    let port = free_port();
+    let child = Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(["serve", "--db", db.to_str().unwrap(), "--bind", &format!("127.0.0.1:{port}"), "--grace-s", "1"])
+        .args(extra)
+        .env("RUST_LOG", "info,tower_http=debug")
+        .env_remove("NO_COLOR")
+        .env_remove("ROBOCAL_LOG_FORMAT")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let client = Client::new(&format!("http://127.0.0.1:{port}"), None).unwrap();
+    ready(&client).await;
+    let r = client.send(Method::GET, "/v1/robots", None, &[("x-request-id", rid)]).await.unwrap();
+    assert_eq!(r.status.as_u16(), 200);
+    signal(&child, "-TERM");
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success());
+    let _ = std::fs::remove_dir_all(&dir);
+    String::from_utf8(out.stderr).unwrap()
+}
+
+/// Text logs to a pipe (not a terminal): no ANSI escape codes, the request's span readable.
+#[tokio::test]
+async fn text_logs_to_a_pipe_have_no_colour_codes() {
+    let log = log_of_one_request("log-text", &[], "text-log-rid-1").await;
+    assert!(!log.contains('\x1b'), "an escape code in: {log:?}");
+    assert!(log.contains("robocal serving") && log.contains("stopped"), "{log}");
+    assert!(log.contains("request_id=text-log-rid-1"), "{log}");
+}
+
+/// `--log-format json`: every line is one JSON object with a timestamp, a level and the event's
+/// fields (its message among them); the request's events carry the http span with its request id.
+#[tokio::test]
+async fn json_logs_are_one_object_per_line_with_the_request_id() {
+    let log = log_of_one_request("log-json", &["--log-format", "json"], "json-log-rid-1").await;
+    assert!(!log.contains('\x1b'), "an escape code in: {log:?}");
+    let lines: Vec<Value> = log
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("not JSON ({e}): {l}")))
+        .collect();
+    for l in &lines {
+        assert!(l["timestamp"].is_string() && l["level"].is_string() && l["target"].is_string(), "{l}");
+        assert!(l["fields"]["message"].is_string(), "{l}");
+    }
+    let serving = lines.iter().find(|l| l["fields"]["message"] == "robocal serving").expect("the start line");
+    assert_eq!(serving["level"], "INFO");
+    assert!(serving["fields"]["addr"].as_str().unwrap().starts_with("127.0.0.1:"), "{serving}");
+    let request: Vec<&Value> = lines.iter().filter(|l| l["span"]["request_id"] == "json-log-rid-1").collect();
+    assert!(!request.is_empty(), "no event in the request's span: {log}");
+    assert!(request.iter().all(|l| l["span"]["name"] == "http" && l["span"]["uri"] == "/v1/robots"), "{request:?}");
 }
