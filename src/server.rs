@@ -122,7 +122,9 @@ pub async fn serve(
     {
         tracing::warn!(lock_file = %lock.path().display(), error = %e, "cannot record the address in the lock file");
     }
-    tracing::info!(%addr, db = %opts.db.display(), require_auth, workers = opts.workers, "robocal serving");
+    tracing::info!(
+        %addr, db = %opts.db.display(), require_auth, workers = opts.workers, cors = %opts.config.cors, "robocal serving"
+    );
     if let Some(tx) = ready {
         let _ = tx.send(addr);
     }

@@ -329,3 +329,24 @@ async fn json_logs_are_one_object_per_line_with_the_request_id() {
     assert!(!request.is_empty(), "no event in the request's span: {log}");
     assert!(request.iter().all(|l| l["span"]["name"] == "http" && l["span"]["uri"] == "/v1/robots"), "{request:?}");
 }
+
+/// A `--cors-origin` that is not an origin is refused at start-up, status 2, naming the option;
+/// nothing is created.
+#[test]
+fn a_bad_cors_origin_is_refused_at_start_up() {
+    let dir = common::fresh_dir("cors-arg");
+    let db = dir.join("robocal.db");
+    let out = Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(["serve", "--db", db.to_str().unwrap(), "--bind", "127.0.0.1:0"])
+        .args(["--cors-origin", "https://ok.example", "--cors-origin", "https://dash.example.com/"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("error: --cors-origin: 'https://dash.example.com/' is not an origin: no trailing slash"),
+        "{err}"
+    );
+    assert!(!db.exists() && !dir.join("robocal.db.lock").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -7,6 +7,7 @@ use clap::{Args, Subcommand};
 use serde_json::{Value, json};
 
 use super::CliError;
+use crate::domain::origin::CorsOrigins;
 
 #[derive(Args, Debug)]
 pub struct ServeArgs {
@@ -32,6 +33,11 @@ pub struct ServeArgs {
     /// (one object per line, for log shippers). RUST_LOG sets the levels (default info).
     #[arg(long, env = "ROBOCAL_LOG_FORMAT", value_enum, default_value_t = LogFormat::Text)]
     pub log_format: LogFormat,
+    /// A browser origin whose pages may call the API (CORS), e.g. https://dash.example.com:
+    /// repeat it or separate origins with commas; * alone allows any origin. Off by default: no
+    /// CORS headers, so browsers keep other sites' pages from reading the API.
+    #[arg(long = "cors-origin", env = "ROBOCAL_CORS_ORIGINS", value_name = "ORIGIN", value_delimiter = ',')]
+    pub cors_origins: Vec<String>,
 }
 
 /// How `serve` writes its log (to stderr).
@@ -139,12 +145,14 @@ pub(super) fn serve(a: ServeArgs) -> Result<String, CliError> {
     if a.max_batch == 0 {
         return Err(CliError::arg("--max-batch", "must be at least 1"));
     }
+    let cors = CorsOrigins::parse(&a.cors_origins, "--cors-origin").map_err(|e| CliError::msg(e.to_string()))?;
     init_tracing(a.log_format);
     let mut opts = ServeOptions::new(a.db.clone(), bind);
     opts.workers = a.workers;
     opts.require_auth = a.require_auth;
     opts.grace = std::time::Duration::from_secs(a.grace_s);
     opts.config.max_batch = a.max_batch;
+    opts.config.cors = cors;
     runtime()?.block_on(serve(opts, None, shutdown_signal())).map_err(|e| {
         if a.log_format == LogFormat::Json {
             // A log shipper sees why the server stopped too (the plain `error:` line follows).

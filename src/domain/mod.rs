@@ -7,6 +7,7 @@ pub mod cell;
 pub mod diagnosis;
 pub mod identification;
 pub mod measurement_csv;
+pub mod origin;
 pub mod param_set;
 pub mod pose;
 pub mod robot;
