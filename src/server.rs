@@ -1,7 +1,10 @@
-//! `robocal serve`: one long-running process on an embedded SQLite database. Opens (creating it on
-//! first start) and migrates the database, requeues jobs a killed predecessor left running, starts
-//! the job workers, serves HTTP until SIGTERM or Ctrl-C, then stops accepting, lets running jobs
-//! finish within a grace period and requeues the rest.
+//! `robocal serve`: one long-running process on an embedded SQLite database. Takes the database's
+//! lock (one server per database: [`lock`]), opens (creating it on first start) and migrates the
+//! database, binds, requeues jobs a killed predecessor left running, starts the job workers, serves
+//! HTTP until SIGTERM or Ctrl-C, then stops accepting, lets running jobs finish within a grace
+//! period and requeues the rest.
+
+pub mod lock;
 
 use std::future::Future;
 use std::net::SocketAddr;
@@ -13,6 +16,7 @@ use tokio::sync::oneshot;
 use crate::db;
 use crate::http::{AppState, ServiceConfig, app};
 use crate::jobs::Workers;
+use lock::{DbLock, LockError};
 
 /// How to serve.
 #[derive(Clone, Debug)]
@@ -43,6 +47,9 @@ impl ServeOptions {
 
 #[derive(Debug, thiserror::Error)]
 pub enum ServeError {
+    /// Another server holds the database (or its lock file cannot be made).
+    #[error(transparent)]
+    Locked(#[from] LockError),
     #[error("database {path}: {source}")]
     Db { path: String, source: sqlx::Error },
     #[error("cannot listen on {addr}: {source}")]
@@ -80,6 +87,8 @@ pub async fn serve(
     ready: Option<oneshot::Sender<SocketAddr>>,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> Result<(), ServeError> {
+    // Before anything touches the database: a second server on it is refused here.
+    let mut lock = DbLock::acquire(&opts.db)?;
     let pool =
         db::connect(&opts.db).await.map_err(|source| ServeError::Db { path: opts.db.display().to_string(), source })?;
     let require_auth = opts.require_auth || !opts.bind.ip().is_loopback();
@@ -93,22 +102,36 @@ pub async fn serve(
             );
         }
     }
+    // Bound before the workers start, so that a refused address leaves no worker behind (an
+    // in-process server's would otherwise go on claiming jobs without the lock).
+    let listener = match tokio::net::TcpListener::bind(opts.bind).await {
+        Ok(l) => l,
+        Err(source) => {
+            pool.close().await;
+            return Err(ServeError::Bind { addr: opts.bind, source });
+        }
+    };
+    let addr = listener.local_addr().map_err(ServeError::Serve)?;
     let config = ServiceConfig { require_auth, ..opts.config.clone() };
     let state = AppState::new(pool.clone(), config);
     let workers = Workers::start(state.clone(), opts.workers, opts.grace)
         .await
         .map_err(|source| ServeError::Db { path: opts.db.display().to_string(), source })?;
-    let listener = tokio::net::TcpListener::bind(opts.bind)
-        .await
-        .map_err(|source| ServeError::Bind { addr: opts.bind, source })?;
-    let addr = listener.local_addr().map_err(ServeError::Serve)?;
-    tracing::info!(%addr, db = %opts.db.display(), require_auth, workers = opts.workers, "robocal serving");
+    if let Some(lock) = lock.as_mut()
+        && let Err(e) = lock.listening(addr)
+    {
+        tracing::warn!(lock_file = %lock.path().display(), error = %e, "cannot record the address in the lock file");
+    }
+    tracing::info!(
+        %addr, db = %opts.db.display(), require_auth, workers = opts.workers, cors = %opts.config.cors, "robocal serving"
+    );
     if let Some(tx) = ready {
         let _ = tx.send(addr);
     }
     let served = axum::serve(listener, app(state)).with_graceful_shutdown(shutdown).await;
     workers.shutdown().await;
     pool.close().await;
+    drop(lock); // only now may another server open the database
     tracing::info!("stopped");
     served.map_err(ServeError::Serve)
 }

@@ -887,3 +887,80 @@ async fn tokens_and_scopes() {
     assert_problem(&app.get("/v1/robots").await, 401, None);
     app.stop().await;
 }
+
+/// CORS is off unless configured: a request from a page of another origin gets no
+/// Access-Control-Allow-Origin (so the browser keeps the answer from the page), and OPTIONS is
+/// not answered as a preflight.
+#[tokio::test]
+async fn cors_is_off_by_default() {
+    let app = TestApp::new(ServiceConfig::default(), false).await;
+    let origin = ("origin", "https://dash.example.com");
+    let r = app.raw(Method::GET, "/v1/robots", None, vec![], &[origin]).await;
+    assert_eq!(r.status, StatusCode::OK);
+    assert!(r.headers.keys().all(|k| !k.as_str().starts_with("access-control-")), "{:?}", r.headers);
+    let r = app
+        .raw(Method::OPTIONS, "/v1/robots", None, vec![], &[origin, ("access-control-request-method", "POST")])
+        .await;
+    assert!(r.headers.keys().all(|k| !k.as_str().starts_with("access-control-")), "{:?}", r.headers);
+    assert_ne!(r.status, StatusCode::OK, "{}", r.text);
+    app.stop().await;
+}
+
+/// `--cors-origin` configured: a preflight from that origin is answered (before any token is
+/// asked for, on a server that requires them) with the origin, the methods and the request
+/// headers the API takes; a request from it gets the origin and the readable response headers,
+/// a 401 included; another origin gets no CORS header at all. `*` answers any origin with `*`.
+#[tokio::test]
+async fn cors_answers_the_configured_origins_only() {
+    use robocal::http::CorsOrigins;
+    let cors = CorsOrigins::parse(&["https://dash.example.com,http://localhost:3000"], "--cors-origin").unwrap();
+    let app = TestApp::new(ServiceConfig { require_auth: true, cors, ..Default::default() }, false).await;
+    let preflight = |origin: &'static str| {
+        [
+            ("origin", origin),
+            ("access-control-request-method", "POST"),
+            ("access-control-request-headers", "authorization, content-type, idempotency-key"),
+        ]
+    };
+    for origin in ["https://dash.example.com", "http://localhost:3000"] {
+        let r = app.raw(Method::OPTIONS, "/v1/sessions/abc/measurements", None, vec![], &preflight(origin)).await;
+        assert!(r.status.is_success(), "{} {}", r.status, r.text);
+        assert_eq!(r.headers["access-control-allow-origin"], origin);
+        let methods = r.headers["access-control-allow-methods"].to_str().unwrap().to_string();
+        for m in ["GET", "POST", "PUT", "PATCH", "DELETE"] {
+            assert!(methods.contains(m), "{methods}");
+        }
+        let allowed = r.headers["access-control-allow-headers"].to_str().unwrap().to_string();
+        for h in ["authorization", "content-type", "idempotency-key", "x-request-id"] {
+            assert!(allowed.contains(h), "{allowed}");
+        }
+        assert!(r.headers.get("access-control-allow-credentials").is_none());
+        assert!(r.headers.contains_key("x-request-id"), "a preflight has its request id too");
+    }
+    // The real request (no token yet): 401, readable by the page.
+    let r = app.raw(Method::GET, "/v1/robots", None, vec![], &[("origin", "https://dash.example.com")]).await;
+    assert_problem(&r, 401, None);
+    assert_eq!(r.headers["access-control-allow-origin"], "https://dash.example.com");
+    let exposed = r.headers["access-control-expose-headers"].to_str().unwrap().to_string();
+    for h in ["x-request-id", "server-timing", "location", "link", "x-total-count"] {
+        assert!(exposed.contains(h), "{exposed}");
+    }
+    assert!(r.headers.get_all("vary").iter().any(|v| v.to_str().unwrap().contains("origin")), "{:?}", r.headers);
+    // Another origin (an origin differs by scheme and port too): no CORS header, nothing to read.
+    for other in ["https://evil.example.com", "http://dash.example.com", "http://localhost:3001"] {
+        let r = app.raw(Method::OPTIONS, "/v1/robots", None, vec![], &preflight(other)).await;
+        assert!(r.headers.get("access-control-allow-origin").is_none(), "{other}: {:?}", r.headers);
+        let r = app.raw(Method::GET, "/v1/robots", None, vec![], &[("origin", other)]).await;
+        assert!(r.headers.get("access-control-allow-origin").is_none(), "{other}: {:?}", r.headers);
+    }
+    app.stop().await;
+
+    let app = TestApp::new(ServiceConfig { cors: CorsOrigins::Any, ..Default::default() }, false).await;
+    let r = app.raw(Method::OPTIONS, "/v1/robots", None, vec![], &preflight("https://anyone.example")).await;
+    assert!(r.status.is_success());
+    assert_eq!(r.headers["access-control-allow-origin"], "*");
+    let r = app.raw(Method::GET, "/v1/robots", None, vec![], &[("origin", "https://anyone.example")]).await;
+    assert_eq!(r.status, StatusCode::OK);
+    assert_eq!(r.headers["access-control-allow-origin"], "*");
+    app.stop().await;
+}

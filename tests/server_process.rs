@@ -1,6 +1,7 @@
 //! The real `robocal serve` process over a real socket: graceful shutdown on SIGTERM, and a job
 //! running when the server is killed (SIGKILL) completes after a restart; processes opening a
-//! new database together.
+//! new database together; one server per database, enforced; logs without colour codes when
+//! stderr is not a terminal, and as JSON lines.
 
 mod common;
 
@@ -11,6 +12,8 @@ use std::time::{Duration, Instant};
 
 use axum::http::Method;
 use robocal::http::client::Client;
+use robocal::server::lock::LockError;
+use robocal::server::{ServeError, ServeOptions};
 use serde_json::{Value, json};
 
 fn free_port() -> u16 {
@@ -195,4 +198,155 @@ async fn processes_opening_a_new_database_together_take_turns() {
         signal(&server, "-TERM");
         assert!(wait_exit(&mut server, Duration::from_secs(30)).success());
     }
+}
+
+/// One server per database: a second `serve` on a database that a running server holds exits at
+/// once, status 2, naming the first one's PID and address; the first is not disturbed. Once the
+/// first is killed (SIGKILL: no cleanup of any kind) the OS has released its lock and a new server
+/// starts on the database; after a clean stop the lock file is left empty.
+#[tokio::test]
+async fn a_second_server_on_one_database_is_refused_until_the_first_is_gone() {
+    let dir = common::fresh_dir("one-server");
+    let db = dir.join("robocal.db");
+    let (port, other_port) = (free_port(), free_port());
+    let mut first = start(&db, port);
+    let client = Client::new(&format!("http://127.0.0.1:{port}"), None).unwrap();
+    ready(&client).await;
+
+    let t = Instant::now();
+    let second = Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(["serve", "--db", db.to_str().unwrap(), "--bind", &format!("127.0.0.1:{other_port}")])
+        .env("RUST_LOG", "warn")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&second.stderr);
+    assert!(t.elapsed() < Duration::from_secs(10), "refused at once, took {:?}", t.elapsed());
+    assert_eq!(second.status.code(), Some(2), "{err}");
+    let real_db = std::fs::canonicalize(&dir).unwrap().join("robocal.db");
+    for expected in [
+        format!("error: the database {} is served by another robocal process", real_db.display()),
+        format!("PID {}", first.id()),
+        format!("listening on 127.0.0.1:{port}"),
+        "one server per database".to_string(),
+    ] {
+        assert!(err.contains(&expected), "{expected:?} not in: {err}");
+    }
+    // It never listened, and the first one still serves.
+    assert!(std::net::TcpStream::connect(("127.0.0.1", other_port)).is_err());
+    let r = client.send(Method::GET, "/readyz", None, &[]).await.unwrap();
+    assert!(r.status.is_success());
+
+    first.kill().unwrap(); // SIGKILL
+    let _ = first.wait();
+    let mut next = start(&db, other_port);
+    let next_client = Client::new(&format!("http://127.0.0.1:{other_port}"), None).unwrap();
+    ready(&next_client).await;
+    let lock: Value = serde_json::from_str(&std::fs::read_to_string(dir.join("robocal.db.lock")).unwrap()).unwrap();
+    assert_eq!(lock["pid"], next.id());
+    assert_eq!(lock["addr"], format!("127.0.0.1:{other_port}"));
+    assert!(lock["since"].as_str().unwrap().ends_with('Z'), "{lock}");
+    signal(&next, "-TERM");
+    assert!(wait_exit(&mut next, Duration::from_secs(30)).success());
+    assert_eq!(std::fs::read_to_string(dir.join("robocal.db.lock")).unwrap(), "", "emptied on a clean stop");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// In one process (the demo's and the tests' in-process servers): a server whose address is
+/// refused releases the database's lock, so the next one starts; while that one runs, another on
+/// the same database is refused with `ServeError::Locked`.
+#[tokio::test]
+async fn a_refused_address_releases_the_database_lock() {
+    let dir = common::fresh_dir("bind-refused");
+    let db = dir.join("robocal.db");
+    let taken = TcpListener::bind("127.0.0.1:0").unwrap();
+    let e = robocal::server::start(ServeOptions::new(db.clone(), taken.local_addr().unwrap())).await.err().unwrap();
+    assert!(matches!(e, ServeError::Bind { .. }), "{e}");
+    let running = robocal::server::start(ServeOptions::new(db.clone(), ([127, 0, 0, 1], 0).into())).await.unwrap();
+    let e = robocal::server::start(ServeOptions::new(db.clone(), ([127, 0, 0, 1], 0).into())).await.err().unwrap();
+    assert!(matches!(e, ServeError::Locked(LockError::Held { .. })), "{e}");
+    assert!(e.to_string().contains(&format!("listening on {}", running.addr)), "{e}");
+    running.stop().await.unwrap();
+    let again = robocal::server::start(ServeOptions::new(db.clone(), ([127, 0, 0, 1], 0).into())).await.unwrap();
+    again.stop().await.unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A server's stderr (its log) from start to a clean stop, with one request carrying the
+/// request id `rid` in between; `RUST_LOG` lets through tower-http's per-request events.
+async fn log_of_one_request(tag: &str, extra: &[&str], rid: &str) -> String {
+    let dir = common::fresh_dir(tag);
+    let db = dir.join("robocal.db");
+    let port = free_port();
+    let child = Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(["serve", "--db", db.to_str().unwrap(), "--bind", &format!("127.0.0.1:{port}"), "--grace-s", "1"])
+        .args(extra)
+        .env("RUST_LOG", "info,tower_http=debug")
+        .env_remove("NO_COLOR")
+        .env_remove("ROBOCAL_LOG_FORMAT")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let client = Client::new(&format!("http://127.0.0.1:{port}"), None).unwrap();
+    ready(&client).await;
+    let r = client.send(Method::GET, "/v1/robots", None, &[("x-request-id", rid)]).await.unwrap();
+    assert_eq!(r.status.as_u16(), 200);
+    signal(&child, "-TERM");
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success());
+    let _ = std::fs::remove_dir_all(&dir);
+    String::from_utf8(out.stderr).unwrap()
+}
+
+/// Text logs to a pipe (not a terminal): no ANSI escape codes, the request's span readable.
+#[tokio::test]
+async fn text_logs_to_a_pipe_have_no_colour_codes() {
+    let log = log_of_one_request("log-text", &[], "text-log-rid-1").await;
+    assert!(!log.contains('\x1b'), "an escape code in: {log:?}");
+    assert!(log.contains("robocal serving") && log.contains("stopped"), "{log}");
+    assert!(log.contains("request_id=text-log-rid-1"), "{log}");
+}
+
+/// `--log-format json`: every line is one JSON object with a timestamp, a level and the event's
+/// fields (its message among them); the request's events carry the http span with its request id.
+#[tokio::test]
+async fn json_logs_are_one_object_per_line_with_the_request_id() {
+    let log = log_of_one_request("log-json", &["--log-format", "json"], "json-log-rid-1").await;
+    assert!(!log.contains('\x1b'), "an escape code in: {log:?}");
+    let lines: Vec<Value> = log
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("not JSON ({e}): {l}")))
+        .collect();
+    for l in &lines {
+        assert!(l["timestamp"].is_string() && l["level"].is_string() && l["target"].is_string(), "{l}");
+        assert!(l["fields"]["message"].is_string(), "{l}");
+    }
+    let serving = lines.iter().find(|l| l["fields"]["message"] == "robocal serving").expect("the start line");
+    assert_eq!(serving["level"], "INFO");
+    assert!(serving["fields"]["addr"].as_str().unwrap().starts_with("127.0.0.1:"), "{serving}");
+    let request: Vec<&Value> = lines.iter().filter(|l| l["span"]["request_id"] == "json-log-rid-1").collect();
+    assert!(!request.is_empty(), "no event in the request's span: {log}");
+    assert!(request.iter().all(|l| l["span"]["name"] == "http" && l["span"]["uri"] == "/v1/robots"), "{request:?}");
+}
+
+/// A `--cors-origin` that is not an origin is refused at start-up, status 2, naming the option;
+/// nothing is created.
+#[test]
+fn a_bad_cors_origin_is_refused_at_start_up() {
+    let dir = common::fresh_dir("cors-arg");
+    let db = dir.join("robocal.db");
+    let out = Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(["serve", "--db", db.to_str().unwrap(), "--bind", "127.0.0.1:0"])
+        .args(["--cors-origin", "https://ok.example", "--cors-origin", "https://dash.example.com/"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("error: --cors-origin: 'https://dash.example.com/' is not an origin: no trailing slash"),
+        "{err}"
+    );
+    assert!(!db.exists() && !dir.join("robocal.db.lock").exists());
+    let _ = std::fs::remove_dir_all(&dir);
 }

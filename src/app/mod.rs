@@ -14,6 +14,7 @@ use std::time::Duration;
 use sqlx::SqlitePool;
 use tokio::sync::Notify;
 
+pub use crate::domain::origin::CorsOrigins;
 pub use metrics::Metrics;
 
 /// Service settings.
@@ -28,6 +29,8 @@ pub struct ServiceConfig {
     pub max_body_bytes: usize,
     /// Requests taking longer are answered 503 (jobs run in the background and are not affected).
     pub request_timeout: Duration,
+    /// Browser origins allowed to call the API from a web page (CORS); off by default.
+    pub cors: CorsOrigins,
 }
 
 impl Default for ServiceConfig {
@@ -37,6 +40,7 @@ impl Default for ServiceConfig {
             max_batch: 10_000,
             max_body_bytes: 32 * 1024 * 1024,
             request_timeout: Duration::from_secs(60),
+            cors: CorsOrigins::Off,
         }
     }
 }

@@ -7,6 +7,7 @@ use clap::{Args, Subcommand};
 use serde_json::{Value, json};
 
 use super::CliError;
+use crate::domain::origin::CorsOrigins;
 
 #[derive(Args, Debug)]
 pub struct ServeArgs {
@@ -28,6 +29,25 @@ pub struct ServeArgs {
     /// Seconds a shutdown waits for running jobs before requeueing them.
     #[arg(long, env = "ROBOCAL_SHUTDOWN_GRACE_S", default_value_t = 10)]
     pub grace_s: u64,
+    /// Log format on stderr: text (coloured only on a terminal, never with NO_COLOR set) or json
+    /// (one object per line, for log shippers). RUST_LOG sets the levels (default info).
+    #[arg(long, env = "ROBOCAL_LOG_FORMAT", value_enum, default_value_t = LogFormat::Text)]
+    pub log_format: LogFormat,
+    /// A browser origin whose pages may call the API (CORS), e.g. https://dash.example.com:
+    /// repeat it or separate origins with commas; * alone allows any origin. Off by default: no
+    /// CORS headers, so browsers keep other sites' pages from reading the API.
+    #[arg(long = "cors-origin", env = "ROBOCAL_CORS_ORIGINS", value_name = "ORIGIN", value_delimiter = ',')]
+    pub cors_origins: Vec<String>,
+}
+
+/// How `serve` writes its log (to stderr).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum LogFormat {
+    /// Lines for people; ANSI colour only when stderr is a terminal and NO_COLOR is unset.
+    Text,
+    /// One JSON object per line: timestamp, level, fields (message and the event's own), target,
+    /// the current span (an HTTP request's method, uri and request_id) and the span list.
+    Json,
 }
 
 #[derive(Subcommand, Debug)]
@@ -96,10 +116,23 @@ fn runtime() -> Result<tokio::runtime::Runtime, CliError> {
         .map_err(|e| CliError::msg(format!("cannot start the async runtime: {e}")))
 }
 
-fn init_tracing() {
+fn init_tracing(format: LogFormat) {
+    use std::io::IsTerminal;
     use tracing_subscriber::EnvFilter;
     let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info,sqlx=warn"));
-    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    let log = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr);
+    let _ = match format {
+        LogFormat::Text => {
+            log.with_ansi(colour(std::io::stderr().is_terminal(), std::env::var_os("NO_COLOR"))).try_init()
+        }
+        LogFormat::Json => log.json().with_ansi(false).try_init(),
+    };
+}
+
+/// ANSI colour in the text log: only on a terminal (a file, a pipe or journald gets plain text),
+/// and never when `NO_COLOR` is set to anything but the empty string (no-color.org).
+fn colour(terminal: bool, no_color: Option<std::ffi::OsString>) -> bool {
+    terminal && no_color.is_none_or(|v| v.is_empty())
 }
 
 pub(super) fn serve(a: ServeArgs) -> Result<String, CliError> {
@@ -112,13 +145,21 @@ pub(super) fn serve(a: ServeArgs) -> Result<String, CliError> {
     if a.max_batch == 0 {
         return Err(CliError::arg("--max-batch", "must be at least 1"));
     }
-    init_tracing();
+    let cors = CorsOrigins::parse(&a.cors_origins, "--cors-origin").map_err(|e| CliError::msg(e.to_string()))?;
+    init_tracing(a.log_format);
     let mut opts = ServeOptions::new(a.db.clone(), bind);
     opts.workers = a.workers;
     opts.require_auth = a.require_auth;
     opts.grace = std::time::Duration::from_secs(a.grace_s);
     opts.config.max_batch = a.max_batch;
-    runtime()?.block_on(serve(opts, None, shutdown_signal())).map_err(|e| CliError::msg(e.to_string()))?;
+    opts.config.cors = cors;
+    runtime()?.block_on(serve(opts, None, shutdown_signal())).map_err(|e| {
+        if a.log_format == LogFormat::Json {
+            // A log shipper sees why the server stopped too (the plain `error:` line follows).
+            tracing::error!(error = %e, "robocal cannot serve");
+        }
+        CliError::msg(e.to_string())
+    })?;
     Ok("robocal stopped".into())
 }
 
@@ -194,11 +235,25 @@ pub(super) fn demo(a: DemoArgs) -> Result<String, CliError> {
                 let client = Client::new(&server.url(), None).map_err(|e| CliError::msg(e.to_string()))?;
                 let r = run(&client, &opts, &mut log).await;
                 let _ = server.stop().await;
-                for suffix in ["", "-wal", "-shm"] {
+                for suffix in ["", "-wal", "-shm", ".lock"] {
                     let _ = std::fs::remove_file(format!("{}{suffix}", db.display()));
                 }
                 Ok(table(&r.map_err(|e| CliError::msg(e.to_string()))?))
             }
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn colour_only_on_a_terminal_without_no_color() {
+        assert!(colour(true, None));
+        assert!(colour(true, Some("".into())), "an empty NO_COLOR is unset (no-color.org)");
+        assert!(!colour(true, Some("1".into())));
+        assert!(!colour(false, None));
+        assert!(!colour(false, Some("1".into())));
+    }
 }

@@ -8,6 +8,7 @@ pub mod diagnosis;
 pub mod identification;
 pub mod limits;
 pub mod measurement_csv;
+pub mod origin;
 pub mod param_set;
 pub mod pose;
 pub mod robot;

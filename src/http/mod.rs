@@ -23,6 +23,7 @@ use axum::Router;
 use axum::extract::DefaultBodyLimit;
 use axum::http::StatusCode;
 use tower_http::compression::CompressionLayer;
+use tower_http::cors::{AllowOrigin, CorsLayer};
 use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
 use tower_http::timeout::TimeoutLayer;
 use tower_http::trace::TraceLayer;
@@ -31,7 +32,7 @@ use utoipa::{Modify, OpenApi};
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
-pub use crate::app::{AppState, ServiceConfig, cache};
+pub use crate::app::{AppState, CorsOrigins, ServiceConfig, cache};
 pub use error::{ApiError, Problem};
 pub use metrics::Metrics;
 
@@ -170,23 +171,59 @@ pub fn openapi_json() -> String {
     s
 }
 
-/// The application: routes, state and middleware (request ids, tracing, metrics, timeouts, body
-/// limits, compression).
+/// The request headers a page may send, and the response headers it may read, across origins.
+const CORS_REQUEST_HEADERS: [&str; 4] = ["authorization", "content-type", "idempotency-key", "x-request-id"];
+const CORS_EXPOSED_HEADERS: [&str; 7] =
+    ["x-request-id", "server-timing", "location", "link", "x-total-count", "idempotency-replayed", "www-authenticate"];
+
+/// The CORS layer for the configured origins (`None` when off: no CORS header at all, and an
+/// `OPTIONS` request is routed like any other).
+fn cors(origins: &CorsOrigins) -> Option<CorsLayer> {
+    use axum::http::{HeaderName, HeaderValue, Method};
+    let allow = match origins {
+        CorsOrigins::Off => return None,
+        CorsOrigins::Any => AllowOrigin::any(),
+        CorsOrigins::List(list) => AllowOrigin::list(
+            list.iter().map(|o| HeaderValue::from_str(o.as_str()).expect("a parsed origin is a header value")),
+        ),
+    };
+    Some(
+        CorsLayer::new()
+            .allow_origin(allow)
+            .allow_methods([Method::GET, Method::POST, Method::PUT, Method::PATCH, Method::DELETE, Method::OPTIONS])
+            .allow_headers(CORS_REQUEST_HEADERS.map(HeaderName::from_static))
+            .expose_headers(CORS_EXPOSED_HEADERS.map(HeaderName::from_static))
+            .max_age(std::time::Duration::from_secs(600)),
+    )
+}
+
+/// The application: routes, state and middleware (request ids, tracing, CORS when configured,
+/// metrics, timeouts, body limits, compression).
 pub fn app(state: AppState) -> Router {
     let (router, _) = api_router().split_for_parts();
     let limit = state.config.max_body_bytes;
     let timeout = state.config.request_timeout;
-    router
+    let cors = cors(&state.config.cors);
+    let router = router
         .with_state(state.clone())
         .fallback(ops::not_found)
         // Innermost first: body limit and timeout, then every error made a problem document
         // (before compression, so it reads and replaces plain bodies), then metrics (which see
-        // timed-out requests as the 503s they are), compression, request ids and tracing.
+        // timed-out requests as the 503s they are), compression, CORS, request ids and tracing.
         .layer(DefaultBodyLimit::max(limit))
         .layer(TimeoutLayer::with_status_code(StatusCode::SERVICE_UNAVAILABLE, timeout))
         .layer(axum::middleware::map_response(error::problem_fallback))
         .layer(axum::middleware::from_fn_with_state(state, metrics::track))
-        .layer(CompressionLayer::new())
+        .layer(CompressionLayer::new());
+    // CORS outside everything that answers for the API: a preflight is answered here, before
+    // routing and before any token is asked for (a browser never sends one with it), and every
+    // answer, a 401 or a 503 included, carries the origin's header so the page can read it.
+    // Inside the request-id layers, so a preflight is traced and has its X-Request-Id too.
+    let router = match cors {
+        Some(cors) => router.layer(cors),
+        None => router,
+    };
+    router
         .layer(PropagateRequestIdLayer::x_request_id())
         .layer(TraceLayer::new_for_http().make_span_with(|req: &axum::http::Request<axum::body::Body>| {
             let rid = req.headers().get("x-request-id").and_then(|v| v.to_str().ok()).unwrap_or("-");
