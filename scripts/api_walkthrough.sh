@@ -34,6 +34,7 @@ JOB=$(call "$API/v1/robots/$ROBOT/pose-plans" -H "$J" -d '{"artefact_id": "'"$PL
   "tool": {"tcp_mm": [40, 0, 130], "mass_kg": 1.7, "com_mm": [30, 0, 64]}, "select": {"n": 75}}' | jq -r .id)
 PLAN=$(wait_job "$JOB" | jq -r .result.pose_plan_id)
 call "$API/v1/pose-plans/$PLAN" | jq -c '.plan | {candidates, first: .identification[0], selection: .selection.index_final}'
+call "$API/v1/robots/$ROBOT/pose-plans" | jq -c '[.[] | {id, identification, validation, candidates}]'
 
 echo "== sessions and their measurements (JSON here; text/csv works too), idempotent uploads"
 for k in 0 1 2 3; do
@@ -78,6 +79,8 @@ call "$API/v1/robots/$ROBOT/compensate" -H "$J" -d @examples/targets.json | jq -
 echo "== the robot's measurements as a cell file, jobs, errors"
 call "$API/v1/robots/$ROBOT/cell?sessions=trical-1" | jq -c '{robot, sessions: [.sessions[] | {name, n: (.measurements | length)}]}'
 call "$API/v1/jobs?robot_id=$ROBOT&state=failed" | jq -c '[.[] | {kind, error: .error.type}]'
+echo "== every list pages the same way: offset and limit; X-Total-Count and Link headers"
+call -D - -o /dev/null "$API/v1/jobs?robot_id=$ROBOT&limit=2" | grep -iE '^(x-total-count|link):'
 curl -sS "${AUTH[@]}" "$API/v1/robots/$ROBOT/sessions" -H "$J" -d '{"name": "x", "purpose": "identification",
   "instrument": "trical", "tool": {"tcp_mm": [0, 0, "?"]}}' | jq -c .
 rm -rf "$tmp"

@@ -299,11 +299,15 @@ async fn sessions_and_measurement_batches() {
     assert!(r.body["next_offset"].is_null());
     assert_problem(&app.get(&format!("{mpath}?limit=0")).await, 422, Some("limit"));
     assert_problem(&app.get(&format!("{mpath}?offset=-1")).await, 422, Some("offset"));
+    assert_problem(&app.get(&format!("{mpath}?offset=abc")).await, 422, Some("offset"));
+    assert_problem(&app.get(&format!("{mpath}?limit=10001")).await, 422, Some("limit"));
+    assert_eq!(r.headers["x-total-count"], "5");
     // Errors raised before a handler runs (query strings, methods) are problems too.
-    assert_problem(&app.get(&format!("{mpath}?offset=abc")).await, 400, None);
+    assert_problem(&app.get("/v1/jobs?state=failed&state=queued").await, 400, None);
     assert_problem(&app.raw(Method::DELETE, &mpath, None, vec![], &[]).await, 405, None);
     // … also when the client accepts gzip: the problem document is what gets compressed.
-    let r = app.raw(Method::GET, &format!("{mpath}?offset=abc"), None, vec![], &[("accept-encoding", "gzip")]).await;
+    let r =
+        app.raw(Method::GET, "/v1/jobs?state=failed&state=queued", None, vec![], &[("accept-encoding", "gzip")]).await;
     assert_eq!(r.status.as_u16(), 400);
     assert_eq!(r.headers["content-type"], "application/problem+json");
     assert_eq!(r.headers["content-encoding"], "gzip");
@@ -718,6 +722,24 @@ async fn pose_plans() {
         .collect();
     assert!(pc.check_sequence(&poses).is_ok());
     assert_problem(&app.get("/v1/pose-plans/none").await, 404, None);
+
+    // The robot's plans, listed without their configurations.
+    let r = app.get(&path).await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    assert_eq!(r.headers["x-total-count"], "1");
+    let listed = r.body.as_array().unwrap();
+    assert_eq!(listed.len(), 1);
+    let s = &listed[0];
+    assert_eq!((s["id"].as_str(), s["job_id"].as_str()), (Some(plan_id), j["id"].as_str()));
+    assert_eq!(
+        (s["identification"].as_u64(), s["validation"].as_u64(), s["candidates"].as_u64()),
+        (Some(35), Some(12), Some(60))
+    );
+    assert_eq!(s["request"]["per_ball"], 20);
+    assert_eq!(s["selection"]["n"], 35);
+    assert!(s.get("plan").is_none() && s.get("identification_poses").is_none(), "no configurations in the list: {s}");
+    assert_eq!(app.get(&format!("/v1/robots/{ur}/pose-plans")).await.body, json!([]));
+    assert_problem(&app.get("/v1/robots/none/pose-plans").await, 404, None);
     app.stop().await;
 }
 
@@ -790,5 +812,100 @@ async fn tokens_and_scopes() {
     assert!(robocal::db::tokens::revoke(&app.state.pool, &cli.id).await.unwrap());
     tokio::time::sleep(robocal::http::cache::TOKEN_RECHECK + std::time::Duration::from_millis(50)).await;
     assert_problem(&app.get("/v1/robots").await, 401, None);
+    app.stop().await;
+}
+
+/// Every list pages the same way: `offset` and `limit` (1–1000, default 100; measurements up to
+/// 10000), bad values refused at the parameter, the bodies as they were, the whole list's length
+/// in `X-Total-Count` and the neighbouring pages in `Link`.
+#[tokio::test]
+async fn every_list_pages_the_same_way() {
+    let app = TestApp::new(ServiceConfig::default(), false).await;
+    let rid = robot(&app, "r1").await;
+    robot(&app, "r2").await;
+    robot(&app, "r3").await;
+    let r = app.get("/v1/robots?limit=2").await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    let names: Vec<&str> = r.body.as_array().unwrap().iter().map(|x| x["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["r1", "r2"], "the limit is honoured, oldest first");
+    assert_eq!(r.headers["x-total-count"], "3");
+    assert_eq!(r.headers["link"], "</v1/robots?offset=2&limit=2>; rel=\"next\"");
+    let r = app.get("/v1/robots?offset=2&limit=2").await;
+    let names: Vec<&str> = r.body.as_array().unwrap().iter().map(|x| x["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["r3"]);
+    assert_eq!(r.headers["link"], "</v1/robots?offset=0&limit=2>; rel=\"prev\"");
+    let r = app.get("/v1/robots").await;
+    assert_eq!((r.body.as_array().unwrap().len(), r.headers.get("link")), (3, None), "default limit 100");
+    assert_eq!(app.get("/v1/robots?offset=5").await.body, json!([]));
+
+    // Filters stay in the links.
+    let aid = artefact(&app, "a").await;
+    let tool = json!({"tcp_mm": [40, 0, 130]});
+    for _ in 0..3 {
+        let r = app.post(&format!("/v1/robots/{rid}/pose-plans"), &json!({"artefact_id": aid, "tool": tool})).await;
+        assert_eq!(r.status, StatusCode::ACCEPTED, "{}", r.text);
+    }
+    let r = app.get(&format!("/v1/jobs?robot_id={rid}&state=queued&offset=1&limit=1")).await;
+    assert_eq!((r.body.as_array().unwrap().len(), r.headers["x-total-count"].to_str().unwrap()), (1, "3"));
+    assert_eq!(
+        r.headers["link"],
+        format!(
+            "</v1/jobs?robot_id={rid}&state=queued&offset=2&limit=1>; rel=\"next\", </v1/jobs?robot_id={rid}&state=queued&offset=0&limit=1>; rel=\"prev\""
+        )
+    );
+    assert_eq!(app.get("/v1/jobs?state=failed").await.headers["x-total-count"], "0");
+
+    // Every list: the same parameters, the same refusals.
+    let session = app
+        .post(
+            &format!("/v1/robots/{rid}/sessions"),
+            &json!({"name": "s", "purpose": "validation", "instrument": "laser_tracker", "tool": {"tcp_mm": [0, 0, 0]}}),
+        )
+        .await;
+    let sid = session.body["id"].as_str().unwrap();
+    let table =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/irb120_table_5_1.json")).unwrap();
+    let set = app
+        .raw(
+            Method::POST,
+            &format!("/v1/robots/{rid}/parameter-sets"),
+            Some("application/json"),
+            table.into_bytes(),
+            &[],
+        )
+        .await;
+    let set_id = set.body["id"].as_str().unwrap();
+    let lists = [
+        "/v1/robots".to_string(),
+        "/v1/artefacts".to_string(),
+        format!("/v1/robots/{rid}/sessions"),
+        format!("/v1/robots/{rid}/parameter-sets"),
+        format!("/v1/robots/{rid}/pose-plans"),
+        format!("/v1/parameter-sets/{set_id}/diagnoses"),
+        "/v1/jobs".to_string(),
+        "/v1/tokens".to_string(),
+        format!("/v1/sessions/{sid}/measurements"),
+    ];
+    for path in &lists {
+        let r = app.get(&format!("{path}?offset=0&limit=1")).await;
+        assert_eq!(r.status, StatusCode::OK, "{path}: {}", r.text);
+        assert!(r.headers.contains_key("x-total-count"), "{path}");
+        for (query, field) in [
+            ("limit=0", "limit"),
+            ("limit=x", "limit"),
+            ("offset=-1", "offset"),
+            ("offset=1.5", "offset"),
+            ("limit=10001", "limit"),
+        ] {
+            let r = app.get(&format!("{path}?{query}")).await;
+            assert_problem(&r, 422, Some(field));
+        }
+        let r = app.get(&format!("{path}?limit=1001")).await;
+        if path.ends_with("/measurements") {
+            assert_eq!(r.status, StatusCode::OK, "measurements keep their larger cap: {}", r.text);
+        } else {
+            assert_problem(&r, 422, Some("limit"));
+        }
+    }
     app.stop().await;
 }

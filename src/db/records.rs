@@ -38,8 +38,17 @@ pub async fn robot(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<Robot
     sqlx::query_as("SELECT * FROM robots WHERE id = ?").bind(id).fetch_optional(db).await
 }
 
-pub async fn robots(db: impl SqliteExecutor<'_>) -> Result<Vec<RobotRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM robots ORDER BY created_at, id").fetch_all(db).await
+/// Robots `offset..offset + limit`, oldest first.
+pub async fn robots(db: impl SqliteExecutor<'_>, offset: i64, limit: i64) -> Result<Vec<RobotRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM robots ORDER BY created_at, id LIMIT ? OFFSET ?")
+        .bind(limit)
+        .bind(offset)
+        .fetch_all(db)
+        .await
+}
+
+pub async fn robot_count(db: impl SqliteExecutor<'_>) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM robots").fetch_one(db).await
 }
 
 pub async fn set_active_parameter_set(
@@ -79,8 +88,17 @@ pub async fn artefact(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<Ar
     sqlx::query_as("SELECT * FROM artefacts WHERE id = ?").bind(id).fetch_optional(db).await
 }
 
-pub async fn artefacts(db: impl SqliteExecutor<'_>) -> Result<Vec<ArtefactRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM artefacts ORDER BY created_at, id").fetch_all(db).await
+/// Artefacts `offset..offset + limit`, oldest first.
+pub async fn artefacts(db: impl SqliteExecutor<'_>, offset: i64, limit: i64) -> Result<Vec<ArtefactRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM artefacts ORDER BY created_at, id LIMIT ? OFFSET ?")
+        .bind(limit)
+        .bind(offset)
+        .fetch_all(db)
+        .await
+}
+
+pub async fn artefact_count(db: impl SqliteExecutor<'_>) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM artefacts").fetch_one(db).await
 }
 
 /// A session row with its measurement count.
@@ -161,7 +179,28 @@ pub async fn sessions_of_robot(db: impl SqliteExecutor<'_>, robot_id: &str) -> R
     .await
 }
 
-/// A stored batch of measurements (for idempotent replays).
+/// A robot's sessions `offset..offset + limit`, oldest first.
+pub async fn sessions_page(
+    db: impl SqliteExecutor<'_>,
+    robot_id: &str,
+    offset: i64,
+    limit: i64,
+) -> Result<Vec<SessionRow>, sqlx::Error> {
+    sqlx::query_as(sqlx::AssertSqlSafe(format!(
+        "SELECT {SESSION_COLUMNS} FROM sessions s WHERE s.robot_id = ? ORDER BY s.created_at, s.id LIMIT ? OFFSET ?"
+    )))
+    .bind(robot_id)
+    .bind(limit)
+    .bind(offset)
+    .fetch_all(db)
+    .await
+}
+
+pub async fn session_count(db: impl SqliteExecutor<'_>, robot_id: &str) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM sessions WHERE robot_id = ?").bind(robot_id).fetch_one(db).await
+}
+
+/// A stored batch of measurements (for idempotent replays and duplicate checks).
 #[derive(Clone, Debug, PartialEq, sqlx::FromRow)]
 pub struct BatchRow {
     pub id: String,
@@ -302,15 +341,23 @@ pub async fn parameter_set(db: impl SqliteExecutor<'_>, id: &str) -> Result<Opti
     sqlx::query_as("SELECT * FROM parameter_sets WHERE id = ?").bind(id).fetch_optional(db).await
 }
 
-/// A robot's parameter sets, newest version first.
+/// A robot's parameter sets `offset..offset + limit`, newest version first.
 pub async fn parameter_sets_of_robot(
     db: impl SqliteExecutor<'_>,
     robot_id: &str,
+    offset: i64,
+    limit: i64,
 ) -> Result<Vec<ParameterSetRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM parameter_sets WHERE robot_id = ? ORDER BY version DESC")
+    sqlx::query_as("SELECT * FROM parameter_sets WHERE robot_id = ? ORDER BY version DESC LIMIT ? OFFSET ?")
         .bind(robot_id)
+        .bind(limit)
+        .bind(offset)
         .fetch_all(db)
         .await
+}
+
+pub async fn parameter_set_count(db: impl SqliteExecutor<'_>, robot_id: &str) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM parameter_sets WHERE robot_id = ?").bind(robot_id).fetch_one(db).await
 }
 
 /// A validation row.
@@ -390,12 +437,25 @@ pub async fn diagnosis(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<D
     sqlx::query_as("SELECT * FROM diagnoses WHERE id = ?").bind(id).fetch_optional(db).await
 }
 
-/// A parameter set's diagnoses, newest first.
-pub async fn diagnoses_of_set(db: impl SqliteExecutor<'_>, set_id: &str) -> Result<Vec<DiagnosisRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM diagnoses WHERE parameter_set_id = ? ORDER BY created_at DESC, id DESC")
-        .bind(set_id)
-        .fetch_all(db)
-        .await
+/// A parameter set's diagnoses `offset..offset + limit`, newest first.
+pub async fn diagnoses_of_set(
+    db: impl SqliteExecutor<'_>,
+    set_id: &str,
+    offset: i64,
+    limit: i64,
+) -> Result<Vec<DiagnosisRow>, sqlx::Error> {
+    sqlx::query_as(
+        "SELECT * FROM diagnoses WHERE parameter_set_id = ? ORDER BY created_at DESC, id DESC LIMIT ? OFFSET ?",
+    )
+    .bind(set_id)
+    .bind(limit)
+    .bind(offset)
+    .fetch_all(db)
+    .await
+}
+
+pub async fn diagnosis_count(db: impl SqliteExecutor<'_>, set_id: &str) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM diagnoses WHERE parameter_set_id = ?").bind(set_id).fetch_one(db).await
 }
 
 /// Record the parameter set accepting a diagnosis created; `false` when it already has one (or
@@ -443,4 +503,23 @@ pub async fn insert_pose_plan(db: impl SqliteExecutor<'_>, p: &PosePlanRow) -> R
 
 pub async fn pose_plan(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<PosePlanRow>, sqlx::Error> {
     sqlx::query_as("SELECT * FROM pose_plans WHERE id = ?").bind(id).fetch_optional(db).await
+}
+
+/// A robot's pose plans `offset..offset + limit`, newest first.
+pub async fn pose_plans_of_robot(
+    db: impl SqliteExecutor<'_>,
+    robot_id: &str,
+    offset: i64,
+    limit: i64,
+) -> Result<Vec<PosePlanRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM pose_plans WHERE robot_id = ? ORDER BY created_at DESC, id DESC LIMIT ? OFFSET ?")
+        .bind(robot_id)
+        .bind(limit)
+        .bind(offset)
+        .fetch_all(db)
+        .await
+}
+
+pub async fn pose_plan_count(db: impl SqliteExecutor<'_>, robot_id: &str) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM pose_plans WHERE robot_id = ?").bind(robot_id).fetch_one(db).await
 }

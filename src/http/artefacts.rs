@@ -3,11 +3,12 @@
 
 use axum::Json;
 use axum::extract::{Path, State};
-use axum::http::StatusCode;
+use axum::http::{HeaderMap, StatusCode};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::extract::{Authorized, JsonBody, MEASURE, READ};
+use super::paging::{PageQuery, Paging};
 use super::{ApiError, AppState};
 use crate::cell::Artefact;
 use crate::db::{self, records};
@@ -105,13 +106,23 @@ pub async fn create(
     Ok((StatusCode::CREATED, Json(artefact_out(&row)?)))
 }
 
-/// List artefacts.
-#[utoipa::path(get, path = "/v1/artefacts", tag = "artefacts",
-    responses((status = 200, description = "Every artefact, oldest first", body = Vec<ArtefactOut>)),
+/// List artefacts, oldest first, a page at a time.
+#[utoipa::path(get, path = "/v1/artefacts", tag = "artefacts", params(PageQuery),
+    responses(
+        (status = 200, description = "Artefacts, oldest first", body = Vec<ArtefactOut>, headers(
+            ("X-Total-Count" = i64, description = "Artefacts in all"),
+            ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
+        (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
     security(("bearer" = [])))]
-pub async fn list(State(state): State<AppState>, _auth: Authorized<READ>) -> Result<Json<Vec<ArtefactOut>>, ApiError> {
-    let rows = records::artefacts(&state.pool).await?;
-    Ok(Json(rows.iter().map(artefact_out).collect::<Result<_, _>>()?))
+pub async fn list(
+    State(state): State<AppState>,
+    _auth: Authorized<READ>,
+    page: Paging,
+) -> Result<(HeaderMap, Json<Vec<ArtefactOut>>), ApiError> {
+    let total = records::artefact_count(&state.pool).await?;
+    let rows = records::artefacts(&state.pool, page.offset, page.limit).await?;
+    let out: Vec<ArtefactOut> = rows.iter().map(artefact_out).collect::<Result<_, _>>()?;
+    Ok((page.headers(total, out.len()), Json(out)))
 }
 
 /// Get an artefact.

@@ -5,14 +5,15 @@
 use axum::Json;
 use axum::body::Bytes;
 use axum::extract::rejection::BytesRejection;
-use axum::extract::{Path, Query, State};
+use axum::extract::{Path, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
-use utoipa::{IntoParams, ToSchema};
+use utoipa::ToSchema;
 
 use super::extract::{Authorized, MEASURE, READ, is_json, parse_json};
+use super::paging::{PageQuery, Paging};
 use super::robots::find as find_robot;
 use super::sessions::find;
 use super::{ApiError, AppState};
@@ -180,17 +181,6 @@ pub async fn append(
     Ok((StatusCode::CREATED, Json(out)).into_response())
 }
 
-#[derive(Debug, Deserialize, IntoParams)]
-#[into_params(parameter_in = Query)]
-pub struct Page {
-    /// Index of the first measurement (default 0).
-    #[param(minimum = 0)]
-    pub offset: Option<i64>,
-    /// At most this many (default 1000, at most 10000).
-    #[param(minimum = 1, maximum = 10000)]
-    pub limit: Option<i64>,
-}
-
 /// One stored measurement with its index in the session.
 #[derive(Debug, Serialize, Deserialize, ToSchema)]
 pub struct MeasurementItem {
@@ -209,11 +199,14 @@ pub struct MeasurementPage {
     pub next_offset: Option<i64>,
 }
 
-/// A page of a session's measurements, in order.
+/// A page of a session's measurements, in order (`offset` is the first measurement's index;
+/// `limit` defaults to 1000 here, at most 10000).
 #[utoipa::path(get, path = "/v1/sessions/{session_id}/measurements", tag = "sessions",
-    params(("session_id" = String, Path, description = "Session id"), Page),
+    params(("session_id" = String, Path, description = "Session id"), PageQuery),
     responses(
-        (status = 200, description = "Measurements offset … offset + limit", body = MeasurementPage),
+        (status = 200, description = "Measurements offset … offset + limit", body = MeasurementPage, headers(
+            ("X-Total-Count" = i64, description = "Measurements in the session"),
+            ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
         (status = 404, description = "Unknown session", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Bad paging values", body = super::Problem, content_type = "application/problem+json")),
     security(("bearer" = [])))]
@@ -221,18 +214,11 @@ pub async fn measurements(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
     Path(session_id): Path<String>,
-    Query(page): Query<Page>,
-) -> Result<Json<MeasurementPage>, ApiError> {
+    page: Paging<1000, 10_000>,
+) -> Result<(HeaderMap, Json<MeasurementPage>), ApiError> {
     let session = find(&state, &session_id).await?;
-    let offset = page.offset.unwrap_or(0);
-    let limit = page.limit.unwrap_or(1000);
-    if offset < 0 {
-        return Err(ApiError::invalid("offset", "must not be negative"));
-    }
-    if !(1..=10_000).contains(&limit) {
-        return Err(ApiError::invalid("limit", "must be 1–10000"));
-    }
-    let rows = records::measurements(&state.pool, &session.id, offset, limit).await?;
+    let offset = page.offset;
+    let rows = records::measurements(&state.pool, &session.id, offset, page.limit).await?;
     let items = rows
         .into_iter()
         .map(|(index, json)| {
@@ -243,5 +229,6 @@ pub async fn measurements(
         .collect::<Result<Vec<_>, _>>()?;
     let total = session.measurements;
     let next = offset + items.len() as i64;
-    Ok(Json(MeasurementPage { items, total, offset, next_offset: (next < total).then_some(next) }))
+    let headers = page.headers(total, items.len());
+    Ok((headers, Json(MeasurementPage { items, total, offset, next_offset: (next < total).then_some(next) })))
 }

@@ -12,6 +12,7 @@ pub mod jobs;
 pub mod measurements;
 pub mod metrics;
 pub mod ops;
+pub mod paging;
 pub mod parameter_sets;
 pub mod plans;
 pub mod robots;
@@ -95,7 +96,7 @@ fn api_router() -> OpenApiRouter<AppState> {
         .routes(routes!(sessions::create, sessions::list))
         .routes(routes!(sessions::get))
         .routes(routes!(measurements::append, measurements::measurements))
-        .routes(routes!(plans::create))
+        .routes(routes!(plans::create, plans::list))
         .routes(routes!(plans::get))
         .routes(routes!(identifications::create))
         .routes(routes!(validations::create))

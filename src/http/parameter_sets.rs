@@ -5,13 +5,14 @@
 
 use axum::Json;
 use axum::extract::{Path, State};
-use axum::http::{StatusCode, header};
+use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::IntoResponse;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use utoipa::ToSchema;
 
 use super::extract::{Authorized, CALIBRATE, JsonBody, READ};
+use super::paging::{PageQuery, Paging};
 use super::robots::find as find_robot;
 use super::{ApiError, AppState};
 use crate::app::robots::model_of;
@@ -112,25 +113,30 @@ pub(super) async fn is_active(state: &AppState, row: &records::ParameterSetRow) 
     Ok(find_robot(state, &row.robot_id).await?.active_parameter_set_id.as_deref() == Some(row.id.as_str()))
 }
 
-/// A robot's calibration history, newest version first.
+/// A robot's calibration history, newest version first, a page at a time.
 #[utoipa::path(get, path = "/v1/robots/{robot_id}/parameter-sets", tag = "parameter-sets",
-    params(("robot_id" = String, Path, description = "Robot id")),
+    params(("robot_id" = String, Path, description = "Robot id"), PageQuery),
     responses(
-        (status = 200, description = "Parameter sets, newest first, with quality and validation figures", body = Vec<ParameterSetOut>),
-        (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json")),
+        (status = 200, description = "Parameter sets, newest first, with quality and validation figures", body = Vec<ParameterSetOut>, headers(
+            ("X-Total-Count" = i64, description = "Parameter sets in the history"),
+            ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
+        (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
     security(("bearer" = [])))]
 pub async fn history(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
     Path(robot_id): Path<String>,
-) -> Result<Json<Vec<ParameterSetOut>>, ApiError> {
+    page: Paging,
+) -> Result<(HeaderMap, Json<Vec<ParameterSetOut>>), ApiError> {
     let robot = find_robot(&state, &robot_id).await?;
+    let total = records::parameter_set_count(&state.pool, &robot.id).await?;
     let mut out = Vec::new();
-    for row in records::parameter_sets_of_robot(&state.pool, &robot.id).await? {
+    for row in records::parameter_sets_of_robot(&state.pool, &robot.id, page.offset, page.limit).await? {
         let active = robot.active_parameter_set_id.as_deref() == Some(row.id.as_str());
         out.push(set_out(&state, &row, active, false).await?);
     }
-    Ok(Json(out))
+    Ok((page.headers(total, out.len()), Json(out)))
 }
 
 /// Import a parameter set made elsewhere (a parameter-set file) as the robot's next version.

@@ -3,12 +3,13 @@
 
 use axum::Json;
 use axum::extract::{Path, Query, State};
-use axum::http::StatusCode;
+use axum::http::{HeaderMap, StatusCode};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use utoipa::{IntoParams, ToSchema};
 
 use super::extract::{Authorized, JsonBody, MEASURE, READ};
+use super::paging::{PageQuery, Paging};
 use super::{ApiError, AppState};
 use crate::app::cells;
 use crate::app::robots::model_of;
@@ -114,13 +115,23 @@ pub async fn create(
     Ok((StatusCode::CREATED, Json(robot_out(&row)?)))
 }
 
-/// List robots.
-#[utoipa::path(get, path = "/v1/robots", tag = "robots",
-    responses((status = 200, description = "Every robot, oldest first", body = Vec<RobotOut>)),
+/// List robots, oldest first, a page at a time.
+#[utoipa::path(get, path = "/v1/robots", tag = "robots", params(PageQuery),
+    responses(
+        (status = 200, description = "Robots, oldest first", body = Vec<RobotOut>, headers(
+            ("X-Total-Count" = i64, description = "Robots in all"),
+            ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
+        (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
     security(("bearer" = [])))]
-pub async fn list(State(state): State<AppState>, _auth: Authorized<READ>) -> Result<Json<Vec<RobotOut>>, ApiError> {
-    let rows = records::robots(&state.pool).await?;
-    Ok(Json(rows.iter().map(robot_out).collect::<Result<_, _>>()?))
+pub async fn list(
+    State(state): State<AppState>,
+    _auth: Authorized<READ>,
+    page: Paging,
+) -> Result<(HeaderMap, Json<Vec<RobotOut>>), ApiError> {
+    let total = records::robot_count(&state.pool).await?;
+    let rows = records::robots(&state.pool, page.offset, page.limit).await?;
+    let out: Vec<RobotOut> = rows.iter().map(robot_out).collect::<Result<_, _>>()?;
+    Ok((page.headers(total, out.len()), Json(out)))
 }
 
 /// Get a robot.

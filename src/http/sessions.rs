@@ -3,11 +3,12 @@
 
 use axum::Json;
 use axum::extract::{Path, State};
-use axum::http::StatusCode;
+use axum::http::{HeaderMap, StatusCode};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::extract::{Authorized, JsonBody, MEASURE, READ};
+use super::paging::{PageQuery, Paging};
 use super::robots::find as find_robot;
 use super::{ApiError, AppState};
 use crate::db::{self, records};
@@ -162,21 +163,27 @@ pub async fn create(
     Ok((StatusCode::CREATED, Json(session_out(&row)?)))
 }
 
-/// A robot's sessions.
+/// A robot's sessions, oldest first, a page at a time.
 #[utoipa::path(get, path = "/v1/robots/{robot_id}/sessions", tag = "sessions",
-    params(("robot_id" = String, Path, description = "Robot id")),
+    params(("robot_id" = String, Path, description = "Robot id"), PageQuery),
     responses(
-        (status = 200, description = "The robot's sessions, oldest first", body = Vec<SessionOut>),
-        (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json")),
+        (status = 200, description = "The robot's sessions, oldest first", body = Vec<SessionOut>, headers(
+            ("X-Total-Count" = i64, description = "The robot's sessions in all"),
+            ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
+        (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
     security(("bearer" = [])))]
 pub async fn list(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
     Path(robot_id): Path<String>,
-) -> Result<Json<Vec<SessionOut>>, ApiError> {
+    page: Paging,
+) -> Result<(HeaderMap, Json<Vec<SessionOut>>), ApiError> {
     let robot = find_robot(&state, &robot_id).await?;
-    let rows = records::sessions_of_robot(&state.pool, &robot.id).await?;
-    Ok(Json(rows.iter().map(session_out).collect::<Result<_, _>>()?))
+    let total = records::session_count(&state.pool, &robot.id).await?;
+    let rows = records::sessions_page(&state.pool, &robot.id, page.offset, page.limit).await?;
+    let out: Vec<SessionOut> = rows.iter().map(session_out).collect::<Result<_, _>>()?;
+    Ok((page.headers(total, out.len()), Json(out)))
 }
 
 /// Get a session.
