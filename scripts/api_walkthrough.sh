@@ -71,7 +71,22 @@ echo "== history, explicit activation, export, import"
 call "$API/v1/robots/$ROBOT/parameter-sets" | jq -c '.[] | {version, active, quality, validations: [.validations[].figures.mean_mm]}'
 call -X PUT "$API/v1/robots/$ROBOT/active-parameter-set" -H "$J" -d '{"parameter_set_id": "'"$SET"'"}' | jq -c '{version, active}'
 call "$API/v1/parameter-sets/$SET/export" > "$tmp/params.json" && jq -c '.parameters[1]' "$tmp/params.json"
-call "$API/v1/robots/$ROBOT/parameter-sets" -H "$J" -d @examples/irb120_table_5_1.json | jq -c '{version, active}'
+IMPORTED=$(call "$API/v1/robots/$ROBOT/parameter-sets" -H "$J" -d @examples/irb120_table_5_1.json | jq -r .id)
+call "$API/v1/parameter-sets/$IMPORTED" | jq -c '{version, active}'
+
+echo "== corrections, each with a reason: a reading excluded and restored, a set archived, a spare session deleted"
+call -X PATCH "$API/v1/sessions/$SID/measurements/0" -H "$J" -d '{"excluded": true, "reason": "walkthrough: reflector dusty"}' \
+  | jq -c '{index, excluded, reason: .exclusion.reason}'
+call -X PATCH "$API/v1/sessions/$SID/measurements/0" -H "$J" -d '{"excluded": false, "reason": "walkthrough: it was fine"}' \
+  | jq -c '{index, excluded, history: [.history[] | {reason, restore_reason}]}'
+call -X PATCH "$API/v1/parameter-sets/$IMPORTED" -H "$J" -d '{"archived": true, "reason": "walkthrough: table kept for reference only"}' \
+  | jq -c '{version, archived}'
+call "$API/v1/robots/$ROBOT/parameter-sets" | jq -c '[.[].version]'
+SPARE=$(call "$API/v1/robots/$ROBOT/sessions" -H "$J" -d '{"name": "spare", "purpose": "validation",
+  "instrument": "laser_tracker", "tool": {"tcp_mm": [0, 60, 80]}}' | jq -r .id)
+call -X DELETE "$API/v1/sessions/$SPARE?reason=walkthrough:%20created%20by%20mistake" -o /dev/null -w '%{http_code}\n'
+curl -sS "${AUTH[@]}" -X DELETE "$API/v1/parameter-sets/$SET" | jq -c '{status, hint}'
+call "$API/v1/audit-events?robot_id=$ROBOT" | jq -c '[.[] | {action, reason}]'
 
 echo "== compensated targets with the active set"
 call "$API/v1/robots/$ROBOT/compensate" -H "$J" -d @examples/targets.json | jq -c '.results[0] | {id, joints_deg, residual_mm}'

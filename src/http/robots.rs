@@ -107,7 +107,11 @@ pub async fn create(
     };
     records::insert_robot(&state.pool, &row).await.map_err(|e| {
         if db::is_unique_violation(&e) {
-            ApiError::Conflict { detail: format!("a robot named '{name}' exists"), field: Some("name".into()) }
+            ApiError::Conflict {
+                detail: format!("a robot named '{name}' exists"),
+                field: Some("name".into()),
+                hint: None,
+            }
         } else {
             e.into()
         }
@@ -154,10 +158,14 @@ pub async fn get(
 pub struct CellQuery {
     /// Sessions to include (comma-separated ids or names); default: all of the robot's sessions.
     pub sessions: Option<String>,
+    /// Keep the excluded measurements in (default: left out, as the jobs leave them out).
+    pub include_excluded: Option<bool>,
 }
 
 /// Export a robot's measurements as a cell file — the document `robocal identify` reads, so a
-/// calibration can be reproduced offline bit for bit.
+/// calibration can be reproduced offline bit for bit. Excluded measurements are left out, as the
+/// jobs leave them out (so the file's indices are the stored ones less the excluded before
+/// them), unless `include_excluded=true`.
 #[utoipa::path(get, path = "/v1/robots/{robot_id}/cell", tag = "robots",
     params(("robot_id" = String, Path, description = "Robot id"), CellQuery),
     responses(
@@ -182,6 +190,6 @@ pub async fn cell(
     } else {
         cells::resolve_sessions(&state.pool, &robot.id, &names, "sessions").await?
     };
-    let file = cells::cell_file(&state.pool, &robot, &sessions).await?;
+    let file = cells::stored_cell(&state.pool, &robot, &sessions, q.include_excluded.unwrap_or(false)).await?.file;
     Ok(Json(serde_json::to_value(&file).expect("a cell file serialises")))
 }
