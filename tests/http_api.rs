@@ -793,6 +793,15 @@ async fn tokens_and_scopes() {
     assert_problem(&r, 403, None);
     assert!(r.body["detail"].as_str().unwrap().contains("'measure'"), "{}", r.text);
     assert_problem(&app.get("/v1/tokens").await, 403, None);
+    // Corrections need the scope of what they correct; the audit timeline is readable.
+    let exclude = br#"{"excluded": true, "reason": "x"}"#.to_vec();
+    let r = app.raw(Method::PATCH, "/v1/sessions/s/measurements/0", Some("application/json"), exclude, &[]).await;
+    assert_problem(&r, 403, None);
+    assert_problem(&app.raw(Method::DELETE, "/v1/sessions/s?reason=x", None, vec![], &[]).await, 403, None);
+    let archive = br#"{"archived": true, "reason": "x"}"#.to_vec();
+    let r = app.raw(Method::PATCH, "/v1/parameter-sets/p", Some("application/json"), archive, &[]).await;
+    assert!(r.body["detail"].as_str().unwrap().contains("'calibrate'"), "{}", r.text);
+    assert_eq!(app.get("/v1/audit-events").await.status, StatusCode::OK);
 
     app.token = Some(secret);
     assert_eq!(
