@@ -38,6 +38,7 @@ JOB=$(call "$API/v1/robots/$ROBOT/pose-plans" -H "$J" -d '{"artefact_id": "'"$PL
   "tool": {"tcp_mm": [40, 0, 130], "mass_kg": 1.7, "com_mm": [30, 0, 64]}, "select": {"n": 75}}' | jq -r .id)
 PLAN=$(wait_job "$JOB" | jq -r .result.pose_plan_id)
 call "$API/v1/pose-plans/$PLAN" | jq -c '.plan | {candidates, first: .identification[0], selection: .selection.index_final}'
+call "$API/v1/robots/$ROBOT/pose-plans" | jq -c '[.[] | {id, identification, validation, candidates}]'
 
 echo "== sessions and their measurements (JSON here; text/csv works too), idempotent uploads"
 for k in 0 1 2 3; do
@@ -74,7 +75,22 @@ echo "== history, explicit activation, export, import"
 call "$API/v1/robots/$ROBOT/parameter-sets" | jq -c '.[] | {version, active, quality, validations: [.validations[].figures.mean_mm]}'
 call -X PUT "$API/v1/robots/$ROBOT/active-parameter-set" -H "$J" -d '{"parameter_set_id": "'"$SET"'"}' | jq -c '{version, active}'
 call "$API/v1/parameter-sets/$SET/export" > "$tmp/params.json" && jq -c '.parameters[1]' "$tmp/params.json"
-call "$API/v1/robots/$ROBOT/parameter-sets" -H "$J" -d @examples/irb120_table_5_1.json | jq -c '{version, active}'
+IMPORTED=$(call "$API/v1/robots/$ROBOT/parameter-sets" -H "$J" -d @examples/irb120_table_5_1.json | jq -r .id)
+call "$API/v1/parameter-sets/$IMPORTED" | jq -c '{version, active}'
+
+echo "== corrections, each with a reason: a reading excluded and restored, a set archived, a spare session deleted"
+call -X PATCH "$API/v1/sessions/$SID/measurements/0" -H "$J" -d '{"excluded": true, "reason": "walkthrough: reflector dusty"}' \
+  | jq -c '{index, excluded, reason: .exclusion.reason}'
+call -X PATCH "$API/v1/sessions/$SID/measurements/0" -H "$J" -d '{"excluded": false, "reason": "walkthrough: it was fine"}' \
+  | jq -c '{index, excluded, history: [.history[] | {reason, restore_reason}]}'
+call -X PATCH "$API/v1/parameter-sets/$IMPORTED" -H "$J" -d '{"archived": true, "reason": "walkthrough: table kept for reference only"}' \
+  | jq -c '{version, archived}'
+call "$API/v1/robots/$ROBOT/parameter-sets" | jq -c '[.[].version]'
+SPARE=$(call "$API/v1/robots/$ROBOT/sessions" -H "$J" -d '{"name": "spare", "purpose": "validation",
+  "instrument": "laser_tracker", "tool": {"tcp_mm": [0, 60, 80]}}' | jq -r .id)
+call -X DELETE "$API/v1/sessions/$SPARE?reason=walkthrough:%20created%20by%20mistake" -o /dev/null -w '%{http_code}\n'
+curl -sS "${AUTH[@]}" -X DELETE "$API/v1/parameter-sets/$SET" | jq -c '{status, hint}'
+call "$API/v1/audit-events?robot_id=$ROBOT" | jq -c '[.[] | {action, reason}]'
 
 echo "== compensated targets with the active set"
 call "$API/v1/robots/$ROBOT/compensate" -H "$J" -d @examples/targets.json | jq -c '.results[0] | {id, joints_deg, residual_mm}'
@@ -82,6 +98,8 @@ call "$API/v1/robots/$ROBOT/compensate" -H "$J" -d @examples/targets.json | jq -
 echo "== the robot's measurements as a cell file, jobs, errors"
 call "$API/v1/robots/$ROBOT/cell?sessions=trical-1" | jq -c '{robot, sessions: [.sessions[] | {name, n: (.measurements | length)}]}'
 call "$API/v1/jobs?robot_id=$ROBOT&state=failed" | jq -c '[.[] | {kind, error: .error.type}]'
+echo "== every list pages the same way: offset and limit; X-Total-Count and Link headers"
+call -D - -o /dev/null "$API/v1/jobs?robot_id=$ROBOT&limit=2" | grep -iE '^(x-total-count|link):'
 curl -sS "${AUTH[@]}" "$API/v1/robots/$ROBOT/sessions" -H "$J" -d '{"name": "x", "purpose": "identification",
   "instrument": "trical", "tool": {"tcp_mm": [0, 0, "?"]}}' | jq -c .
 rm -rf "$tmp"

@@ -306,11 +306,15 @@ async fn sessions_and_measurement_batches() {
     assert!(r.body["next_offset"].is_null());
     assert_problem(&app.get(&format!("{mpath}?limit=0")).await, 422, Some("limit"));
     assert_problem(&app.get(&format!("{mpath}?offset=-1")).await, 422, Some("offset"));
+    assert_problem(&app.get(&format!("{mpath}?offset=abc")).await, 422, Some("offset"));
+    assert_problem(&app.get(&format!("{mpath}?limit=10001")).await, 422, Some("limit"));
+    assert_eq!(r.headers["x-total-count"], "5");
     // Errors raised before a handler runs (query strings, methods) are problems too.
-    assert_problem(&app.get(&format!("{mpath}?offset=abc")).await, 400, None);
+    assert_problem(&app.get("/v1/jobs?state=failed&state=queued").await, 400, None);
     assert_problem(&app.raw(Method::DELETE, &mpath, None, vec![], &[]).await, 405, None);
     // … also when the client accepts gzip: the problem document is what gets compressed.
-    let r = app.raw(Method::GET, &format!("{mpath}?offset=abc"), None, vec![], &[("accept-encoding", "gzip")]).await;
+    let r =
+        app.raw(Method::GET, "/v1/jobs?state=failed&state=queued", None, vec![], &[("accept-encoding", "gzip")]).await;
     assert_eq!(r.status.as_u16(), 400);
     assert_eq!(r.headers["content-type"], "application/problem+json");
     assert_eq!(r.headers["content-encoding"], "gzip");
@@ -813,6 +817,24 @@ async fn pose_plans() {
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("--per-ball: must be 1–2000") && err.contains("--force") && err.contains(" MB"), "{err}");
     assert_problem(&app.get("/v1/pose-plans/none").await, 404, None);
+
+    // The robot's plans, listed without their configurations.
+    let r = app.get(&path).await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    assert_eq!(r.headers["x-total-count"], "1");
+    let listed = r.body.as_array().unwrap();
+    assert_eq!(listed.len(), 1);
+    let s = &listed[0];
+    assert_eq!((s["id"].as_str(), s["job_id"].as_str()), (Some(plan_id), j["id"].as_str()));
+    assert_eq!(
+        (s["identification"].as_u64(), s["validation"].as_u64(), s["candidates"].as_u64()),
+        (Some(35), Some(12), Some(60))
+    );
+    assert_eq!(s["request"]["per_ball"], 20);
+    assert_eq!(s["selection"]["n"], 35);
+    assert!(s.get("plan").is_none() && s.get("identification_poses").is_none(), "no configurations in the list: {s}");
+    assert_eq!(app.get(&format!("/v1/robots/{ur}/pose-plans")).await.body, json!([]));
+    assert_problem(&app.get("/v1/robots/none/pose-plans").await, 404, None);
     app.stop().await;
 }
 
@@ -866,6 +888,15 @@ async fn tokens_and_scopes() {
     assert_problem(&r, 403, None);
     assert!(r.body["detail"].as_str().unwrap().contains("'measure'"), "{}", r.text);
     assert_problem(&app.get("/v1/tokens").await, 403, None);
+    // Corrections need the scope of what they correct; the audit timeline is readable.
+    let exclude = br#"{"excluded": true, "reason": "x"}"#.to_vec();
+    let r = app.raw(Method::PATCH, "/v1/sessions/s/measurements/0", Some("application/json"), exclude, &[]).await;
+    assert_problem(&r, 403, None);
+    assert_problem(&app.raw(Method::DELETE, "/v1/sessions/s?reason=x", None, vec![], &[]).await, 403, None);
+    let archive = br#"{"archived": true, "reason": "x"}"#.to_vec();
+    let r = app.raw(Method::PATCH, "/v1/parameter-sets/p", Some("application/json"), archive, &[]).await;
+    assert!(r.body["detail"].as_str().unwrap().contains("'calibrate'"), "{}", r.text);
+    assert_eq!(app.get("/v1/audit-events").await.status, StatusCode::OK);
 
     app.token = Some(secret);
     assert_eq!(
@@ -962,5 +993,505 @@ async fn cors_answers_the_configured_origins_only() {
     let r = app.raw(Method::GET, "/v1/robots", None, vec![], &[("origin", "https://anyone.example")]).await;
     assert_eq!(r.status, StatusCode::OK);
     assert_eq!(r.headers["access-control-allow-origin"], "*");
+    app.stop().await;
+}
+
+/// Every list pages the same way: `offset` and `limit` (1–1000, default 100; measurements up to
+/// 10000), bad values refused at the parameter, the bodies as they were, the whole list's length
+/// in `X-Total-Count` and the neighbouring pages in `Link`.
+#[tokio::test]
+async fn every_list_pages_the_same_way() {
+    let app = TestApp::new(ServiceConfig::default(), false).await;
+    let rid = robot(&app, "r1").await;
+    robot(&app, "r2").await;
+    robot(&app, "r3").await;
+    let r = app.get("/v1/robots?limit=2").await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    let names: Vec<&str> = r.body.as_array().unwrap().iter().map(|x| x["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["r1", "r2"], "the limit is honoured, oldest first");
+    assert_eq!(r.headers["x-total-count"], "3");
+    assert_eq!(r.headers["link"], "</v1/robots?offset=2&limit=2>; rel=\"next\"");
+    let r = app.get("/v1/robots?offset=2&limit=2").await;
+    let names: Vec<&str> = r.body.as_array().unwrap().iter().map(|x| x["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["r3"]);
+    assert_eq!(r.headers["link"], "</v1/robots?offset=0&limit=2>; rel=\"prev\"");
+    let r = app.get("/v1/robots").await;
+    assert_eq!((r.body.as_array().unwrap().len(), r.headers.get("link")), (3, None), "default limit 100");
+    assert_eq!(app.get("/v1/robots?offset=5").await.body, json!([]));
+
+    // Filters stay in the links.
+    let aid = artefact(&app, "a").await;
+    let tool = json!({"tcp_mm": [40, 0, 130]});
+    for _ in 0..3 {
+        let r = app.post(&format!("/v1/robots/{rid}/pose-plans"), &json!({"artefact_id": aid, "tool": tool})).await;
+        assert_eq!(r.status, StatusCode::ACCEPTED, "{}", r.text);
+    }
+    let r = app.get(&format!("/v1/jobs?robot_id={rid}&state=queued&offset=1&limit=1")).await;
+    assert_eq!((r.body.as_array().unwrap().len(), r.headers["x-total-count"].to_str().unwrap()), (1, "3"));
+    assert_eq!(
+        r.headers["link"],
+        format!(
+            "</v1/jobs?robot_id={rid}&state=queued&offset=2&limit=1>; rel=\"next\", </v1/jobs?robot_id={rid}&state=queued&offset=0&limit=1>; rel=\"prev\""
+        )
+    );
+    assert_eq!(app.get("/v1/jobs?state=failed").await.headers["x-total-count"], "0");
+
+    // Every list: the same parameters, the same refusals.
+    let session = app
+        .post(
+            &format!("/v1/robots/{rid}/sessions"),
+            &json!({"name": "s", "purpose": "validation", "instrument": "laser_tracker", "tool": {"tcp_mm": [0, 0, 0]}}),
+        )
+        .await;
+    let sid = session.body["id"].as_str().unwrap();
+    let table =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/irb120_table_5_1.json")).unwrap();
+    let set = app
+        .raw(
+            Method::POST,
+            &format!("/v1/robots/{rid}/parameter-sets"),
+            Some("application/json"),
+            table.into_bytes(),
+            &[],
+        )
+        .await;
+    let set_id = set.body["id"].as_str().unwrap();
+    let lists = [
+        "/v1/robots".to_string(),
+        "/v1/artefacts".to_string(),
+        format!("/v1/robots/{rid}/sessions"),
+        format!("/v1/robots/{rid}/parameter-sets"),
+        format!("/v1/robots/{rid}/pose-plans"),
+        format!("/v1/parameter-sets/{set_id}/diagnoses"),
+        "/v1/jobs".to_string(),
+        "/v1/tokens".to_string(),
+        format!("/v1/sessions/{sid}/measurements"),
+    ];
+    for path in &lists {
+        let r = app.get(&format!("{path}?offset=0&limit=1")).await;
+        assert_eq!(r.status, StatusCode::OK, "{path}: {}", r.text);
+        assert!(r.headers.contains_key("x-total-count"), "{path}");
+        for (query, field) in [
+            ("limit=0", "limit"),
+            ("limit=x", "limit"),
+            ("offset=-1", "offset"),
+            ("offset=1.5", "offset"),
+            ("limit=10001", "limit"),
+        ] {
+            let r = app.get(&format!("{path}?{query}")).await;
+            assert_problem(&r, 422, Some(field));
+        }
+        let r = app.get(&format!("{path}?limit=1001")).await;
+        if path.ends_with("/measurements") {
+            assert_eq!(r.status, StatusCode::OK, "measurements keep their larger cap: {}", r.text);
+        } else {
+            assert_problem(&r, 422, Some("limit"));
+        }
+    }
+    app.stop().await;
+}
+
+/// Excluding a measurement is a record with a reason, and changes what the jobs use: a gross
+/// outlier refuses the fit (named by its stored index, even with another measurement excluded
+/// before it), excluding it lets the fit succeed, restoring brings measurements back; the
+/// listing, the measurement's history, the export and the audit timeline show each step.
+#[tokio::test]
+async fn excluded_measurements_leave_the_jobs_and_restoring_brings_them_back() {
+    let app = TestApp::default().await;
+    let rid = robot(&app, "r").await;
+    let aid = artefact(&app, "plate").await;
+    let mut cell = small_cell(3);
+    let t = cell.sessions.iter().position(|s| s.name == "trical-1").unwrap();
+    // Measurement 10 read with joint 1 off by 0.1°: ~0.9 mm at the ball, a gross outlier.
+    cell.sessions[t].measurements[10].joints_deg[0] += 0.1;
+    let n = cell.sessions[t].measurements.len();
+    let ids = upload(&app, &rid, &aid, &cell).await;
+    let sid = ids.iter().find(|(name, _)| name == "trical-1").unwrap().1.clone();
+    let m = |i: i64| format!("/v1/sessions/{sid}/measurements/{i}");
+    let patch = async |i: i64, body: Value| {
+        app.raw(Method::PATCH, &m(i), Some("application/json"), serde_json::to_vec(&body).unwrap(), &[]).await
+    };
+
+    // Refusals: no reason, a blank one, an unknown index or session, an unknown field.
+    assert_problem(&patch(3, json!({"excluded": true})).await, 422, Some("reason"));
+    assert_problem(&patch(3, json!({"excluded": true, "reason": "  "})).await, 422, Some("reason"));
+    assert_problem(&patch(n as i64, json!({"excluded": true, "reason": "x"})).await, 404, None);
+    assert_problem(&patch(-1, json!({"excluded": true, "reason": "x"})).await, 404, None);
+    assert_problem(&patch(3, json!({"excluded": true, "reason": "x", "why": 1})).await, 422, Some("why"));
+    assert_problem(
+        &app.raw(
+            Method::PATCH,
+            "/v1/sessions/none/measurements/0",
+            Some("application/json"),
+            br#"{"excluded": true, "reason": "x"}"#.to_vec(),
+            &[],
+        )
+        .await,
+        404,
+        None,
+    );
+    assert_problem(&patch(5, json!({"excluded": false, "reason": "x"})).await, 409, None);
+    assert_problem(&app.get(&m(n as i64)).await, 404, None);
+
+    // Measurement 3 excluded first: from here on the cell's indices differ from the stored ones.
+    let r = patch(3, json!({"excluded": true, "reason": "nest not cleaned before this reading"})).await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    assert_eq!((r.body["index"].as_i64(), r.body["excluded"].as_bool()), (Some(3), Some(true)));
+    assert_eq!(r.body["exclusion"]["reason"], "nest not cleaned before this reading");
+    assert!(r.body["exclusion"]["excluded_at"].is_string() && r.body["exclusion"]["restored_at"].is_null());
+    assert_eq!(r.body["joints_deg"], json!(cell.sessions[t].measurements[3].joints_deg));
+    assert_problem(&patch(3, json!({"excluded": true, "reason": "again"})).await, 409, None);
+
+    // The outlier refuses the fit, named by its stored index.
+    let path = format!("/v1/robots/{rid}/identifications");
+    let identify = async || app.wait(&app.post(&path, &json!({"sessions": ["trical-1"]})).await.body).await;
+    let j = identify().await;
+    assert_eq!(j["state"], "failed", "{j}");
+    assert_eq!(j["error"]["type"], "urn:robocal:problem:outliers", "{j}");
+    let detail = j["error"]["detail"].as_str().unwrap();
+    assert!(detail.contains("trical-1[10]") && detail.contains("trical-1:10"), "stored index: {detail}");
+
+    // Excluded, the fit succeeds without both.
+    let r = patch(10, json!({"excluded": true, "reason": "joint 1 slipped: refused fit named it an outlier"})).await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    let j = identify().await;
+    assert_eq!(j["state"], "succeeded", "{j}");
+    let summary = &j["result"]["summary"];
+    assert_eq!((summary["measurements"].as_u64(), summary["excluded"].as_u64()), (Some(n as u64 - 2), Some(2)));
+    let set = app.get(&format!("/v1/parameter-sets/{}", j["result"]["parameter_set_id"].as_str().unwrap())).await;
+    assert_eq!(set.body["quality"]["measurements"], n - 2);
+    for w in set.body["parameter_set"]["quality"]["worst"].as_array().unwrap() {
+        assert!(![3, 10].contains(&w["index"].as_u64().unwrap()), "worst names stored indices: {w}");
+    }
+
+    // The listing, the session, the export show the exclusions.
+    let page = app.get(&format!("/v1/sessions/{sid}/measurements?offset=2&limit=10")).await;
+    let items = page.body["items"].as_array().unwrap();
+    let excluded: Vec<i64> =
+        items.iter().filter(|i| i["excluded"] == true).map(|i| i["index"].as_i64().unwrap()).collect();
+    assert_eq!(excluded, [3, 10]);
+    assert_eq!(items[1]["exclusion"]["reason"], "nest not cleaned before this reading");
+    assert!(items[0].get("exclusion").is_none() && items[0]["excluded"] == false);
+    let s = app.get(&format!("/v1/sessions/{sid}")).await;
+    assert_eq!((s.body["measurements"].as_u64(), s.body["excluded_measurements"].as_u64()), (Some(n as u64), Some(2)));
+    let export = app.get(&format!("/v1/robots/{rid}/cell?sessions=trical-1")).await;
+    assert_eq!(export.body["sessions"][0]["measurements"].as_array().unwrap().len(), n - 2);
+    let export = app.get(&format!("/v1/robots/{rid}/cell?sessions=trical-1&include_excluded=true")).await;
+    assert_eq!(export.body["sessions"][0]["measurements"].as_array().unwrap().len(), n);
+
+    // Restoring measurement 3 brings it back into the fit; its history keeps both records.
+    assert_problem(&patch(3, json!({"excluded": false})).await, 422, Some("reason"));
+    let r = patch(3, json!({"excluded": false, "reason": "the nest was clean: checked the photo log"})).await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    assert_eq!((r.body["excluded"].as_bool(), r.body["exclusion"].is_null()), (Some(false), true));
+    let h = &r.body["history"];
+    assert_eq!(h.as_array().unwrap().len(), 1);
+    assert_eq!(h[0]["reason"], "nest not cleaned before this reading");
+    assert_eq!(h[0]["restore_reason"], "the nest was clean: checked the photo log");
+    assert!(h[0]["restored_at"].is_string());
+    let j = identify().await;
+    assert_eq!(j["state"], "succeeded", "{j}");
+    assert_eq!(
+        (j["result"]["summary"]["measurements"].as_u64(), j["result"]["summary"]["excluded"].as_u64()),
+        (Some(n as u64 - 1), Some(1))
+    );
+    // Excluded again with another reason: a second record, the first one kept.
+    assert_eq!(patch(3, json!({"excluded": true, "reason": "second look: it was dirty"})).await.status, StatusCode::OK);
+    let g = app.get(&m(3)).await;
+    assert_eq!(g.body["history"].as_array().unwrap().len(), 2);
+    assert_eq!(g.body["exclusion"]["reason"], "second look: it was dirty");
+
+    // The audit timeline: newest first, with the reasons.
+    let a = app.get(&format!("/v1/audit-events?subject_id={sid}")).await;
+    assert_eq!(a.status, StatusCode::OK, "{}", a.text);
+    assert_eq!(a.headers["x-total-count"], "4");
+    let steps: Vec<(&str, i64, &str)> = a
+        .body
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| (e["action"].as_str().unwrap(), e["detail"]["index"].as_i64().unwrap(), e["reason"].as_str().unwrap()))
+        .collect();
+    assert_eq!(
+        steps,
+        [
+            ("measurement_excluded", 3, "second look: it was dirty"),
+            ("measurement_restored", 3, "the nest was clean: checked the photo log"),
+            ("measurement_excluded", 10, "joint 1 slipped: refused fit named it an outlier"),
+            ("measurement_excluded", 3, "nest not cleaned before this reading"),
+        ]
+    );
+    assert!(a.body[0]["actor"].is_null(), "no token on loopback");
+    assert_eq!(a.body[0]["robot_id"], rid);
+
+    // Validation leaves an excluded reading out too, and names the others by their stored index.
+    let set_id = j["result"]["parameter_set_id"].as_str().unwrap();
+    let n1 = ids.iter().find(|(name, _)| name == "tracker-n1").unwrap().1.clone();
+    let count = cell.sessions.iter().find(|s| s.name == "tracker-n1").unwrap().measurements.len();
+    let r = app
+        .raw(
+            Method::PATCH,
+            &format!("/v1/sessions/{n1}/measurements/0"),
+            Some("application/json"),
+            serde_json::to_vec(&json!({"excluded": true, "reason": "tracker warming up"})).unwrap(),
+            &[],
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    let v = app.post(&format!("/v1/parameter-sets/{set_id}/validations"), &json!({"sessions": ["tracker-n1"]})).await;
+    let v = app.wait(&v.body).await;
+    assert_eq!(v["state"], "succeeded", "{v}");
+    assert_eq!(v["result"]["summary"]["measurements"], count - 1);
+    let rep = app.get(&format!("/v1/validations/{}", v["result"]["validation_id"].as_str().unwrap())).await;
+    let indices: Vec<u64> =
+        rep.body["report"]["residuals"].as_array().unwrap().iter().map(|r| r["index"].as_u64().unwrap()).collect();
+    assert_eq!(indices, (1..count as u64).collect::<Vec<_>>());
+    app.stop().await;
+}
+
+/// A session or an artefact nothing refers to is deleted with a reason (204), the audit keeping
+/// what it was; one that results were made from, or that a queued job reads, is refused (409,
+/// naming them).
+#[tokio::test]
+async fn sessions_and_artefacts_are_deleted_only_when_unused() {
+    let app = TestApp::new(ServiceConfig::default(), false).await;
+    let rid = robot(&app, "r").await;
+    let aid = artefact(&app, "plate").await;
+    let spare = artefact(&app, "spare").await;
+    let sess = |name: &str| {
+        json!({"name": name, "purpose": "identification", "instrument": "trical", "tool": {"tcp_mm": [40, 0, 130]},
+               "artefact_id": aid})
+    };
+    let mk = async |name: &str| {
+        let r = app.post(&format!("/v1/robots/{rid}/sessions"), &sess(name)).await;
+        assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
+        let id = r.body["id"].as_str().unwrap().to_string();
+        let ms = json!({"measurements": [{"joints_deg": [0, 10, 20, 0, 30, 0], "ball": 1}, {"joints_deg": [0, 10, 20, 0, 31, 0], "ball": 2}]});
+        assert_eq!(app.post(&format!("/v1/sessions/{id}/measurements"), &ms).await.status, StatusCode::CREATED);
+        id
+    };
+    let del = async |path: &str| app.raw(Method::DELETE, path, None, vec![], &[]).await;
+    let wrong = mk("wrong-upload").await;
+    let used = mk("used").await;
+
+    assert_problem(&del(&format!("/v1/sessions/{wrong}")).await, 422, Some("reason"));
+    assert_problem(&del(&format!("/v1/sessions/{wrong}?reason=")).await, 422, Some("reason"));
+    assert_problem(&del("/v1/sessions/none?reason=x").await, 404, None);
+
+    // A queued identification reads "used": refused while it waits, allowed once it is cancelled.
+    let r = app.post(&format!("/v1/robots/{rid}/identifications"), &json!({"sessions": ["used"]})).await;
+    assert_eq!(r.status, StatusCode::ACCEPTED, "{}", r.text);
+    let job = r.body["id"].as_str().unwrap().to_string();
+    let r = del(&format!("/v1/sessions/{used}?reason=test")).await;
+    assert_problem(&r, 409, None);
+    assert!(r.body["detail"].as_str().unwrap().contains(&format!("identification job {job} (queued)")), "{}", r.text);
+    assert!(r.body["hint"].as_str().unwrap().contains("exclude"), "{}", r.text);
+    // A parameter set made from it (its sessions name it) holds it too.
+    sqlx::query("INSERT INTO parameter_sets (id, robot_id, version, doc_json, sessions_json, created_at) VALUES ('ps', ?, 7, '{}', '[\"used\"]', 't')")
+        .bind(&rid)
+        .execute(&app.state.pool)
+        .await
+        .unwrap();
+    assert_eq!(app.post(&format!("/v1/jobs/{job}/cancel"), &json!({})).await.status, StatusCode::OK);
+    let r = del(&format!("/v1/sessions/{used}?reason=test")).await;
+    assert_problem(&r, 409, None);
+    let detail = r.body["detail"].as_str().unwrap();
+    assert!(detail.contains("parameter set version 7") && !detail.contains("job"), "{detail}");
+    assert_eq!(app.get(&format!("/v1/sessions/{used}")).await.body["measurements"], 2, "nothing deleted");
+
+    // The wrong upload goes, with its measurements; the audit says what it was.
+    let r = del(&format!("/v1/sessions/{wrong}?reason=uploaded%20to%20the%20wrong%20robot")).await;
+    assert_eq!(r.status, StatusCode::NO_CONTENT, "{}", r.text);
+    assert_problem(&app.get(&format!("/v1/sessions/{wrong}")).await, 404, None);
+    assert_problem(&app.get(&format!("/v1/sessions/{wrong}/measurements")).await, 404, None);
+    assert_problem(&del(&format!("/v1/sessions/{wrong}?reason=again")).await, 404, None);
+    let left: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM measurements WHERE session_id = ?")
+        .bind(&wrong)
+        .fetch_one(&app.state.pool)
+        .await
+        .unwrap();
+    assert_eq!(left, 0);
+    let a = app.get(&format!("/v1/audit-events?robot_id={rid}")).await;
+    assert_eq!(a.body[0]["action"], "session_deleted");
+    assert_eq!(a.body[0]["reason"], "uploaded to the wrong robot");
+    assert_eq!(
+        (a.body[0]["detail"]["name"].as_str(), a.body[0]["detail"]["measurements"].as_i64()),
+        (Some("wrong-upload"), Some(2))
+    );
+    assert_eq!(app.get(&format!("/v1/robots/{rid}/sessions")).await.body.as_array().unwrap().len(), 1);
+    // A new session may take the deleted one's name.
+    mk("wrong-upload").await;
+
+    // Artefacts: the one measured on is refused, naming the sessions; the spare one goes.
+    let r = del(&format!("/v1/artefacts/{aid}?reason=x")).await;
+    assert_problem(&r, 409, None);
+    assert!(r.body["detail"].as_str().unwrap().contains("session 'used' of robot 'r'"), "{}", r.text);
+    assert_problem(&del(&format!("/v1/artefacts/{spare}")).await, 422, Some("reason"));
+    assert_problem(&del("/v1/artefacts/none?reason=x").await, 404, None);
+    assert_eq!(del(&format!("/v1/artefacts/{spare}?reason=duplicate%20entry")).await.status, StatusCode::NO_CONTENT);
+    assert_problem(&app.get(&format!("/v1/artefacts/{spare}")).await, 404, None);
+    let a = app.get(&format!("/v1/audit-events?subject_id={spare}")).await;
+    assert_eq!(
+        (a.body[0]["action"].as_str(), a.body[0]["detail"]["name"].as_str()),
+        (Some("artefact_deleted"), Some("spare"))
+    );
+    assert!(a.body[0]["robot_id"].is_null());
+    app.stop().await;
+}
+
+/// Parameter sets are archived, never deleted: the active one cannot be, an archived one is
+/// hidden from the history and never activated, and the activation history keeps every set that
+/// was active.
+#[tokio::test]
+async fn parameter_sets_are_archived_not_deleted() {
+    let mut app = TestApp::new(ServiceConfig { require_auth: true, ..Default::default() }, false).await;
+    let (_, secret) = robocal::db::tokens::create(&app.state.pool, "metrologist", &[robocal::db::tokens::Scope::Admin])
+        .await
+        .unwrap();
+    app.token = Some(secret);
+    let rid = robot(&app, "r").await;
+    let table =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/irb120_table_5_1.json")).unwrap();
+    let import = async || {
+        let r = app
+            .raw(
+                Method::POST,
+                &format!("/v1/robots/{rid}/parameter-sets"),
+                Some("application/json"),
+                table.clone().into_bytes(),
+                &[],
+            )
+            .await;
+        assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
+        r.body["id"].as_str().unwrap().to_string()
+    };
+    let v1 = import().await;
+    let v2 = import().await;
+    let apath = format!("/v1/robots/{rid}/active-parameter-set");
+    let patch = async |id: &str, body: Value| {
+        app.raw(
+            Method::PATCH,
+            &format!("/v1/parameter-sets/{id}"),
+            Some("application/json"),
+            serde_json::to_vec(&body).unwrap(),
+            &[],
+        )
+        .await
+    };
+    assert_eq!(app.put(&apath, &json!({"parameter_set_id": v1})).await.status, StatusCode::OK);
+
+    // The active set is not archived; a reason is needed; an unknown set is 404.
+    let r = patch(&v1, json!({"archived": true, "reason": "wrong tool mass"})).await;
+    assert_problem(&r, 409, None);
+    assert!(r.body["hint"].as_str().unwrap().contains("activate another set first"), "{}", r.text);
+    assert_problem(&patch(&v2, json!({"archived": true})).await, 422, Some("reason"));
+    assert_problem(&patch("none", json!({"archived": true, "reason": "x"})).await, 404, None);
+    assert_problem(&patch(&v2, json!({"archived": false, "reason": "x"})).await, 409, None);
+
+    // Once v2 is active, v1 — active before — is archived: hidden, not activated, still on record.
+    assert_eq!(app.put(&apath, &json!({"parameter_set_id": v2})).await.status, StatusCode::OK);
+    let r = patch(&v1, json!({"archived": true, "reason": "identified with the wrong tool mass"})).await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    assert_eq!(r.body["archived"]["reason"], "identified with the wrong tool mass");
+    assert_eq!(r.body["archived"]["by"], "metrologist");
+    assert_eq!(r.body["active"], false);
+    assert_problem(&patch(&v1, json!({"archived": true, "reason": "again"})).await, 409, None);
+    let history = |q: &str| format!("/v1/robots/{rid}/parameter-sets{q}");
+    let h = app.get(&history("")).await;
+    let versions: Vec<i64> = h.body.as_array().unwrap().iter().map(|s| s["version"].as_i64().unwrap()).collect();
+    assert_eq!((versions, h.headers["x-total-count"].to_str().unwrap()), (vec![2], "1"));
+    let h = app.get(&history("?include_archived=true")).await;
+    let versions: Vec<i64> = h.body.as_array().unwrap().iter().map(|s| s["version"].as_i64().unwrap()).collect();
+    assert_eq!(versions, [2, 1]);
+    assert!(h.body[0].get("archived").is_none() && h.body[1]["archived"]["at"].is_string());
+    assert_problem(&app.get(&history("?include_archived=maybe")).await, 400, None);
+    let r = app.put(&apath, &json!({"parameter_set_id": v1})).await;
+    assert_problem(&r, 409, None);
+    assert!(r.body["hint"].as_str().unwrap().contains("\"archived\": false"), "{}", r.text);
+    assert_eq!(app.get(&format!("/v1/parameter-sets/{v1}")).await.status, StatusCode::OK, "still readable");
+    assert_eq!(app.get(&format!("/v1/parameter-sets/{v1}/export")).await.status, StatusCode::OK);
+    let acts = app.get(&format!("/v1/robots/{rid}/activations")).await;
+    assert_eq!(acts.status, StatusCode::OK, "{}", acts.text);
+    let seen: Vec<(i64, bool, bool)> = acts
+        .body
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| (a["version"].as_i64().unwrap(), a["active"].as_bool().unwrap(), a["archived"].as_bool().unwrap()))
+        .collect();
+    assert_eq!(seen, [(2, true, false), (1, false, true)], "the archived set stays in the activation history");
+    assert_eq!(acts.body[1]["activated_by"], "metrologist");
+    assert!(acts.body[1]["activated_at"].is_string());
+
+    // DELETE: 405 with what to do instead.
+    let r = app.raw(Method::DELETE, &format!("/v1/parameter-sets/{v2}"), None, vec![], &[]).await;
+    assert_problem(&r, 405, None);
+    assert!(r.body["detail"].as_str().unwrap().contains("archived, not deleted"), "{}", r.text);
+    assert!(r.body["hint"].as_str().unwrap().contains("\"archived\": true"), "{}", r.text);
+    assert_eq!(r.headers["allow"], "GET, PATCH");
+    assert_problem(&app.raw(Method::DELETE, "/v1/parameter-sets/none", None, vec![], &[]).await, 404, None);
+
+    // Unarchived, it can be activated again; the audit timeline has both steps.
+    let r = patch(&v1, json!({"archived": false, "reason": "the tool mass was right after all"})).await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    assert!(r.body.get("archived").is_none());
+    assert_eq!(app.put(&apath, &json!({"parameter_set_id": v1})).await.status, StatusCode::OK);
+    let a = app.get(&format!("/v1/audit-events?subject_id={v1}")).await;
+    let actions: Vec<&str> = a.body.as_array().unwrap().iter().map(|e| e["action"].as_str().unwrap()).collect();
+    assert_eq!(actions, ["parameter_set_unarchived", "parameter_set_archived"]);
+    assert_eq!(a.body[1]["actor"], "metrologist");
+    app.stop().await;
+}
+
+/// A keyless re-upload of a batch the session already holds is refused (409) — as JSON or CSV —
+/// with the batch it duplicates and how to resend; `allow_duplicate=true` appends it on purpose;
+/// a keyed retry is still replayed.
+#[tokio::test]
+async fn a_keyless_duplicate_batch_is_refused() {
+    let app = TestApp::new(ServiceConfig::default(), false).await;
+    let rid = robot(&app, "r").await;
+    let r = app
+        .post(
+            &format!("/v1/robots/{rid}/sessions"),
+            &json!({"name": "s", "purpose": "validation", "instrument": "laser_tracker", "tool": {"tcp_mm": [0, 0, 0]}}),
+        )
+        .await;
+    let sid = r.body["id"].as_str().unwrap().to_string();
+    let mpath = format!("/v1/sessions/{sid}/measurements");
+    let body = json!({"measurements": [
+        {"joints_deg": [0, 10, 20, 0, 30, 0], "position_mm": [400, 0, 500]},
+        {"joints_deg": [1, 10, 20, 0, 30, 0], "position_mm": [401, 7, 500]}]});
+    let first = app.post(&mpath, &body).await;
+    assert_eq!(first.status, StatusCode::CREATED, "{}", first.text);
+    let batch = first.body["batch_id"].as_str().unwrap();
+
+    let again = app.post(&mpath, &body).await;
+    assert_problem(&again, 409, None);
+    let detail = again.body["detail"].as_str().unwrap();
+    assert!(detail.contains(batch) && detail.contains("appended") && detail.contains("measurements 0–1"), "{detail}");
+    let hint = again.body["hint"].as_str().unwrap();
+    assert!(hint.contains("Idempotency-Key") && hint.contains("allow_duplicate=true"), "{hint}");
+    // The same measurements as CSV are the same batch.
+    let csv = "q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm\n0,10,20,0,30,0,400,0,500\n1,10,20,0,30,0,401,7,500\n";
+    assert_problem(&app.raw(Method::POST, &mpath, Some("text/csv"), csv.as_bytes().to_vec(), &[]).await, 409, None);
+    // A subset, or another reading, is not a duplicate.
+    let one = json!({"measurements": [{"joints_deg": [0, 10, 20, 0, 30, 0], "position_mm": [400, 0, 500]}]});
+    assert_eq!(app.post(&mpath, &one).await.status, StatusCode::CREATED);
+    assert_eq!(app.get(&format!("/v1/sessions/{sid}")).await.body["measurements"], 3);
+    // On purpose: appended again.
+    let r = app.post(&format!("{mpath}?allow_duplicate=true"), &body).await;
+    assert_eq!((r.status, r.body["first_index"].as_i64()), (StatusCode::CREATED, Some(3)), "{}", r.text);
+    assert_problem(&app.post(&format!("{mpath}?allow_duplicate=perhaps"), &body).await, 400, None);
+    // With a key the client says what a retry is: a new key appends, the same key replays.
+    let key = [("idempotency-key", "day-2-batch-1")];
+    let bytes = serde_json::to_vec(&body).unwrap();
+    let k1 = app.raw(Method::POST, &mpath, Some("application/json"), bytes.clone(), &key).await;
+    assert_eq!((k1.status, k1.body["first_index"].as_i64()), (StatusCode::CREATED, Some(5)), "{}", k1.text);
+    let k2 = app.raw(Method::POST, &mpath, Some("application/json"), bytes, &key).await;
+    assert_eq!(
+        (k2.status, k2.headers.get("idempotency-replayed").map(|v| v.to_str().unwrap())),
+        (StatusCode::CREATED, Some("true"))
+    );
+    assert_eq!(app.get(&format!("/v1/sessions/{sid}")).await.body["measurements"], 7);
     app.stop().await;
 }

@@ -244,3 +244,76 @@ async fn sessions_stored_before_targets_have_none() {
     pool.close().await;
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// 0005 (audited correction) keeps everything stored before it: the sessions' measurements (none
+/// excluded), the batches (their content hash unknown, yet a keyless re-upload of one is still
+/// recognised by hashing its rows), the parameter sets (none archived) and the active set, which
+/// becomes the first entry of the activation history (time unknown). Its constraints hold: one
+/// open exclusion per measurement, of a stored measurement, with a reason.
+#[tokio::test]
+async fn data_stored_before_audited_correction_survive_it() {
+    let dir = fresh_dir("migrate-correction");
+    let path = dir.join("robocal.db");
+    let old = at_version(&path, 4, true).await;
+    fill_v1(&old).await;
+    exec(&old, "INSERT INTO sessions (id, robot_id, name, purpose, instrument, tool_json, created_at) VALUES ('se1', 'r1', 'n1', 'validation', 'laser_tracker', '{\"tcp_mm\": [0, 0, 0]}', 't4')").await;
+    exec(&old, "INSERT INTO batches (id, session_id, request_hash, first_seq, count, created_at) VALUES ('b1', 'se1', 'h', 0, 2, 't5')").await;
+    let specs = [
+        r#"{"joints_deg":[0.0,0.0,0.0,0.0,30.0,0.0],"position_mm":[1.0,2.0,3.0]}"#,
+        r#"{"joints_deg":[1.0,0.0,0.0,0.0,30.0,0.0],"position_mm":[1.0,2.0,4.0]}"#,
+    ];
+    for (i, s) in specs.iter().enumerate() {
+        exec(
+            &old,
+            &format!(
+                "INSERT INTO measurements (session_id, seq, batch_id, spec_json) VALUES ('se1', {i}, 'b1', '{s}')"
+            ),
+        )
+        .await;
+    }
+    old.close().await;
+
+    let pool = db::connect(&path).await.unwrap();
+    assert_eq!(applied(&pool).await, db::MIGRATOR.iter().count() as i64);
+    let s = robocal::db::records::session(&pool, "se1").await.unwrap().unwrap();
+    assert_eq!((s.measurements, s.excluded), (2, 0));
+    let set = robocal::db::records::parameter_set(&pool, "s1").await.unwrap().unwrap();
+    assert_eq!((set.version, set.archived_at), (1, None));
+    let acts = robocal::db::corrections::activations(&pool, "r1", 0, 10).await.unwrap();
+    assert_eq!(acts.len(), 1);
+    assert_eq!((acts[0].parameter_set_id.as_str(), acts[0].activated_at.as_deref()), ("s1", None));
+    let hash: Option<String> =
+        sqlx::query_scalar("SELECT content_hash FROM batches WHERE id = 'b1'").fetch_one(&pool).await.unwrap();
+    assert_eq!(hash, None);
+    let rows: Vec<String> = specs.iter().map(|s| s.to_string()).collect();
+    let mut conn = pool.acquire().await.unwrap();
+    let dup = robocal::db::records::identical_batch(&mut conn, "se1", &robocal::db::records::content_hash(&rows), 2)
+        .await
+        .unwrap();
+    assert_eq!(dup.map(|b| b.id).as_deref(), Some("b1"), "an old batch is recognised by its rows");
+    drop(conn);
+
+    // The constraints: a reason, a stored measurement, one open exclusion at a time.
+    let ins = |id: &str, seq: i64, reason: &str| {
+        format!(
+            "INSERT INTO measurement_exclusions (id, session_id, seq, reason, excluded_at) VALUES ('{id}', 'se1', {seq}, '{reason}', 't6')"
+        )
+    };
+    exec(&pool, &ins("x1", 1, "outlier")).await;
+    assert_eq!(robocal::db::records::session(&pool, "se1").await.unwrap().unwrap().excluded, 1);
+    for (sql, want) in
+        [(ins("x2", 1, "again"), "UNIQUE"), (ins("x3", 5, "none"), "FOREIGN KEY"), (ins("x4", 0, " "), "CHECK")]
+    {
+        let e = sqlx::query(sqlx::AssertSqlSafe(sql.clone())).execute(&pool).await.expect_err(&sql);
+        assert!(e.to_string().contains(want), "{sql}: {e}");
+    }
+    let e = sqlx::query("UPDATE measurement_exclusions SET restored_at = 't7' WHERE id = 'x1'")
+        .execute(&pool)
+        .await
+        .unwrap_err();
+    assert!(e.to_string().contains("CHECK"), "a restore needs its reason: {e}");
+    exec(&pool, "UPDATE measurement_exclusions SET restored_at = 't7', restore_reason = 'fine' WHERE id = 'x1'").await;
+    exec(&pool, &ins("x2", 1, "again")).await;
+    pool.close().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}

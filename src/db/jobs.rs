@@ -139,17 +139,32 @@ pub async fn list(
     db: impl SqliteExecutor<'_>,
     robot_id: Option<&str>,
     state: Option<JobState>,
+    offset: i64,
     limit: i64,
 ) -> Result<Vec<JobRow>, sqlx::Error> {
     sqlx::query_as(
         "SELECT * FROM jobs WHERE (?1 IS NULL OR robot_id = ?1) AND (?2 IS NULL OR state = ?2) \
-         ORDER BY created_at DESC, id DESC LIMIT ?3",
+         ORDER BY created_at DESC, id DESC LIMIT ?3 OFFSET ?4",
     )
     .bind(robot_id)
     .bind(state)
     .bind(limit)
+    .bind(offset)
     .fetch_all(db)
     .await
+}
+
+/// Jobs matching the filters of [`list`].
+pub async fn count(
+    db: impl SqliteExecutor<'_>,
+    robot_id: Option<&str>,
+    state: Option<JobState>,
+) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM jobs WHERE (?1 IS NULL OR robot_id = ?1) AND (?2 IS NULL OR state = ?2)")
+        .bind(robot_id)
+        .bind(state)
+        .fetch_one(db)
+        .await
 }
 
 /// Claim the oldest queued job for `owner` with a lease of `lease`: one atomic statement.

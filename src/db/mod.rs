@@ -4,6 +4,7 @@
 //! (immediate: the write lock is taken up front, so two writers never deadlock upgrading a
 //! read lock).
 
+pub mod corrections;
 pub mod jobs;
 pub mod records;
 pub mod tokens;

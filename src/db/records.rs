@@ -38,8 +38,17 @@ pub async fn robot(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<Robot
     sqlx::query_as("SELECT * FROM robots WHERE id = ?").bind(id).fetch_optional(db).await
 }
 
-pub async fn robots(db: impl SqliteExecutor<'_>) -> Result<Vec<RobotRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM robots ORDER BY created_at, id").fetch_all(db).await
+/// Robots `offset..offset + limit`, oldest first.
+pub async fn robots(db: impl SqliteExecutor<'_>, offset: i64, limit: i64) -> Result<Vec<RobotRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM robots ORDER BY created_at, id LIMIT ? OFFSET ?")
+        .bind(limit)
+        .bind(offset)
+        .fetch_all(db)
+        .await
+}
+
+pub async fn robot_count(db: impl SqliteExecutor<'_>) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM robots").fetch_one(db).await
 }
 
 pub async fn set_active_parameter_set(
@@ -79,8 +88,17 @@ pub async fn artefact(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<Ar
     sqlx::query_as("SELECT * FROM artefacts WHERE id = ?").bind(id).fetch_optional(db).await
 }
 
-pub async fn artefacts(db: impl SqliteExecutor<'_>) -> Result<Vec<ArtefactRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM artefacts ORDER BY created_at, id").fetch_all(db).await
+/// Artefacts `offset..offset + limit`, oldest first.
+pub async fn artefacts(db: impl SqliteExecutor<'_>, offset: i64, limit: i64) -> Result<Vec<ArtefactRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM artefacts ORDER BY created_at, id LIMIT ? OFFSET ?")
+        .bind(limit)
+        .bind(offset)
+        .fetch_all(db)
+        .await
+}
+
+pub async fn artefact_count(db: impl SqliteExecutor<'_>) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM artefacts").fetch_one(db).await
 }
 
 /// A session row with its measurement count.
@@ -103,10 +121,21 @@ pub struct SessionRow {
     /// Measurements stored (not a column: counted on read).
     #[sqlx(default)]
     pub measurements: i64,
+    /// Of them, excluded (open exclusions, 0005; counted on read): the jobs leave them out.
+    #[sqlx(default)]
+    pub excluded: i64,
+}
+
+impl SessionRow {
+    /// Measurements the jobs use: stored and not excluded.
+    pub fn usable(&self) -> i64 {
+        self.measurements - self.excluded
+    }
 }
 
 const SESSION_COLUMNS: &str = "s.id, s.robot_id, s.name, s.purpose, s.instrument, s.tool_json, s.identify_tcp, \
-     s.artefact_id, s.created_at, s.measuring_order, s.target, (SELECT COUNT(*) FROM measurements m WHERE m.session_id = s.id) AS measurements";
+     s.artefact_id, s.created_at, s.measuring_order, s.target, (SELECT COUNT(*) FROM measurements m WHERE m.session_id = s.id) AS measurements, \
+     (SELECT COUNT(*) FROM measurement_exclusions e WHERE e.session_id = s.id AND e.restored_at IS NULL) AS excluded";
 
 pub async fn insert_session(db: impl SqliteExecutor<'_>, s: &SessionRow) -> Result<(), sqlx::Error> {
     sqlx::query(
@@ -161,7 +190,28 @@ pub async fn sessions_of_robot(db: impl SqliteExecutor<'_>, robot_id: &str) -> R
     .await
 }
 
-/// A stored batch of measurements (for idempotent replays).
+/// A robot's sessions `offset..offset + limit`, oldest first.
+pub async fn sessions_page(
+    db: impl SqliteExecutor<'_>,
+    robot_id: &str,
+    offset: i64,
+    limit: i64,
+) -> Result<Vec<SessionRow>, sqlx::Error> {
+    sqlx::query_as(sqlx::AssertSqlSafe(format!(
+        "SELECT {SESSION_COLUMNS} FROM sessions s WHERE s.robot_id = ? ORDER BY s.created_at, s.id LIMIT ? OFFSET ?"
+    )))
+    .bind(robot_id)
+    .bind(limit)
+    .bind(offset)
+    .fetch_all(db)
+    .await
+}
+
+pub async fn session_count(db: impl SqliteExecutor<'_>, robot_id: &str) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM sessions WHERE robot_id = ?").bind(robot_id).fetch_one(db).await
+}
+
+/// A stored batch of measurements (for idempotent replays and duplicate checks).
 #[derive(Clone, Debug, PartialEq, sqlx::FromRow)]
 pub struct BatchRow {
     pub id: String,
@@ -171,6 +221,54 @@ pub struct BatchRow {
     pub first_seq: i64,
     pub count: i64,
     pub created_at: String,
+    /// SHA-256 of the batch's measurements as stored (0005); NULL for batches stored before.
+    pub content_hash: Option<String>,
+}
+
+/// SHA-256 (hex) of a batch's measurements as stored: each spec JSON followed by a newline.
+pub fn content_hash(specs_json: &[String]) -> String {
+    use sha2::{Digest, Sha256};
+    let mut h = Sha256::new();
+    for s in specs_json {
+        h.update(s.as_bytes());
+        h.update(b"\n");
+    }
+    h.finalize().iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// The first batch of a session holding exactly these measurements (`specs_json` as stored,
+/// hashed to `hash`): by its content hash, or — for batches stored before 0005 — by hashing
+/// their rows.
+pub async fn identical_batch(
+    tx: &mut sqlx::SqliteConnection,
+    session_id: &str,
+    hash: &str,
+    count: i64,
+) -> Result<Option<BatchRow>, sqlx::Error> {
+    let candidates: Vec<BatchRow> = sqlx::query_as(
+        "SELECT * FROM batches WHERE session_id = ?1 AND (content_hash = ?2 OR (content_hash IS NULL AND count = ?3)) \
+         ORDER BY first_seq",
+    )
+    .bind(session_id)
+    .bind(hash)
+    .bind(count)
+    .fetch_all(&mut *tx)
+    .await?;
+    for b in candidates {
+        if b.content_hash.as_deref() == Some(hash) {
+            return Ok(Some(b));
+        }
+        let rows: Vec<String> =
+            sqlx::query_scalar("SELECT spec_json FROM measurements WHERE session_id = ? AND batch_id = ? ORDER BY seq")
+                .bind(session_id)
+                .bind(&b.id)
+                .fetch_all(&mut *tx)
+                .await?;
+        if content_hash(&rows) == hash {
+            return Ok(Some(b));
+        }
+    }
+    Ok(None)
 }
 
 pub async fn batch_by_key(
@@ -187,8 +285,8 @@ pub async fn batch_by_key(
 
 pub async fn insert_batch(db: impl SqliteExecutor<'_>, b: &BatchRow) -> Result<(), sqlx::Error> {
     sqlx::query(
-        "INSERT INTO batches (id, session_id, idempotency_key, request_hash, first_seq, count, created_at) \
-         VALUES (?, ?, ?, ?, ?, ?, ?)",
+        "INSERT INTO batches (id, session_id, idempotency_key, request_hash, first_seq, count, created_at, content_hash) \
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
     )
     .bind(&b.id)
     .bind(&b.session_id)
@@ -197,6 +295,7 @@ pub async fn insert_batch(db: impl SqliteExecutor<'_>, b: &BatchRow) -> Result<(
     .bind(b.first_seq)
     .bind(b.count)
     .bind(&b.created_at)
+    .bind(&b.content_hash)
     .execute(db)
     .await?;
     Ok(())
@@ -247,6 +346,22 @@ pub async fn measurements(
         .await
 }
 
+/// Every stored measurement of a session in order, with whether it is excluded: (index, spec
+/// JSON, excluded). One statement, so the measurements and their exclusions are read together.
+pub async fn measurements_with_state(
+    db: impl SqliteExecutor<'_>,
+    session_id: &str,
+) -> Result<Vec<(i64, String, bool)>, sqlx::Error> {
+    sqlx::query_as(
+        "SELECT m.seq, m.spec_json, EXISTS (SELECT 1 FROM measurement_exclusions e \
+             WHERE e.session_id = m.session_id AND e.seq = m.seq AND e.restored_at IS NULL) \
+         FROM measurements m WHERE m.session_id = ? ORDER BY m.seq",
+    )
+    .bind(session_id)
+    .fetch_all(db)
+    .await
+}
+
 /// A parameter-set row.
 #[derive(Clone, Debug, PartialEq, sqlx::FromRow)]
 pub struct ParameterSetRow {
@@ -257,6 +372,10 @@ pub struct ParameterSetRow {
     pub sessions_json: String,
     pub job_id: Option<String>,
     pub created_at: String,
+    /// When, by whom and why it was archived (0005): hidden from the history, never activated.
+    pub archived_at: Option<String>,
+    pub archived_by: Option<String>,
+    pub archive_reason: Option<String>,
 }
 
 /// Insert a new version of a robot's parameter set (the next version number is taken inside the
@@ -281,6 +400,9 @@ pub async fn insert_parameter_set(
         sessions_json: sessions_json.to_string(),
         job_id: job_id.map(str::to_string),
         created_at: super::now(),
+        archived_at: None,
+        archived_by: None,
+        archive_reason: None,
     };
     sqlx::query(
         "INSERT INTO parameter_sets (id, robot_id, version, doc_json, sessions_json, job_id, created_at) \
@@ -302,14 +424,36 @@ pub async fn parameter_set(db: impl SqliteExecutor<'_>, id: &str) -> Result<Opti
     sqlx::query_as("SELECT * FROM parameter_sets WHERE id = ?").bind(id).fetch_optional(db).await
 }
 
-/// A robot's parameter sets, newest version first.
+/// A robot's parameter sets `offset..offset + limit`, newest version first; archived ones only
+/// when asked for.
 pub async fn parameter_sets_of_robot(
     db: impl SqliteExecutor<'_>,
     robot_id: &str,
+    include_archived: bool,
+    offset: i64,
+    limit: i64,
 ) -> Result<Vec<ParameterSetRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM parameter_sets WHERE robot_id = ? ORDER BY version DESC")
+    sqlx::query_as(
+        "SELECT * FROM parameter_sets WHERE robot_id = ? AND (? OR archived_at IS NULL) \
+         ORDER BY version DESC LIMIT ? OFFSET ?",
+    )
+    .bind(robot_id)
+    .bind(include_archived)
+    .bind(limit)
+    .bind(offset)
+    .fetch_all(db)
+    .await
+}
+
+pub async fn parameter_set_count(
+    db: impl SqliteExecutor<'_>,
+    robot_id: &str,
+    include_archived: bool,
+) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM parameter_sets WHERE robot_id = ? AND (? OR archived_at IS NULL)")
         .bind(robot_id)
-        .fetch_all(db)
+        .bind(include_archived)
+        .fetch_one(db)
         .await
 }
 
@@ -390,12 +534,25 @@ pub async fn diagnosis(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<D
     sqlx::query_as("SELECT * FROM diagnoses WHERE id = ?").bind(id).fetch_optional(db).await
 }
 
-/// A parameter set's diagnoses, newest first.
-pub async fn diagnoses_of_set(db: impl SqliteExecutor<'_>, set_id: &str) -> Result<Vec<DiagnosisRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM diagnoses WHERE parameter_set_id = ? ORDER BY created_at DESC, id DESC")
-        .bind(set_id)
-        .fetch_all(db)
-        .await
+/// A parameter set's diagnoses `offset..offset + limit`, newest first.
+pub async fn diagnoses_of_set(
+    db: impl SqliteExecutor<'_>,
+    set_id: &str,
+    offset: i64,
+    limit: i64,
+) -> Result<Vec<DiagnosisRow>, sqlx::Error> {
+    sqlx::query_as(
+        "SELECT * FROM diagnoses WHERE parameter_set_id = ? ORDER BY created_at DESC, id DESC LIMIT ? OFFSET ?",
+    )
+    .bind(set_id)
+    .bind(limit)
+    .bind(offset)
+    .fetch_all(db)
+    .await
+}
+
+pub async fn diagnosis_count(db: impl SqliteExecutor<'_>, set_id: &str) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM diagnoses WHERE parameter_set_id = ?").bind(set_id).fetch_one(db).await
 }
 
 /// Record the parameter set accepting a diagnosis created; `false` when it already has one (or
@@ -443,4 +600,23 @@ pub async fn insert_pose_plan(db: impl SqliteExecutor<'_>, p: &PosePlanRow) -> R
 
 pub async fn pose_plan(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<PosePlanRow>, sqlx::Error> {
     sqlx::query_as("SELECT * FROM pose_plans WHERE id = ?").bind(id).fetch_optional(db).await
+}
+
+/// A robot's pose plans `offset..offset + limit`, newest first.
+pub async fn pose_plans_of_robot(
+    db: impl SqliteExecutor<'_>,
+    robot_id: &str,
+    offset: i64,
+    limit: i64,
+) -> Result<Vec<PosePlanRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM pose_plans WHERE robot_id = ? ORDER BY created_at DESC, id DESC LIMIT ? OFFSET ?")
+        .bind(robot_id)
+        .bind(limit)
+        .bind(offset)
+        .fetch_all(db)
+        .await
+}
+
+pub async fn pose_plan_count(db: impl SqliteExecutor<'_>, robot_id: &str) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM pose_plans WHERE robot_id = ?").bind(robot_id).fetch_one(db).await
 }

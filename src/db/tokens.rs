@@ -126,6 +126,19 @@ pub async fn list(db: impl SqliteExecutor<'_>) -> Result<Vec<TokenRow>, sqlx::Er
     sqlx::query_as("SELECT * FROM tokens ORDER BY created_at, id").fetch_all(db).await
 }
 
+/// Tokens `offset..offset + limit`, oldest first.
+pub async fn page(db: impl SqliteExecutor<'_>, offset: i64, limit: i64) -> Result<Vec<TokenRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM tokens ORDER BY created_at, id LIMIT ? OFFSET ?")
+        .bind(limit)
+        .bind(offset)
+        .fetch_all(db)
+        .await
+}
+
+pub async fn count(db: impl SqliteExecutor<'_>) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM tokens").fetch_one(db).await
+}
+
 /// Revoke; `false` if unknown or already revoked.
 pub async fn revoke(db: impl SqliteExecutor<'_>, id: &str) -> Result<bool, sqlx::Error> {
     let r = sqlx::query("UPDATE tokens SET revoked_at = ? WHERE id = ? AND revoked_at IS NULL")

@@ -2,15 +2,17 @@
 //! computed (thesis §2, eq. 4.3–4.7) and returned.
 
 use axum::Json;
-use axum::extract::{Path, State};
-use axum::http::StatusCode;
+use axum::extract::{Path, Query, State};
+use axum::http::{HeaderMap, StatusCode};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
+use super::audit::{Event, ReasonQuery, reason};
 use super::extract::{Authorized, JsonBody, MEASURE, READ};
+use super::paging::{PageQuery, Paging};
 use super::{ApiError, AppState};
 use crate::cell::Artefact;
-use crate::db::{self, records};
+use crate::db::{self, corrections, records};
 use crate::domain::cell::{ArtefactKind, ArtefactSpec, Distances};
 use crate::units::MM;
 
@@ -97,7 +99,11 @@ pub async fn create(
     };
     records::insert_artefact(&state.pool, &row).await.map_err(|e| {
         if db::is_unique_violation(&e) {
-            ApiError::Conflict { detail: format!("an artefact named '{name}' exists"), field: Some("name".into()) }
+            ApiError::Conflict {
+                detail: format!("an artefact named '{name}' exists"),
+                field: Some("name".into()),
+                hint: None,
+            }
         } else {
             e.into()
         }
@@ -105,13 +111,23 @@ pub async fn create(
     Ok((StatusCode::CREATED, Json(artefact_out(&row)?)))
 }
 
-/// List artefacts.
-#[utoipa::path(get, path = "/v1/artefacts", tag = "artefacts",
-    responses((status = 200, description = "Every artefact, oldest first", body = Vec<ArtefactOut>)),
+/// List artefacts, oldest first, a page at a time.
+#[utoipa::path(get, path = "/v1/artefacts", tag = "artefacts", params(PageQuery),
+    responses(
+        (status = 200, description = "Artefacts, oldest first", body = Vec<ArtefactOut>, headers(
+            ("X-Total-Count" = i64, description = "Artefacts in all"),
+            ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
+        (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
     security(("bearer" = [])))]
-pub async fn list(State(state): State<AppState>, _auth: Authorized<READ>) -> Result<Json<Vec<ArtefactOut>>, ApiError> {
-    let rows = records::artefacts(&state.pool).await?;
-    Ok(Json(rows.iter().map(artefact_out).collect::<Result<_, _>>()?))
+pub async fn list(
+    State(state): State<AppState>,
+    _auth: Authorized<READ>,
+    page: Paging,
+) -> Result<(HeaderMap, Json<Vec<ArtefactOut>>), ApiError> {
+    let total = records::artefact_count(&state.pool).await?;
+    let rows = records::artefacts(&state.pool, page.offset, page.limit).await?;
+    let out: Vec<ArtefactOut> = rows.iter().map(artefact_out).collect::<Result<_, _>>()?;
+    Ok((page.headers(total, out.len()), Json(out)))
 }
 
 /// Get an artefact.
@@ -130,4 +146,50 @@ pub async fn get(
         .await?
         .ok_or_else(|| ApiError::not_found("artefact", &artefact_id))?;
     Ok(Json(artefact_out(&row)?))
+}
+
+/// Delete an artefact nothing uses, saying why. Refused (409, naming them) while sessions were
+/// measured on it, pose plans were made for it, or a pose-plan job on it is queued or running.
+/// The audit timeline keeps who, when, why and the artefact's specification.
+#[utoipa::path(delete, path = "/v1/artefacts/{artefact_id}", tag = "artefacts",
+    params(("artefact_id" = String, Path, description = "Artefact id"), ReasonQuery),
+    responses(
+        (status = 204, description = "Deleted"),
+        (status = 404, description = "Unknown artefact", body = super::Problem, content_type = "application/problem+json"),
+        (status = 409, description = "Sessions, pose plans or unfinished jobs use the artefact (named in the detail)", body = super::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "`reason` missing or empty", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn delete(
+    State(state): State<AppState>,
+    auth: Authorized<MEASURE>,
+    Path(artefact_id): Path<String>,
+    Query(q): Query<ReasonQuery>,
+) -> Result<StatusCode, ApiError> {
+    records::artefact(&state.pool, &artefact_id).await?.ok_or_else(|| ApiError::not_found("artefact", &artefact_id))?;
+    let why = reason(q.reason.as_deref())?;
+    let mut tx = db::begin_write(&state.pool).await?;
+    let a = records::artefact(&mut *tx, &artefact_id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("artefact", &artefact_id))?;
+    let refs = corrections::artefact_references(&mut tx, &a).await?;
+    if !refs.is_empty() {
+        return Err(ApiError::conflict_hint(
+            format!("artefact '{}' is used by {}; nothing was deleted", a.name, refs.join(", ")),
+            "only an artefact nothing was measured on or planned for can be deleted: delete the unused sessions first",
+        ));
+    }
+    let spec: serde_json::Value =
+        serde_json::from_str(&a.spec_json).map_err(|e| ApiError::Internal(format!("artefact {}: {e}", a.id)))?;
+    corrections::delete_artefact(&mut *tx, &a.id).await?;
+    let detail = serde_json::json!({"name": a.name, "spec": spec, "created_at": a.created_at});
+    let actor = auth.actor();
+    super::audit::record(
+        &mut tx,
+        actor.as_deref(),
+        &db::now(),
+        Event { action: "artefact_deleted", robot_id: None, subject_id: &a.id, reason: &why, detail },
+    )
+    .await?;
+    tx.commit().await?;
+    Ok(StatusCode::NO_CONTENT)
 }

@@ -7,13 +7,14 @@
 
 use axum::Json;
 use axum::extract::{Path, State};
-use axum::http::StatusCode;
+use axum::http::{HeaderMap, StatusCode};
 use axum::response::Response;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use utoipa::ToSchema;
 
 use super::extract::{Authorized, CALIBRATE, JsonBody, READ};
+use super::paging::{PageQuery, Paging};
 use super::parameter_sets::{ParameterSetOut, is_active, set_out};
 use super::{ApiError, AppState};
 use crate::db::jobs::JobKind;
@@ -96,21 +97,27 @@ async fn find(state: &AppState, id: &str) -> Result<records::DiagnosisRow, ApiEr
     records::diagnosis(&state.pool, id).await?.ok_or_else(|| ApiError::not_found("diagnosis", id))
 }
 
-/// A parameter set's diagnoses, newest first.
+/// A parameter set's diagnoses, newest first, a page at a time.
 #[utoipa::path(get, path = "/v1/parameter-sets/{set_id}/diagnoses", tag = "diagnoses",
-    params(("set_id" = String, Path, description = "Parameter set id")),
+    params(("set_id" = String, Path, description = "Parameter set id"), PageQuery),
     responses(
-        (status = 200, description = "The set's diagnoses, newest first", body = Vec<Diagnosis>),
-        (status = 404, description = "Unknown parameter set", body = super::Problem, content_type = "application/problem+json")),
+        (status = 200, description = "The set's diagnoses, newest first", body = Vec<Diagnosis>, headers(
+            ("X-Total-Count" = i64, description = "The set's diagnoses in all"),
+            ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
+        (status = 404, description = "Unknown parameter set", body = super::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
     security(("bearer" = [])))]
 pub async fn list(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
     Path(set_id): Path<String>,
-) -> Result<Json<Vec<Diagnosis>>, ApiError> {
+    page: Paging,
+) -> Result<(HeaderMap, Json<Vec<Diagnosis>>), ApiError> {
     let set = find_set(&state, &set_id).await?;
-    let rows = records::diagnoses_of_set(&state.pool, &set.id).await?;
-    Ok(Json(rows.iter().map(diagnosis_out).collect::<Result<_, _>>()?))
+    let total = records::diagnosis_count(&state.pool, &set.id).await?;
+    let rows = records::diagnoses_of_set(&state.pool, &set.id, page.offset, page.limit).await?;
+    let out: Vec<Diagnosis> = rows.iter().map(diagnosis_out).collect::<Result<_, _>>()?;
+    Ok((page.headers(total, out.len()), Json(out)))
 }
 
 /// Get a diagnosis.

@@ -27,6 +27,10 @@ pub struct Problem {
     /// The request field at fault, as a path (`measurements[3].joints_deg[1]`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub field: Option<String>,
+    /// What to do instead (a refused correction, a duplicate upload, a method the resource does
+    /// not have).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hint: Option<String>,
 }
 
 /// What can go wrong answering a request (or running a job).
@@ -41,7 +45,10 @@ pub enum ApiError {
     #[error("{what} '{id}' does not exist")]
     NotFound { what: &'static str, id: String },
     #[error("{detail}")]
-    Conflict { detail: String, field: Option<String> },
+    Conflict { detail: String, field: Option<String>, hint: Option<String> },
+    /// The resource does not have this method (and never will): `allow` lists those it has.
+    #[error("{detail}")]
+    MethodNotAllowed { detail: String, hint: String, allow: &'static str },
     #[error("{detail}")]
     TooLarge { detail: String, field: Option<String> },
     #[error("{0}")]
@@ -69,7 +76,12 @@ impl ApiError {
     }
 
     pub fn conflict(detail: impl Into<String>) -> Self {
-        ApiError::Conflict { detail: detail.into(), field: None }
+        ApiError::Conflict { detail: detail.into(), field: None, hint: None }
+    }
+
+    /// A conflict with what to do about it.
+    pub fn conflict_hint(detail: impl Into<String>, hint: impl Into<String>) -> Self {
+        ApiError::Conflict { detail: detail.into(), field: None, hint: Some(hint.into()) }
     }
 
     pub fn not_found(what: &'static str, id: &str) -> Self {
@@ -95,6 +107,7 @@ impl ApiError {
             ApiError::Forbidden(_) => StatusCode::FORBIDDEN,
             ApiError::NotFound { .. } => StatusCode::NOT_FOUND,
             ApiError::Conflict { .. } => StatusCode::CONFLICT,
+            ApiError::MethodNotAllowed { .. } => StatusCode::METHOD_NOT_ALLOWED,
             ApiError::TooLarge { .. } => StatusCode::PAYLOAD_TOO_LARGE,
             ApiError::UnsupportedMediaType(_) => StatusCode::UNSUPPORTED_MEDIA_TYPE,
             ApiError::Invalid { .. } | ApiError::Numerical { .. } => StatusCode::UNPROCESSABLE_ENTITY,
@@ -111,6 +124,7 @@ impl ApiError {
             ApiError::Forbidden(_) => ("forbidden", "The token lacks the scope", None),
             ApiError::NotFound { .. } => ("not-found", "Not found", None),
             ApiError::Conflict { field, .. } => ("conflict", "Conflict", field.clone()),
+            ApiError::MethodNotAllowed { .. } => ("method-not-allowed", "Method Not Allowed", None),
             ApiError::TooLarge { field, .. } => ("too-large", "Request too large", field.clone()),
             ApiError::UnsupportedMediaType(_) => ("unsupported-media-type", "Unsupported media type", None),
             ApiError::Invalid { field, .. } => ("invalid-value", "Invalid value", field.clone()),
@@ -122,12 +136,18 @@ impl ApiError {
             ApiError::Internal(_) => None,
             other => Some(other.to_string()),
         };
+        let hint = match self {
+            ApiError::Conflict { hint, .. } => hint.clone(),
+            ApiError::MethodNotAllowed { hint, .. } => Some(hint.clone()),
+            _ => None,
+        };
         Problem {
             type_: format!("urn:robocal:problem:{slug}"),
             title: title.to_string(),
             status: self.status().as_u16(),
             detail,
             field,
+            hint,
         }
     }
 }
@@ -189,6 +209,9 @@ impl IntoResponse for ApiError {
         if status == StatusCode::UNAUTHORIZED {
             res.headers_mut().insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
         }
+        if let ApiError::MethodNotAllowed { allow, .. } = &self {
+            res.headers_mut().insert(header::ALLOW, HeaderValue::from_static(allow));
+        }
         res
     }
 }
@@ -234,8 +257,14 @@ pub async fn problem_fallback(res: Response) -> Response {
     } else {
         Some(text)
     };
-    let problem =
-        Problem { type_: format!("urn:robocal:problem:{slug}"), title, status: status.as_u16(), detail, field: None };
+    let problem = Problem {
+        type_: format!("urn:robocal:problem:{slug}"),
+        title,
+        status: status.as_u16(),
+        detail,
+        field: None,
+        hint: None,
+    };
     let mut out = (
         status,
         [(header::CONTENT_TYPE, HeaderValue::from_static(PROBLEM_JSON))],

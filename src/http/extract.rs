@@ -88,6 +88,13 @@ fn scope_of(s: u8) -> Scope {
 /// revoked token stops working.
 pub struct Authorized<const S: u8>(pub Option<Arc<TokenRow>>);
 
+impl<const S: u8> Authorized<S> {
+    /// Who is asking, as the audit records it: the token's name, `None` without a token.
+    pub fn actor(&self) -> Option<String> {
+        self.0.as_ref().map(|t| t.name.clone())
+    }
+}
+
 impl<const S: u8> FromRequestParts<AppState> for Authorized<S> {
     type Rejection = ApiError;
 

@@ -3,13 +3,14 @@
 
 use axum::Json;
 use axum::extract::{Path, Query, State};
-use axum::http::{HeaderValue, StatusCode, header};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use utoipa::{IntoParams, ToSchema};
 
 use super::extract::{Authorized, CALIBRATE, READ};
+use super::paging::{PageQuery, Paging};
 use super::{ApiError, AppState, Problem};
 use crate::db;
 use crate::db::jobs::{JobKind, JobRow, JobState};
@@ -113,22 +114,22 @@ pub struct JobQuery {
     pub robot_id: Option<String>,
     /// `queued`, `running`, `succeeded`, `failed` or `cancelled`.
     pub state: Option<String>,
-    /// At most this many, newest first (default 100, at most 1000).
-    #[param(minimum = 1, maximum = 1000)]
-    pub limit: Option<i64>,
 }
 
-/// List jobs, newest first.
-#[utoipa::path(get, path = "/v1/jobs", tag = "jobs", params(JobQuery),
+/// List jobs, newest first, a page at a time.
+#[utoipa::path(get, path = "/v1/jobs", tag = "jobs", params(JobQuery, PageQuery),
     responses(
-        (status = 200, description = "Jobs, newest first", body = Vec<JobOut>),
-        (status = 422, description = "Unknown state or bad limit", body = super::Problem, content_type = "application/problem+json")),
+        (status = 200, description = "Jobs, newest first", body = Vec<JobOut>, headers(
+            ("X-Total-Count" = i64, description = "Jobs matching the filters"),
+            ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
+        (status = 422, description = "Unknown state, bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
     security(("bearer" = [])))]
 pub async fn list(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
     Query(q): Query<JobQuery>,
-) -> Result<Json<Vec<JobOut>>, ApiError> {
+    page: Paging,
+) -> Result<(HeaderMap, Json<Vec<JobOut>>), ApiError> {
     let state_filter = match q.state.as_deref().filter(|s| !s.is_empty()) {
         None => None,
         Some(s) => Some(JobState::parse(s).ok_or_else(|| {
@@ -136,13 +137,11 @@ pub async fn list(
             ApiError::invalid("state", format!("'{s}' is not one of {}", all.join(", ")))
         })?),
     };
-    let limit = q.limit.unwrap_or(100);
-    if !(1..=1000).contains(&limit) {
-        return Err(ApiError::invalid("limit", "must be 1–1000"));
-    }
-    let rows =
-        db::jobs::list(&state.pool, q.robot_id.as_deref().filter(|s| !s.is_empty()), state_filter, limit).await?;
-    Ok(Json(rows.iter().map(job_out).collect::<Result<_, _>>()?))
+    let robot = q.robot_id.as_deref().filter(|s| !s.is_empty());
+    let total = db::jobs::count(&state.pool, robot, state_filter).await?;
+    let rows = db::jobs::list(&state.pool, robot, state_filter, page.offset, page.limit).await?;
+    let out: Vec<JobOut> = rows.iter().map(job_out).collect::<Result<_, _>>()?;
+    Ok((page.headers(total, out.len()), Json(out)))
 }
 
 /// Get a job.

@@ -2,6 +2,7 @@
 //! generated from the handlers (utoipa), Prometheus metrics.
 
 pub mod artefacts;
+pub mod audit;
 pub mod client;
 pub mod compensation;
 pub mod diagnoses;
@@ -12,6 +13,7 @@ pub mod jobs;
 pub mod measurements;
 pub mod metrics;
 pub mod ops;
+pub mod paging;
 pub mod parameter_sets;
 pub mod plans;
 pub mod robots;
@@ -72,6 +74,7 @@ compensate, read, admin (admin implies all); a server bound to loopback accepts 
         (name = "compensation", description = "Compensated (fake-target) joint targets"),
         (name = "jobs", description = "Background jobs"),
         (name = "tokens", description = "Bearer tokens (admin)"),
+        (name = "audit", description = "Corrections of stored data (exclusions, deletions, archiving): who, when, why"),
         (name = "ops", description = "Health, readiness, metrics, this document")
     )
 )]
@@ -89,14 +92,16 @@ fn api_router() -> OpenApiRouter<AppState> {
         .routes(routes!(robots::cell))
         .routes(routes!(parameter_sets::history, parameter_sets::import))
         .routes(routes!(parameter_sets::active, parameter_sets::activate))
-        .routes(routes!(parameter_sets::get))
+        .routes(routes!(parameter_sets::activations))
+        .routes(routes!(parameter_sets::get, parameter_sets::patch, parameter_sets::delete))
         .routes(routes!(parameter_sets::export))
         .routes(routes!(artefacts::create, artefacts::list))
-        .routes(routes!(artefacts::get))
+        .routes(routes!(artefacts::get, artefacts::delete))
         .routes(routes!(sessions::create, sessions::list))
-        .routes(routes!(sessions::get))
+        .routes(routes!(sessions::get, sessions::delete))
         .routes(routes!(measurements::append, measurements::measurements))
-        .routes(routes!(plans::create))
+        .routes(routes!(measurements::get, measurements::patch))
+        .routes(routes!(plans::create, plans::list))
         .routes(routes!(plans::get))
         .routes(routes!(identifications::create))
         .routes(routes!(validations::create))
@@ -110,6 +115,7 @@ fn api_router() -> OpenApiRouter<AppState> {
         .routes(routes!(jobs::cancel))
         .routes(routes!(tokens::create, tokens::list))
         .routes(routes!(tokens::revoke))
+        .routes(routes!(audit::list))
 }
 
 /// The OpenAPI document (3.1).
@@ -144,6 +150,7 @@ fn common_responses(api: &mut utoipa::openapi::OpenApi) {
             (&mut item.get, false),
             (&mut item.post, with_body[0]),
             (&mut item.put, with_body[1]),
+            (&mut item.patch, true),
             (&mut item.delete, false),
         ] {
             let Some(op) = op.as_mut() else { continue };

@@ -1,21 +1,25 @@
 //! Parameter sets: immutable and versioned per robot. A robot's calibration history (created,
-//! sessions used, quality, validation figures when known); activating one is an explicit call;
-//! export as the parameter-set file (`robocal compensate --params` reads it); import of a set made
-//! elsewhere (e.g. the thesis's Table 5.1).
+//! sessions used, quality, validation figures when known); activating one is an explicit call,
+//! recorded in the robot's activation history; export as the parameter-set file (`robocal
+//! compensate --params` reads it); import of a set made elsewhere (e.g. the thesis's Table 5.1).
+//! A set is never deleted (DELETE answers 405): it is archived — hidden from the history, never
+//! activated again — with a reason, and stays in the activation history.
 
 use axum::Json;
-use axum::extract::{Path, State};
-use axum::http::{StatusCode, header};
+use axum::extract::{Path, Query, State};
+use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::IntoResponse;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
-use utoipa::ToSchema;
+use utoipa::{IntoParams, ToSchema};
 
+use super::audit::{Event, reason};
 use super::extract::{Authorized, CALIBRATE, JsonBody, READ};
+use super::paging::{PageQuery, Paging};
 use super::robots::find as find_robot;
 use super::{ApiError, AppState};
 use crate::app::robots::model_of;
-use crate::db::{self, records};
+use crate::db::{self, corrections, records};
 use crate::domain::ParameterSetFile;
 
 /// Validation figures of a set (mm).
@@ -48,10 +52,22 @@ pub struct ParameterSetOut {
     pub quality: Value,
     /// Validations of this set, newest first.
     pub validations: Vec<ValidationSummary>,
+    /// When, by whom and why it was archived; absent when it is not.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub archived: Option<ArchivedOut>,
     /// The parameter-set file (only in single-set answers).
     #[serde(skip_serializing_if = "Option::is_none")]
     #[schema(value_type = Option<Object>)]
     pub parameter_set: Option<Value>,
+}
+
+/// An archived set's record.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct ArchivedOut {
+    pub at: String,
+    /// The bearer token's name; absent when the server took the request without a token.
+    pub by: Option<String>,
+    pub reason: String,
 }
 
 fn quality_summary(doc: &Value) -> Value {
@@ -100,6 +116,11 @@ pub(super) async fn set_out(
         job_id: row.job_id.clone(),
         quality: quality_summary(&doc),
         validations,
+        archived: row.archived_at.as_ref().map(|at| ArchivedOut {
+            at: at.clone(),
+            by: row.archived_by.clone(),
+            reason: row.archive_reason.clone().unwrap_or_default(),
+        }),
         parameter_set: full.then_some(doc),
     })
 }
@@ -112,25 +133,40 @@ pub(super) async fn is_active(state: &AppState, row: &records::ParameterSetRow) 
     Ok(find_robot(state, &row.robot_id).await?.active_parameter_set_id.as_deref() == Some(row.id.as_str()))
 }
 
-/// A robot's calibration history, newest version first.
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct HistoryQuery {
+    /// List archived sets too (default false).
+    pub include_archived: Option<bool>,
+}
+
+/// A robot's calibration history, newest version first, a page at a time; archived sets only
+/// with `include_archived=true`.
 #[utoipa::path(get, path = "/v1/robots/{robot_id}/parameter-sets", tag = "parameter-sets",
-    params(("robot_id" = String, Path, description = "Robot id")),
+    params(("robot_id" = String, Path, description = "Robot id"), HistoryQuery, PageQuery),
     responses(
-        (status = 200, description = "Parameter sets, newest first, with quality and validation figures", body = Vec<ParameterSetOut>),
-        (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json")),
+        (status = 200, description = "Parameter sets, newest first, with quality and validation figures", body = Vec<ParameterSetOut>, headers(
+            ("X-Total-Count" = i64, description = "Parameter sets in the history"),
+            ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
+        (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
     security(("bearer" = [])))]
 pub async fn history(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
     Path(robot_id): Path<String>,
-) -> Result<Json<Vec<ParameterSetOut>>, ApiError> {
+    Query(q): Query<HistoryQuery>,
+    page: Paging,
+) -> Result<(HeaderMap, Json<Vec<ParameterSetOut>>), ApiError> {
     let robot = find_robot(&state, &robot_id).await?;
+    let archived = q.include_archived.unwrap_or(false);
+    let total = records::parameter_set_count(&state.pool, &robot.id, archived).await?;
     let mut out = Vec::new();
-    for row in records::parameter_sets_of_robot(&state.pool, &robot.id).await? {
+    for row in records::parameter_sets_of_robot(&state.pool, &robot.id, archived, page.offset, page.limit).await? {
         let active = robot.active_parameter_set_id.as_deref() == Some(row.id.as_str());
         out.push(set_out(&state, &row, active, false).await?);
     }
-    Ok(Json(out))
+    Ok((page.headers(total, out.len()), Json(out)))
 }
 
 /// Import a parameter set made elsewhere (a parameter-set file) as the robot's next version.
@@ -231,18 +267,20 @@ pub struct Activate {
     pub parameter_set_id: String,
 }
 
-/// Activate one of the robot's parameter sets: compensation uses it from now on.
+/// Activate one of the robot's parameter sets: compensation uses it from now on. The activation
+/// is recorded (who, when) in the robot's activation history. An archived set is not activated.
 #[utoipa::path(put, path = "/v1/robots/{robot_id}/active-parameter-set", tag = "parameter-sets",
     params(("robot_id" = String, Path, description = "Robot id")),
     request_body(content = Activate, content_type = "application/json"),
     responses(
         (status = 200, description = "Activated", body = ParameterSetOut),
         (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
+        (status = 409, description = "The set is archived (the `hint` says how to unarchive it)", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Unknown set, or a set of another robot", body = super::Problem, content_type = "application/problem+json")),
     security(("bearer" = [])))]
 pub async fn activate(
     State(state): State<AppState>,
-    _auth: Authorized<CALIBRATE>,
+    auth: Authorized<CALIBRATE>,
     Path(robot_id): Path<String>,
     JsonBody(body): JsonBody<Activate>,
 ) -> Result<Json<ParameterSetOut>, ApiError> {
@@ -253,7 +291,183 @@ pub async fn activate(
     if row.robot_id != robot.id {
         return Err(ApiError::invalid("parameter_set_id", "the set belongs to another robot"));
     }
-    records::set_active_parameter_set(&state.pool, &robot.id, &row.id).await?;
+    let mut tx = db::begin_write(&state.pool).await?;
+    // Under the write lock: the set cannot be archived between the check and the activation.
+    let row = find_in(&mut tx, &row.id).await?;
+    if let Some(at) = &row.archived_at {
+        return Err(ApiError::conflict_hint(
+            format!("parameter set version {} was archived at {at}: an archived set is not activated", row.version),
+            format!(
+                "unarchive it first: PATCH /v1/parameter-sets/{} with {{\"archived\": false, \"reason\": …}}",
+                row.id
+            ),
+        ));
+    }
+    corrections::activate(&mut tx, &robot.id, &row.id, auth.actor().as_deref(), None).await?;
+    tx.commit().await?;
     state.caches.robot_changed(&robot.id);
     Ok(Json(set_out(&state, &row, true, true).await?))
+}
+
+async fn find_in(tx: &mut sqlx::SqliteConnection, id: &str) -> Result<records::ParameterSetRow, ApiError> {
+    records::parameter_set(&mut *tx, id).await?.ok_or_else(|| ApiError::not_found("parameter set", id))
+}
+
+/// A change of a parameter set: archive it or unarchive it, saying why.
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ParameterSetPatch {
+    /// `true`: archive (hidden from the history, never activated); `false`: unarchive.
+    pub archived: bool,
+    /// Why (required, non-empty): kept with the set and in the audit timeline.
+    #[serde(default)]
+    pub reason: Option<String>,
+}
+
+/// Archive a parameter set — or unarchive it — with a reason. An archived set is hidden from
+/// the robot's history (`?include_archived=true` lists it), cannot be activated (409) and stays
+/// readable, exportable and in the activation history: a set that was active once is never
+/// removed from the record. The active set cannot be archived (409: activate another first).
+#[utoipa::path(patch, path = "/v1/parameter-sets/{set_id}", tag = "parameter-sets",
+    params(("set_id" = String, Path, description = "Parameter set id")),
+    request_body(content = ParameterSetPatch, content_type = "application/json",
+        example = json!({"archived": true, "reason": "identified with the wrong tool mass"})),
+    responses(
+        (status = 200, description = "Archived or unarchived", body = ParameterSetOut),
+        (status = 404, description = "Unknown parameter set", body = super::Problem, content_type = "application/problem+json"),
+        (status = 409, description = "The set is the robot's active one; already archived (or, unarchiving, not archived)", body = super::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "`reason` missing or empty", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn patch(
+    State(state): State<AppState>,
+    auth: Authorized<CALIBRATE>,
+    Path(set_id): Path<String>,
+    JsonBody(body): JsonBody<ParameterSetPatch>,
+) -> Result<Json<ParameterSetOut>, ApiError> {
+    find(&state, &set_id).await?;
+    let why = reason(body.reason.as_deref())?;
+    let actor = auth.actor();
+    let mut tx = db::begin_write(&state.pool).await?;
+    let row = find_in(&mut tx, &set_id).await?;
+    let robot = records::robot(&mut *tx, &row.robot_id)
+        .await?
+        .ok_or_else(|| ApiError::Internal(format!("robot {} of parameter set {} missing", row.robot_id, row.id)))?;
+    let active = robot.active_parameter_set_id.as_deref() == Some(row.id.as_str());
+    let at = db::now();
+    let action = match (body.archived, &row.archived_at) {
+        (true, Some(when)) => {
+            return Err(ApiError::conflict(format!(
+                "parameter set version {} is already archived (at {when})",
+                row.version
+            )));
+        }
+        (false, None) => {
+            return Err(ApiError::conflict(format!("parameter set version {} is not archived", row.version)));
+        }
+        (true, None) if active => {
+            return Err(ApiError::conflict_hint(
+                format!(
+                    "parameter set version {} is robot '{}''s active set: it cannot be archived",
+                    row.version, robot.name
+                ),
+                format!(
+                    "activate another set first (PUT /v1/robots/{}/active-parameter-set), then archive this one",
+                    robot.id
+                ),
+            ));
+        }
+        (true, None) => {
+            corrections::set_archived(&mut *tx, &row.id, Some((&at, actor.as_deref(), &why))).await?;
+            "parameter_set_archived"
+        }
+        (false, Some(_)) => {
+            corrections::set_archived(&mut *tx, &row.id, None).await?;
+            "parameter_set_unarchived"
+        }
+    };
+    let detail = serde_json::json!({"version": row.version, "created_at": row.created_at});
+    super::audit::record(
+        &mut tx,
+        actor.as_deref(),
+        &at,
+        Event { action, robot_id: Some(&row.robot_id), subject_id: &row.id, reason: &why, detail },
+    )
+    .await?;
+    let row = find_in(&mut tx, &set_id).await?;
+    tx.commit().await?;
+    Ok(Json(set_out(&state, &row, active, true).await?))
+}
+
+/// Parameter sets are never deleted: 405 (with `Allow` and a `hint`), after a 404 for an unknown
+/// set. A set that was used must stay, so that what was compensated with it can be explained;
+/// archive one instead (`PATCH` with `{"archived": true, "reason": …}`).
+#[utoipa::path(delete, path = "/v1/parameter-sets/{set_id}", tag = "parameter-sets",
+    params(("set_id" = String, Path, description = "Parameter set id")),
+    responses(
+        (status = 404, description = "Unknown parameter set", body = super::Problem, content_type = "application/problem+json"),
+        (status = 405, description = "Never deleted: archive instead (the problem's `hint`)", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn delete(
+    State(state): State<AppState>,
+    _auth: Authorized<CALIBRATE>,
+    Path(set_id): Path<String>,
+) -> Result<StatusCode, ApiError> {
+    let row = find(&state, &set_id).await?;
+    Err(ApiError::MethodNotAllowed {
+        detail: format!("parameter sets are archived, not deleted (version {} stays in the record)", row.version),
+        hint: format!("PATCH /v1/parameter-sets/{} with {{\"archived\": true, \"reason\": …}}", row.id),
+        allow: "GET, PATCH",
+    })
+}
+
+/// An activation of a parameter set.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct ActivationOut {
+    pub parameter_set_id: String,
+    pub version: i64,
+    /// Absent for the set that was active when activations began to be recorded.
+    pub activated_at: Option<String>,
+    /// The bearer token's name; absent without a token (or when a job activated its result).
+    pub activated_by: Option<String>,
+    /// The identification job that activated its own result.
+    pub job_id: Option<String>,
+    /// The set is the robot's active one now.
+    pub active: bool,
+    /// The set has been archived since.
+    pub archived: bool,
+}
+
+/// A robot's activation history, newest first, a page at a time: which set compensation used
+/// from when, archived sets included.
+#[utoipa::path(get, path = "/v1/robots/{robot_id}/activations", tag = "parameter-sets",
+    params(("robot_id" = String, Path, description = "Robot id"), PageQuery),
+    responses(
+        (status = 200, description = "Activations, newest first", body = Vec<ActivationOut>, headers(
+            ("X-Total-Count" = i64, description = "The robot's activations in all"),
+            ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
+        (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn activations(
+    State(state): State<AppState>,
+    _auth: Authorized<READ>,
+    Path(robot_id): Path<String>,
+    page: Paging,
+) -> Result<(HeaderMap, Json<Vec<ActivationOut>>), ApiError> {
+    let robot = find_robot(&state, &robot_id).await?;
+    let total = corrections::activation_count(&state.pool, &robot.id).await?;
+    let mut out = Vec::new();
+    for a in corrections::activations(&state.pool, &robot.id, page.offset, page.limit).await? {
+        let set = find(&state, &a.parameter_set_id).await?;
+        out.push(ActivationOut {
+            active: robot.active_parameter_set_id.as_deref() == Some(set.id.as_str()),
+            archived: set.archived_at.is_some(),
+            version: set.version,
+            parameter_set_id: a.parameter_set_id,
+            activated_at: a.activated_at,
+            activated_by: a.activated_by,
+            job_id: a.job_id,
+        });
+    }
+    Ok((page.headers(total, out.len()), Json(out)))
 }

@@ -4,12 +4,14 @@
 
 use axum::Json;
 use axum::extract::{Path, State};
+use axum::http::HeaderMap;
 use axum::response::Response;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use utoipa::ToSchema;
 
 use super::extract::{Authorized, CALIBRATE, JsonBody, READ};
+use super::paging::{PageQuery, Paging};
 use super::robots::find as find_robot;
 use super::{ApiError, AppState};
 use crate::app::robots::{model_of, robot_base};
@@ -68,6 +70,66 @@ pub struct PosePlanOut {
     #[schema(value_type = Object)]
     pub request: Value,
     pub plan: PosePlan,
+}
+
+/// A pose plan in a robot's list: the plan without its configurations.
+#[derive(Debug, Serialize, Deserialize, ToSchema)]
+pub struct PosePlanSummary {
+    pub id: String,
+    pub robot_id: String,
+    pub job_id: Option<String>,
+    pub created_at: String,
+    /// The request as stored (artefact, tool, counts, selection, seed).
+    #[schema(value_type = Object)]
+    pub request: Value,
+    /// TriCal configurations in the plan.
+    pub identification: usize,
+    /// Laser-tracker configurations in the plan.
+    pub validation: usize,
+    /// Collision-checked candidates the identification configurations were chosen from.
+    pub candidates: usize,
+    /// The DETMAX settings, when a selection was asked for.
+    #[schema(value_type = Option<Object>)]
+    pub selection: Option<Value>,
+}
+
+/// A robot's pose plans, newest first, a page at a time (each without its configurations: get
+/// one plan for them).
+#[utoipa::path(get, path = "/v1/robots/{robot_id}/pose-plans", tag = "pose-plans",
+    params(("robot_id" = String, Path, description = "Robot id"), PageQuery),
+    responses(
+        (status = 200, description = "The robot's pose plans, newest first", body = Vec<PosePlanSummary>, headers(
+            ("X-Total-Count" = i64, description = "The robot's pose plans in all"),
+            ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
+        (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn list(
+    State(state): State<AppState>,
+    _auth: Authorized<READ>,
+    Path(robot_id): Path<String>,
+    page: Paging,
+) -> Result<(HeaderMap, Json<Vec<PosePlanSummary>>), ApiError> {
+    let robot = find_robot(&state, &robot_id).await?;
+    let total = records::pose_plan_count(&state.pool, &robot.id).await?;
+    let rows = records::pose_plans_of_robot(&state.pool, &robot.id, page.offset, page.limit).await?;
+    let mut out = Vec::with_capacity(rows.len());
+    for row in rows {
+        let internal = |e: serde_json::Error| ApiError::Internal(format!("pose plan {}: {e}", row.id));
+        let plan: PosePlan = serde_json::from_str(&row.result_json).map_err(internal)?;
+        out.push(PosePlanSummary {
+            request: serde_json::from_str(&row.request_json).map_err(internal)?,
+            identification: plan.identification.len(),
+            validation: plan.validation.len(),
+            candidates: plan.candidates,
+            selection: plan.selection,
+            id: row.id,
+            robot_id: row.robot_id,
+            job_id: row.job_id,
+            created_at: row.created_at,
+        });
+    }
+    Ok((page.headers(total, out.len()), Json(out)))
 }
 
 /// Get a pose plan.

@@ -3,12 +3,13 @@
 
 use axum::Json;
 use axum::extract::{Path, Query, State};
-use axum::http::StatusCode;
+use axum::http::{HeaderMap, StatusCode};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use utoipa::{IntoParams, ToSchema};
 
 use super::extract::{Authorized, JsonBody, MEASURE, READ};
+use super::paging::{PageQuery, Paging};
 use super::{ApiError, AppState};
 use crate::app::cells;
 use crate::app::robots::model_of;
@@ -106,7 +107,11 @@ pub async fn create(
     };
     records::insert_robot(&state.pool, &row).await.map_err(|e| {
         if db::is_unique_violation(&e) {
-            ApiError::Conflict { detail: format!("a robot named '{name}' exists"), field: Some("name".into()) }
+            ApiError::Conflict {
+                detail: format!("a robot named '{name}' exists"),
+                field: Some("name".into()),
+                hint: None,
+            }
         } else {
             e.into()
         }
@@ -114,13 +119,23 @@ pub async fn create(
     Ok((StatusCode::CREATED, Json(robot_out(&row)?)))
 }
 
-/// List robots.
-#[utoipa::path(get, path = "/v1/robots", tag = "robots",
-    responses((status = 200, description = "Every robot, oldest first", body = Vec<RobotOut>)),
+/// List robots, oldest first, a page at a time.
+#[utoipa::path(get, path = "/v1/robots", tag = "robots", params(PageQuery),
+    responses(
+        (status = 200, description = "Robots, oldest first", body = Vec<RobotOut>, headers(
+            ("X-Total-Count" = i64, description = "Robots in all"),
+            ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
+        (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
     security(("bearer" = [])))]
-pub async fn list(State(state): State<AppState>, _auth: Authorized<READ>) -> Result<Json<Vec<RobotOut>>, ApiError> {
-    let rows = records::robots(&state.pool).await?;
-    Ok(Json(rows.iter().map(robot_out).collect::<Result<_, _>>()?))
+pub async fn list(
+    State(state): State<AppState>,
+    _auth: Authorized<READ>,
+    page: Paging,
+) -> Result<(HeaderMap, Json<Vec<RobotOut>>), ApiError> {
+    let total = records::robot_count(&state.pool).await?;
+    let rows = records::robots(&state.pool, page.offset, page.limit).await?;
+    let out: Vec<RobotOut> = rows.iter().map(robot_out).collect::<Result<_, _>>()?;
+    Ok((page.headers(total, out.len()), Json(out)))
 }
 
 /// Get a robot.
@@ -143,10 +158,14 @@ pub async fn get(
 pub struct CellQuery {
     /// Sessions to include (comma-separated ids or names); default: all of the robot's sessions.
     pub sessions: Option<String>,
+    /// Keep the excluded measurements in (default: left out, as the jobs leave them out).
+    pub include_excluded: Option<bool>,
 }
 
 /// Export a robot's measurements as a cell file — the document `robocal identify` reads, so a
-/// calibration can be reproduced offline bit for bit.
+/// calibration can be reproduced offline bit for bit. Excluded measurements are left out, as the
+/// jobs leave them out (so the file's indices are the stored ones less the excluded before
+/// them), unless `include_excluded=true`.
 #[utoipa::path(get, path = "/v1/robots/{robot_id}/cell", tag = "robots",
     params(("robot_id" = String, Path, description = "Robot id"), CellQuery),
     responses(
@@ -171,6 +190,6 @@ pub async fn cell(
     } else {
         cells::resolve_sessions(&state.pool, &robot.id, &names, "sessions").await?
     };
-    let file = cells::cell_file(&state.pool, &robot, &sessions).await?;
+    let file = cells::stored_cell(&state.pool, &robot, &sessions, q.include_excluded.unwrap_or(false)).await?.file;
     Ok(Json(serde_json::to_value(&file).expect("a cell file serialises")))
 }

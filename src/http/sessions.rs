@@ -1,16 +1,19 @@
 //! Measuring sessions of a robot: purpose, instrument, tool, artefact. Their measurements are
-//! [`super::measurements`].
+//! [`super::measurements`]. A session no stored result refers to can be deleted, with a reason
+//! kept in the audit timeline.
 
 use axum::Json;
-use axum::extract::{Path, State};
-use axum::http::StatusCode;
+use axum::extract::{Path, Query, State};
+use axum::http::{HeaderMap, StatusCode};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
+use super::audit::{Event, ReasonQuery, reason};
 use super::extract::{Authorized, JsonBody, MEASURE, READ};
+use super::paging::{PageQuery, Paging};
 use super::robots::find as find_robot;
 use super::{ApiError, AppState};
-use crate::db::{self, records};
+use crate::db::{self, corrections, records};
 use crate::domain::ToolSpec;
 use crate::domain::cell::{InstrumentSpec, OrderSpec, PurposeSpec};
 
@@ -60,6 +63,8 @@ pub struct SessionOut {
     pub target: Option<String>,
     /// Measurements stored.
     pub measurements: i64,
+    /// Of them, excluded: the jobs leave them out.
+    pub excluded_measurements: i64,
     pub created_at: String,
 }
 
@@ -76,6 +81,7 @@ pub fn session_out(s: &records::SessionRow) -> Result<SessionOut, ApiError> {
         order: s.order,
         target: s.target.clone(),
         measurements: s.measurements,
+        excluded_measurements: s.excluded,
         created_at: s.created_at.clone(),
     })
 }
@@ -148,12 +154,14 @@ pub async fn create(
         order: body.order,
         target,
         measurements: 0,
+        excluded: 0,
     };
     records::insert_session(&state.pool, &row).await.map_err(|e| {
         if db::is_unique_violation(&e) {
             ApiError::Conflict {
                 detail: format!("robot '{}' has a session named '{name}'", robot.name),
                 field: Some("name".into()),
+                hint: None,
             }
         } else {
             e.into()
@@ -162,21 +170,27 @@ pub async fn create(
     Ok((StatusCode::CREATED, Json(session_out(&row)?)))
 }
 
-/// A robot's sessions.
+/// A robot's sessions, oldest first, a page at a time.
 #[utoipa::path(get, path = "/v1/robots/{robot_id}/sessions", tag = "sessions",
-    params(("robot_id" = String, Path, description = "Robot id")),
+    params(("robot_id" = String, Path, description = "Robot id"), PageQuery),
     responses(
-        (status = 200, description = "The robot's sessions, oldest first", body = Vec<SessionOut>),
-        (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json")),
+        (status = 200, description = "The robot's sessions, oldest first", body = Vec<SessionOut>, headers(
+            ("X-Total-Count" = i64, description = "The robot's sessions in all"),
+            ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
+        (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
     security(("bearer" = [])))]
 pub async fn list(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
     Path(robot_id): Path<String>,
-) -> Result<Json<Vec<SessionOut>>, ApiError> {
+    page: Paging,
+) -> Result<(HeaderMap, Json<Vec<SessionOut>>), ApiError> {
     let robot = find_robot(&state, &robot_id).await?;
-    let rows = records::sessions_of_robot(&state.pool, &robot.id).await?;
-    Ok(Json(rows.iter().map(session_out).collect::<Result<_, _>>()?))
+    let total = records::session_count(&state.pool, &robot.id).await?;
+    let rows = records::sessions_page(&state.pool, &robot.id, page.offset, page.limit).await?;
+    let out: Vec<SessionOut> = rows.iter().map(session_out).collect::<Result<_, _>>()?;
+    Ok((page.headers(total, out.len()), Json(out)))
 }
 
 /// Get a session.
@@ -192,4 +206,53 @@ pub async fn get(
     Path(session_id): Path<String>,
 ) -> Result<Json<SessionOut>, ApiError> {
     Ok(Json(session_out(&find(&state, &session_id).await?)?))
+}
+
+/// Delete a session with its measurements (and their exclusions), saying why. Refused (409,
+/// naming them) while a parameter set, a validation or a diagnosis of the robot was made from the
+/// session, or a queued or running job reads it: the history stays true (exclude measurements
+/// instead). One transaction; the audit timeline keeps who, when, why and what the session was.
+#[utoipa::path(delete, path = "/v1/sessions/{session_id}", tag = "sessions",
+    params(("session_id" = String, Path, description = "Session id"), ReasonQuery),
+    responses(
+        (status = 204, description = "Deleted"),
+        (status = 404, description = "Unknown session", body = super::Problem, content_type = "application/problem+json"),
+        (status = 409, description = "Stored results or unfinished jobs refer to the session (named in the detail)", body = super::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "`reason` missing or empty", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn delete(
+    State(state): State<AppState>,
+    auth: Authorized<MEASURE>,
+    Path(session_id): Path<String>,
+    Query(q): Query<ReasonQuery>,
+) -> Result<StatusCode, ApiError> {
+    find(&state, &session_id).await?;
+    let why = reason(q.reason.as_deref())?;
+    let mut tx = db::begin_write(&state.pool).await?;
+    // Under the write lock: nothing can start using the session between the check and the delete.
+    let s =
+        records::session(&mut *tx, &session_id).await?.ok_or_else(|| ApiError::not_found("session", &session_id))?;
+    let refs = corrections::session_references(&mut tx, &s).await?;
+    if !refs.is_empty() {
+        return Err(ApiError::conflict_hint(
+            format!("session '{}' is used by {}; nothing was deleted", s.name, refs.join(", ")),
+            "a session that results were made from stays, so that they can be reproduced: exclude wrong measurements instead (PATCH /v1/sessions/{session_id}/measurements/{index}); a queued job can be cancelled",
+        ));
+    }
+    let detail = serde_json::json!({
+        "name": s.name, "purpose": s.purpose, "instrument": s.instrument, "target": s.target,
+        "artefact_id": s.artefact_id, "measurements": s.measurements, "excluded_measurements": s.excluded,
+        "created_at": s.created_at,
+    });
+    corrections::delete_session(&mut tx, &s.id).await?;
+    let actor = auth.actor();
+    super::audit::record(
+        &mut tx,
+        actor.as_deref(),
+        &db::now(),
+        Event { action: "session_deleted", robot_id: Some(&s.robot_id), subject_id: &s.id, reason: &why, detail },
+    )
+    .await?;
+    tx.commit().await?;
+    Ok(StatusCode::NO_CONTENT)
 }

@@ -3,11 +3,12 @@
 
 use axum::Json;
 use axum::extract::{Path, State};
-use axum::http::StatusCode;
+use axum::http::{HeaderMap, StatusCode};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::extract::{ADMIN, Authorized, JsonBody};
+use super::paging::{PageQuery, Paging};
 use super::{ApiError, AppState};
 use crate::db::tokens::{self, Scope, TokenRow};
 
@@ -82,12 +83,23 @@ pub async fn create(
     Ok((StatusCode::CREATED, Json(token_out(&row, Some(secret)))))
 }
 
-/// List tokens (without secrets).
-#[utoipa::path(get, path = "/v1/tokens", tag = "tokens",
-    responses((status = 200, description = "Every token, revoked ones included", body = Vec<TokenOut>)),
+/// List tokens (without secrets), oldest first, a page at a time.
+#[utoipa::path(get, path = "/v1/tokens", tag = "tokens", params(PageQuery),
+    responses(
+        (status = 200, description = "Tokens, revoked ones included, oldest first", body = Vec<TokenOut>, headers(
+            ("X-Total-Count" = i64, description = "Tokens in all"),
+            ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
+        (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
     security(("bearer" = [])))]
-pub async fn list(State(state): State<AppState>, _auth: Authorized<ADMIN>) -> Result<Json<Vec<TokenOut>>, ApiError> {
-    Ok(Json(tokens::list(&state.pool).await?.iter().map(|t| token_out(t, None)).collect()))
+pub async fn list(
+    State(state): State<AppState>,
+    _auth: Authorized<ADMIN>,
+    page: Paging,
+) -> Result<(HeaderMap, Json<Vec<TokenOut>>), ApiError> {
+    let total = tokens::count(&state.pool).await?;
+    let out: Vec<TokenOut> =
+        tokens::page(&state.pool, page.offset, page.limit).await?.iter().map(|t| token_out(t, None)).collect();
+    Ok((page.headers(total, out.len()), Json(out)))
 }
 
 /// Revoke a token.

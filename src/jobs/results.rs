@@ -73,7 +73,11 @@ pub struct PosePlanResult {
 pub struct IdentificationSummary {
     /// Parameters identified.
     pub identified: usize,
+    /// Measurements fitted.
     pub measurements: usize,
+    /// Measurements of the sessions left out because they are excluded in the store.
+    #[serde(default)]
+    pub excluded: usize,
     pub iterations: usize,
     /// κ(J) in SI units.
     pub kappa_si: f64,

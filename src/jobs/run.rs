@@ -11,7 +11,7 @@ use super::results::{
     DiagnosisResult, IdentificationResult, IdentificationSummary, JobResult, PlanNest, PlannedBallPose,
     PlannedTrackerPose, PosePlan, PosePlanResult, ValidationJobSummary, ValidationResult,
 };
-use crate::app::cells;
+use crate::app::cells::{self, StoredIndices};
 use crate::app::robots::{model_of, robot_base};
 use crate::cell::{Cell, Instrument, Measurement, MeasuringOrder, Observation, Purpose, Session};
 use crate::db::jobs::JobKind;
@@ -19,20 +19,45 @@ use crate::db::records::{self, RobotRow, SessionRow};
 use crate::diagnose::DiagnoseError;
 use crate::domain::cell::{ArtefactSpec, CellFile, PurposeSpec};
 use crate::domain::diagnosis::{DiagnoseSpec, accepted_doc, diagnosis_out, input_of};
-use crate::domain::identification::{DetmaxSelection, run_identification};
+use crate::domain::identification::{DetmaxSelection, MeasurementRef, run_identification};
 use crate::domain::validation::ErrorFigures;
 use crate::domain::{ParameterSetDoc, ToolSpec, to_deg};
-use crate::identify::{DetmaxPool, IdentifyError, IdentifyOptions, SolveError};
+use crate::identify::{DetmaxPool, IdentifyError, IdentifyOptions, SolveError, Worst};
 use crate::kinematics::{Preset, RobotModel};
 use crate::sim::poses::{CellLayout, IdentificationOptions, PlanningCell, ValidationOptions};
 use crate::units::{DEG, MM};
 
-/// Everything a job needs, loaded.
+/// Everything a job needs, loaded. A cell is the stored sessions without their excluded
+/// measurements; `indices` gives each cell measurement's stored index, what the job reports.
 pub enum Inputs {
-    PosePlan { base: [f64; 6], model: RobotModel, request: PosePlanRequest, artefact: ArtefactSpec },
-    Identification { robot: RobotRow, request: IdentificationRequest, cell: CellFile, session_names: Vec<String> },
-    Validation { job: ValidationJob, set_json: String, cell: CellFile, session_names: Vec<String> },
-    Diagnosis { job: DiagnosisJob, set_json: String, cell: CellFile, sessions: DiagnosisSessions },
+    PosePlan {
+        base: [f64; 6],
+        model: RobotModel,
+        request: PosePlanRequest,
+        artefact: ArtefactSpec,
+    },
+    Identification {
+        robot: RobotRow,
+        request: IdentificationRequest,
+        cell: CellFile,
+        indices: StoredIndices,
+        excluded: usize,
+        session_names: Vec<String>,
+    },
+    Validation {
+        job: ValidationJob,
+        set_json: String,
+        cell: CellFile,
+        indices: StoredIndices,
+        session_names: Vec<String>,
+    },
+    Diagnosis {
+        job: DiagnosisJob,
+        set_json: String,
+        cell: CellFile,
+        indices: StoredIndices,
+        sessions: DiagnosisSessions,
+    },
 }
 
 /// What a job computed.
@@ -123,9 +148,16 @@ pub async fn load(pool: &SqlitePool, kind: JobKind, robot_id: &str, request_json
         JobKind::Identification => {
             let request: IdentificationRequest = stored(request_json, "identification request")?;
             let sessions = cells::resolve_sessions(pool, &robot.id, &request.sessions, "sessions").await?;
-            let cell = cells::cell_file(pool, &robot, &sessions).await?;
+            let stored = cells::stored_cell(pool, &robot, &sessions, false).await?;
             let session_names = sessions.iter().map(|s| s.name.clone()).collect();
-            Ok(Inputs::Identification { robot, request, cell, session_names })
+            Ok(Inputs::Identification {
+                robot,
+                request,
+                cell: stored.file,
+                indices: stored.indices,
+                excluded: stored.excluded,
+                session_names,
+            })
         }
         JobKind::Validation => {
             let job: ValidationJob = stored(request_json, "validation request")?;
@@ -133,13 +165,19 @@ pub async fn load(pool: &SqlitePool, kind: JobKind, robot_id: &str, request_json
                 .await?
                 .ok_or_else(|| JobError::Internal(format!("parameter set {} missing", job.parameter_set_id)))?;
             let sessions = cells::resolve_sessions(pool, &robot.id, &job.request.sessions, "sessions").await?;
-            let mut cell = cells::cell_file(pool, &robot, &sessions).await?;
-            if cell.artefact.is_none() {
+            let mut stored = cells::stored_cell(pool, &robot, &sessions, false).await?;
+            if stored.file.artefact.is_none() {
                 // The calibration zone of `vs_zone_distance`, as the CLI has it from the cell file.
-                cell.artefact = cells::calibration_artefact(pool, &robot.id).await?;
+                stored.file.artefact = cells::calibration_artefact(pool, &robot.id).await?;
             }
             let session_names = sessions.iter().map(|s| s.name.clone()).collect();
-            Ok(Inputs::Validation { job, set_json: set.doc_json, cell, session_names })
+            Ok(Inputs::Validation {
+                job,
+                set_json: set.doc_json,
+                cell: stored.file,
+                indices: stored.indices,
+                session_names,
+            })
         }
         JobKind::Diagnosis => {
             let job: DiagnosisJob = stored(request_json, "diagnosis request")?;
@@ -152,8 +190,8 @@ pub async fn load(pool: &SqlitePool, kind: JobKind, robot_id: &str, request_json
             let names = |s: &[SessionRow]| s.iter().map(|s| s.name.clone()).collect::<Vec<_>>();
             let sessions = DiagnosisSessions { identification: names(&id), validation: names(&val) };
             let all: Vec<SessionRow> = id.into_iter().chain(val).collect();
-            let cell = cells::cell_file(pool, &robot, &all).await?;
-            Ok(Inputs::Diagnosis { job, set_json: set.doc_json, cell, sessions })
+            let stored = cells::stored_cell(pool, &robot, &all, false).await?;
+            Ok(Inputs::Diagnosis { job, set_json: set.doc_json, cell: stored.file, indices: stored.indices, sessions })
         }
     }
 }
@@ -207,6 +245,36 @@ pub fn identify_error(e: IdentifyError) -> JobError {
     }
 }
 
+/// An identification's failure with the measurements it names (outliers, the worst residuals of
+/// a misfit) by their stored index.
+fn stored_identify_error(e: IdentifyError, indices: &StoredIndices) -> IdentifyError {
+    let remap = |ws: Vec<Worst>| {
+        ws.into_iter().map(|w| Worst { index: indices.stored(&w.session, w.index), ..w }).collect::<Vec<_>>()
+    };
+    match e {
+        IdentifyError::Outliers { outliers, factor } => IdentifyError::Outliers { outliers: remap(outliers), factor },
+        IdentifyError::Misfit { rms, expected, ratio, limit, worst } => {
+            IdentifyError::Misfit { rms, expected, ratio, limit, worst: remap(worst) }
+        }
+        other => other,
+    }
+}
+
+/// A parameter-set document's quality report with the measurements it names (`worst`,
+/// `downweighted`) by their stored index.
+fn stored_quality(doc: &mut ParameterSetDoc, indices: &StoredIndices) {
+    let Some(q) = doc.quality.as_mut() else { return };
+    for key in ["worst", "downweighted"] {
+        let Some(items) = q.get_mut(key).and_then(Value::as_array_mut) else { continue };
+        for item in items {
+            let session = item["session"].as_str().unwrap_or("").to_string();
+            if let Some(i) = item["index"].as_u64() {
+                item["index"] = json!(indices.stored(&session, i as usize));
+            }
+        }
+    }
+}
+
 /// A diagnosis's failure: its options as 422, the starting model's fit as an identification's.
 pub fn diagnose_error(e: DiagnoseError) -> JobError {
     match e {
@@ -219,15 +287,25 @@ pub fn diagnose_error(e: DiagnoseError) -> JobError {
 pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64) + Sync)) -> Result<Output, JobError> {
     match inputs {
         Inputs::PosePlan { base, model, request, artefact } => pose_plan(&model, base, &request, &artefact, progress),
-        Inputs::Identification { robot: _, request, cell, session_names } => {
+        Inputs::Identification { robot: _, mut request, cell, indices, excluded, session_names } => {
             let cell_si = cell.to_cell().map_err(|e| JobError::domain(e, "stored cell"))?;
+            // The request names measurements by their stored index; one already excluded in the
+            // store is not in the cell.
+            request.exclude = request
+                .exclude
+                .iter()
+                .filter_map(|m| indices.cell(&m.session, m.index).map(|index| MeasurementRef { index, ..m.clone() }))
+                .collect();
             let opts = identify_options(&request, cell_si.model.dof(), session_names.clone())?;
             let select = request.select.as_ref().map(selection).transpose()?;
-            let (id, doc) = run_identification(&cell_si, opts, select, &|| progress(0.3)).map_err(identify_error)?;
+            let (id, mut doc) = run_identification(&cell_si, opts, select, &|| progress(0.3))
+                .map_err(|e| identify_error(stored_identify_error(e, &indices)))?;
+            stored_quality(&mut doc, &indices);
             let q = &id.quality;
             let summary = IdentificationSummary {
                 identified: id.free_names.len(),
                 measurements: q.n_configs,
+                excluded,
                 iterations: id.iterations,
                 kappa_si: q.kappa,
                 kappa_scaled: q.kappa_scaled,
@@ -241,17 +319,20 @@ pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64) + Sync)) -> Result<Output
                 activate: request.activate,
             })
         }
-        Inputs::Validation { job, set_json, cell, session_names } => {
+        Inputs::Validation { job, set_json, cell, indices, session_names } => {
             let doc = ParameterSetDoc::from_json(&set_json)
                 .map_err(|e| JobError::Internal(format!("stored parameter set: {e}")))?;
             let cell_si = cell.to_cell().map_err(|e| JobError::domain(e, "stored cell"))?;
-            let report = crate::validate::report::validate(
+            let mut report = crate::validate::report::validate(
                 &doc.set,
                 &cell_si,
                 &session_names,
                 crate::validate::report::Reference::Measured,
             )
             .map_err(|e| JobError::Invalid { detail: e.to_string(), field: Some("sessions".into()) })?;
+            for r in &mut report.residuals {
+                r.index = indices.stored(&r.session, r.index);
+            }
             let full = crate::domain::validation::report_to_json(&report, job.request.residuals);
             let summary = ValidationJobSummary {
                 measurements: report.calibrated.position.n,
@@ -265,7 +346,7 @@ pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64) + Sync)) -> Result<Output
                 summary,
             })
         }
-        Inputs::Diagnosis { job, set_json, cell, sessions } => {
+        Inputs::Diagnosis { job, set_json, cell, indices, sessions } => {
             let doc = ParameterSetDoc::from_json(&set_json)
                 .map_err(|e| JobError::Internal(format!("stored parameter set: {e}")))?;
             let cell_si = cell.to_cell().map_err(|e| JobError::domain(e, "stored cell"))?;
@@ -278,7 +359,10 @@ pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64) + Sync)) -> Result<Output
             };
             let opts = spec.to_options().map_err(JobError::field)?;
             progress(0.1);
-            let d = crate::diagnose::diagnose(&input_of(&cell_si, &doc), &opts).map_err(diagnose_error)?;
+            let d = crate::diagnose::diagnose(&input_of(&cell_si, &doc), &opts).map_err(|e| match e {
+                DiagnoseError::Identify(e) => identify_error(stored_identify_error(e, &indices)),
+                other => diagnose_error(other),
+            })?;
             progress(0.9);
             let out = diagnosis_out(&d);
             Ok(Output::Diagnosis {
@@ -286,7 +370,10 @@ pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64) + Sync)) -> Result<Output
                 sessions_json: json!({"identification": sessions.identification, "validation": sessions.validation})
                     .to_string(),
                 report_json: serde_json::to_string(&out).expect("a diagnosis serialises"),
-                accepted_doc_json: accepted_doc(&d).map(|doc| doc.to_json_pretty()),
+                accepted_doc_json: accepted_doc(&d).map(|mut doc| {
+                    stored_quality(&mut doc, &indices);
+                    doc.to_json_pretty()
+                }),
                 status: out.verdict.status.clone(),
                 summary: out.verdict.summary.clone(),
                 effects: out.verdict.effects.iter().map(|e| e.which.label.clone()).collect(),
@@ -445,7 +532,7 @@ pub async fn store(
             let row =
                 records::insert_parameter_set(&mut *tx, robot_id, &doc_json, &sessions_json, Some(job_id)).await?;
             if activate {
-                records::set_active_parameter_set(&mut *tx, robot_id, &row.id).await?;
+                crate::db::corrections::activate(&mut *tx, robot_id, &row.id, None, Some(job_id)).await?;
             }
             Ok(JobResult::Identification(IdentificationResult {
                 parameter_set_id: row.id,
