@@ -224,24 +224,19 @@ fn check_counts(
         return Err(CliError::arg(per_ball_arg, "must be at least 1"));
     }
     let over = [limits::per_ball(per_ball, per_ball_arg).err(), limits::validation(validation, validation_arg).err()];
-    match over.into_iter().flatten().next() {
-        Some(e) if !force => {
-            let (s, mb) = limits::estimate(per_ball, validation);
-            Err(CliError::arg(
-                &e.path,
-                format!(
-                    "{} (the service's bound); this run would take ~{s:.0} s and write ~{mb:.0} MB: pass --force to run it anyway",
-                    e.reason
-                ),
-            ))
-        }
-        Some(e) => {
-            let (s, mb) = limits::estimate(per_ball, validation);
-            eprintln!("note: {}: {}, forced: expect ~{s:.0} s and ~{mb:.0} MB", e.path, e.reason);
-            Ok(())
-        }
-        None => Ok(()),
+    let Some(e) = over.into_iter().flatten().next() else { return Ok(()) };
+    let (s, mb) = limits::estimate(per_ball, validation);
+    if force {
+        eprintln!("note: {}: {}, forced: expect ~{s:.0} s and ~{mb:.0} MB", e.path, e.reason);
+        return Ok(());
     }
+    Err(CliError::arg(
+        &e.path,
+        format!(
+            "{} (the service's bound); this run would take ~{s:.0} s and write ~{mb:.0} MB: pass --force to run it anyway",
+            e.reason
+        ),
+    ))
 }
 
 /// How a report is printed: a table for a person, JSON for a program.

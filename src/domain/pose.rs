@@ -463,19 +463,15 @@ pub fn compensate_target(
             (comp.pose(&frames.into_world.compose(pose), choice.seed()), note.clone())
         }
     };
-    match res {
+    let mut r = match res {
         Ok(c) => {
             let fake = PoseOut::like(&frames.out_of_world.compose(&c.fake_pose), t.rotation_deg, t.quaternion);
-            let mut r = CompensationResult::ok(id, &c, fake);
-            r.notes.extend(note);
-            r
+            CompensationResult::ok(id, &c, fake)
         }
-        Err(e) => {
-            let mut r = CompensationResult::from_ik_error(id, &e);
-            r.notes.extend(note);
-            r
-        }
-    }
+        Err(e) => CompensationResult::from_ik_error(id, &e),
+    };
+    r.notes.extend(note);
+    r
 }
 
 /// Targets per thread below which splitting a batch across cores is not worth a thread.
