@@ -264,6 +264,9 @@ fn simulate_identify_validate_study() {
     let out =
         Command::new(env!("CARGO_BIN_EXE_robocal")).args(["simulate", "--seed", "2", "--out", &cell]).output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    // Piped, a long command draws no progress bar.
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains('\r') && !err.contains("ETA"), "{err}");
 
     let out = Command::new(env!("CARGO_BIN_EXE_robocal"))
         .args(["identify", &cell, "--select", "detmax", "--n", "75", "--seed", "3", "--out", &params])
@@ -283,6 +286,41 @@ fn simulate_identify_validate_study() {
     assert!(ps.iter().any(|p| p["status"] == "c1: no gravity torque on axis 1"));
     assert_eq!(doc["quality"]["selection"]["n"], 75);
     assert!(doc["quality"]["kappa_si"].as_f64().unwrap() > 1.0);
+
+    // The set records the envelope of its measurements: compensation refuses a target beyond
+    // it (exit 1, the target's own error) unless asked, and gives each target its predicted
+    // uncertainty from the parameter covariance.
+    let env = &doc["quality"]["envelope"];
+    assert_eq!(env["n_measurements"], 75, "{env}");
+    let j1 = nums(&env["joints_deg"][0]);
+    let out_j1 = if j1[1] + 10.0 < 160.0 { j1[1] + 10.0 } else { j1[0] - 10.0 };
+    let mid: Vec<f64> = (0..6).map(|j| nums(&env["joints_deg"][j]).iter().sum::<f64>() / 2.0).collect();
+    let mut far = mid.clone();
+    far[0] = out_j1;
+    let targets = path("targets.json");
+    std::fs::write(
+        &targets,
+        json!({"targets": [{"id": "in", "joints_deg": mid}, {"id": "out", "joints_deg": far}]}).to_string(),
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(["compensate", "--params", &params, "--targets", &targets])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", String::from_utf8_lossy(&out.stderr));
+    let c: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let u = c["results"][0]["uncertainty_mm"].as_f64().unwrap();
+    assert!(u > 1e-4 && u < 0.05, "{u}");
+    let e = c["results"][1]["error"].as_str().unwrap();
+    assert!(e.contains("outside the calibrated envelope") && e.contains("joint 1"), "{e}");
+    assert_eq!(c["validity"]["envelope"]["n_measurements"], 75);
+    let out = Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(["compensate", "--params", &params, "--targets", &targets, "--allow-outside-envelope"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let c: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(c["results"][1]["notes"][0].as_str().unwrap().contains("outside the calibrated envelope"), "{c}");
 
     let (ok, v, err) = robocal(&["validate", &params, &cell]);
     assert!(ok, "{err}");
@@ -326,6 +364,8 @@ fn simulate_identify_validate_study() {
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains('\r') && !err.contains("ETA"), "{err}");
     let st: Value = serde_json::from_str(&std::fs::read_to_string(&study).unwrap()).unwrap();
     assert_eq!(st["rows"].as_array().unwrap().len(), 2);
     assert_eq!(st["runs"].as_array().unwrap().len(), 6);

@@ -538,7 +538,12 @@ async fn identification_validation_and_compensation() {
         {"id": "far", "position_mm": [3000, 0, 0], "rotation_deg": [0, 180, 0], "cfx": 0},
         {"id": "bad", "position_mm": [150, 80, 120], "rotation_deg": [0, 180, 0]}]);
     assert_problem(&app.post(&cpath, &json!({"targets": targets})).await, 409, None);
+    // A set without a held-out validation is refused unless asked for, saying what to do.
     let r = app.post(&cpath, &json!({"targets": targets, "parameter_set_id": set_id})).await;
+    assert_problem(&r, 409, None);
+    assert!(r.body["detail"].as_str().unwrap().contains("no validation"), "{}", r.text);
+    assert!(r.body["hint"].as_str().unwrap().contains("allow_unvalidated"), "{}", r.text);
+    let r = app.post(&cpath, &json!({"targets": targets, "parameter_set_id": set_id, "allow_unvalidated": true})).await;
     assert_eq!(r.status, StatusCode::OK, "{}", r.text);
     assert_eq!(r.body["failed"], 2);
     let res = r.body["results"].as_array().unwrap();
@@ -555,24 +560,34 @@ async fn identification_validation_and_compensation() {
     // A quaternion rounded as a program stores it is normalised, and the answer says so; the
     // same target in the base frame and relative to a work object is answered in those frames.
     let q = json!([{"id": "q", "position_mm": [150, 80, 120], "quaternion": [0, 0, 1.0004, 0], "cfx": 0}]);
-    let r = app.post(&cpath, &json!({"targets": q, "parameter_set_id": set_id})).await;
+    let r = app.post(&cpath, &json!({"targets": q, "parameter_set_id": set_id, "allow_unvalidated": true})).await;
     assert_eq!(r.status, StatusCode::OK, "{}", r.text);
-    let note = r.body["results"][0]["notes"][0].as_str().unwrap_or_default();
-    assert!(note.contains("normalised") && note.contains("1.0004"), "{}", r.text);
+    let notes = r.body["results"][0]["notes"].as_array().unwrap();
+    assert!(
+        notes.iter().any(|n| n.as_str().unwrap().contains("normalised") && n.as_str().unwrap().contains("1.0004")),
+        "{}",
+        r.text
+    );
+    // 120 mm above the plate: noted with its distance to the measured region, not refused.
+    assert!(notes.iter().any(|n| n.as_str().unwrap().contains("70.0 mm outside the measured region")), "{}", r.text);
     assert_eq!(r.body["results"][0]["joints_deg"], res[0]["joints_deg"], "the same rotation as [0, 180, 0]");
-    let r = app.post(&cpath, &json!({"targets": q, "parameter_set_id": set_id, "frame": "base"})).await;
+    let r = app
+        .post(&cpath, &json!({"targets": q, "parameter_set_id": set_id, "allow_unvalidated": true, "frame": "base"}))
+        .await;
     assert_eq!((r.status, &r.body["frame"]["kind"]), (StatusCode::OK, &json!("base")), "{}", r.text);
     let wobj = json!({"name": "fixture-2", "position_mm": [0, 0, 0], "rotation_deg": [0, 0, 0]});
     let r = app
-        .post(&cpath, &json!({"targets": q, "parameter_set_id": set_id, "frame": "base", "work_object": wobj}))
+        .post(&cpath, &json!({"targets": q, "parameter_set_id": set_id, "allow_unvalidated": true, "frame": "base", "work_object": wobj}))
         .await;
     assert_eq!(r.status, StatusCode::OK, "{}", r.text);
     assert_eq!(r.body["frame"]["work_object"], "fixture-2");
     let bad = json!({"name": "w", "position_mm": [0, 0, 0], "quaternion": [0, 0, 2, 0]});
-    let r = app.post(&cpath, &json!({"targets": q, "parameter_set_id": set_id, "work_object": bad})).await;
+    let r = app
+        .post(&cpath, &json!({"targets": q, "parameter_set_id": set_id, "allow_unvalidated": true, "work_object": bad}))
+        .await;
     assert_problem(&r, 422, Some("work_object.quaternion"));
     let r = app
-        .post(&cpath, &json!({"targets": q, "parameter_set_id": set_id, "frame": "world", "work_object": wobj}))
+        .post(&cpath, &json!({"targets": q, "parameter_set_id": set_id, "allow_unvalidated": true, "frame": "world", "work_object": wobj}))
         .await;
     assert_problem(&r, 422, Some("work_object"));
     assert_problem(
@@ -581,7 +596,7 @@ async fn identification_validation_and_compensation() {
         Some("parameter_set_id"),
     );
     assert_problem(
-        &app.post(&cpath, &json!({"targets": [], "parameter_set_id": set_id, "tool": {"tcp_mm": [0, 0, "x"]}})).await,
+        &app.post(&cpath, &json!({"targets": [], "parameter_set_id": set_id, "allow_unvalidated": true, "tool": {"tcp_mm": [0, 0, "x"]}})).await,
         422,
         None,
     );
@@ -652,6 +667,27 @@ async fn identification_validation_and_compensation() {
     let r = app.post(&cpath, &json!({"targets": [{"joints_deg": [10, 20, -10, 0, 45, 0]}]})).await;
     assert_eq!(r.body["parameter_set_id"], set_id);
     assert_eq!(r.body["failed"], 0);
+    // Validated now: the answer names the validation it relied on, and each target carries the
+    // model's predicted uncertainty there (a few µm for a 31-parameter fit on 0.01 mm noise).
+    let validity = &r.body["validity"];
+    assert_eq!(validity["validation"]["validation_id"], vid, "{validity}");
+    assert_eq!(validity["validation"]["mean_mm"], rep["mean_mm"]);
+    let u = r.body["results"][0]["uncertainty_mm"].as_f64().unwrap();
+    assert!(u > 1e-4 && u < 0.05, "{u}");
+    // Outside the calibrated envelope (joint 1 beyond its measured range and the 5° margin) a
+    // target is refused, saying why, unless asked for.
+    let j1 = &validity["envelope"]["joints_deg"][0];
+    let (lo, hi) = (j1[0].as_f64().unwrap(), j1[1].as_f64().unwrap());
+    let out_j1 = if hi + 10.0 < 160.0 { hi + 10.0 } else { lo - 10.0 };
+    let outside = json!([{"id": "out", "joints_deg": [out_j1, 20, -10, 0, 45, 0]}]);
+    let r = app.post(&cpath, &json!({"targets": outside})).await;
+    assert_eq!((r.status, r.body["failed"].as_u64()), (StatusCode::OK, Some(1)), "{}", r.text);
+    let e = r.body["results"][0]["error"].as_str().unwrap();
+    assert!(e.contains("outside the calibrated envelope") && e.contains("joint 1"), "{e}");
+    let r = app.post(&cpath, &json!({"targets": outside, "allow_outside_envelope": true})).await;
+    assert_eq!(r.body["failed"], 0, "{}", r.text);
+    assert!(r.body["results"][0]["notes"][0].as_str().unwrap().contains("outside the calibrated envelope"));
+    assert!(r.body["results"][0]["uncertainty_mm"].as_f64().unwrap() > 0.0);
 
     // Import (the thesis's Table 5.1) as version 2; a set of another robot is refused.
     let table =
@@ -676,7 +712,8 @@ async fn identification_validation_and_compensation() {
 
     // Compensation follows every activation at once (the robot and its sets are cached in the
     // server): by an explicit call…
-    let one = json!({"targets": [{"joints_deg": [10, 20, -10, 0, 45, 0]}]});
+    // (The imported table carries no validation, envelope or covariance: used as asked.)
+    let one = json!({"targets": [{"joints_deg": [10, 20, -10, 0, 45, 0]}], "allow_unvalidated": true});
     let joints = |r: &common::Res| r.body["results"][0]["joints_deg"].clone();
     let with_v1 = app.post(&cpath, &one).await;
     assert_eq!(with_v1.body["version"], 1);

@@ -28,6 +28,7 @@ use super::AppError;
 use crate::db::records::{self, ParameterSetRow, RobotRow};
 use crate::db::tokens::{self, TokenRow};
 use crate::domain::ParameterSetDoc;
+use crate::domain::validity::{Envelope, PredictionCovariance};
 use crate::kinematics::{Compensator, ParameterSet};
 
 /// A stored parameter set, parsed and ready to compensate with its own tool.
@@ -35,6 +36,10 @@ pub struct CompiledSet {
     pub row: ParameterSetRow,
     pub set: ParameterSet,
     pub compensator: Compensator,
+    /// The envelope the set was calibrated in, when it records one.
+    pub envelope: Option<Envelope>,
+    /// Its parameter covariance, when it records one.
+    pub covariance: Option<PredictionCovariance>,
 }
 
 /// How long a verified token is trusted before the store is asked again.
@@ -117,8 +122,11 @@ impl Caches {
         let Some(row) = records::parameter_set(pool, id).await? else { return Ok(None) };
         let doc = ParameterSetDoc::from_json(&row.doc_json)
             .map_err(|e| AppError::Internal(format!("stored set {}: {e}", row.id)))?;
+        let stored = |e: crate::domain::DomainError| AppError::Internal(format!("stored set {}: {e}", row.id));
+        let envelope = Envelope::of_doc(&doc).map_err(stored)?;
+        let covariance = PredictionCovariance::of_doc(&doc).map_err(stored)?;
         let compensator = Compensator::new(&doc.set);
-        let compiled = Arc::new(CompiledSet { row, set: doc.set, compensator });
+        let compiled = Arc::new(CompiledSet { row, set: doc.set, compensator, envelope, covariance });
         self.sets.insert(id.to_string(), compiled.clone());
         Ok(Some(compiled))
     }

@@ -174,7 +174,13 @@ pub(super) fn simulate(a: SimulateArgs) -> Result<String, CliError> {
         }
     }
     super::check_counts(a.id_per_ball, "--id-per-ball", a.validation, "--validation", a.force)?;
-    let sim = crate::sim::simulate::simulate(&opts).map_err(|e| CliError::msg(e.to_string()))?;
+    let bar = super::progress::Progress::new("simulating", crate::sim::simulate::SIMULATE_STAGES);
+    let sim = crate::sim::simulate::simulate_with_progress(&opts, &|done, total, stage| {
+        bar.stage(stage);
+        bar.set(done, total);
+    })
+    .map_err(|e| CliError::msg(e.to_string()))?;
+    drop(bar);
     let text = crate::domain::cell::cell_to_json(&sim.cell);
     write(&a.out, &text)?;
     let mut report = format!(

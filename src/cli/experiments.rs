@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 
+use super::progress::Progress;
 use super::reports::{CrossvalReport, StudyReport};
 use super::{CliError, DetmaxArgs, ThreadsArgs, list, load_cell, option_error, write};
 
@@ -101,7 +102,7 @@ pub struct CrossvalArgs {
 
 pub(super) fn study(a: StudyArgs) -> Result<String, CliError> {
     use crate::domain::identification::IdentifySpec;
-    use crate::identify::study::{StudyOptions, parse_sizes, study};
+    use crate::identify::study::{StudyOptions, parse_sizes, study_with_progress};
     let cell = load_cell(&a.cell)?;
     let sizes = parse_sizes(&a.sizes).map_err(|e| CliError::arg("--sizes", e))?;
     if a.sets == 0 {
@@ -123,7 +124,9 @@ pub(super) fn study(a: StudyArgs) -> Result<String, CliError> {
         identify,
     };
     let started = std::time::Instant::now();
-    let st = study(&cell, &opts).map_err(|e| CliError::msg(e.to_string()))?;
+    let bar = Progress::new("identifications", opts.sizes.len() * opts.sets);
+    let st = study_with_progress(&cell, &opts, &bar.callback()).map_err(|e| CliError::msg(e.to_string()))?;
+    drop(bar);
     let elapsed = started.elapsed().as_secs_f64();
     let report = StudyReport::new(&st, a.sets, index, a.polish, a.detmax.seed, elapsed, threads);
     let mut text = report.text();
@@ -153,7 +156,7 @@ pub(super) fn study(a: StudyArgs) -> Result<String, CliError> {
 
 pub(super) fn crossval(a: CrossvalArgs) -> Result<String, CliError> {
     use crate::domain::identification::{IdentifySpec, kappa_limit};
-    use crate::identify::crossval::{CrossvalOptions, Variant, crossval};
+    use crate::identify::crossval::{CrossvalOptions, Variant, crossval_with_progress};
     let cell = load_cell(&a.cell)?;
     let spec = IdentifySpec {
         fix: list(&a.fix),
@@ -194,7 +197,9 @@ pub(super) fn crossval(a: CrossvalArgs) -> Result<String, CliError> {
     if let Some(k) = a.transfer_kappa_limit {
         kappa_limit(k, "transfer_kappa_limit").map_err(option_error)?;
     }
-    let cv = crossval(&cell, &opts).map_err(|e| CliError::msg(e.to_string()))?;
+    let bar = Progress::new("identifications", 0);
+    let cv = crossval_with_progress(&cell, &opts, &bar.callback()).map_err(|e| CliError::msg(e.to_string()))?;
+    drop(bar);
     let elapsed = started.elapsed().as_secs_f64();
 
     let report = CrossvalReport::new(&cv, a.seed, a.folds, a.draws, elapsed, threads);
@@ -230,7 +235,6 @@ pub struct BenchDiagnosisArgs {
 pub(super) fn bench_diagnosis(a: BenchDiagnosisArgs) -> Result<String, CliError> {
     use crate::diagnose::DiagnoseOptions;
     use crate::experiments::withheld::{run_suite, suite};
-    use std::io::Write;
     if a.seeds == 0 {
         return Err(CliError::arg("--seeds", "must be at least 1"));
     }
@@ -242,15 +246,10 @@ pub(super) fn bench_diagnosis(a: BenchDiagnosisArgs) -> Result<String, CliError>
     let seeds: Vec<u64> = (a.first_seed..a.first_seed + a.seeds).collect();
     let threads = a.threads.count()?;
     let started = std::time::Instant::now();
-    let progress = |done: usize, total: usize| {
-        let mut e = std::io::stderr();
-        let _ = write!(e, "\r{done}/{total} diagnoses ({:.0} s)", started.elapsed().as_secs_f64());
-        if done == total {
-            let _ = writeln!(e);
-        }
-    };
+    let bar = Progress::new("diagnoses", cases.len() * seeds.len());
     // One thread per case run: each diagnosis is sequential inside.
-    let outcomes = run_suite(&cases, &seeds, &DiagnoseOptions::default(), threads, &progress);
+    let outcomes = run_suite(&cases, &seeds, &DiagnoseOptions::default(), threads, &bar.callback());
+    drop(bar);
     let elapsed = started.elapsed().as_secs_f64();
     let report = super::reports::BenchDiagnosisReport::new(&cases, &outcomes, elapsed, threads);
     let mut text = if a.markdown { report.markdown() } else { report.text() };

@@ -10,6 +10,7 @@ use super::{CliError, numbers, read, robot_model, three, write_or_return};
 use crate::domain::pose::{
     FrameKind, TargetFrames, WorkObjectSpec, compensate_targets, frame_from_parts_noted, position_mm,
 };
+use crate::domain::validity::{Envelope, Guard, PredictionCovariance, ValidityOut};
 use crate::domain::{
     DomainError, ParameterSetDoc, PoseOut, Target, TargetSpec, ToolSpec, from_json, joints_deg, to_deg,
 };
@@ -101,6 +102,10 @@ pub struct CompensateArgs {
     /// Write the result here instead of standard output.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Compensate targets outside the envelope the set was calibrated in (its identification's
+    /// joint ranges ± 5°) instead of refusing them; each is noted.
+    #[arg(long)]
+    pub allow_outside_envelope: bool,
 }
 
 #[derive(Args, Debug)]
@@ -319,21 +324,27 @@ struct TargetsFile {
 pub(super) fn compensate(a: CompensateArgs) -> Result<String, CliError> {
     let doc = ParameterSetDoc::from_json(&read(&a.params)?).map_err(|e| CliError::file(&a.params, e))?;
     let file: TargetsFile = from_json(&read(&a.targets)?).map_err(|e| CliError::file(&a.targets, e))?;
+    let envelope = Envelope::of_doc(&doc).map_err(|e| CliError::file(&a.params, e))?;
+    let covariance = PredictionCovariance::of_doc(&doc).map_err(|e| CliError::file(&a.params, e))?;
+    let guard =
+        Guard { envelope: envelope.as_ref(), allow_outside: a.allow_outside_envelope, covariance: covariance.as_ref() };
     let set = doc.set;
     let comp = Compensator::new(&set);
     let dof = set.dof();
     let frames =
         TargetFrames::new(&comp, file.frame, file.work_object.as_ref()).map_err(|e| CliError::file(&a.targets, e))?;
-    let results = compensate_targets(&comp, dof, &frames, &file.targets);
+    let results = compensate_targets(&comp, dof, &frames, &guard, &file.targets);
+    let validity = ValidityOut::new(&guard);
     let failed: Vec<String> = results
         .iter()
         .enumerate()
         .filter(|(_, r)| r.error.is_some())
         .map(|(i, r)| r.id.clone().unwrap_or_else(|| format!("targets[{i}]")))
         .collect();
-    let text =
-        serde_json::to_string_pretty(&json!({ "frame": frames.out, "results": results, "failed": failed.len() }))
-            .expect("json");
+    let text = serde_json::to_string_pretty(
+        &json!({ "frame": frames.out, "validity": validity, "results": results, "failed": failed.len() }),
+    )
+    .expect("json");
     let out = write_or_return(&a.out, text)?;
     if failed.is_empty() {
         return Ok(out);

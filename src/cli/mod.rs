@@ -6,6 +6,7 @@ mod data;
 mod experiments;
 mod kinematics;
 mod plan;
+mod progress;
 mod reports;
 mod service;
 mod validation_text;

@@ -94,7 +94,7 @@ pub(super) fn plan(a: PlanArgs) -> Result<String, CliError> {
     if let Some(s) = &request.select {
         crate::jobs::run::selection(s).map_err(|e| CliError::arg("--select", e))?;
     }
-    let plan = crate::jobs::run::plan_poses(&model, base, &request, &artefact, &|_| ()).map_err(|e| {
+    let plan = crate::jobs::run::plan_poses(&model, base, &request, &artefact, &|_, _| ()).map_err(|e| {
         use crate::jobs::JobError;
         let arg = match &e {
             JobError::Invalid { field: Some(f), .. } if f.starts_with("select") => "--select",

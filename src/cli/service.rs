@@ -216,11 +216,15 @@ pub(super) fn demo(a: DemoArgs) -> Result<String, CliError> {
     }
     let opts = DemoOptions { seed: a.seed, select: a.select, targets: a.targets, ..Default::default() };
     runtime()?.block_on(async {
-        let mut log = |s: &str| eprintln!("{s}");
+        let bar = super::progress::Progress::steps("demo");
+        let mut log = |s: &str| {
+            bar.line(s);
+            bar.inc();
+        };
         match &a.url {
             Some(url) => {
                 let client = Client::new(url, a.token.clone()).map_err(|e| CliError::arg("--url", e))?;
-                eprintln!("robocal demo against {url}");
+                bar.line(&format!("robocal demo against {url}"));
                 let r = run(&client, &opts, &mut log).await.map_err(|e| CliError::msg(e.to_string()))?;
                 Ok(table(&r))
             }
@@ -231,7 +235,7 @@ pub(super) fn demo(a: DemoArgs) -> Result<String, CliError> {
                     crate::server::start(crate::server::ServeOptions::new(db.clone(), ([127, 0, 0, 1], 0).into()))
                         .await
                         .map_err(|e| CliError::msg(e.to_string()))?;
-                eprintln!("robocal demo: in-process server at {} on {}", server.url(), db.display());
+                bar.line(&format!("robocal demo: in-process server at {} on {}", server.url(), db.display()));
                 let client = Client::new(&server.url(), None).map_err(|e| CliError::msg(e.to_string()))?;
                 let r = run(&client, &opts, &mut log).await;
                 let _ = server.stop().await;

@@ -104,6 +104,8 @@ pub struct JobRow {
     pub started_at: Option<String>,
     pub finished_at: Option<String>,
     pub updated_at: String,
+    /// What the job is doing now (the last phase once it ended).
+    pub phase: Option<String>,
 }
 
 /// Queue a new job.
@@ -183,6 +185,28 @@ pub async fn claim(pool: &SqlitePool, owner: &str, lease: Duration) -> Result<Op
     .bind(&t)
     .fetch_optional(pool)
     .await
+}
+
+/// Record a running job's progress (0–1, never backwards) and phase.
+pub async fn progress(
+    pool: &SqlitePool,
+    id: &str,
+    owner: &str,
+    progress: f64,
+    phase: &str,
+) -> Result<bool, sqlx::Error> {
+    let r = sqlx::query(
+        "UPDATE jobs SET progress = MAX(progress, ?), phase = ?, updated_at = ? \
+         WHERE id = ? AND lease_owner = ? AND state = 'running'",
+    )
+    .bind(progress)
+    .bind(phase)
+    .bind(now())
+    .bind(id)
+    .bind(owner)
+    .execute(pool)
+    .await?;
+    Ok(r.rows_affected() == 1)
 }
 
 /// Extend a running job's lease and record its progress; `false` when the job is no longer this

@@ -488,6 +488,25 @@ pub async fn validation(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<
     sqlx::query_as("SELECT * FROM validations WHERE id = ?").bind(id).fetch_optional(db).await
 }
 
+/// The latest validation of a set that holds out at least one validation session: (id, calibrated
+/// mean, nominal mean in mm, the validated envelope as JSON), read from the stored report without
+/// parsing its residuals.
+pub async fn latest_held_out_validation(
+    db: impl SqliteExecutor<'_>,
+    set_id: &str,
+) -> Result<Option<(String, f64, f64, Option<String>)>, sqlx::Error> {
+    sqlx::query_as(
+        "SELECT id, json_extract(report_json, '$.mean_mm'), json_extract(report_json, '$.nominal.mean_mm'), \
+         json_extract(report_json, '$.validated_envelope') \
+         FROM validations WHERE parameter_set_id = ?1 \
+         AND EXISTS (SELECT 1 FROM json_each(report_json, '$.purposes') WHERE value = 'validation') \
+         ORDER BY created_at DESC, id DESC LIMIT 1",
+    )
+    .bind(set_id)
+    .fetch_optional(db)
+    .await
+}
+
 /// A parameter set's validations, newest first.
 pub async fn validations_of_set(db: impl SqliteExecutor<'_>, set_id: &str) -> Result<Vec<ValidationRow>, sqlx::Error> {
     sqlx::query_as("SELECT * FROM validations WHERE parameter_set_id = ? ORDER BY created_at DESC, id DESC")

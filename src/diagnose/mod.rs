@@ -293,7 +293,18 @@ fn unrefused() -> IdentifyOptions {
 
 /// Diagnose `input`.
 pub fn diagnose(input: &Input<'_>, opts: &DiagnoseOptions) -> Result<Diagnosis, DiagnoseError> {
+    diagnose_with_progress(input, opts, &|_, _| {})
+}
+
+/// [`diagnose`], telling `progress` how far it got (0–1, by the stages' typical share of the
+/// time: the candidates' held-out refits dominate) and which stage runs.
+pub fn diagnose_with_progress(
+    input: &Input<'_>,
+    opts: &DiagnoseOptions,
+    progress: &(dyn Fn(f64, &'static str) + Sync),
+) -> Result<Diagnosis, DiagnoseError> {
     let cell = input.cell;
+    progress(0.0, "fitting the current model");
     if opts.folds < 2 {
         return Err(DiagnoseError::Option(format!("folds must be at least 2, got {}", opts.folds)));
     }
@@ -332,6 +343,7 @@ pub fn diagnose(input: &Input<'_>, opts: &DiagnoseOptions) -> Result<Diagnosis, 
     let t0 = std::time::Instant::now();
     let stage0 = stage::Stage::fit(&work, start)?;
     search::timing("stage 0", t0);
+    progress(0.1, "estimating the noise floor");
     let t0 = std::time::Instant::now();
     let start_note = stage0.fit.as_ref().err().cloned();
     let pr = &stage0.problem;
@@ -360,6 +372,7 @@ pub fn diagnose(input: &Input<'_>, opts: &DiagnoseOptions) -> Result<Diagnosis, 
     let base = input.set.chain().base().t;
 
     search::timing("folds + floor", t0);
+    progress(0.2, "screening and cross-validating candidate effects");
     let t0 = std::time::Instant::now();
     let search_opts = SearchOptions { threads: opts.threads.max(opts.search.threads), ..opts.search.clone() };
     let mut s = search::search(&work, stage0, &folds, fl.rms * fl.rms, &search_opts)?;
@@ -369,6 +382,7 @@ pub fn diagnose(input: &Input<'_>, opts: &DiagnoseOptions) -> Result<Diagnosis, 
         }
     }
     search::timing("search", t0);
+    progress(0.85, "locating the residual error");
     let t0 = std::time::Instant::now();
     let voxel = if opts.voxel_size > 0.0 {
         opts.voxel_size
@@ -418,6 +432,9 @@ pub fn diagnose(input: &Input<'_>, opts: &DiagnoseOptions) -> Result<Diagnosis, 
         identify(&work, &o).ok().or_else(|| s.stages.last().and_then(|st| st.fit.as_ref().ok().cloned()))
     };
     search::timing("verdict + accepted", t0);
+    if !opts.transfer.is_empty() {
+        progress(0.95, "transfer to other sessions");
+    }
     let backlash_screened = s.rounds[0].screened.iter().any(|c| c.candidate.kind == Kind::Backlash);
     let approach = derived.source.filter(|_| backlash_screened);
     let approach_notes =

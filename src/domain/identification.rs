@@ -251,6 +251,7 @@ pub fn identification_doc(id: &Identification, sessions: &[String], selection: O
         "downweighted": id.downweighted.iter().map(|(s, i, w)| json!({"session": s, "index": i, "weight": w})).collect::<Vec<_>>(),
         "expected_rms_mm": q.expected_rms / MM,
         "residual_ratio": q.residual_ratio,
+        "envelope": super::validity::Envelope::of_identification(id).map(|e| super::validity::envelope_json(&e)),
         "worst": id.worst.iter().map(|w| json!({"session": w.session, "index": w.index, "residual_mm": w.residual / MM, "ratio": w.ratio})).collect::<Vec<_>>(),
     }));
     if q.weighted

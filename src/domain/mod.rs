@@ -14,6 +14,7 @@ pub mod pose;
 pub mod robot;
 pub mod truth;
 pub mod validation;
+pub mod validity;
 
 use std::fmt;
 

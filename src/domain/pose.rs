@@ -6,9 +6,10 @@
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
+use super::validity::Guard;
 use super::{DomainError, finite, joints_deg, to_deg, vec3_mm};
 use crate::kinematics::frame::{quaternion_from_rot, rot_from_quaternion, rot_zyx, zyx_from_rot};
-use crate::kinematics::{Branch, Compensated, Compensator, Confdata, Frame, IkError, Seed};
+use crate::kinematics::{Branch, Compensated, Compensator, Confdata, Frame, IkError, JointState, Seed};
 use crate::units::{DEG, MM, OUT_DEG, OUT_MM, OUT_UNIT, round_all, round_to};
 
 /// A TCP pose in {W}.
@@ -272,6 +273,11 @@ pub struct CompensationResult {
     pub residual_urad: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub iterations: Option<usize>,
+    /// The model's predicted standard uncertainty of the TCP position at the commanded joints,
+    /// √trace(J·Cov·Jᵀ) from the identification's parameter covariance, mm (absent when the set
+    /// carries no covariance).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty_mm: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
     /// What was mended in the target before solving (a quaternion normalised).
@@ -290,6 +296,7 @@ impl CompensationResult {
             residual_mm: Some(c.residual_position / MM),
             residual_urad: Some(c.residual_rotation * 1e6),
             iterations: Some(c.iterations),
+            uncertainty_mm: None,
             error: None,
             notes: Vec::new(),
         }
@@ -304,6 +311,7 @@ impl CompensationResult {
             residual_mm: None,
             residual_urad: None,
             iterations: None,
+            uncertainty_mm: None,
             error: Some(error),
             notes: Vec::new(),
         }
@@ -449,6 +457,7 @@ pub fn compensate_target(
     comp: &Compensator,
     dof: usize,
     frames: &TargetFrames,
+    guard: &Guard,
     i: usize,
     t: &TargetSpec,
 ) -> CompensationResult {
@@ -466,12 +475,49 @@ pub fn compensate_target(
     let mut r = match res {
         Ok(c) => {
             let fake = PoseOut::like(&frames.out_of_world.compose(&c.fake_pose), t.rotation_deg, t.quaternion);
-            CompensationResult::ok(id, &c, fake)
+            match guard_target(comp, guard, &c) {
+                Ok((sigma, notes)) => {
+                    let mut r = CompensationResult::ok(id, &c, fake);
+                    r.uncertainty_mm = sigma.map(|s| round_to(s / MM, OUT_MM));
+                    r.notes = notes;
+                    r
+                }
+                Err(why) => CompensationResult::failed(
+                    id,
+                    format!(
+                        "targets[{i}]: outside the calibrated envelope: {why}; the model is not validated there \
+                         (allow_outside_envelope compensates it anyway)"
+                    ),
+                ),
+            }
         }
         Err(e) => CompensationResult::from_ik_error(id, &e),
     };
     r.notes.extend(note);
     r
+}
+
+/// The envelope check and the predicted uncertainty of a solved target: `Err(why)` when its
+/// joints lie outside the envelope and that was not allowed; otherwise σ (m) and the notes (outside
+/// as asked; the distance to the measured region).
+fn guard_target(comp: &Compensator, guard: &Guard, c: &Compensated) -> Result<(Option<f64>, Vec<String>), String> {
+    if guard.envelope.is_none() && guard.covariance.is_none() {
+        return Ok((None, Vec::new()));
+    }
+    let q = c.joints();
+    let tau = comp.gravity().torques(q);
+    let s = JointState::with_torques(q, &tau[..q.len()]);
+    let mut notes = Vec::new();
+    if let Some(e) = guard.envelope {
+        if let Some(why) = e.outside(q) {
+            if !guard.allow_outside {
+                return Err(why);
+            }
+            notes.push(format!("outside the calibrated envelope, compensated as asked: {why}"));
+        }
+        notes.extend(e.distance_note(&comp.calibrated_chain().fk(&s).t));
+    }
+    Ok((guard.covariance.map(|pc| pc.sigma(comp.calibrated_chain(), &s)), notes))
 }
 
 /// Targets per thread below which splitting a batch across cores is not worth a thread.
@@ -482,10 +528,11 @@ pub fn compensate_targets(
     comp: &Compensator,
     dof: usize,
     frames: &TargetFrames,
+    guard: &Guard,
     targets: &[TargetSpec],
 ) -> Vec<CompensationResult> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    compensate_on(comp, dof, frames, targets, cores.min(targets.len() / TARGETS_PER_THREAD).max(1))
+    compensate_on(comp, dof, frames, guard, targets, cores.min(targets.len() / TARGETS_PER_THREAD).max(1))
 }
 
 /// Compensate a batch on `threads` threads (contiguous chunks); results in order.
@@ -493,11 +540,12 @@ fn compensate_on(
     comp: &Compensator,
     dof: usize,
     frames: &TargetFrames,
+    guard: &Guard,
     targets: &[TargetSpec],
     threads: usize,
 ) -> Vec<CompensationResult> {
     if threads <= 1 {
-        return targets.iter().enumerate().map(|(i, t)| compensate_target(comp, dof, frames, i, t)).collect();
+        return targets.iter().enumerate().map(|(i, t)| compensate_target(comp, dof, frames, guard, i, t)).collect();
     }
     let chunk = targets.len().div_ceil(threads);
     std::thread::scope(|s| {
@@ -508,7 +556,7 @@ fn compensate_on(
                 s.spawn(move || {
                     part.iter()
                         .enumerate()
-                        .map(|(i, t)| compensate_target(comp, dof, frames, c * chunk + i, t))
+                        .map(|(i, t)| compensate_target(comp, dof, frames, guard, c * chunk + i, t))
                         .collect::<Vec<_>>()
                 })
             })
@@ -588,10 +636,11 @@ mod tests {
             })
             .collect();
         let w = TargetFrames::world();
-        let split = compensate_on(&comp, 6, &w, &targets, 3);
-        assert_eq!(compensate_targets(&comp, 6, &w, &targets), split);
+        let g = Guard::none();
+        let split = compensate_on(&comp, 6, &w, &g, &targets, 3);
+        assert_eq!(compensate_targets(&comp, 6, &w, &g, &targets), split);
         let sequential: Vec<_> =
-            targets.iter().enumerate().map(|(i, t)| compensate_target(&comp, 6, &w, i, t)).collect();
+            targets.iter().enumerate().map(|(i, t)| compensate_target(&comp, 6, &w, &g, i, t)).collect();
         assert_eq!(split, sequential);
         assert_eq!(split.len(), 1500);
         for (i, r) in split.iter().enumerate() {
@@ -669,8 +718,8 @@ mod tests {
         let in_base = TargetFrames::new(&comp, Some(FrameKind::Base), None).unwrap();
         let in_wobj = TargetFrames::new(&comp, None, Some(&wobj)).unwrap();
         let world = TargetFrames::world();
-        let w = compensate_target(&comp, 6, &world, 0, &target);
-        let b = compensate_target(&comp, 6, &in_base, 0, &target);
+        let w = compensate_target(&comp, 6, &world, &Guard::none(), 0, &target);
+        let b = compensate_target(&comp, 6, &in_base, &Guard::none(), 0, &target);
         // The same target in {W} and in the calibrated base differ by the calibrated base: the joints differ…
         assert_ne!(w.joints_deg, b.joints_deg);
         // …and a target given in {W} equals, in the base frame, calibrated_base⁻¹ · target.
@@ -684,7 +733,7 @@ mod tests {
             cfx: Some(0),
             ..Default::default()
         };
-        let b2 = compensate_target(&comp, 6, &via_base, 0, &spec_b);
+        let b2 = compensate_target(&comp, 6, &via_base, &Guard::none(), 0, &spec_b);
         for (x, y) in w.joints_deg.as_ref().unwrap().iter().zip(b2.joints_deg.as_ref().unwrap()) {
             assert!((x - y).abs() < 1e-5, "{x} vs {y}");
         }
@@ -710,7 +759,7 @@ mod tests {
                 ..Default::default()
             }
         };
-        let o = compensate_target(&comp, 6, &in_wobj, 0, &target_in_wobj);
+        let o = compensate_target(&comp, 6, &in_wobj, &Guard::none(), 0, &target_in_wobj);
         for (x, y) in w.joints_deg.as_ref().unwrap().iter().zip(o.joints_deg.as_ref().unwrap()) {
             assert!((x - y).abs() < 1e-5, "{x} vs {y}");
         }

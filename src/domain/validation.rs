@@ -26,6 +26,10 @@ pub struct ValidationOut {
     pub nominal: ModelErrorsOut,
     /// Each session's figures (several reflectors, or sessions of different purposes, apart).
     pub per_session: Vec<SessionErrorsOut>,
+    /// The joint ranges and the box of {W} the held-out (validation-purpose) sessions cover:
+    /// where this validation shows the model to hold (compensation accepts targets there).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub validated_envelope: Option<super::validity::EnvelopeFile>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub residuals: Option<Vec<ResidualOut>>,
 }
@@ -161,6 +165,7 @@ impl ValidationOut {
             calibrated: ModelErrorsOut::from_errors(&r.calibrated),
             nominal: ModelErrorsOut::from_errors(&r.nominal),
             per_session: r.per_session.iter().map(SessionErrorsOut::from_errors).collect(),
+            validated_envelope: r.region.as_ref().map(|g| super::validity::Envelope::of_region(g).file().clone()),
             residuals: include_residuals.then(|| r.residuals.iter().map(ResidualOut::from_residual).collect()),
         }
     }

@@ -12,6 +12,7 @@ use super::extract::{Authorized, COMPENSATE, JsonBody};
 use super::robots::find as find_robot;
 use super::{ApiError, AppState};
 use crate::domain::pose::{FrameKind, FrameOut, TargetFrames, WorkObjectSpec, compensate_target, compensate_targets};
+use crate::domain::validity::{Envelope, EnvelopeFile, Guard, ValidationCheck, ValidityOut};
 use crate::domain::{CompensationResult, TargetSpec, ToolSpec};
 use crate::kinematics::{Compensator, Param, ParameterSet, Tool};
 
@@ -34,6 +35,15 @@ pub struct CompensationRequest {
     /// as on the controller.
     #[serde(default)]
     pub work_object: Option<WorkObjectSpec>,
+    /// Use a parameter set that has no held-out validation, or whose latest one found it no
+    /// better than the nominal model (refused otherwise, 409).
+    #[serde(default)]
+    pub allow_unvalidated: bool,
+    /// Compensate targets outside the envelope the set was calibrated in (the joint ranges of its
+    /// identification and held-out validation measurements, ± 5°) instead of refusing each; each
+    /// is noted.
+    #[serde(default)]
+    pub allow_outside_envelope: bool,
     pub targets: Vec<TargetSpec>,
 }
 
@@ -45,6 +55,9 @@ pub struct CompensationOut {
     /// The frame the targets were read in and the fake poses are written in, and how to program
     /// them.
     pub frame: FrameOut,
+    /// What was checked: the validation the set was accepted on, the calibrated envelope, and
+    /// whether each result carries its predicted uncertainty.
+    pub validity: ValidityOut,
     /// One per target, in order: joints_deg, fake_pose (in `frame`, in the target's own Euler
     /// family and quaternion sign), confdata, residual_mm, residual_urad, iterations — or error;
     /// notes when the target was mended (a quaternion within 1e-3 of unit norm, normalised).
@@ -66,6 +79,46 @@ pub fn with_tool(set: &ParameterSet, tool: Tool) -> ParameterSet {
     s
 }
 
+/// The set's latest held-out validation, refused when there is none or when it found the set no
+/// better than the nominal model; with the envelope it validated, when it records one.
+async fn validation_check(
+    state: &AppState,
+    set_id: &str,
+    version: i64,
+) -> Result<(ValidationCheck, Option<Envelope>), ApiError> {
+    let hint = format!(
+        "validate it on held-out sessions (POST /v1/parameter-sets/{set_id}/validations), or set \
+         allow_unvalidated to use it anyway"
+    );
+    match crate::db::records::latest_held_out_validation(&state.pool, set_id).await? {
+        None => Err(ApiError::conflict_hint(
+            format!("parameter set v{version} has no validation on held-out (validation-purpose) sessions"),
+            hint,
+        )),
+        Some((validation_id, mean_mm, nominal_mean_mm, envelope)) if mean_mm < nominal_mean_mm => {
+            let envelope = match envelope {
+                None => None,
+                Some(text) => {
+                    let file: EnvelopeFile = serde_json::from_str(&text).map_err(|e| {
+                        ApiError::Internal(format!("stored validation {validation_id}: validated_envelope: {e}"))
+                    })?;
+                    Some(Envelope::from_file(&file).map_err(|e| {
+                        ApiError::Internal(format!("stored validation {validation_id}: validated_envelope: {e}"))
+                    })?)
+                }
+            };
+            Ok((ValidationCheck { validation_id, mean_mm, nominal_mean_mm }, envelope))
+        }
+        Some((validation_id, mean_mm, nominal_mean_mm, _)) => Err(ApiError::conflict_hint(
+            format!(
+                "parameter set v{version} failed its latest validation ({validation_id}): its held-out mean \
+                 error {mean_mm:.4} mm is no better than the nominal model's {nominal_mean_mm:.4} mm"
+            ),
+            hint,
+        )),
+    }
+}
+
 /// Batches up to this size are solved on the request's own task.
 const INLINE_TARGETS: usize = 8;
 
@@ -76,7 +129,7 @@ const INLINE_TARGETS: usize = 8;
     responses(
         (status = 200, description = "One result per target; a target that cannot be reached carries its own error", body = CompensationOut),
         (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
-        (status = 409, description = "No parameter set named and none active", body = super::Problem, content_type = "application/problem+json"),
+        (status = 409, description = "No parameter set named and none active; the set has no held-out validation, or its latest found it no better than nominal (unless allow_unvalidated)", body = super::Problem, content_type = "application/problem+json"),
         (status = 413, description = "More targets than the batch limit", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Unknown set, a set of another robot, invalid tool", body = super::Problem, content_type = "application/problem+json")),
     security(("bearer" = [])))]
@@ -111,6 +164,17 @@ pub async fn compensate(
     if compiled.row.robot_id != robot.id {
         return Err(ApiError::invalid("parameter_set_id", "the set belongs to another robot"));
     }
+    let (validation, validated) = if body.allow_unvalidated {
+        (None, None)
+    } else {
+        let (check, envelope) = validation_check(&state, &compiled.row.id, compiled.row.version).await?;
+        (Some(check), envelope)
+    };
+    // Where the model may be used: the identification's data and the held-out validation's.
+    let envelope = match (&compiled.envelope, validated) {
+        (Some(a), Some(b)) => Some(a.union(&b)),
+        (a, b) => a.clone().or(b),
+    };
     let custom = match &body.tool {
         None => None,
         Some(t) => Some(with_tool(&compiled.set, t.to_tool().map_err(|e| ApiError::domain(e, "tool"))?)),
@@ -119,23 +183,37 @@ pub async fn compensate(
         .map_err(|e| ApiError::domain(e, ""))?;
     let frame = frames.out.clone();
     let targets = body.targets;
+    let allow_outside = body.allow_outside_envelope;
+    // With another tool, only the robot's parameters carry uncertainty (the identification did
+    // not see that tool).
+    let robot_only = custom.as_ref().and(compiled.covariance.as_ref()).map(|c| c.without_tool());
+    let guard = |covariance| Guard { envelope: envelope.as_ref(), allow_outside, covariance };
+    let mut validity = ValidityOut::new(&guard(robot_only.as_ref().or(compiled.covariance.as_ref())));
+    validity.validation = validation;
     let results = if custom.is_none() && targets.len() <= INLINE_TARGETS {
         // A few solves (~4 µs each) cost less than handing them to the blocking pool.
         let dof = compiled.set.dof();
-        targets.iter().enumerate().map(|(i, t)| compensate_target(&compiled.compensator, dof, &frames, i, t)).collect()
+        let g = guard(compiled.covariance.as_ref());
+        targets
+            .iter()
+            .enumerate()
+            .map(|(i, t)| compensate_target(&compiled.compensator, dof, &frames, &g, i, t))
+            .collect()
     } else {
         let frames = frames.clone();
         let compiled = compiled.clone();
+        let envelope = envelope.clone();
         tokio::task::spawn_blocking(move || {
             let own;
-            let (comp, dof) = match &custom {
-                None => (&compiled.compensator, compiled.set.dof()),
+            let (comp, dof, covariance) = match &custom {
+                None => (&compiled.compensator, compiled.set.dof(), compiled.covariance.as_ref()),
                 Some(set) => {
                     own = Compensator::new(set);
-                    (&own, set.dof())
+                    (&own, set.dof(), robot_only.as_ref())
                 }
             };
-            compensate_targets(comp, dof, &frames, &targets)
+            let g = Guard { envelope: envelope.as_ref(), allow_outside, covariance };
+            compensate_targets(comp, dof, &frames, &g, &targets)
         })
         .await?
     };
@@ -144,6 +222,7 @@ pub async fn compensate(
         parameter_set_id: compiled.row.id.clone(),
         version: compiled.row.version,
         frame,
+        validity,
         results,
         failed,
     }))

@@ -28,8 +28,12 @@ pub struct JobOut {
     /// `queued`, `running`, `succeeded`, `failed` or `cancelled`.
     #[schema(value_type = String)]
     pub state: JobState,
-    /// 0–1.
+    /// 0–1, updated about once a second while the job runs.
     pub progress: f64,
+    /// What a running job is doing now (`loading`, `selecting poses`, `identifying`,
+    /// `validating`, `fitting the current model`, `cross-validating candidate effects`, …); once it
+    /// ended, the last phase it reached.
+    pub phase: Option<String>,
     /// The request as stored (sessions resolved to ids).
     #[schema(value_type = Object)]
     pub request: Value,
@@ -56,6 +60,7 @@ pub fn job_out(j: &JobRow) -> Result<JobOut, ApiError> {
         robot_id: j.robot_id.clone(),
         state: j.state,
         progress: j.progress,
+        phase: j.phase.clone(),
         request: parse(&j.request_json)?,
         result: j
             .result_json

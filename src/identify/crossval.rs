@@ -362,6 +362,24 @@ fn shuffled(n: usize, seed: u64) -> Vec<usize> {
 
 /// Run the schemes of `opts` on `cell`.
 pub fn crossval(cell: &Cell, opts: &CrossvalOptions) -> Result<Crossval, IdentifyError> {
+    crossval_with_progress(cell, opts, &|_, _| {})
+}
+
+/// Calls its function when dropped: a tick however the closure returns.
+struct Tick<'a, F: Fn()>(&'a F);
+
+impl<F: Fn()> Drop for Tick<'_, F> {
+    fn drop(&mut self) {
+        (self.0)();
+    }
+}
+
+/// [`crossval`], calling `progress` with (fits done, fits in all) after each identification.
+pub fn crossval_with_progress(
+    cell: &Cell,
+    opts: &CrossvalOptions,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<Crossval, IdentifyError> {
     if opts.sessions.is_empty() {
         return Err(IdentifyError::Option("name at least one session to split".into()));
     }
@@ -416,6 +434,13 @@ pub fn crossval(cell: &Cell, opts: &CrossvalOptions) -> Result<Crossval, Identif
     let mut variants = vec![Variant::before(&opts.before)];
     variants.extend(opts.variants.iter().cloned());
     let all_poses: Vec<usize> = (0..n_poses).collect();
+    // Every identification the run makes, for the progress callback.
+    let total = variants.len()
+        * (if opts.folds >= 2 { opts.folds } else { 0 }
+            + opts.sizes.len() * opts.draws
+            + if opts.transfer.is_empty() { 0 } else { 1 + opts.transfer.len() });
+    let done = AtomicUsize::new(0);
+    let tick = || progress(done.fetch_add(1, Ordering::Relaxed) + 1, total);
 
     // k-fold cross-validation: fold f holds the shuffled poses f, f + k, f + 2k, …
     let mut folds = Vec::new();
@@ -440,7 +465,9 @@ pub fn crossval(cell: &Cell, opts: &CrossvalOptions) -> Result<Crossval, Identif
         let results = par_map(&jobs, opts.threads, |&(v, f)| {
             let test = &tests[f];
             let train: Vec<usize> = all_poses.iter().copied().filter(|p| test.binary_search(p).is_err()).collect();
-            split.fold_errors(cell, &train, test, &variants[v].options)
+            let r = split.fold_errors(cell, &train, test, &variants[v].options);
+            tick();
+            r
         });
         for (v, variant) in variants.iter().enumerate() {
             let mine: Vec<&Result<FoldErrors, String>> =
@@ -478,7 +505,9 @@ pub fn crossval(cell: &Cell, opts: &CrossvalOptions) -> Result<Crossval, Identif
             train.sort_unstable();
             let mut test: Vec<usize> = order[half..].to_vec();
             test.sort_unstable();
-            split.fit_and_score(cell, &train, &test, &variants[v].options).map(|r| r.0)
+            let r = split.fit_and_score(cell, &train, &test, &variants[v].options).map(|r| r.0);
+            tick();
+            r
         });
         for (v, variant) in variants.iter().enumerate() {
             for &n in &opts.sizes {
@@ -501,12 +530,15 @@ pub fn crossval(cell: &Cell, opts: &CrossvalOptions) -> Result<Crossval, Identif
         let fitted = par_map(&variants, opts.threads, |v| {
             let mut o = v.options.clone();
             o.selection.sessions = split.names.clone();
-            identify(&whole, &o).map_err(|e| e.to_string())
+            let r = identify(&whole, &o).map_err(|e| e.to_string());
+            tick();
+            r
         });
         let on = split.names.join(", ");
         let jobs: Vec<(usize, usize)> =
             (0..variants.len()).flat_map(|v| (0..opts.transfer.len()).map(move |t| (v, t))).collect();
         let results = par_map(&jobs, opts.threads, |&(v, t)| {
+            let _done = Tick(&tick);
             let id = fitted[v].as_ref().map_err(|e| format!("identification on '{on}': {e}"))?;
             let target = cell.session(&opts.transfer[t]).expect("checked above");
             let mut o = IdentifyOptions {

@@ -79,6 +79,17 @@ pub struct Obs {
     q_sc: [(f64, f64); MAX_JOINTS],
 }
 
+impl Obs {
+    /// The measured TCP position in {W} (m): the point, the ball centre, or the pose's origin.
+    pub fn measured_position(&self) -> Vector3<f64> {
+        match &self.target {
+            Target::Point(p) => *p,
+            Target::Ball { centre, .. } => *centre,
+            Target::Pose(f) => f.t,
+        }
+    }
+}
+
 /// A linear pseudo-observation Σ coef·x ≈ target on global parameters: the regularisation rows
 /// of a correction table (smoothness, zero mean, target 0) or an anchor of a parameter to a
 /// value. Appended after the measurement rows.

@@ -92,6 +92,15 @@ fn quartiles(values: &[f64]) -> Option<Quartiles> {
 
 /// Run the study on `cell`.
 pub fn study(cell: &Cell, opts: &StudyOptions) -> Result<Study, IdentifyError> {
+    study_with_progress(cell, opts, &|_, _| {})
+}
+
+/// [`study`], calling `progress` with (runs done, runs in all) after each identification.
+pub fn study_with_progress(
+    cell: &Cell,
+    opts: &StudyOptions,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<Study, IdentifyError> {
     if opts.sizes.is_empty() || opts.sets == 0 {
         return Err(IdentifyError::Option("the study needs at least one size and one set".into()));
     }
@@ -128,6 +137,7 @@ pub fn study(cell: &Cell, opts: &StudyOptions) -> Result<Study, IdentifyError> {
     }
     let jobs: Vec<(usize, usize)> = opts.sizes.iter().flat_map(|&n| (0..opts.sets).map(move |i| (n, i))).collect();
     let next = AtomicUsize::new(0);
+    let done = AtomicUsize::new(0);
     let results: Mutex<Vec<Option<StudyRun>>> = Mutex::new(vec![None; jobs.len()]);
     let one = |n: usize, set: usize| -> StudyRun {
         let seed = opts.seed.wrapping_add(1000 * n as u64 + set as u64);
@@ -171,6 +181,7 @@ pub fn study(cell: &Cell, opts: &StudyOptions) -> Result<Study, IdentifyError> {
                     let Some(&(n, set)) = jobs.get(k) else { break };
                     let r = one(n, set);
                     results.lock().expect("no worker panics while holding the lock")[k] = Some(r);
+                    progress(done.fetch_add(1, Ordering::Relaxed) + 1, jobs.len());
                 }
             });
         }

@@ -89,6 +89,8 @@ pub struct JobContext {
 /// A claimed job's lease; renewed every [`HEARTBEAT`] while it runs.
 pub const LEASE: Duration = Duration::from_secs(60);
 pub const HEARTBEAT: Duration = Duration::from_secs(10);
+/// A running job's progress and phase are written at most this often (when they changed).
+pub const PROGRESS_EVERY: Duration = Duration::from_secs(1);
 /// Idle workers look for work (and for expired leases) at least this often.
 const POLL: Duration = Duration::from_secs(2);
 
@@ -177,21 +179,28 @@ async fn run_one(
 ) {
     tracing::info!("job started");
     let started = Instant::now();
-    // Progress in thousandths, shared with the blocking solver.
+    // Progress in thousandths and the phase, shared with the blocking solver.
     let progress = Arc::new(AtomicU64::new(0));
+    let phase: Arc<std::sync::Mutex<&'static str>> = Arc::new(std::sync::Mutex::new("loading"));
+    let _ = db::jobs::progress(&state.pool, &job.id, owner, 0.0, "loading").await;
     let end = match run::load(&state.pool, job.kind, &job.robot_id, &job.request_json).await {
         Err(e) => End::Failed(e),
         Ok(inputs) => {
             progress.store(50, Ordering::Relaxed);
-            let p = progress.clone();
+            let (p, ph) = (progress.clone(), phase.clone());
             let mut task = tokio::task::spawn_blocking(move || {
-                let report = move |f: f64| {
+                let report = move |f: f64, what: &'static str| {
                     p.fetch_max((f.clamp(0.0, 1.0) * 1000.0) as u64, Ordering::Relaxed);
+                    *ph.lock().unwrap_or_else(|e| e.into_inner()) = what;
                 };
                 run::compute(inputs, &report)
             });
             let mut beat = tokio::time::interval(HEARTBEAT);
             beat.tick().await;
+            // Progress is written when it changed, at most every PROGRESS_EVERY.
+            let mut tick = tokio::time::interval(PROGRESS_EVERY);
+            tick.tick().await;
+            let mut written = (0u64, "loading");
             let mut stopping: Option<tokio::time::Instant> = None;
             loop {
                 let deadline =
@@ -203,6 +212,15 @@ async fn run_one(
                             Ok(Err(e)) => End::Failed(e),
                             Err(e) => End::Failed(JobError::Internal(format!("the solver task failed: {e}"))),
                         };
+                    }
+                    _ = tick.tick() => {
+                        let now = (progress.load(Ordering::Relaxed), *phase.lock().unwrap_or_else(|e| e.into_inner()));
+                        if now != written {
+                            match db::jobs::progress(&state.pool, &job.id, owner, now.0 as f64 / 1000.0, now.1).await {
+                                Ok(_) => written = now,
+                                Err(e) => tracing::warn!(error = %e, "recording progress"),
+                            }
+                        }
                     }
                     _ = beat.tick() => {
                         let f = progress.load(Ordering::Relaxed) as f64 / 1000.0;

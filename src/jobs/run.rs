@@ -283,8 +283,8 @@ pub fn diagnose_error(e: DiagnoseError) -> JobError {
     }
 }
 
-/// The computation (blocking). `progress` is told how far it got (0–1).
-pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64) + Sync)) -> Result<Output, JobError> {
+/// The computation (blocking). `progress` is told how far it got (0–1) and what it is doing.
+pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64, &'static str) + Sync)) -> Result<Output, JobError> {
     match inputs {
         Inputs::PosePlan { base, model, request, artefact } => pose_plan(&model, base, &request, &artefact, progress),
         Inputs::Identification { robot: _, mut request, cell, indices, excluded, session_names } => {
@@ -298,8 +298,10 @@ pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64) + Sync)) -> Result<Output
                 .collect();
             let opts = identify_options(&request, cell_si.model.dof(), session_names.clone())?;
             let select = request.select.as_ref().map(selection).transpose()?;
-            let (id, mut doc) = run_identification(&cell_si, opts, select, &|| progress(0.3))
+            progress(0.05, if select.is_some() { "selecting poses (DETMAX)" } else { "identifying" });
+            let (id, mut doc) = run_identification(&cell_si, opts, select, &|| progress(0.3, "identifying"))
                 .map_err(|e| identify_error(stored_identify_error(e, &indices)))?;
+            progress(0.95, "storing");
             stored_quality(&mut doc, &indices);
             let q = &id.quality;
             let summary = IdentificationSummary {
@@ -323,6 +325,7 @@ pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64) + Sync)) -> Result<Output
             let doc = ParameterSetDoc::from_json(&set_json)
                 .map_err(|e| JobError::Internal(format!("stored parameter set: {e}")))?;
             let cell_si = cell.to_cell().map_err(|e| JobError::domain(e, "stored cell"))?;
+            progress(0.1, "validating");
             let mut report = crate::validate::report::validate(
                 &doc.set,
                 &cell_si,
@@ -358,12 +361,15 @@ pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64) + Sync)) -> Result<Output
                 ..job.request
             };
             let opts = spec.to_options().map_err(JobError::field)?;
-            progress(0.1);
-            let d = crate::diagnose::diagnose(&input_of(&cell_si, &doc), &opts).map_err(|e| match e {
+            progress(0.05, "fitting the current model");
+            let d = crate::diagnose::diagnose_with_progress(&input_of(&cell_si, &doc), &opts, &|f, what| {
+                progress(0.05 + 0.9 * f, what)
+            })
+            .map_err(|e| match e {
                 DiagnoseError::Identify(e) => identify_error(stored_identify_error(e, &indices)),
                 other => diagnose_error(other),
             })?;
-            progress(0.9);
+            progress(0.95, "storing");
             let out = diagnosis_out(&d);
             Ok(Output::Diagnosis {
                 parameter_set_id: job.parameter_set_id,
@@ -414,7 +420,7 @@ fn pose_plan(
     base: [f64; 6],
     request: &PosePlanRequest,
     artefact: &ArtefactSpec,
-    progress: &(dyn Fn(f64) + Sync),
+    progress: &(dyn Fn(f64, &'static str) + Sync),
 ) -> Result<Output, JobError> {
     plan_poses(model, base, request, artefact, progress).map(|plan| Output::PosePlan { plan })
 }
@@ -425,12 +431,13 @@ pub fn plan_poses(
     base: [f64; 6],
     request: &PosePlanRequest,
     artefact: &ArtefactSpec,
-    progress: &(dyn Fn(f64) + Sync),
+    progress: &(dyn Fn(f64, &'static str) + Sync),
 ) -> Result<PosePlan, JobError> {
+    progress(0.05, "planning ball poses");
     let pc = planning_cell(model, base, request, artefact)?;
     let id_opts = IdentificationOptions { per_ball: request.per_ball, ..Default::default() };
     let candidates = pc.plan_identification(&id_opts, request.seed).map_err(plan_error)?;
-    progress(0.4);
+    progress(0.4, "planning ball poses");
     let mut identification = candidates.poses.clone();
     let mut selection_info = None;
     if let Some(s) = &request.select {
@@ -471,9 +478,10 @@ pub fn plan_poses(
                 order: MeasuringOrder::Unknown,
             }],
         };
+        progress(0.45, "selecting poses (DETMAX)");
         let pool = DetmaxPool::new(&cell, &IdentifyOptions::default()).map_err(identify_error)?;
         let (subset, info) = pool.select(select.n, select.index, select.seed).map_err(identify_error)?;
-        progress(0.7);
+        progress(0.7, "planning tracker poses");
         let chosen: Vec<_> = subset.iter().map(|(_, i)| identification[*i].clone()).collect();
         identification = pc.sequence(chosen).map_err(plan_error)?;
         selection_info = Some(info);

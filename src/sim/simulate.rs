@@ -69,7 +69,20 @@ pub enum SimulateError {
 }
 
 pub fn simulate(opts: &SimulateOptions) -> Result<Simulated, SimulateError> {
+    simulate_with_progress(opts, &|_, _, _| {})
+}
+
+/// The stages of [`simulate`], for progress reports.
+pub const SIMULATE_STAGES: usize = 3;
+
+/// [`simulate`], calling `progress` with (stages done, [`SIMULATE_STAGES`], the next stage) as it
+/// goes: planning the ball poses, planning the tracker poses, measuring.
+pub fn simulate_with_progress(
+    opts: &SimulateOptions,
+    progress: &dyn Fn(usize, usize, &str),
+) -> Result<Simulated, SimulateError> {
     let layout = &opts.layout;
+    progress(0, SIMULATE_STAGES, "planning ball poses");
     let truth = match &opts.truth {
         Some(t) => {
             if t.set.model.links.len() != layout.robot.links.len() || t.set.model.preset != layout.robot.preset {
@@ -86,7 +99,9 @@ pub fn simulate(opts: &SimulateOptions) -> Result<Simulated, SimulateError> {
         .iter()
         .map(|p| BallPose { q: p.q, ball: p.ball.expect("identification poses have a ball") })
         .collect();
+    progress(1, SIMULATE_STAGES, "planning tracker poses");
     let planned = plan_validation(layout, opts.validation, opts.seed)?;
+    progress(2, SIMULATE_STAGES, "measuring");
     let nests: Vec<NestPose> = if opts.all_nests {
         let pc = PlanningCell::new(layout)?;
         planned.iter().flat_map(|p| pc.visible_nests(&p.q).into_iter().map(|nest| NestPose { q: p.q, nest })).collect()
@@ -116,5 +131,6 @@ pub fn simulate(opts: &SimulateOptions) -> Result<Simulated, SimulateError> {
         record_indicators: opts.record_indicators,
     };
     let (cell, run) = measure(&truth, &rig, &layout.home, &balls, &nests, opts.seed)?;
+    progress(3, SIMULATE_STAGES, "done");
     Ok(Simulated { cell, truth, run })
 }

@@ -91,6 +91,41 @@ pub struct Residual {
     pub distance_to_zone: Option<f64>,
 }
 
+/// The joint ranges and the box of {W} a set of measurements covers (SI): the region where a
+/// validation has shown the model to hold.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Region {
+    /// Per joint, [min, max], rad.
+    pub joints: Vec<[f64; 2]>,
+    /// The positions' box: lower and upper corners, m.
+    pub lo: Vector3<f64>,
+    pub hi: Vector3<f64>,
+    pub n: usize,
+}
+
+impl Region {
+    /// The region of (joints, position) pairs; `None` without any.
+    pub fn of<'a>(points: impl IntoIterator<Item = (&'a [f64], Vector3<f64>)>) -> Option<Region> {
+        let mut r: Option<Region> = None;
+        for (q, p) in points {
+            let r = r.get_or_insert_with(|| Region {
+                joints: vec![[f64::INFINITY, f64::NEG_INFINITY]; q.len()],
+                lo: Vector3::repeat(f64::INFINITY),
+                hi: Vector3::repeat(f64::NEG_INFINITY),
+                n: 0,
+            });
+            for (range, &v) in r.joints.iter_mut().zip(q) {
+                range[0] = range[0].min(v);
+                range[1] = range[1].max(v);
+            }
+            r.lo = r.lo.inf(&p);
+            r.hi = r.hi.sup(&p);
+            r.n += 1;
+        }
+        r
+    }
+}
+
 /// The validation of one parameter set on selected sessions.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ValidationReport {
@@ -108,6 +143,9 @@ pub struct ValidationReport {
     pub per_session: Vec<SessionErrors>,
     /// One per measurement, sessions in selection order, measurements in file order.
     pub residuals: Vec<Residual>,
+    /// The region the validation-purpose (held-out) sessions' measurements cover: where this
+    /// validation shows the model to hold. `None` without such a session.
+    pub region: Option<Region>,
 }
 
 /// One session's share of a validation: both models' errors over its measurements.
@@ -182,6 +220,7 @@ pub fn validate(
     let base_origin = set.chain().base().t;
     let zone = cell.artefact.as_ref().map(|a| a.triangle.centroid());
     let mut residuals = Vec::new();
+    let mut held_out: Vec<(&[f64], Vector3<f64>)> = Vec::new();
     for session in &selected {
         let truth = match reference {
             Reference::Measured => None,
@@ -229,6 +268,9 @@ pub fn validate(
             if !(error.iter().chain(nominal_error.iter()).all(|v| v.is_finite())) {
                 return Err(ValidateError::NotFinite { session: session.name.clone(), index });
             }
+            if session.purpose == Purpose::Validation {
+                held_out.push((&m.q[..], reference_position));
+            }
             residuals.push(Residual {
                 session: session.name.clone(),
                 index,
@@ -266,6 +308,7 @@ pub fn validate(
         nominal: model_errors(&residuals, nominal),
         per_session,
         residuals,
+        region: Region::of(held_out),
     })
 }
 
