@@ -16,8 +16,11 @@ need() { command -v "$1" >/dev/null 2>&1; }
 if ! need chromium; then $SUDO apt-get update -qq && $SUDO apt-get install -y -qq chromium >/dev/null; fi
 if ! need curl || ! need jq; then $SUDO apt-get update -qq && $SUDO apt-get install -y -qq curl jq >/dev/null; fi
 
-cargo build --release --locked --quiet
-BIN=$(realpath "${CARGO_TARGET_DIR:-target}")/release/robocal
+# The robocal binary: $ROBOCAL when set, else cargo's release build.
+if [[ -n "${ROBOCAL:-}" ]]; then BIN=$(realpath "$ROBOCAL"); else
+  cargo build --release --locked --quiet
+  BIN=$(realpath "${CARGO_TARGET_DIR:-target}")/release/robocal
+fi
 tmp=$(mktemp -d)
 PORT=$(python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
 API=http://127.0.0.1:$PORT
