@@ -101,9 +101,13 @@ pub fn quality_rows(quality: &Value) -> Vec<Vec<String>> {
     rows
 }
 
-/// The parameters with an uncertainty, grouped by unit: (unit, names, (change, 95 % half-width)).
-pub fn error_bar_groups(set: &ParameterSetFile) -> Vec<(String, Vec<String>, Vec<(f64, f64)>)> {
-    let mut groups: Vec<(String, Vec<String>, Vec<(f64, f64)>)> = Vec::new();
+/// The parameters of one unit that carry an uncertainty: the unit, their names, and per
+/// parameter (change from nominal, 95 % half-width).
+pub type BarGroup = (String, Vec<String>, Vec<(f64, f64)>);
+
+/// The parameters with an uncertainty, grouped by unit.
+pub fn error_bar_groups(set: &ParameterSetFile) -> Vec<BarGroup> {
+    let mut groups: Vec<BarGroup> = Vec::new();
     for p in &set.parameters {
         let (Some(s), Some(n)) = (p.std, p.nominal) else { continue };
         let unit = p.unit.clone().unwrap_or_default();

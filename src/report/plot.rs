@@ -694,7 +694,7 @@ pub fn stacked_bars_svg(title: &str, x_desc: &str, rows: &[(String, Vec<Segment>
                 (FONT, 13).into_font(),
             )))?;
         }
-        legend(&mut chart, SeriesLabelPosition::LowerRight)?;
+        legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         Ok(())
     })
 }
