@@ -24,6 +24,7 @@ pub mod import;
 pub mod jobs;
 pub mod kinematics;
 pub mod metrology;
+pub mod report;
 pub mod server;
 pub mod sim;
 pub mod units;

@@ -4,7 +4,10 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use super::{CliError, DetmaxArgs, OutputFormat, list, load_cell, option_error, read, write, write_or_return};
+use super::{
+    CliError, DetmaxArgs, OutputFormat, list, load_cell, option_error, read, write, write_or_return, write_report,
+    wrote,
+};
 use crate::domain::ParameterSetDoc;
 use crate::units::MM;
 
@@ -60,6 +63,9 @@ pub struct IdentifyArgs {
     pub residual_ratio_limit: f64,
     #[arg(long)]
     pub out: PathBuf,
+    /// Also write the identification's HTML report here (quality, parameters with error bars).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -80,6 +86,10 @@ pub struct ValidateArgs {
     /// Write the JSON report here (the table is still printed on a terminal).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Write the HTML report here (before/after table, error distributions, error against
+    /// distance, the poses shaded by error).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
     /// `text`: the before/after table and per-axis statistics; `json`: the full report; `auto`: the
     /// table on a terminal, JSON when piped.
     #[arg(long, value_enum, default_value_t)]
@@ -130,6 +140,11 @@ pub(super) fn identify(a: IdentifyArgs) -> Result<String, CliError> {
     let (id, doc) = run_identification(&cell, opts, select, &|| ()).map_err(|e| CliError::msg(e.to_string()))?;
     let q = &id.quality;
     write(&a.out, &doc.to_json_pretty())?;
+    let mut reported = String::new();
+    if let Some(path) = &a.report {
+        write_report(path, &crate::report::parameter_set_report(&doc.to_file(), None))?;
+        reported = format!("\nwrote {}", path.display());
+    }
     Ok(format!(
         "wrote {}: {} parameters identified from {} measurements in {} iterations; κ {:.1} (scaled) / {:.1} (SI), O1 {:.4}, residual RMS {:.4} mm ({:.1} times the {:.4} mm the instrument predicts)",
         a.out.display(),
@@ -142,7 +157,7 @@ pub(super) fn identify(a: IdentifyArgs) -> Result<String, CliError> {
         q.rms_residual / MM,
         q.residual_ratio,
         q.expected_rms / MM
-    ))
+    ) + &reported)
 }
 
 pub(super) fn validate(a: ValidateArgs) -> Result<String, CliError> {
@@ -166,13 +181,31 @@ pub(super) fn validate(a: ValidateArgs) -> Result<String, CliError> {
     let report = validate(&doc.set, &cell, &sessions, reference).map_err(|e| validate_error(&a, e))?;
     let json =
         serde_json::to_string_pretty(&crate::domain::validation::report_to_json(&report, a.residuals)).expect("json");
+    if let Some(path) = &a.report {
+        // The report draws every measurement: its document carries the residuals, as the
+        // service stores them.
+        let full = crate::domain::validation::report_to_json(&report, true);
+        let doc = crate::report::ValidationDoc::from_value(&full).map_err(CliError::msg)?;
+        write_report(path, &crate::report::validation_report(&doc))?;
+        // On stderr when the JSON goes to stdout, so stdout stays the report alone.
+        if !a.format.text(a.json) && a.out.is_none() {
+            eprintln!("wrote {}", path.display());
+        }
+    }
     if !a.format.text(a.json) {
-        return write_or_return(&a.out, json);
+        let text = write_or_return(&a.out, json)?;
+        return Ok(match (&a.report, &a.out) {
+            (Some(path), Some(_)) => text.clone() + &wrote(&text, path),
+            _ => text,
+        });
     }
     let mut text = super::validation_text::text(&crate::domain::validation::ValidationOut::from_report(&report, false));
     if let Some(out) = &a.out {
         write(out, &json)?;
         text.push_str(&format!("\nwrote {}", out.display()));
+    }
+    if let Some(path) = &a.report {
+        text.push_str(&format!("\nwrote {}", path.display()));
     }
     Ok(text)
 }
@@ -261,6 +294,9 @@ pub struct DiagnoseArgs {
     /// Write the diagnosis (JSON) here instead of printing it.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Write the HTML report here (verdict, decomposition, candidates, residual profiles, shrink).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
     /// Accept the named effects: write the parameter set of the extended model here (fitted on
     /// the identification and validation sessions together). Fails when no effect is named.
     #[arg(long)]
@@ -306,6 +342,11 @@ pub(super) fn diagnose(a: DiagnoseArgs) -> Result<String, CliError> {
     let diag = crate::diagnose::diagnose(&input, &opts).map_err(|e| CliError::msg(e.to_string()))?;
     let out = diagnosis_out(&diag);
     let json = serde_json::to_string_pretty(&out).expect("json");
+    if let Some(path) = &a.report {
+        write_report(path, &crate::report::diagnosis_report(&out))?;
+        // On stderr: stdout stays the report alone, parseable as JSON.
+        eprintln!("wrote {}", path.display());
+    }
     let text = match &a.out {
         Some(p) => {
             write(p, &json)?;

@@ -6,7 +6,7 @@ use clap::Args;
 
 use super::progress::Progress;
 use super::reports::{CrossvalReport, StudyReport};
-use super::{CliError, DetmaxArgs, ThreadsArgs, list, load_cell, option_error, write};
+use super::{CliError, DetmaxArgs, ThreadsArgs, list, load_cell, option_error, write, write_report, wrote};
 
 #[derive(Args, Debug)]
 pub struct StudyArgs {
@@ -41,6 +41,9 @@ pub struct StudyArgs {
     /// Write every identification's result and the per-size quartiles as JSON here.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Write the HTML report here (box plots per set size, the quartile table).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -98,6 +101,9 @@ pub struct CrossvalArgs {
     /// Write the full result as JSON here.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Write the HTML report here (learning curves, k-fold and transfer tables).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
 }
 
 pub(super) fn study(a: StudyArgs) -> Result<String, CliError> {
@@ -133,6 +139,10 @@ pub(super) fn study(a: StudyArgs) -> Result<String, CliError> {
     if let Some(out) = &a.out {
         write(out, &serde_json::to_string_pretty(&report).expect("json"))?;
         text.push_str(&format!("wrote {}", out.display()));
+    }
+    if let Some(path) = &a.report {
+        write_report(path, &crate::report::study_report(&st))?;
+        text.push_str(&wrote(&text, path));
     }
     let text = text.trim_end().to_string();
     // Refused fits are part of a study's result (the table counts them); a study none of whose
@@ -207,6 +217,10 @@ pub(super) fn crossval(a: CrossvalArgs) -> Result<String, CliError> {
     if let Some(out) = &a.out {
         write(out, &serde_json::to_string_pretty(&report).expect("json"))?;
         text.push_str(&format!("wrote {}", out.display()));
+    }
+    if let Some(path) = &a.report {
+        write_report(path, &crate::report::crossval_report(&cv))?;
+        text.push_str(&wrote(&text, path));
     }
     Ok(text.trim_end().to_string())
 }

@@ -201,6 +201,17 @@ fn write(path: &Path, text: &str) -> Result<(), CliError> {
     fs::write(path, format!("{text}\n")).map_err(|e| CliError::msg(format!("{}: cannot write: {e}", path.display())))
 }
 
+/// Write an HTML report as rendered: the same bytes the service answers.
+fn write_report(path: &Path, html: &str) -> Result<(), CliError> {
+    fs::write(path, html).map_err(|e| CliError::msg(format!("{}: cannot write: {e}", path.display())))
+}
+
+/// "wrote path" on a line of its own after `text`.
+fn wrote(text: &str, path: &Path) -> String {
+    let sep = if text.is_empty() || text.ends_with('\n') { "" } else { "\n" };
+    format!("{sep}wrote {}", path.display())
+}
+
 fn write_or_return(out: &Option<PathBuf>, text: String) -> Result<String, CliError> {
     match out {
         Some(p) => {

@@ -198,7 +198,7 @@ pub fn input_of<'a>(cell: &'a crate::cell::Cell, doc: &'a ParameterSetDoc) -> In
 
 // ---- the report ----
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct DiagnosisOut {
     pub verdict: VerdictOut,
     pub decomposition: DecompositionOut,
@@ -220,7 +220,7 @@ pub struct DiagnosisOut {
     pub notes: Vec<String>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct TransferOut {
     pub session: String,
     /// `start` or `final`.
@@ -230,7 +230,7 @@ pub struct TransferOut {
     pub kappa_scaled: Option<f64>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct SessionsOut {
     pub identification: Vec<String>,
     pub validation: Vec<String>,
@@ -239,7 +239,7 @@ pub struct SessionsOut {
     pub folds: usize,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct VerdictOut {
     /// `named`, `none`, `not_separable` or `unknown_effect`.
     pub status: String,
@@ -259,13 +259,13 @@ pub struct VerdictOut {
     pub approach_source: Option<String>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct RemainingOut {
     pub status: String,
     pub summary: String,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct AbsorbedOut {
     pub parameter: String,
     /// Share of the candidate the parameter absorbs.
@@ -273,7 +273,7 @@ pub struct AbsorbedOut {
 }
 
 /// Which candidate: kind and place.
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct CandidateRef {
     /// hayati_beta, compliance, compliance_cubic, cyclic, joint_map, backlash, thermal, coupling,
     /// tool_mass, base, tool.
@@ -294,7 +294,7 @@ pub struct CandidateRef {
     pub step_deg: Option<u8>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct EffectOut {
     #[serde(flatten)]
     pub which: CandidateRef,
@@ -314,7 +314,7 @@ pub struct EffectOut {
     pub separability: f64,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct ParamOut {
     pub name: String,
     pub estimate: f64,
@@ -324,14 +324,14 @@ pub struct ParamOut {
 
 /// Error magnitudes over `n` poses: the validation report's figures (mean, median, std, RMS, p95,
 /// max in mm) with their count.
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct StatsOut {
     pub n: usize,
     #[serde(flatten)]
     pub figures: ErrorFigures,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct FloorOut {
     pub mean_mm: f64,
     pub rms_mm: f64,
@@ -342,7 +342,7 @@ pub struct FloorOut {
     pub prediction_rms_mm: f64,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct DecompositionOut {
     /// The parameter set as given, on the validation poses (no refit).
     pub calibrated: Option<StatsOut>,
@@ -356,21 +356,21 @@ pub struct DecompositionOut {
     pub unmodelled_gap_mm: f64,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct AxisOut {
     pub mean_mm: f64,
     pub std_mm: f64,
     pub shapiro_p: Option<f64>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct PerAxisOut {
     pub x: AxisOut,
     pub y: AxisOut,
     pub z: AxisOut,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct BinOut {
     /// Bin centre in the variable's unit.
     pub at: f64,
@@ -378,7 +378,7 @@ pub struct BinOut {
     pub n: usize,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct AgainstOut {
     /// distance_to_base, distance_to_zone, distance_to_nearest_calibration,
     /// joint_distance_to_nearest_calibration, q1…, tau1…, sigma_pred.
@@ -393,7 +393,7 @@ pub struct AgainstOut {
     pub profile: Vec<BinOut>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct VoxelOut {
     pub centre_mm: [f64; 3],
     pub n: usize,
@@ -404,7 +404,7 @@ pub struct VoxelOut {
     pub q: f64,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct VoxelsOut {
     pub size_mm: f64,
     pub tested: usize,
@@ -412,7 +412,7 @@ pub struct VoxelsOut {
     pub above_floor: Vec<VoxelOut>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct WhereOut {
     /// The residuals used: held-out errors of the starting model at the tested poses.
     pub n: usize,
@@ -421,7 +421,7 @@ pub struct WhereOut {
     pub voxels: VoxelsOut,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct HeldoutOut {
     pub gain_mean_mm: f64,
     pub gain_rms_mm: f64,
@@ -431,7 +431,7 @@ pub struct HeldoutOut {
     pub confirmed: bool,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct CandidateOut {
     /// Search round (1-based).
     pub round: usize,
@@ -452,7 +452,7 @@ pub struct CandidateOut {
     pub absorbed_by: Vec<AbsorbedOut>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct ShrinkOut {
     /// `start`, then `start + …` with each accepted effect.
     pub model: String,
@@ -466,7 +466,7 @@ pub struct ShrinkOut {
     pub gap_closure: Option<f64>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct RoundOut {
     pub round: usize,
     /// `accept`, `nothing`, `not_separable` or `unknown_effect`.
@@ -477,7 +477,7 @@ pub struct RoundOut {
     pub smoother_p: Option<f64>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct UnavailableOut {
     pub name: String,
     pub reason: String,

@@ -32,6 +32,9 @@ pub struct ValidationOut {
     pub validated_envelope: Option<super::validity::EnvelopeFile>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub residuals: Option<Vec<ResidualOut>>,
+    /// The artefact's ball centres in {W} (the calibration zone), when the cell has one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub balls_mm: Option<[[f64; 3]; 3]>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -152,6 +155,8 @@ pub struct ResidualOut {
     pub orientation_error_mrad: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub nominal_orientation_error_mrad: Option<f64>,
+    /// The reference position (measured or true), {W}.
+    pub position_mm: [f64; 3],
     pub distance_to_base_mm: f64,
     pub distance_to_zone_mm: Option<f64>,
 }
@@ -167,6 +172,7 @@ impl ValidationOut {
             per_session: r.per_session.iter().map(SessionErrorsOut::from_errors).collect(),
             validated_envelope: r.region.as_ref().map(|g| super::validity::Envelope::of_region(g).file().clone()),
             residuals: include_residuals.then(|| r.residuals.iter().map(ResidualOut::from_residual).collect()),
+            balls_mm: r.balls.map(|b| b.map(|c| [c.x / MM, c.y / MM, c.z / MM])),
         }
     }
 }
@@ -250,6 +256,7 @@ impl ResidualOut {
             nominal_error_norm_mm: r.nominal_error.norm() / MM,
             orientation_error_mrad: r.orientation_error.map(|a| a / MRAD),
             nominal_orientation_error_mrad: r.nominal_orientation_error.map(|a| a / MRAD),
+            position_mm: mm(&r.position),
             distance_to_base_mm: r.distance_to_base / MM,
             distance_to_zone_mm: r.distance_to_zone.map(|d| d / MM),
         }

@@ -16,6 +16,7 @@ pub mod ops;
 pub mod paging;
 pub mod parameter_sets;
 pub mod plans;
+pub mod reports;
 pub mod robots;
 pub mod sessions;
 pub mod tokens;
@@ -106,6 +107,9 @@ fn api_router() -> OpenApiRouter<AppState> {
         .routes(routes!(identifications::create))
         .routes(routes!(validations::create))
         .routes(routes!(validations::get))
+        .routes(routes!(reports::validation))
+        .routes(routes!(reports::parameter_set))
+        .routes(routes!(reports::diagnosis))
         .routes(routes!(diagnoses::create, diagnoses::list))
         .routes(routes!(diagnoses::get))
         .routes(routes!(diagnoses::accept))

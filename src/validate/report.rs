@@ -85,6 +85,8 @@ pub struct Residual {
     /// Angle of R_ref·R_modelᵀ, rad (pose observations against the measured reference only).
     pub orientation_error: Option<f64>,
     pub nominal_orientation_error: Option<f64>,
+    /// The reference position, {W}, m.
+    pub position: Vector3<f64>,
     /// Distance of the reference position to the base origin, m.
     pub distance_to_base: f64,
     /// Distance of the reference position to the ball centroid, m.
@@ -146,6 +148,8 @@ pub struct ValidationReport {
     /// The region the validation-purpose (held-out) sessions' measurements cover: where this
     /// validation shows the model to hold. `None` without such a session.
     pub region: Option<Region>,
+    /// The artefact's ball centres in {W}, m (the calibration zone), when the cell has one.
+    pub balls: Option<[Vector3<f64>; 3]>,
 }
 
 /// One session's share of a validation: both models' errors over its measurements.
@@ -278,6 +282,7 @@ pub fn validate(
                 nominal_error,
                 orientation_error: reference_rotation.map(|r| rotation_angle(&(r * cal.r.transpose()))),
                 nominal_orientation_error: reference_rotation.map(|r| rotation_angle(&(r * nom.r.transpose()))),
+                position: reference_position,
                 distance_to_base: (reference_position - base_origin).norm(),
                 distance_to_zone: zone.map(|z| (reference_position - z).norm()),
             });
@@ -309,6 +314,7 @@ pub fn validate(
         per_session,
         residuals,
         region: Region::of(held_out),
+        balls: cell.artefact.as_ref().map(|a| *a.triangle.centres()),
     })
 }
 

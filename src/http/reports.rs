@@ -1,0 +1,174 @@
+//! HTML reports of stored results (issue 15): a validation, a parameter set (its identification's
+//! quality, parameters with error bars and its latest validation) and a diagnosis, each one
+//! self-contained `text/html` page (inline CSS and SVG; nothing fetched), rendered by
+//! `crate::report` from the stored documents — the same calls `robocal … --report` makes on the
+//! same documents, so both give the same page.
+//!
+//! Content negotiation: a client whose `Accept` admits HTML (or says nothing) gets the page; one
+//! that accepts only other types (`application/json`) gets 406 as problem+json.
+
+use axum::extract::{Path, State};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde_json::Value;
+
+use super::error::PROBLEM_JSON;
+use super::extract::{Authorized, READ};
+use super::{ApiError, AppState, Problem};
+use crate::db::records;
+use crate::domain::ParameterSetFile;
+use crate::domain::diagnosis::DiagnosisOut;
+use crate::report::{self, ValidationDoc};
+
+/// Whether `Accept` admits `text/html`: absent, or a range `text/html`, `text/*` or `*/*` with a
+/// non-zero q.
+pub fn accepts_html(headers: &HeaderMap) -> bool {
+    let values: Vec<&str> = headers.get_all(header::ACCEPT).iter().filter_map(|v| v.to_str().ok()).collect();
+    if values.is_empty() {
+        return true;
+    }
+    values.iter().flat_map(|v| v.split(',')).any(|range| {
+        let mut parts = range.split(';').map(str::trim);
+        let media = parts.next().unwrap_or("").to_ascii_lowercase();
+        let q = parts
+            .filter_map(|p| p.strip_prefix("q=").or_else(|| p.strip_prefix("Q=")))
+            .filter_map(|q| q.trim().parse::<f64>().ok())
+            .next()
+            .unwrap_or(1.0);
+        q > 0.0 && matches!(media.as_str(), "text/html" | "text/*" | "*/*")
+    })
+}
+
+fn not_acceptable() -> Response {
+    let problem = Problem {
+        type_: "urn:robocal:problem:not-acceptable".into(),
+        title: "Not acceptable".into(),
+        status: 406,
+        detail: Some("this resource is an HTML report: accept text/html".into()),
+        field: None,
+        hint: Some("the same figures as JSON are at the resource without /report".into()),
+    };
+    let body = serde_json::to_vec(&problem).expect("problem serialises");
+    (StatusCode::NOT_ACCEPTABLE, [(header::CONTENT_TYPE, HeaderValue::from_static(PROBLEM_JSON))], body).into_response()
+}
+
+fn html(page: String) -> Response {
+    (
+        StatusCode::OK,
+        [
+            (header::CONTENT_TYPE, HeaderValue::from_static("text/html; charset=utf-8")),
+            // The report draws everything inline: forbid the page any fetch and any script.
+            (
+                header::CONTENT_SECURITY_POLICY,
+                HeaderValue::from_static("default-src 'none'; style-src 'unsafe-inline'; img-src data:"),
+            ),
+        ],
+        page,
+    )
+        .into_response()
+}
+
+fn stored<T: serde::de::DeserializeOwned>(json: &str, what: &str) -> Result<T, ApiError> {
+    serde_json::from_str(json).map_err(|e| ApiError::Internal(format!("stored {what}: {e}")))
+}
+
+fn validation_doc(row: &records::ValidationRow) -> Result<ValidationDoc, ApiError> {
+    let v: Value = stored(&row.report_json, "validation")?;
+    ValidationDoc::from_value(&v).map_err(|e| ApiError::Internal(format!("validation {}: {e}", row.id)))
+}
+
+/// A validation's report.
+#[utoipa::path(get, path = "/v1/validations/{validation_id}/report", tag = "validations",
+    params(("validation_id" = String, Path, description = "Validation id")),
+    responses(
+        (status = 200, description = "The validation report: before/after table, per-axis statistics, error distributions (histogram, CDF, Q–Q), error against distance, the poses shaded by error; self-contained HTML", body = String, content_type = "text/html"),
+        (status = 404, description = "Unknown validation (a validation exists once its job has succeeded)", body = super::Problem, content_type = "application/problem+json"),
+        (status = 406, description = "The client accepts no HTML", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn validation(
+    State(state): State<AppState>,
+    _auth: Authorized<READ>,
+    headers: HeaderMap,
+    Path(validation_id): Path<String>,
+) -> Result<Response, ApiError> {
+    if !accepts_html(&headers) {
+        return Ok(not_acceptable());
+    }
+    let row = records::validation(&state.pool, &validation_id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("validation", &validation_id))?;
+    let doc = validation_doc(&row)?;
+    Ok(html(report::validation_report(&doc)))
+}
+
+/// A parameter set's report: its identification (or import) and its latest validation.
+#[utoipa::path(get, path = "/v1/parameter-sets/{set_id}/report", tag = "parameter-sets",
+    params(("set_id" = String, Path, description = "Parameter set id")),
+    responses(
+        (status = 200, description = "The identification report: quality (κ, O1, residual), parameters with their change from nominal and 95 % error bars, and the latest validation of the set when there is one; self-contained HTML", body = String, content_type = "text/html"),
+        (status = 404, description = "Unknown parameter set (a parameter set exists once its identification job has succeeded)", body = super::Problem, content_type = "application/problem+json"),
+        (status = 406, description = "The client accepts no HTML", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn parameter_set(
+    State(state): State<AppState>,
+    _auth: Authorized<READ>,
+    headers: HeaderMap,
+    Path(set_id): Path<String>,
+) -> Result<Response, ApiError> {
+    if !accepts_html(&headers) {
+        return Ok(not_acceptable());
+    }
+    let row = records::parameter_set(&state.pool, &set_id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("parameter set", &set_id))?;
+    let set: ParameterSetFile = stored(&row.doc_json, "parameter set")?;
+    let latest = records::validations_of_set(&state.pool, &set_id).await?;
+    let validation = latest.first().map(validation_doc).transpose()?;
+    Ok(html(report::parameter_set_report(&set, validation.as_ref())))
+}
+
+/// A diagnosis's report.
+#[utoipa::path(get, path = "/v1/diagnoses/{diagnosis_id}/report", tag = "diagnoses",
+    params(("diagnosis_id" = String, Path, description = "Diagnosis id")),
+    responses(
+        (status = 200, description = "The diagnosis report: verdict, decomposition bar, candidates, residual profiles, voxels above the floor, shrink table; self-contained HTML", body = String, content_type = "text/html"),
+        (status = 404, description = "Unknown diagnosis (a diagnosis exists once its job has succeeded)", body = super::Problem, content_type = "application/problem+json"),
+        (status = 406, description = "The client accepts no HTML", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = [])))]
+pub async fn diagnosis(
+    State(state): State<AppState>,
+    _auth: Authorized<READ>,
+    headers: HeaderMap,
+    Path(diagnosis_id): Path<String>,
+) -> Result<Response, ApiError> {
+    if !accepts_html(&headers) {
+        return Ok(not_acceptable());
+    }
+    let row = records::diagnosis(&state.pool, &diagnosis_id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("diagnosis", &diagnosis_id))?;
+    let d: DiagnosisOut = stored(&row.report_json, "diagnosis")?;
+    Ok(html(report::diagnosis_report(&d)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn accept(v: &str) -> bool {
+        let mut h = HeaderMap::new();
+        h.insert(header::ACCEPT, HeaderValue::from_str(v).unwrap());
+        accepts_html(&h)
+    }
+
+    #[test]
+    fn negotiation() {
+        assert!(accepts_html(&HeaderMap::new()));
+        assert!(accept("text/html,application/xhtml+xml,application/xml;q=0.9,*/*;q=0.8"));
+        assert!(accept("*/*"));
+        assert!(accept("application/json, text/*;q=0.5"));
+        assert!(!accept("application/json"));
+        assert!(!accept("application/json, application/problem+json"));
+        assert!(!accept("text/html;q=0, application/json"));
+    }
+}

@@ -1,0 +1,314 @@
+//! The diagnosis report (issue 11): the verdict, the decomposition of the held-out error (noise
+//! floor, what the named effects explain, what remains unexplained, and the extrapolation gap of
+//! the set as given), the candidate table, where the model misses (binned error profiles against
+//! each variable, the voxels above the floor) and the shrink table. Its input is the diagnosis's
+//! wire form, `domain::diagnosis::DiagnosisOut`, as `robocal diagnose` writes it and the service
+//! stores it.
+
+use super::html::{esc, figure, fixed, mm, opt, p_value, page, sig, table};
+use super::plot::{self, Panel, Segment};
+use crate::domain::diagnosis::{CandidateRef, DiagnosisOut};
+
+/// The decomposition, mm: (label, segments) rows of the stacked bar.
+///
+/// Held-out error of the starting model (mean |e|) = noise floor + explained by the named effects
+/// (start − final held-out mean) + unexplained (final − floor); the set as given on the validation
+/// poses adds the extrapolation gap (calibrated − held-out) when that is positive.
+pub fn decomposition_rows(d: &DiagnosisOut) -> Vec<(String, Vec<Segment>)> {
+    let dec = &d.decomposition;
+    let start = dec.heldout.figures.mean_mm;
+    let floor = dec.floor.mean_mm.min(start);
+    let last = d.shrink.last().map_or(start, |s| s.mean_mm).clamp(floor, start);
+    let seg = |label: &str, length: f64, shade: usize| Segment { label: label.into(), length, shade };
+    let mut rows = vec![(
+        "held-out, starting model".to_string(),
+        vec![
+            seg("noise floor", floor, 0),
+            seg("unexplained", last - floor, 2),
+            seg("explained by the named effects", start - last, 1),
+        ],
+    )];
+    if let Some(c) = &dec.calibrated {
+        let cal = c.figures.mean_mm;
+        let mut segments = vec![seg("held-out, starting model", cal.min(start), 3)];
+        if cal > start {
+            segments.push(seg("extrapolation gap", cal - start, 1));
+        }
+        rows.push(("calibrated, as given".to_string(), segments));
+    }
+    rows
+}
+
+fn candidate_name(c: &CandidateRef) -> String {
+    esc(&c.label)
+}
+
+/// The diagnosis's sections.
+pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
+    let mut s = String::new();
+    let v = &d.verdict;
+    s.push_str(&format!(
+        "<p class=\"meta\">Identification sessions: {}; tested poses: {} ({}-fold grouped cross-validation).</p>",
+        esc(&d.sessions.identification.join(", ")),
+        esc(&if d.sessions.validation.is_empty() {
+            d.sessions.identification.join(", ")
+        } else {
+            d.sessions.validation.join(", ")
+        }),
+        d.sessions.folds
+    ));
+    s.push_str("<h2>Verdict</h2>");
+    s.push_str(&format!("<p><strong>{}</strong>: {}</p>", esc(&v.status), esc(&v.summary)));
+    if !v.effects.is_empty() {
+        let rows: Vec<Vec<String>> = v
+            .effects
+            .iter()
+            .map(|e| {
+                vec![
+                    esc(&e.which.label),
+                    format!("{} {}", opt(e.estimate, 4), esc(&e.unit)),
+                    e.std.map_or("—".into(), |x| format!("{} {}", fixed(x, 4), esc(&e.unit))),
+                    mm(e.gain_mean_mm),
+                    mm(e.gain_rms_mm),
+                    e.confirm_p.map_or("—".into(), p_value),
+                    fixed(e.screen_log10_p, 1),
+                    fixed(e.separability, 3),
+                ]
+            })
+            .collect();
+        s.push_str(&table(
+            "Named effects",
+            &["effect", "estimate", "σ", "gain mean (mm)", "gain RMS (mm)", "confirm p", "log10 p (Holm)", "ρ"],
+            &rows,
+            &[false, true, true, true, true, true, true, true],
+        ));
+    }
+    if let Some(r) = &v.remaining {
+        s.push_str(&format!("<p>What remains: <strong>{}</strong> — {}</p>", esc(&r.status), esc(&r.summary)));
+    }
+    if let Some(x) = &v.experiment {
+        s.push_str(&format!("<p class=\"note\">Experiment that would separate it: {}</p>", esc(x)));
+    }
+    s.push_str(&format!("<p>Final model: <code>{}</code></p>", esc(&d.model)));
+
+    s.push_str("<h2>Decomposition of the error</h2>");
+    let dec = &d.decomposition;
+    let rows = decomposition_rows(d);
+    s.push_str(&figure(
+        &plot::stacked_bars_svg("Mean |e| decomposed", "mean |e| (mm)", &rows),
+        "The starting model's held-out mean error split into the noise floor (instrument and repeatability), what \
+         the named effects explain and what stays unexplained; below, the set as given on the tested poses.",
+    ));
+    let mut t = vec![
+        vec![
+            "held-out, starting model".into(),
+            dec.heldout.n.to_string(),
+            mm(dec.heldout.figures.mean_mm),
+            mm(dec.heldout.figures.rms_mm),
+            mm(dec.heldout.figures.p95_mm),
+        ],
+        vec!["noise floor".into(), "".into(), mm(dec.floor.mean_mm), mm(dec.floor.rms_mm), mm(dec.floor.p95_mm)],
+    ];
+    if let Some(c) = &dec.calibrated {
+        t.insert(
+            0,
+            vec![
+                "calibrated, as given".into(),
+                c.n.to_string(),
+                mm(c.figures.mean_mm),
+                mm(c.figures.rms_mm),
+                mm(c.figures.p95_mm),
+            ],
+        );
+    }
+    s.push_str(&table(
+        "Error figures, mm",
+        &["model", "n", "mean (mm)", "RMS (mm)", "p95 (mm)"],
+        &t,
+        &[false, true, true, true, true],
+    ));
+    s.push_str(&format!(
+        "<p>Unmodelled gap (held-out − floor): {} mm; extrapolation gap (calibrated − held-out): {} mm; \
+         instrument σ per axis {} mm; prediction RMS from the covariance {} mm.</p>",
+        mm(dec.unmodelled_gap_mm),
+        dec.extrapolation_gap_mm.map_or("—".into(), mm),
+        mm(dec.floor.instrument_sigma_mm),
+        mm(dec.floor.prediction_rms_mm)
+    ));
+
+    s.push_str("<h2>Candidates</h2>");
+    let rows: Vec<Vec<String>> = d
+        .candidates
+        .iter()
+        .map(|c| {
+            let h = c.heldout.as_ref();
+            vec![
+                c.round.to_string(),
+                candidate_name(&c.which),
+                fixed(c.statistic, 1),
+                fixed(c.dof, 0),
+                fixed(c.log10_p_holm, 1),
+                if c.significant { "yes".into() } else { "no".into() },
+                fixed(c.separability, 3),
+                fixed(c.bic_gain, 1),
+                h.map_or("—".into(), |h| mm(h.gain_mean_mm)),
+                h.and_then(|h| h.p).map_or("—".into(), p_value),
+                h.map_or("—".into(), |h| if h.confirmed { "confirmed".into() } else { "not confirmed".into() }),
+            ]
+        })
+        .collect();
+    s.push_str(&table(
+        "Screened candidates per round: score statistic, Holm-corrected p, separability ρ, and the held-out check",
+        &[
+            "round",
+            "candidate",
+            "S",
+            "dof",
+            "log10 p (Holm)",
+            "significant",
+            "ρ",
+            "BIC gain",
+            "held-out gain (mm)",
+            "p",
+            "held-out",
+        ],
+        &rows,
+        &[true, false, true, true, true, false, true, true, true, true, false],
+    ));
+    if !d.unavailable.is_empty() {
+        let rows: Vec<Vec<String>> = d.unavailable.iter().map(|u| vec![esc(&u.name), esc(&u.reason)]).collect();
+        s.push_str(&table("Candidates these data cannot test", &["candidate", "why"], &rows, &[false, false]));
+    }
+
+    s.push_str("<h2>Where the model misses</h2>");
+    let w = &d.location;
+    let panels: Vec<Panel> = w
+        .against
+        .iter()
+        .filter(|a| a.profile.len() >= 2)
+        .map(|a| Panel {
+            title: format!(
+                "{}: r = {}, p = {}",
+                a.variable,
+                a.r.map_or("—".into(), |r| fixed(r, 2)),
+                a.p_value.map_or("—".into(), p_value)
+            ),
+            x_desc: format!("{} ({})", a.variable, a.unit),
+            points: a.profile.iter().map(|b| (b.at, b.mean_mm)).collect(),
+            reference: Some(dec.floor.mean_mm),
+        })
+        .collect();
+    if panels.is_empty() {
+        s.push_str("<p class=\"note\">No binned profile to draw.</p>");
+    } else {
+        s.push_str(&figure(
+            &plot::panels_svg("mean |e| (mm)", &panels),
+            &format!(
+                "Held-out |e| of the starting model over {} tested poses, binned against each variable; dashed: the noise floor's mean.",
+                w.n
+            ),
+        ));
+    }
+    let axes = [("x", &w.per_axis.x), ("y", &w.per_axis.y), ("z", &w.per_axis.z)];
+    let rows: Vec<Vec<String>> = axes
+        .iter()
+        .map(|(k, a)| vec![k.to_string(), mm(a.mean_mm), mm(a.std_mm), a.shapiro_p.map_or("—".into(), p_value)])
+        .collect();
+    s.push_str(&table(
+        "Held-out signed error per axis of {W}",
+        &["axis", "mean (mm)", "σ (mm)", "Shapiro–Wilk p"],
+        &rows,
+        &[false, true, true, true],
+    ));
+    let rows: Vec<Vec<String>> = w
+        .voxels
+        .above_floor
+        .iter()
+        .map(|x| {
+            vec![
+                format!("{}, {}, {}", fixed(x.centre_mm[0], 0), fixed(x.centre_mm[1], 0), fixed(x.centre_mm[2], 0)),
+                x.n.to_string(),
+                mm(x.mean_mm),
+                mm(x.floor_mean_mm),
+                p_value(x.p),
+                p_value(x.q),
+            ]
+        })
+        .collect();
+    if rows.is_empty() {
+        s.push_str(&format!(
+            "<p>No workspace voxel ({} mm edge, {} tested) stands above the floor at the false-discovery rate.</p>",
+            fixed(w.voxels.size_mm, 0),
+            w.voxels.tested
+        ));
+    } else {
+        s.push_str(&table(
+            &format!(
+                "Voxels above the floor ({} mm edge, {} tested), worst first",
+                fixed(w.voxels.size_mm, 0),
+                w.voxels.tested
+            ),
+            &["centre (mm)", "n", "mean (mm)", "floor mean (mm)", "p", "q (BH)"],
+            &rows,
+            &[false, true, true, true, true, true],
+        ));
+    }
+
+    s.push_str("<h2>How far the error shrinks</h2>");
+    let rows: Vec<Vec<String>> = d
+        .shrink
+        .iter()
+        .map(|x| {
+            vec![
+                esc(&x.model),
+                x.n.to_string(),
+                mm(x.mean_mm),
+                mm(x.rms_mm),
+                mm(x.p95_mm),
+                mm(x.max_mm),
+                x.gap_closure.map_or("—".into(), |g| format!("{} %", fixed(100.0 * g, 1))),
+            ]
+        })
+        .collect();
+    s.push_str(&table(
+        "Held-out errors from the starting model to the last accepted one; gap closure against the floor",
+        &["model", "n", "mean (mm)", "RMS (mm)", "p95 (mm)", "max (mm)", "gap closed"],
+        &rows,
+        &[false, true, true, true, true, true, true],
+    ));
+    if !d.transfer.is_empty() {
+        let rows: Vec<Vec<String>> = d
+            .transfer
+            .iter()
+            .map(|t| {
+                vec![
+                    esc(&t.session),
+                    esc(&t.model),
+                    t.errors.as_ref().map_or("—".into(), |e| mm(e.figures.mean_mm)),
+                    t.errors.as_ref().map_or("—".into(), |e| mm(e.figures.p95_mm)),
+                    t.kappa_scaled.map_or("—".into(), sig),
+                    esc(t.error.as_deref().unwrap_or("")),
+                ]
+            })
+            .collect();
+        s.push_str(&table(
+            "Transfer to other sessions (base and tools refitted)",
+            &["session", "model", "mean (mm)", "p95 (mm)", "κ scaled", "refused"],
+            &rows,
+            &[false, false, true, true, true, false],
+        ));
+    }
+    if !d.notes.is_empty() {
+        s.push_str("<h3>Notes</h3><ul>");
+        for n in &d.notes {
+            s.push_str(&format!("<li>{}</li>", esc(n)));
+        }
+        s.push_str("</ul>");
+    }
+    s
+}
+
+/// The diagnosis report page.
+pub fn diagnosis_report(d: &DiagnosisOut) -> String {
+    page("Diagnosis report", &diagnosis_sections(d))
+}

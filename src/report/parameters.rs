@@ -1,0 +1,179 @@
+//! The identification's report: the parameter set (cf. thesis Table 5.1) — each parameter's
+//! nominal and identified value, the change and its uncertainty (±1.96σ, 95 %), drawn as error
+//! bars per unit — the fit's quality (κ in SI units against the thesis's ≤ 1000 criterion, κ of
+//! the scaled Jacobian, O1, the residual against the instrument's prediction), and the set's
+//! latest validation when there is one.
+
+use serde_json::Value;
+
+use super::html::{esc, figure, fixed, mm, page, sig, table};
+use super::plot;
+use super::validation::{ValidationDoc, validation_sections};
+use crate::domain::param_set::{ParamEntry, ParameterSetFile};
+
+/// Decimals of a value and of its σ in `unit`: µm for mm, 0.1 mdeg (≈ 1.7 µrad) for deg.
+fn decimals(unit: &str) -> Option<(usize, usize)> {
+    match unit {
+        "mm" => Some((3, 4)),
+        "deg" => Some((4, 5)),
+        _ => None,
+    }
+}
+
+fn value(v: f64, unit: &str, sigma: bool) -> String {
+    match decimals(unit) {
+        Some((d, ds)) => fixed(v, if sigma { ds } else { d }),
+        None => sig(v),
+    }
+}
+
+/// The 95 % half-width of a parameter: 1.96 σ.
+pub const Z95: f64 = 1.959963984540054;
+
+/// One parameter's row: name, unit, nominal, identified, change, σ, ±95 %, status.
+pub fn parameter_row(p: &ParamEntry) -> Vec<String> {
+    let unit = p.unit.as_deref().unwrap_or("");
+    let change = p.nominal.map(|n| p.value - n);
+    vec![
+        esc(&p.name),
+        esc(unit),
+        p.nominal.map_or("—".into(), |n| value(n, unit, false)),
+        value(p.value, unit, false),
+        change.map_or("—".into(), |c| value(c, unit, false)),
+        p.std.map_or("—".into(), |s| value(s, unit, true)),
+        p.std.map_or("—".into(), |s| value(Z95 * s, unit, true)),
+        esc(p.status.as_deref().unwrap_or("")),
+    ]
+}
+
+fn q<'a>(quality: &'a Value, path: &[&str]) -> Option<&'a Value> {
+    path.iter().try_fold(quality, |v, k| v.get(k))
+}
+
+fn qf(quality: &Value, path: &[&str]) -> Option<f64> {
+    q(quality, path).and_then(Value::as_f64)
+}
+
+/// The quality rows: what, value, comment.
+pub fn quality_rows(quality: &Value) -> Vec<Vec<String>> {
+    let mut rows = Vec::new();
+    let mut push = |what: &str, v: String, note: &str| rows.push(vec![esc(what), v, esc(note)]);
+    if let Some(s) = q(quality, &["sessions"]).and_then(Value::as_array) {
+        let names: Vec<&str> = s.iter().filter_map(Value::as_str).collect();
+        push("sessions", esc(&names.join(", ")), "");
+    }
+    for (key, what) in
+        [("n_measurements", "measurements"), ("n_parameters", "parameters identified"), ("iterations", "iterations")]
+    {
+        if let Some(v) = q(quality, &[key]).and_then(Value::as_u64) {
+            push(what, v.to_string(), "");
+        }
+    }
+    if let Some(k) = qf(quality, &["kappa_si"]) {
+        let note = if k <= 1000.0 {
+            "≤ 1000: the thesis's criterion is met"
+        } else {
+            "> 1000: above the thesis's criterion"
+        };
+        push("κ(J), SI units (m, rad)", sig(k), note);
+    }
+    if let Some(k) = qf(quality, &["kappa_scaled"]) {
+        push("κ(J), columns scaled", sig(k), "what the kappa limit refuses on");
+    }
+    if let Some(o) = qf(quality, &["observability_si", "O1"]) {
+        push("O1 (observability, SI)", sig(o), "larger is better (Borm & Menq)");
+    }
+    if let Some(v) = qf(quality, &["rms_residual_mm"]) {
+        push("residual RMS", format!("{} mm", mm(v)), "");
+    }
+    if let Some(v) = qf(quality, &["expected_rms_mm"]) {
+        push("RMS the instrument predicts", format!("{} mm", mm(v)), "");
+    }
+    if let Some(v) = qf(quality, &["residual_ratio"]) {
+        push("residual / predicted", fixed(v, 2), "near 1: the residual is the instrument's noise");
+    }
+    if let Some(v) = qf(quality, &["sigma_mm"]) {
+        push("σ̂ of the residuals", format!("{} mm", mm(v)), "");
+    }
+    if let Some(v) = qf(quality, &["sigma_ratio"]) {
+        push("σ̂ / instrument σ (weighted)", fixed(v, 3), "");
+    }
+    rows
+}
+
+/// The parameters of one unit that carry an uncertainty: the unit, their names, and per
+/// parameter (change from nominal, 95 % half-width).
+pub type BarGroup = (String, Vec<String>, Vec<(f64, f64)>);
+
+/// The parameters with an uncertainty, grouped by unit.
+pub fn error_bar_groups(set: &ParameterSetFile) -> Vec<BarGroup> {
+    let mut groups: Vec<BarGroup> = Vec::new();
+    for p in &set.parameters {
+        let (Some(s), Some(n)) = (p.std, p.nominal) else { continue };
+        let unit = p.unit.clone().unwrap_or_default();
+        let k = match groups.iter().position(|g| g.0 == unit) {
+            Some(k) => k,
+            None => {
+                groups.push((unit, Vec::new(), Vec::new()));
+                groups.len() - 1
+            }
+        };
+        groups[k].1.push(p.name.clone());
+        groups[k].2.push((p.value - n, Z95 * s));
+    }
+    groups
+}
+
+/// The identification's sections: quality, parameter table, error bars.
+pub fn parameter_sections(set: &ParameterSetFile) -> String {
+    let mut s = String::new();
+    let robot = set.robot.get("name").or_else(|| set.robot.get("preset")).and_then(Value::as_str).unwrap_or("robot");
+    s.push_str(&format!("<p class=\"meta\">Robot: {}; {} parameters.</p>", esc(robot), set.parameters.len()));
+    if let Some(quality) = &set.quality {
+        s.push_str("<h2>Quality of the identification</h2>");
+        s.push_str(&table("", &["figure", "value", "comment"], &quality_rows(quality), &[false, true, false]));
+    } else {
+        s.push_str(
+            "<p class=\"note\">This parameter set carries no identification quality (imported, or made by hand).</p>",
+        );
+    }
+    s.push_str("<h2>Parameters</h2>");
+    let rows: Vec<Vec<String>> = set.parameters.iter().map(parameter_row).collect();
+    s.push_str(&table(
+        "Nominal and identified values, the change, σ and the 95 % half-width 1.96σ (cf. Table 5.1)",
+        &["parameter", "unit", "nominal", "identified", "change", "σ", "±95 %", "status"],
+        &rows,
+        &[false, false, true, true, true, true, true, false],
+    ));
+    let groups = error_bar_groups(set);
+    if groups.is_empty() {
+        s.push_str("<p class=\"note\">No parameter has an uncertainty: no error bars to draw.</p>");
+    }
+    for (unit, names, bars) in &groups {
+        let u = if unit.is_empty() { "1".to_string() } else { unit.clone() };
+        let svg = plot::error_bars_svg(
+            &format!("Change from nominal, parameters in {u}"),
+            &format!("identified − nominal ({u})"),
+            names,
+            bars,
+        );
+        s.push_str(&figure(
+            &svg,
+            "Identified − nominal with its 95 % interval (±1.96σ); the dashed line is no change.",
+        ));
+    }
+    s
+}
+
+/// The identification's report page, with the set's latest validation when given.
+pub fn parameter_set_report(set: &ParameterSetFile, validation: Option<&ValidationDoc>) -> String {
+    let mut body = parameter_sections(set);
+    match validation {
+        Some(v) => {
+            body.push_str("<h2>Latest validation</h2>");
+            body.push_str(&validation_sections(v));
+        }
+        None => body.push_str("<p class=\"note\">No validation of this parameter set yet.</p>"),
+    }
+    page("Identification report", &body)
+}

@@ -1,0 +1,178 @@
+//! The reports against the data they draw: one `<svg` per expected plot, the tables' numbers
+//! recomputed from the SI reports, nothing fetched from anywhere.
+
+use serde_json::json;
+
+use super::*;
+use crate::cell::Purpose;
+use crate::domain::ParameterSetDoc;
+use crate::domain::diagnosis::DiagnosisOut;
+use crate::domain::validation::report_to_json;
+use crate::kinematics::Param;
+use crate::sim::simulate::{SimulateOptions, Simulated, simulate};
+use crate::units::MM;
+use crate::validate::report::{Reference, ValidationReport, validate};
+
+fn sim() -> Simulated {
+    simulate(&SimulateOptions { seed: 5, id_per_ball: 10, validation: 40, ..Default::default() }).unwrap()
+}
+
+fn validation(sim: &Simulated) -> ValidationReport {
+    let sessions: Vec<String> = sim.cell.sessions_for(Purpose::Validation).map(|s| s.name.clone()).collect();
+    validate(&sim.truth.set, &sim.cell, &sessions, Reference::Measured).unwrap()
+}
+
+fn count(html: &str, what: &str) -> usize {
+    html.matches(what).count()
+}
+
+/// Nothing a browser would fetch, nothing it would run.
+fn self_contained(html: &str) {
+    assert!(!html.contains("<script"), "a script");
+    assert!(!html.contains("http"), "a URL");
+    assert!(!html.contains("src="), "an external resource");
+    assert!(!html.contains("<p class=\"warn\">plot not drawn"), "a plot failed");
+    for (i, _) in html.match_indices("href=") {
+        assert!(html[i..].starts_with("href=\"data:"), "a link to somewhere: {}", &html[i..i + 40]);
+    }
+    assert!(html.starts_with("<!DOCTYPE html>") && html.trim_end().ends_with("</html>"));
+}
+
+#[test]
+fn the_validation_report_draws_every_plot_and_tells_the_reports_numbers() {
+    let sim = sim();
+    let report = validation(&sim);
+    let doc = ValidationDoc::from_value(&report_to_json(&report, true)).unwrap();
+    let t = std::time::Instant::now();
+    let html = validation_report(&doc);
+    let elapsed = t.elapsed();
+    self_contained(&html);
+    // Histogram, CDF, Q–Q, the per-axis grid, |e| against both distances, the projections.
+    assert!(sim.cell.artefact.is_some());
+    assert_eq!(count(&html, "<svg"), 7);
+    assert_eq!(doc.plot_count(), 7);
+    // The projections' points: one circle (fill) and one outline per validation pose per view,
+    // beside the other plots' circles.
+    let n = report.residuals.len();
+    assert_eq!(n, 40);
+
+    // The before/after table, from the SI report: mean, σ, max, p95 in mm at µm resolution.
+    let (c, nom) = (&report.calibrated.position, &report.nominal.position);
+    for (name, a, b) in [
+        ("mean |e|", nom.mean, c.mean),
+        ("σ |e|", nom.std, c.std),
+        ("max |e|", nom.max, c.max),
+        ("p95 |e|", nom.p95, c.p95),
+    ] {
+        let row = format!("<td>{name}</td><td class=\"n\">{:.3}</td><td class=\"n\">{:.3}</td>", a / MM, b / MM);
+        assert!(html.contains(&row), "missing row {row}");
+    }
+    // The regressions' R² and the Shapiro–Wilk p of each axis.
+    let r2 = report.calibrated.vs_base_distance.unwrap().r2;
+    assert!(html.contains(&format!("calibrated R² = {r2:.3}")), "R² {r2}");
+    let px = report.calibrated.per_axis[0].shapiro.unwrap().p_value;
+    assert!(html.contains(&html::p_value(px)));
+    // Rendering is fast (a debug build; a release build is several times faster).
+    assert!(elapsed.as_millis() < 2000, "{elapsed:?}");
+
+    // Stored without residuals: the tables, no plot.
+    let bare = ValidationDoc::from_value(&report_to_json(&report, false)).unwrap();
+    let html = validation_report(&bare);
+    assert_eq!(count(&html, "<svg"), 0);
+    assert!(html.contains("without its per-measurement residuals"));
+}
+
+#[test]
+fn the_projections_place_every_pose() {
+    let sim = sim();
+    let report = validation(&sim);
+    let positions: Vec<[f64; 3]> = report.residuals.iter().map(|r| (r.position / MM).into()).collect();
+    let errors: Vec<f64> = report.residuals.iter().map(|r| r.error.norm() / MM).collect();
+    let balls: Option<[[f64; 3]; 3]> = report.balls.map(|b| b.map(|c| (c / MM).into()));
+    let svg = plot::projections_svg(&positions, &errors, balls.as_ref());
+    // Three views, each a filled circle and an outline per pose.
+    assert_eq!(count(&svg, "<circle"), 3 * 2 * positions.len());
+    // The reference position is the measured one: distance to the base agrees with the report.
+    let base = sim.truth.set.chain().base().t / MM;
+    for (r, p) in report.residuals.iter().zip(&positions) {
+        let d = ((p[0] - base.x).powi(2) + (p[1] - base.y).powi(2) + (p[2] - base.z).powi(2)).sqrt();
+        assert!((d - r.distance_to_base / MM).abs() < 1e-9);
+    }
+}
+
+#[test]
+fn the_identification_report_tabulates_each_parameter_with_its_error_bar() {
+    let sim = sim();
+    let mut set = sim.truth.set.clone();
+    let a2 = set.layout.index_of(Param::A(2)).unwrap();
+    set.values[a2] = set.nominal[a2] + 0.000146;
+    let mut doc = ParameterSetDoc::new(set);
+    doc.std[a2] = Some(4e-6);
+    doc.status[a2] = Some("identified".into());
+    let beta = doc.set.layout.index_of(Param::Beta(2)).unwrap();
+    doc.std[beta] = Some(1e-5);
+    doc.quality = Some(
+        json!({"kappa_si": 812.5, "kappa_scaled": 40.2, "observability_si": {"O1": 0.0123}, "n_measurements": 30}),
+    );
+    let file = doc.to_file();
+    let html = parameter_set_report(&file, None);
+    self_contained(&html);
+    // Two units with uncertainties (mm, deg): two error-bar plots.
+    assert_eq!(count(&html, "<svg"), 2);
+    // a2: nominal, identified, change, σ and 1.96σ, mm.
+    let nominal = doc.set.nominal[a2] / MM;
+    let value = doc.set.values[a2] / MM;
+    let row = format!(
+        "<td>a2</td><td>mm</td><td class=\"n\">{nominal:.3}</td><td class=\"n\">{value:.3}</td><td class=\"n\">{:.3}</td><td class=\"n\">{:.4}</td><td class=\"n\">{:.4}</td><td>identified</td>",
+        value - nominal,
+        0.004,
+        1.96 * 0.004
+    );
+    assert!(html.contains(&row), "missing {row}");
+    assert!(html.contains("812.5") && html.contains("≤ 1000"));
+    assert!(html.contains("No validation of this parameter set yet."));
+
+    // With its validation: the validation's plots follow.
+    let v = ValidationDoc::from_value(&report_to_json(&validation(&sim), true)).unwrap();
+    let html = parameter_set_report(&file, Some(&v));
+    assert_eq!(count(&html, "<svg"), 2 + 7);
+}
+
+fn diagnosis_json() -> serde_json::Value {
+    let stats = |n: usize, mean: f64| json!({"n": n, "mean_mm": mean, "median_mm": mean, "std_mm": 0.01, "rms_mm": mean, "p95_mm": mean * 1.5, "max_mm": mean * 2.0});
+    json!({
+        "verdict": {"status": "named", "summary": "joint 2 cyclic error", "effects": [], "absorbed_by": []},
+        "decomposition": {
+            "calibrated": stats(40, 0.200), "heldout": stats(40, 0.150),
+            "floor": {"mean_mm": 0.050, "rms_mm": 0.06, "p95_mm": 0.09, "instrument_sigma_mm": 0.02, "prediction_rms_mm": 0.01},
+            "extrapolation_gap_mm": 0.05, "unmodelled_gap_mm": 0.1
+        },
+        "where": {"n": 40, "per_axis": {"x": {"mean_mm": 0.0, "std_mm": 0.1}, "y": {"mean_mm": 0.0, "std_mm": 0.1}, "z": {"mean_mm": 0.0, "std_mm": 0.1}},
+            "against": [{"variable": "q2", "unit": "deg", "r": 0.5, "profile": [{"at": -30.0, "mean_mm": 0.1, "n": 10}, {"at": 0.0, "mean_mm": 0.2, "n": 10}]}],
+            "voxels": {"size_mm": 100.0, "tested": 4, "above_floor": []}},
+        "candidates": [],
+        "shrink": [
+            {"model": "start", "effects": [], "n": 40, "mean_mm": 0.150, "rms_mm": 0.2, "p95_mm": 0.3, "max_mm": 0.4},
+            {"model": "start + cyc2", "effects": ["cyc2"], "n": 40, "mean_mm": 0.080, "rms_mm": 0.1, "p95_mm": 0.2, "max_mm": 0.3, "gap_closure": 0.7}
+        ],
+        "rounds": [], "unavailable": [], "model": "+cyc2_h1",
+        "sessions": {"identification": ["id"], "validation": ["val"], "tested": "validation", "folds": 5},
+        "transfer": [], "notes": []
+    })
+}
+
+#[test]
+fn the_diagnosis_decomposes_the_held_out_error() {
+    let d: DiagnosisOut = serde_json::from_value(diagnosis_json()).unwrap();
+    let rows = diagnosis::decomposition_rows(&d);
+    // floor 0.05 + unexplained (0.08 − 0.05) + explained (0.15 − 0.08) = the held-out 0.15 mm.
+    let held: Vec<f64> = rows[0].1.iter().map(|s| s.length).collect();
+    assert!((held[0] - 0.05).abs() < 1e-12 && (held[1] - 0.03).abs() < 1e-12 && (held[2] - 0.07).abs() < 1e-12);
+    let cal: f64 = rows[1].1.iter().map(|s| s.length).sum();
+    assert!((cal - 0.2).abs() < 1e-12);
+    let html = diagnosis_report(&d);
+    self_contained(&html);
+    // The decomposition bar and the residual profiles.
+    assert_eq!(count(&html, "<svg"), 2);
+    assert!(html.contains("<td class=\"n\">70.0 %</td>"), "gap closure");
+}
