@@ -8,9 +8,12 @@ use axum::extract::{Path, State};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
+use std::sync::Arc;
+
 use super::extract::{Authorized, COMPENSATE, JsonBody};
 use super::robots::find as find_robot;
 use super::{ApiError, AppState};
+use crate::app::cache::CompiledSet;
 use crate::domain::pose::{FrameKind, FrameOut, TargetFrames, WorkObjectSpec, compensate_target, compensate_targets};
 use crate::domain::{CompensationResult, TargetSpec, ToolSpec};
 use crate::kinematics::{Compensator, Param, ParameterSet, Tool};
@@ -87,12 +90,7 @@ pub async fn compensate(
     JsonBody(body): JsonBody<CompensationRequest>,
 ) -> Result<Json<CompensationOut>, ApiError> {
     let robot = find_robot(&state, &robot_id).await?;
-    if body.targets.len() > state.config.max_batch {
-        return Err(ApiError::TooLarge {
-            detail: format!("{} targets in one batch; the limit is {}", body.targets.len(), state.config.max_batch),
-            field: Some("targets".into()),
-        });
-    }
+    check_batch(&state, &body.targets)?;
     let set_id = match (&body.parameter_set_id, &robot.active_parameter_set_id) {
         (Some(id), _) => id.clone(),
         (None, Some(id)) => id.clone(),
@@ -111,21 +109,49 @@ pub async fn compensate(
     if compiled.row.robot_id != robot.id {
         return Err(ApiError::invalid("parameter_set_id", "the set belongs to another robot"));
     }
-    let custom = match &body.tool {
+    let (frame, results) =
+        run_batch(compiled.clone(), body.tool.as_ref(), body.frame, body.work_object.as_ref(), body.targets).await?;
+    let failed = results.iter().filter(|r| r.error.is_some()).count();
+    Ok(Json(CompensationOut {
+        parameter_set_id: compiled.row.id.clone(),
+        version: compiled.row.version,
+        frame,
+        results,
+        failed,
+    }))
+}
+
+/// 413 naming `targets` when a batch is over the server's limit.
+pub(super) fn check_batch(state: &AppState, targets: &[TargetSpec]) -> Result<(), ApiError> {
+    if targets.len() > state.config.max_batch {
+        return Err(ApiError::TooLarge {
+            detail: format!("{} targets in one batch; the limit is {}", targets.len(), state.config.max_batch),
+            field: Some("targets".into()),
+        });
+    }
+    Ok(())
+}
+
+/// Compensate a batch with a compiled set (its own tool, or `tool`), reading targets and writing
+/// fake poses in the request's frame: the compensation route and the RAPID export share it.
+pub(super) async fn run_batch(
+    compiled: Arc<CompiledSet>,
+    tool: Option<&ToolSpec>,
+    frame: Option<FrameKind>,
+    work_object: Option<&WorkObjectSpec>,
+    targets: Vec<TargetSpec>,
+) -> Result<(FrameOut, Vec<CompensationResult>), ApiError> {
+    let custom = match tool {
         None => None,
         Some(t) => Some(with_tool(&compiled.set, t.to_tool().map_err(|e| ApiError::domain(e, "tool"))?)),
     };
-    let frames = TargetFrames::new(&compiled.compensator, body.frame, body.work_object.as_ref())
-        .map_err(|e| ApiError::domain(e, ""))?;
-    let frame = frames.out.clone();
-    let targets = body.targets;
+    let frames = TargetFrames::new(&compiled.compensator, frame, work_object).map_err(|e| ApiError::domain(e, ""))?;
+    let out = frames.out.clone();
     let results = if custom.is_none() && targets.len() <= INLINE_TARGETS {
         // A few solves (~4 µs each) cost less than handing them to the blocking pool.
         let dof = compiled.set.dof();
         targets.iter().enumerate().map(|(i, t)| compensate_target(&compiled.compensator, dof, &frames, i, t)).collect()
     } else {
-        let frames = frames.clone();
-        let compiled = compiled.clone();
         tokio::task::spawn_blocking(move || {
             let own;
             let (comp, dof) = match &custom {
@@ -139,12 +165,5 @@ pub async fn compensate(
         })
         .await?
     };
-    let failed = results.iter().filter(|r| r.error.is_some()).count();
-    Ok(Json(CompensationOut {
-        parameter_set_id: compiled.row.id.clone(),
-        version: compiled.row.version,
-        frame,
-        results,
-        failed,
-    }))
+    Ok((out, results))
 }
