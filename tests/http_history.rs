@@ -294,7 +294,12 @@ async fn exports_in_every_format() {
             result["fake_pose"]["position_mm"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
         assert_eq!(pos, expected, "{name}");
     }
-    assert!(m.text.contains(&format!("parameter set {set}, version 1")) && m.text.contains("frame: world"));
+    // The header names the set (comment lines wrap at about 100 characters) and the frame.
+    assert!(
+        m.text.contains(set.as_str()) && m.text.contains("version 1") && m.text.contains("frame: world"),
+        "{}",
+        m.text
+    );
 
     // A target out of reach: 422 naming it, unless allow_partial.
     let with_bad = json!({"targets": [targets[0], {"id": "far", "position_mm": [3000, 0, 60], "rotation_deg": [0, 180, 0], "cfx": 0}]});
