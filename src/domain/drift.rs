@@ -149,7 +149,7 @@ mod tests {
         let t2 = &r.parameters[1];
         assert_eq!(t2.unit, "deg");
         assert!((t2.change + 0.005).abs() < 1e-9);
-        assert!((t2.combined_std - 0.014142135623730951).abs() < 1e-12);
+        assert!((t2.combined_std - 0.01 * std::f64::consts::SQRT_2).abs() < 1e-12);
         assert!((t2.n_sigma.unwrap() - 0.35355339).abs() < 1e-6);
         assert!(!t2.moved);
         assert_eq!(r.moved, 1);

@@ -124,7 +124,8 @@ mod tests {
 
     #[test]
     fn exact_numbers_read_back_bit_for_bit() {
-        for v in [0.0, 0.1 + 0.2, -1.5707963267948966, 1e-20, 3.4e-5, 270.146, 1e300, -2.2250738585072014e-308] {
+        for v in [0.0, 0.1 + 0.2, -std::f64::consts::FRAC_PI_2, 1e-20, 3.4e-5, 270.146, 1e300, -2.2250738585072014e-308]
+        {
             let s = exact(v);
             assert_eq!(s.parse::<f64>().unwrap().to_bits(), v.to_bits(), "{v} printed {s}");
         }

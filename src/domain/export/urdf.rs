@@ -230,7 +230,7 @@ mod tests {
         let mut ur = ParameterSet::nominal(
             crate::kinematics::model::ur10(),
             Tool { tcp: [0.01, -0.02, 0.15, 0.3, -1.2, 2.9], mass: 1.0, com: Vector3::zeros() },
-            [1.2, -0.4, 0.1, 3.0, 1.5707963267948966, -0.2],
+            [1.2, -0.4, 0.1, 3.0, std::f64::consts::FRAC_PI_2, -0.2],
         );
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         for i in 0..ur.values.len() {
