@@ -94,6 +94,13 @@ call "$API/v1/audit-events?robot_id=$ROBOT" | jq -c '[.[] | {action, reason}]'
 
 echo "== compensated targets with the active set"
 call "$API/v1/robots/$ROBOT/compensate" -H "$J" -d @examples/targets.json | jq -c '.results[0] | {id, joints_deg, residual_mm}'
+echo "== exports (the DH table, URDF, a RAPID module of compensated targets), the history for dashboards, drift"
+call "$API/v1/parameter-sets/$SET/export?format=csv-dh" > "$tmp/set.csv" && grep -E '^(row|joint3),' "$tmp/set.csv"
+call "$API/v1/parameter-sets/$SET/export?format=urdf" > "$tmp/set.urdf" && grep -c '<joint ' "$tmp/set.urdf"
+call "$API/v1/parameter-sets/$SET/export?format=rapid&allow_partial=true" -H "$J" -d @examples/targets.json > "$tmp/targets.mod"
+grep -m 2 -E 'CONST (robtarget|jointtarget) ' "$tmp/targets.mod"
+call "$API/v1/robots/$ROBOT/history?from=2020-01-01" | jq -c '.[] | {version, active, mean_mm: .validation.mean_mm, verdict: .diagnosis.verdict}'
+call "$API/v1/parameter-sets/$SET/drift?against=$IMPORTED" | jq -c '.drift | {moved, identified_in_a_only: (.only_in_a | length)}'
 
 echo "== the robot's measurements as a cell file, jobs, errors"
 call "$API/v1/robots/$ROBOT/cell?sessions=trical-1" | jq -c '{robot, sessions: [.sessions[] | {name, n: (.measurements | length)}]}'

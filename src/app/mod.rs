@@ -5,6 +5,7 @@
 
 pub mod cache;
 pub mod cells;
+pub mod history;
 pub mod metrics;
 pub mod robots;
 

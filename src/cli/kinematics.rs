@@ -310,15 +310,16 @@ pub(super) fn ik(a: IkArgs) -> Result<String, CliError> {
     Ok(serde_json::to_string_pretty(&out).expect("json"))
 }
 
+/// A targets file (`compensate --targets`, `export --format rapid --targets`).
 #[derive(serde::Deserialize)]
 #[serde(deny_unknown_fields)]
-struct TargetsFile {
+pub(super) struct TargetsFile {
     /// `world` (default) or `base`, as in the service's compensation request.
     #[serde(default)]
-    frame: Option<FrameKind>,
+    pub frame: Option<FrameKind>,
     #[serde(default)]
-    work_object: Option<WorkObjectSpec>,
-    targets: Vec<TargetSpec>,
+    pub work_object: Option<WorkObjectSpec>,
+    pub targets: Vec<TargetSpec>,
 }
 
 pub(super) fn compensate(a: CompensateArgs) -> Result<String, CliError> {

@@ -4,6 +4,7 @@
 mod calibrate;
 mod data;
 mod experiments;
+mod export;
 mod kinematics;
 mod plan;
 mod progress;
@@ -23,6 +24,7 @@ use crate::identify::observability::Index;
 pub use calibrate::{DiagnoseArgs, IdentifyArgs, ValidateArgs};
 pub use data::{ImportCommand, SimulateArgs, ThreeReflectorArgs, Ur10IpaArgs};
 pub use experiments::{BenchDiagnosisArgs, CrossvalArgs, StudyArgs};
+pub use export::{DriftArgs, ExportArgs};
 pub use kinematics::{CompensateArgs, FkArgs, IkArgs, ModelArgs, NominalArgs, ToolArgs};
 pub use service::{DemoArgs, OpenapiArgs, ServeArgs, TokenCommand};
 
@@ -47,6 +49,12 @@ pub enum Command {
     Compensate(CompensateArgs),
     /// Write the nominal parameter set of a robot and tool (a starting point for custom models).
     Nominal(NominalArgs),
+    /// Export a parameter set: json, csv-dh (the modified-DH table), urdf (geometry only), or
+    /// rapid (an ABB RAPID module of compensated targets, with --targets).
+    Export(ExportArgs),
+    /// The drift between two parameter sets of one robot: per parameter both identify, the change
+    /// against the combined uncertainty (JSON).
+    Drift(DriftArgs),
     /// Convert a real data set into a cell file.
     #[command(subcommand)]
     Import(ImportCommand),
@@ -120,6 +128,8 @@ pub fn run(cli: Cli) -> Result<String, CliError> {
         Command::Ik(a) => kinematics::ik(a),
         Command::Compensate(a) => kinematics::compensate(a),
         Command::Nominal(a) => kinematics::nominal(a),
+        Command::Export(a) => export::export(a),
+        Command::Drift(a) => export::drift(a),
         Command::Import(ImportCommand::Ur10Ipa(a)) => data::import_ur10(a),
         Command::Import(ImportCommand::ThreeReflector(a)) => data::import_three(a),
         Command::Simulate(a) => data::simulate(a),

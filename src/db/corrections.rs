@@ -232,6 +232,16 @@ pub async fn activation_count(db: impl SqliteExecutor<'_>, robot_id: &str) -> Re
         .await
 }
 
+/// A parameter set's activations, oldest first (those of unknown time first).
+pub async fn activations_of_set(db: impl SqliteExecutor<'_>, set_id: &str) -> Result<Vec<ActivationRow>, sqlx::Error> {
+    sqlx::query_as(
+        "SELECT * FROM parameter_set_activations WHERE parameter_set_id = ? ORDER BY COALESCE(activated_at, ''), id",
+    )
+    .bind(set_id)
+    .fetch_all(db)
+    .await
+}
+
 /// Archive (`Some((at, by, reason))`) or unarchive (`None`) a parameter set.
 pub async fn set_archived(
     db: impl SqliteExecutor<'_>,

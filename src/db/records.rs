@@ -457,6 +457,53 @@ pub async fn parameter_set_count(
         .await
 }
 
+/// A robot's parameter sets created in `[from, to)` (store time text; `None`: open), oldest first
+/// (the history's time order), `offset..offset + limit`; archived ones only when asked for.
+#[allow(clippy::too_many_arguments)]
+pub async fn parameter_sets_in_range(
+    db: impl SqliteExecutor<'_>,
+    robot_id: &str,
+    include_archived: bool,
+    from: Option<&str>,
+    to: Option<&str>,
+    offset: i64,
+    limit: i64,
+) -> Result<Vec<ParameterSetRow>, sqlx::Error> {
+    sqlx::query_as(
+        "SELECT * FROM parameter_sets WHERE robot_id = ?1 AND (?2 OR archived_at IS NULL) \
+         AND (?3 IS NULL OR created_at >= ?3) AND (?4 IS NULL OR created_at < ?4) \
+         ORDER BY created_at, version LIMIT ?5 OFFSET ?6",
+    )
+    .bind(robot_id)
+    .bind(include_archived)
+    .bind(from)
+    .bind(to)
+    .bind(limit)
+    .bind(offset)
+    .fetch_all(db)
+    .await
+}
+
+/// How many sets [`parameter_sets_in_range`] pages through.
+pub async fn parameter_set_count_in_range(
+    db: impl SqliteExecutor<'_>,
+    robot_id: &str,
+    include_archived: bool,
+    from: Option<&str>,
+    to: Option<&str>,
+) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar(
+        "SELECT COUNT(*) FROM parameter_sets WHERE robot_id = ?1 AND (?2 OR archived_at IS NULL) \
+         AND (?3 IS NULL OR created_at >= ?3) AND (?4 IS NULL OR created_at < ?4)",
+    )
+    .bind(robot_id)
+    .bind(include_archived)
+    .bind(from)
+    .bind(to)
+    .fetch_one(db)
+    .await
+}
+
 /// A validation row.
 #[derive(Clone, Debug, PartialEq, sqlx::FromRow)]
 pub struct ValidationRow {

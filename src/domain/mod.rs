@@ -5,6 +5,9 @@
 
 pub mod cell;
 pub mod diagnosis;
+pub mod drift;
+pub mod export;
+pub mod history;
 pub mod identification;
 pub mod limits;
 pub mod measurement_csv;

@@ -8,9 +8,12 @@ use axum::extract::{Path, State};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
+use std::sync::Arc;
+
 use super::extract::{Authorized, COMPENSATE, JsonBody};
 use super::robots::find as find_robot;
 use super::{ApiError, AppState};
+use crate::app::cache::CompiledSet;
 use crate::domain::pose::{FrameKind, FrameOut, TargetFrames, WorkObjectSpec, compensate_target, compensate_targets};
 use crate::domain::validity::{Envelope, EnvelopeFile, Guard, ValidationCheck, ValidityOut};
 use crate::domain::{CompensationResult, TargetSpec, ToolSpec};
@@ -140,12 +143,7 @@ pub async fn compensate(
     JsonBody(body): JsonBody<CompensationRequest>,
 ) -> Result<Json<CompensationOut>, ApiError> {
     let robot = find_robot(&state, &robot_id).await?;
-    if body.targets.len() > state.config.max_batch {
-        return Err(ApiError::TooLarge {
-            detail: format!("{} targets in one batch; the limit is {}", body.targets.len(), state.config.max_batch),
-            field: Some("targets".into()),
-        });
-    }
+    check_batch(&state, &body.targets)?;
     let set_id = match (&body.parameter_set_id, &robot.active_parameter_set_id) {
         (Some(id), _) => id.clone(),
         (None, Some(id)) => id.clone(),
@@ -164,32 +162,83 @@ pub async fn compensate(
     if compiled.row.robot_id != robot.id {
         return Err(ApiError::invalid("parameter_set_id", "the set belongs to another robot"));
     }
-    let (validation, validated) = if body.allow_unvalidated {
+    let (validation, envelope) = checks(&state, &compiled, body.allow_unvalidated).await?;
+    let (frame, results, mut validity) = run_batch(
+        compiled.clone(),
+        body.tool.as_ref(),
+        body.frame,
+        body.work_object.as_ref(),
+        envelope,
+        body.allow_outside_envelope,
+        body.targets,
+    )
+    .await?;
+    validity.validation = validation;
+    let failed = results.iter().filter(|r| r.error.is_some()).count();
+    Ok(Json(CompensationOut {
+        parameter_set_id: compiled.row.id.clone(),
+        version: compiled.row.version,
+        frame,
+        validity,
+        results,
+        failed,
+    }))
+}
+
+/// The set's held-out validation (unless `allow_unvalidated`) and the envelope targets are
+/// checked against: the identification's data and the validation's, joined.
+pub(super) async fn checks(
+    state: &AppState,
+    compiled: &CompiledSet,
+    allow_unvalidated: bool,
+) -> Result<(Option<ValidationCheck>, Option<Envelope>), ApiError> {
+    let (validation, validated) = if allow_unvalidated {
         (None, None)
     } else {
-        let (check, envelope) = validation_check(&state, &compiled.row.id, compiled.row.version).await?;
+        let (check, envelope) = validation_check(state, &compiled.row.id, compiled.row.version).await?;
         (Some(check), envelope)
     };
-    // Where the model may be used: the identification's data and the held-out validation's.
     let envelope = match (&compiled.envelope, validated) {
         (Some(a), Some(b)) => Some(a.union(&b)),
         (a, b) => a.clone().or(b),
     };
-    let custom = match &body.tool {
+    Ok((validation, envelope))
+}
+
+/// 413 naming `targets` when a batch is over the server's limit.
+pub(super) fn check_batch(state: &AppState, targets: &[TargetSpec]) -> Result<(), ApiError> {
+    if targets.len() > state.config.max_batch {
+        return Err(ApiError::TooLarge {
+            detail: format!("{} targets in one batch; the limit is {}", targets.len(), state.config.max_batch),
+            field: Some("targets".into()),
+        });
+    }
+    Ok(())
+}
+
+/// Compensate a batch with a compiled set (its own tool, or `tool`), reading targets and writing
+/// fake poses in the request's frame, each target checked against `envelope` and given its
+/// predicted uncertainty: the compensation route and the RAPID export share it.
+pub(super) async fn run_batch(
+    compiled: Arc<CompiledSet>,
+    tool: Option<&ToolSpec>,
+    frame: Option<FrameKind>,
+    work_object: Option<&WorkObjectSpec>,
+    envelope: Option<Envelope>,
+    allow_outside: bool,
+    targets: Vec<TargetSpec>,
+) -> Result<(FrameOut, Vec<CompensationResult>, ValidityOut), ApiError> {
+    let custom = match tool {
         None => None,
         Some(t) => Some(with_tool(&compiled.set, t.to_tool().map_err(|e| ApiError::domain(e, "tool"))?)),
     };
-    let frames = TargetFrames::new(&compiled.compensator, body.frame, body.work_object.as_ref())
-        .map_err(|e| ApiError::domain(e, ""))?;
-    let frame = frames.out.clone();
-    let targets = body.targets;
-    let allow_outside = body.allow_outside_envelope;
+    let frames = TargetFrames::new(&compiled.compensator, frame, work_object).map_err(|e| ApiError::domain(e, ""))?;
+    let out = frames.out.clone();
     // With another tool, only the robot's parameters carry uncertainty (the identification did
     // not see that tool).
     let robot_only = custom.as_ref().and(compiled.covariance.as_ref()).map(|c| c.without_tool());
     let guard = |covariance| Guard { envelope: envelope.as_ref(), allow_outside, covariance };
-    let mut validity = ValidityOut::new(&guard(robot_only.as_ref().or(compiled.covariance.as_ref())));
-    validity.validation = validation;
+    let validity = ValidityOut::new(&guard(robot_only.as_ref().or(compiled.covariance.as_ref())));
     let results = if custom.is_none() && targets.len() <= INLINE_TARGETS {
         // A few solves (~4 µs each) cost less than handing them to the blocking pool.
         let dof = compiled.set.dof();
@@ -200,8 +249,6 @@ pub async fn compensate(
             .map(|(i, t)| compensate_target(&compiled.compensator, dof, &frames, &g, i, t))
             .collect()
     } else {
-        let frames = frames.clone();
-        let compiled = compiled.clone();
         let envelope = envelope.clone();
         tokio::task::spawn_blocking(move || {
             let own;
@@ -217,13 +264,5 @@ pub async fn compensate(
         })
         .await?
     };
-    let failed = results.iter().filter(|r| r.error.is_some()).count();
-    Ok(Json(CompensationOut {
-        parameter_set_id: compiled.row.id.clone(),
-        version: compiled.row.version,
-        frame,
-        validity,
-        results,
-        failed,
-    }))
+    Ok((out, results, validity))
 }

@@ -7,7 +7,9 @@ pub mod client;
 pub mod compensation;
 pub mod diagnoses;
 pub mod error;
+pub mod exports;
 pub mod extract;
+pub mod history;
 pub mod identifications;
 pub mod jobs;
 pub mod measurements;
@@ -95,7 +97,9 @@ fn api_router() -> OpenApiRouter<AppState> {
         .routes(routes!(parameter_sets::active, parameter_sets::activate))
         .routes(routes!(parameter_sets::activations))
         .routes(routes!(parameter_sets::get, parameter_sets::patch, parameter_sets::delete))
-        .routes(routes!(parameter_sets::export))
+        .routes(routes!(exports::export, exports::export_rapid))
+        .routes(routes!(history::history))
+        .routes(routes!(history::drift))
         .routes(routes!(artefacts::create, artefacts::list))
         .routes(routes!(artefacts::get, artefacts::delete))
         .routes(routes!(sessions::create, sessions::list))

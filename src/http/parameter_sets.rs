@@ -1,14 +1,13 @@
 //! Parameter sets: immutable and versioned per robot. A robot's calibration history (created,
 //! sessions used, quality, validation figures when known); activating one is an explicit call,
-//! recorded in the robot's activation history; export as the parameter-set file (`robocal
-//! compensate --params` reads it); import of a set made elsewhere (e.g. the thesis's Table 5.1).
+//! recorded in the robot's activation history; export (`exports.rs`: the parameter-set file that
+//! `robocal compensate --params` reads, and other tools' formats); import of a set made elsewhere (e.g. the thesis's Table 5.1).
 //! A set is never deleted (DELETE answers 405): it is archived — hidden from the history, never
 //! activated again — with a reason, and stays in the activation history.
 
 use axum::Json;
 use axum::extract::{Path, Query, State};
-use axum::http::{HeaderMap, StatusCode, header};
-use axum::response::IntoResponse;
+use axum::http::{HeaderMap, StatusCode};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use utoipa::{IntoParams, ToSchema};
@@ -214,29 +213,6 @@ pub async fn get(
     let row = find(&state, &set_id).await?;
     let active = is_active(&state, &row).await?;
     Ok(Json(set_out(&state, &row, active, true).await?))
-}
-
-/// Export a parameter set as its file, exactly as stored (mm, deg, deg/(N·m); per parameter value,
-/// nominal, std, unit, status; the quality report).
-#[utoipa::path(get, path = "/v1/parameter-sets/{set_id}/export", tag = "parameter-sets",
-    params(("set_id" = String, Path, description = "Parameter set id")),
-    responses(
-        (status = 200, description = "The parameter-set file", body = Object),
-        (status = 404, description = "Unknown parameter set", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
-pub async fn export(
-    State(state): State<AppState>,
-    _auth: Authorized<READ>,
-    Path(set_id): Path<String>,
-) -> Result<impl IntoResponse, ApiError> {
-    let row = find(&state, &set_id).await?;
-    Ok((
-        [
-            (header::CONTENT_TYPE, "application/json".to_string()),
-            (header::CONTENT_DISPOSITION, format!("attachment; filename=\"parameter-set-v{}.json\"", row.version)),
-        ],
-        row.doc_json,
-    ))
 }
 
 /// The robot's active parameter set.

@@ -1,0 +1,153 @@
+//! A robot's calibration history as a time series, for dashboards: one entry per parameter set,
+//! oldest first — its version and date, the sessions it was identified from, the latest
+//! validation's mean/p95/max (mm), the latest diagnosis's verdict, and whether it is or was
+//! active. The JSON route (`GET /v1/robots/{id}/history`) and any page plotting it call
+//! [`history`].
+
+use serde::Serialize;
+use serde_json::Value;
+use sqlx::SqlitePool;
+use utoipa::ToSchema;
+
+use super::AppError;
+use crate::db::{corrections, records};
+use crate::domain::history::TimeRange;
+
+/// Which part of the history.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct HistoryFilter {
+    /// Created in `[from, to)`.
+    pub range: TimeRange,
+    /// Archived sets too.
+    pub include_archived: bool,
+    /// Entries to skip.
+    pub offset: i64,
+    /// Entries at most (`None`: all).
+    pub limit: Option<i64>,
+}
+
+/// The latest validation of a set (figures in mm, the calibrated model's).
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct HistoryValidation {
+    pub validation_id: String,
+    pub created_at: String,
+    /// Sessions validated on.
+    pub sessions: Vec<String>,
+    /// Measurements in the figures.
+    pub n: Option<u64>,
+    pub mean_mm: Option<f64>,
+    pub p95_mm: Option<f64>,
+    pub max_mm: Option<f64>,
+    /// The nominal model's mean on the same measurements, for the before/after line.
+    pub nominal_mean_mm: Option<f64>,
+}
+
+/// The latest diagnosis of a set.
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct HistoryDiagnosis {
+    pub diagnosis_id: String,
+    pub created_at: String,
+    /// `named`, `none`, `not_separable` or `unknown_effect`.
+    pub verdict: String,
+    pub summary: String,
+}
+
+/// One parameter set in the time series.
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+pub struct HistoryEntry {
+    pub parameter_set_id: String,
+    /// 1, 2, 3 … per robot.
+    pub version: i64,
+    /// When the set was made (RFC 3339, UTC).
+    pub created_at: String,
+    /// Names of the sessions it was identified from (empty when imported).
+    pub sessions: Vec<String>,
+    /// The identification job, when it came from one.
+    pub job_id: Option<String>,
+    /// Compensation uses it now.
+    pub active: bool,
+    /// It has been activated at some time (now or before).
+    pub was_active: bool,
+    /// Its first recorded activation (absent when never, or activated before activations were
+    /// recorded).
+    pub first_activated_at: Option<String>,
+    pub archived: bool,
+    /// Absent until the set is validated.
+    pub validation: Option<HistoryValidation>,
+    /// Absent until the set is diagnosed.
+    pub diagnosis: Option<HistoryDiagnosis>,
+}
+
+/// A page of the history and how long the whole (filtered) history is.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HistoryPage {
+    pub total: i64,
+    pub entries: Vec<HistoryEntry>,
+}
+
+fn json(text: &str, what: &str) -> Result<Value, AppError> {
+    serde_json::from_str(text).map_err(|e| AppError::Internal(format!("{what}: stored JSON: {e}")))
+}
+
+/// The history of robot `robot_id` (which must exist: the caller has found it) in `filter`.
+pub async fn history(pool: &SqlitePool, robot_id: &str, filter: &HistoryFilter) -> Result<HistoryPage, AppError> {
+    let robot = records::robot(pool, robot_id)
+        .await?
+        .ok_or_else(|| AppError::invalid("robot_id", format!("no robot '{robot_id}'")))?;
+    let (from, to) = (filter.range.from.as_deref(), filter.range.to.as_deref());
+    let total = records::parameter_set_count_in_range(pool, robot_id, filter.include_archived, from, to).await?;
+    let limit = filter.limit.unwrap_or(i64::MAX);
+    let rows =
+        records::parameter_sets_in_range(pool, robot_id, filter.include_archived, from, to, filter.offset, limit)
+            .await?;
+    let mut entries = Vec::with_capacity(rows.len());
+    for row in rows {
+        let what = format!("parameter set {}", row.id);
+        let validation = match records::validations_of_set(pool, &row.id).await?.into_iter().next() {
+            None => None,
+            Some(v) => {
+                let r = json(&v.report_json, &what)?;
+                Some(HistoryValidation {
+                    validation_id: v.id,
+                    created_at: v.created_at,
+                    sessions: serde_json::from_str(&v.sessions_json)
+                        .map_err(|e| AppError::Internal(format!("{what}: validation sessions: {e}")))?,
+                    n: r["n"].as_u64(),
+                    mean_mm: r["mean_mm"].as_f64(),
+                    p95_mm: r["p95_mm"].as_f64(),
+                    max_mm: r["max_mm"].as_f64(),
+                    nominal_mean_mm: r["nominal"]["mean_mm"].as_f64(),
+                })
+            }
+        };
+        let diagnosis = match records::diagnoses_of_set(pool, &row.id, 0, 1).await?.into_iter().next() {
+            None => None,
+            Some(d) => {
+                let r = json(&d.report_json, &what)?;
+                Some(HistoryDiagnosis {
+                    diagnosis_id: d.id,
+                    created_at: d.created_at,
+                    verdict: r["verdict"]["status"].as_str().unwrap_or_default().to_string(),
+                    summary: r["verdict"]["summary"].as_str().unwrap_or_default().to_string(),
+                })
+            }
+        };
+        let activations = corrections::activations_of_set(pool, &row.id).await?;
+        let active = robot.active_parameter_set_id.as_deref() == Some(row.id.as_str());
+        entries.push(HistoryEntry {
+            version: row.version,
+            created_at: row.created_at.clone(),
+            sessions: serde_json::from_str(&row.sessions_json)
+                .map_err(|e| AppError::Internal(format!("{what}: sessions: {e}")))?,
+            job_id: row.job_id.clone(),
+            active,
+            was_active: active || !activations.is_empty(),
+            first_activated_at: activations.iter().find_map(|a| a.activated_at.clone()),
+            archived: row.archived_at.is_some(),
+            validation,
+            diagnosis,
+            parameter_set_id: row.id,
+        });
+    }
+    Ok(HistoryPage { total, entries })
+}

@@ -1,0 +1,309 @@
+//! `rapid`: a compensated target batch as an ABB RAPID module. Per compensated target a
+//! `CONST robtarget p_<id>` (the fake pose with its confdata, for MoveL/MoveJ; written when the
+//! answer has a confdata) and a `CONST jointtarget j_<id>` (the joints to command, for MoveAbsJ),
+//! external axes 9E9. A target that was not compensated gets no declaration: it is listed in a
+//! comment, and the caller reports the failure. The header comment names the robot, the parameter
+//! set, the date and the frame the fake poses are in (and how to program them).
+//!
+//! Numbers are the compensation answer's, printed in their shortest form: positions to 0.1 µm,
+//! quaternions to 1e-9 and joints to 1e-6 deg (the answer's output resolution), so the module's
+//! values are the answer's values.
+
+use super::ExportSource;
+use crate::domain::CompensationResult;
+use crate::domain::pose::FrameOut;
+
+/// RAPID's longest identifier.
+pub const MAX_IDENTIFIER: usize = 32;
+
+/// A target the module could not declare: its index in the batch, its id, and why.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Unwritten {
+    pub index: usize,
+    pub id: Option<String>,
+    pub error: String,
+}
+
+/// The module text and the targets it leaves out.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RapidModule {
+    pub text: String,
+    pub failed: Vec<Unwritten>,
+}
+
+/// What the header says besides the set.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RapidHeader<'a> {
+    pub robot: &'a str,
+    pub source: &'a ExportSource,
+    /// When the module was written (RFC 3339).
+    pub date: &'a str,
+    pub frame: &'a FrameOut,
+    /// Which tool the targets are for.
+    pub tool: &'a str,
+}
+
+/// Whether `s` is a valid RAPID identifier: a letter, then letters, digits and underscores, at
+/// most 32 characters.
+pub fn is_identifier(s: &str) -> bool {
+    let mut chars = s.chars();
+    matches!(chars.next(), Some(c) if c.is_ascii_alphabetic())
+        && chars.all(|c| c.is_ascii_alphanumeric() || c == '_')
+        && s.len() <= MAX_IDENTIFIER
+}
+
+/// `prefix` + the target's id made an identifier (other characters → `_`), cut to 32 characters,
+/// made unique (RAPID names are case-insensitive) with the target's number when needed.
+fn identifier(prefix: &str, id: Option<&str>, index: usize, taken: &mut Vec<String>) -> String {
+    let stem: String = match id {
+        Some(id) if !id.trim().is_empty() => {
+            id.trim().chars().map(|c| if c.is_ascii_alphanumeric() { c } else { '_' }).collect()
+        }
+        _ => format!("t{}", index + 1),
+    };
+    let mut name: String = format!("{prefix}{stem}").chars().take(MAX_IDENTIFIER).collect();
+    if taken.iter().any(|t| t.eq_ignore_ascii_case(&name)) {
+        let suffix = format!("_{}", index + 1);
+        name = name.chars().take(MAX_IDENTIFIER - suffix.len()).collect::<String>() + &suffix;
+    }
+    taken.push(name.clone());
+    name
+}
+
+/// A number as RAPID reads it (no negative zero).
+fn num(v: f64) -> String {
+    if v == 0.0 { "0".to_string() } else { format!("{v}") }
+}
+
+fn list(v: &[f64]) -> String {
+    v.iter().map(|x| num(*x)).collect::<Vec<_>>().join(",")
+}
+
+/// Text safe in a `!` comment line (one line).
+fn comment(s: &str) -> String {
+    s.replace(['\n', '\r'], " ")
+}
+
+/// Wrap a long comment over lines of about 100 characters, each starting with `    ! `.
+fn comment_lines(out: &mut String, text: &str) {
+    let mut line = String::new();
+    for word in comment(text).split_whitespace() {
+        if !line.is_empty() && line.len() + word.len() > 96 {
+            out.push_str(&format!("    ! {line}\n"));
+            line.clear();
+        }
+        if !line.is_empty() {
+            line.push(' ');
+        }
+        line.push_str(word);
+    }
+    if !line.is_empty() {
+        out.push_str(&format!("    ! {line}\n"));
+    }
+}
+
+/// The module of a compensated batch (`results` in the batch's order).
+pub fn write(header: &RapidHeader, results: &[CompensationResult]) -> RapidModule {
+    let mut taken = Vec::new();
+    let module = identifier("robocal_", Some(header.source.short.as_str()), 0, &mut taken);
+    let mut out = format!("MODULE {module}\n");
+    comment_lines(
+        &mut out,
+        &format!("robocal compensated (fake) targets: robot {}, {}", header.robot, header.source.label),
+    );
+    comment_lines(&mut out, &format!("written {}", header.date));
+    comment_lines(&mut out, &format!("frame: {}: {}", header.frame.kind, header.frame.description));
+    comment_lines(&mut out, &format!("tool: {}", header.tool));
+    comment_lines(
+        &mut out,
+        "p_<target>: robtarget, the fake pose with its confdata (MoveJ/MoveL); j_<target>: jointtarget, the \
+         compensated joints (MoveAbsJ). Positions mm, orientation quaternion [q1 = w, q2, q3, q4], joints deg.",
+    );
+    let mut failed = Vec::new();
+    let mut decls = String::new();
+    for (i, r) in results.iter().enumerate() {
+        let label = r.id.as_deref().map(|id| format!("targets[{i}] '{id}'")).unwrap_or_else(|| format!("targets[{i}]"));
+        let (Some(joints), None) = (&r.joints_deg, &r.error) else {
+            let error = r.error.clone().unwrap_or_else(|| "no joints in the answer".into());
+            failed.push(Unwritten { index: i, id: r.id.clone(), error });
+            continue;
+        };
+        let mut robax = [9e9; 6];
+        let mut extax = [9e9; 6];
+        for (k, v) in joints.iter().enumerate() {
+            if k < 6 {
+                robax[k] = *v;
+            } else if k < 12 {
+                extax[k - 6] = *v;
+            }
+        }
+        let ext =
+            extax.iter().map(|v| if *v == 9e9 { "9E9".to_string() } else { num(*v) }).collect::<Vec<_>>().join(",");
+        let rob =
+            robax.iter().map(|v| if *v == 9e9 { "9E9".to_string() } else { num(*v) }).collect::<Vec<_>>().join(",");
+        let p = identifier("p_", r.id.as_deref(), i, &mut taken);
+        let j = identifier("j_", r.id.as_deref(), i, &mut taken);
+        decls.push_str(&format!("    ! {}\n", comment(&label)));
+        match (&r.fake_pose, r.confdata) {
+            (Some(pose), Some(cd)) => decls.push_str(&format!(
+                "    CONST robtarget {p}:=[[{}],[{}],[{},{},{},{}],[{ext}]];\n",
+                list(&pose.position_mm),
+                list(&pose.quaternion),
+                cd[0],
+                cd[1],
+                cd[2],
+                cd[3]
+            )),
+            _ => decls.push_str("    ! no confdata in the answer (no closed-form IK): jointtarget only\n"),
+        }
+        decls.push_str(&format!("    CONST jointtarget {j}:=[[{rob}],[{ext}]];\n"));
+    }
+    if !failed.is_empty() {
+        comment_lines(
+            &mut out,
+            &format!("NOT COMPENSATED ({} of {}), no declaration written:", failed.len(), results.len()),
+        );
+        for f in &failed {
+            let label =
+                f.id.as_deref()
+                    .map(|id| format!("targets[{}] '{id}'", f.index))
+                    .unwrap_or_else(|| format!("targets[{}]", f.index));
+            comment_lines(&mut out, &format!("  {label}: {}", f.error));
+        }
+    }
+    out.push_str(&decls);
+    out.push_str("ENDMODULE\n");
+    RapidModule { text: out, failed }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::domain::pose::{TargetFrames, compensate_targets};
+    use crate::domain::{TargetSpec, from_json};
+    use crate::kinematics::thesis::{irb120_table_5_1, trical_tool};
+    use crate::kinematics::{Compensator, ParameterSet, Tool};
+
+    /// The bracketed number lists of a declaration's value, in order: `[[1,2],[3]]` → [[1,2],[3]].
+    fn groups(value: &str) -> Vec<Vec<f64>> {
+        let inner = value.trim().strip_prefix('[').unwrap().strip_suffix(']').unwrap();
+        inner
+            .split("],")
+            .map(|g| {
+                g.trim_matches(|c| c == '[' || c == ']')
+                    .split(',')
+                    .map(|v| v.parse::<f64>().unwrap_or_else(|_| panic!("'{v}' is not a number")))
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// Every declaration as (type, name, groups); every other line a comment or the module frame.
+    fn declarations(text: &str) -> Vec<(String, String, Vec<Vec<f64>>)> {
+        let lines: Vec<&str> = text.lines().collect();
+        assert!(lines[0].starts_with("MODULE ") && is_identifier(&lines[0][7..]), "{}", lines[0]);
+        assert_eq!(*lines.last().unwrap(), "ENDMODULE");
+        let mut out = Vec::new();
+        for l in &lines[1..lines.len() - 1] {
+            let l = l.trim();
+            if l.starts_with('!') {
+                continue;
+            }
+            let rest = l.strip_prefix("CONST ").unwrap_or_else(|| panic!("not a declaration: {l}"));
+            let (ty, rest) = rest.split_once(' ').unwrap();
+            let (name, value) = rest.split_once(":=").unwrap();
+            assert!(is_identifier(name), "{name}");
+            let value = value.strip_suffix(';').unwrap();
+            out.push((ty.to_string(), name.to_string(), groups(value)));
+        }
+        out
+    }
+
+    fn header<'a>(source: &'a ExportSource, frame: &'a FrameOut) -> RapidHeader<'a> {
+        RapidHeader { robot: "irb120", source, date: "2026-11-24T12:00:00Z", frame, tool: "the set's own" }
+    }
+
+    /// A batch compensated by `compensate_targets`, written as RAPID and parsed back: each
+    /// compensated target's joints and fake pose are the answer's, a failed target is listed and
+    /// not declared, and the names are valid and unique.
+    #[test]
+    fn declarations_read_back_to_the_answer() {
+        let set = irb120_table_5_1(trical_tool());
+        let comp = Compensator::new(&set);
+        let targets: Vec<TargetSpec> = from_json(
+            r#"[{"id": "pick-1", "position_mm": [400, -50, 300], "rotation_deg": [0, 90, 0], "cfx": 0},
+                {"id": "Pick 1", "position_mm": [380, 60, 350], "quaternion": [0.5, 0.5, 0.5, 0.5], "cfx": 0},
+                {"joints_deg": [10, 20, -10, 0, 45, 0]},
+                {"id": "too-far", "position_mm": [2000, 0, 300], "rotation_deg": [0, 90, 0], "cfx": 0},
+                {"id": "a-very-long-target-name-beyond-thirty-two", "joints_deg": [0, 0, 0, 0, 30, 0]}]"#,
+        )
+        .unwrap();
+        let frames = TargetFrames::world();
+        let results = compensate_targets(&comp, 6, &frames, &crate::domain::validity::Guard::none(), &targets);
+        assert!(results[3].error.is_some() && results.iter().filter(|r| r.error.is_some()).count() == 1);
+        let source = ExportSource::stored("abc", 4);
+        let m = write(&header(&source, &frames.out), &results);
+        assert_eq!(m.failed.len(), 1);
+        assert_eq!((m.failed[0].index, m.failed[0].id.as_deref()), (3, Some("too-far")));
+        assert!(m.text.contains("targets[3] 'too-far'") && m.text.contains("NOT COMPENSATED (1 of 5)"), "{}", m.text);
+        assert!(m.text.contains("irb120") && m.text.contains("version 4") && m.text.contains("2026-11-24T12:00:00Z"));
+        assert!(m.text.contains("frame: world"));
+        let decls = declarations(&m.text);
+        assert_eq!(decls.len(), 8, "{}", m.text);
+        let names: Vec<String> = decls.iter().map(|d| d.1.to_ascii_lowercase()).collect();
+        let mut unique = names.clone();
+        unique.sort();
+        unique.dedup();
+        assert_eq!(unique.len(), names.len(), "{names:?}");
+        assert!(names.contains(&"p_pick_1".to_string()) && names.contains(&"p_pick_1_2".to_string()), "{names:?}");
+        assert!(names.contains(&"j_t3".to_string()));
+        assert!(names.iter().all(|n| n.len() <= 32));
+        for (i, r) in results.iter().enumerate().filter(|(i, _)| *i != 3) {
+            let joints = decls.iter().filter(|d| d.0 == "jointtarget").nth(if i > 3 { i - 1 } else { i }).unwrap();
+            assert_eq!(joints.2[0], *r.joints_deg.as_ref().unwrap(), "target {i}");
+            assert_eq!(joints.2[1], [9e9; 6]);
+            let pose = decls.iter().filter(|d| d.0 == "robtarget").nth(if i > 3 { i - 1 } else { i }).unwrap();
+            let fake = r.fake_pose.as_ref().unwrap();
+            assert_eq!(pose.2[0], fake.position_mm);
+            assert_eq!(pose.2[1], fake.quaternion);
+            let cd = r.confdata.unwrap();
+            assert_eq!(pose.2[2], cd.map(f64::from));
+            assert_eq!(pose.2[3], [9e9; 6]);
+        }
+    }
+
+    /// Without a closed-form IK there is no confdata: jointtargets only, said in a comment.
+    #[test]
+    fn a_robot_without_confdata_gets_jointtargets() {
+        let set = ParameterSet::nominal(crate::kinematics::model::ur10(), Tool::flange(), [0.0; 6]);
+        let comp = Compensator::new(&set);
+        let targets: Vec<TargetSpec> = from_json(r#"[{"id": "home", "joints_deg": [0, -90, 90, 0, 90, 0]}]"#).unwrap();
+        let frames = TargetFrames::world();
+        let results = compensate_targets(&comp, 6, &frames, &crate::domain::validity::Guard::none(), &targets);
+        let source = ExportSource::file("ur10.json");
+        let m = write(&header(&source, &frames.out), &results);
+        let decls = declarations(&m.text);
+        if results[0].confdata.is_none() {
+            assert_eq!(decls.len(), 1, "{}", m.text);
+            assert!(m.text.contains("jointtarget only"));
+        }
+        assert_eq!(decls.iter().find(|d| d.0 == "jointtarget").unwrap().2[0], *results[0].joints_deg.as_ref().unwrap());
+        assert!(m.text.starts_with("MODULE robocal_ur10\n"));
+    }
+
+    #[test]
+    fn identifiers_are_checked() {
+        assert!(is_identifier("p_t1") && is_identifier("A"));
+        assert!(
+            !is_identifier("1a") && !is_identifier("_a") && !is_identifier("a-b") && !is_identifier(&"a".repeat(33))
+        );
+        let mut taken = Vec::new();
+        assert_eq!(identifier("p_", Some("x y"), 0, &mut taken), "p_x_y");
+        assert_eq!(identifier("p_", Some("X-Y"), 1, &mut taken), "p_X_Y_2");
+        assert_eq!(identifier("p_", None, 4, &mut taken), "p_t5");
+        let long = identifier("j_", Some(&"z".repeat(40)), 9, &mut taken);
+        assert_eq!(long.len(), 32);
+        let again = identifier("j_", Some(&"z".repeat(40)), 10, &mut taken);
+        assert!(again.ends_with("_11") && again.len() == 32 && is_identifier(&again));
+    }
+}
