@@ -37,7 +37,7 @@ pub struct ParamEntry {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ParameterSetFile {
-    #[schema(value_type = Object)]
+    #[schema(value_type = super::robot::RobotDoc)]
     pub robot: Value,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tool: Option<ToolSpec>,

@@ -163,6 +163,7 @@ pub struct TargetSpec {
     pub quaternion: Option<[f64; 4]>,
     /// Configuration branch, ABB cfx 0–7.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(minimum = 0, maximum = 7)]
     pub cfx: Option<u8>,
     /// ABB confdata [cf1, cf4, cf6, cfx].
     #[serde(default, skip_serializing_if = "Option::is_none")]

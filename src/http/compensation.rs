@@ -34,6 +34,9 @@ pub struct CompensationRequest {
     /// as on the controller.
     #[serde(default)]
     pub work_object: Option<WorkObjectSpec>,
+    /// At most the server's batch limit (`serve --max-batch`, default 10,000; the served document
+    /// states the server's).
+    #[schema(max_items = 10000)]
     pub targets: Vec<TargetSpec>,
 }
 
@@ -79,7 +82,7 @@ const INLINE_TARGETS: usize = 8;
         (status = 409, description = "No parameter set named and none active", body = super::Problem, content_type = "application/problem+json"),
         (status = 413, description = "More targets than the batch limit", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Unknown set, a set of another robot, invalid tool", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["compensate"])))]
 pub async fn compensate(
     State(state): State<AppState>,
     _auth: Authorized<COMPENSATE>,
