@@ -273,6 +273,7 @@ pub struct ToolSpec {
     #[schema(min_items = 3, max_items = 3)]
     pub tcp_rotation_deg: Option<[f64; 3]>,
     #[serde(default)]
+    #[schema(minimum = 0)]
     pub mass_kg: f64,
     #[serde(default)]
     #[schema(min_items = 3, max_items = 3)]

@@ -113,7 +113,7 @@ pub async fn submit(
 pub struct JobQuery {
     pub robot_id: Option<String>,
     /// `queued`, `running`, `succeeded`, `failed` or `cancelled`.
-    #[param(value_type = Option<JobStateName>)]
+    #[param(value_type = Option<JobStateName>, inline)]
     pub state: Option<String>,
 }
 

@@ -48,7 +48,8 @@ pub struct ParameterSetOut {
     pub job_id: Option<String>,
     /// Quality summary: `identified`, `kappa_si`, `kappa_scaled`, `rms_residual_mm`,
     /// `measurements` (from the set's quality report, when it has one).
-    #[schema(value_type = Object)]
+    /// `null` for a set without a quality report (an imported one).
+    #[schema(value_type = Option<Object>)]
     pub quality: Value,
     /// Validations of this set, newest first.
     pub validations: Vec<ValidationSummary>,
