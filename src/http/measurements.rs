@@ -67,7 +67,8 @@ pub struct AppendQuery {
 #[utoipa::path(post, path = "/v1/sessions/{session_id}/measurements", tag = "sessions",
     params(
         ("session_id" = String, Path, description = "Session id"),
-        ("Idempotency-Key" = Option<String>, Header, description = "Makes a retried upload safe: the same key and body return the first answer"),
+        ("Idempotency-Key" = Option<String>, Header, description = "Makes a retried upload safe: the same key and body return the first answer (1–200 visible ASCII characters)",
+            min_length = 1, max_length = 200, pattern = r"^[!-~]([ -~]{0,198}[!-~])?$"),
         AppendQuery),
     request_body(description = "JSON {\"measurements\": [...]} (the cell-file measurement objects) or CSV with a header row \
 (q1_deg … qN_deg, ball, x_mm y_mm z_mm, a_deg b_deg c_deg, temperature_c, time_s, sequence, approach_1 … approach_N, dx_mm dy_mm dz_mm)",
