@@ -74,8 +74,11 @@ impl PoseXyzAbc {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Distances {
+    #[schema(exclusive_minimum = 0)]
     pub d12: f64,
+    #[schema(exclusive_minimum = 0)]
     pub d13: f64,
+    #[schema(exclusive_minimum = 0)]
     pub d23: f64,
 }
 

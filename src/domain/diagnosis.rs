@@ -30,15 +30,20 @@ fn one() -> u64 {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct NoiseSpec {
-    /// A TriCal ball measurement, µm.
+    /// A TriCal ball measurement, µm (1e-6 … 1e6).
+    #[schema(minimum = 1e-6, maximum = 1e6)]
     pub trical_um: f64,
-    /// A laser-tracker reading: constant part, µm…
+    /// A laser-tracker reading: constant part, µm (1e-6 … 1e6)…
+    #[schema(minimum = 1e-6, maximum = 1e6)]
     pub tracker_um: f64,
-    /// …plus this per metre from the {W} origin, µm/m.
+    /// …plus this per metre from the {W} origin, µm/m (0 … 1e6).
+    #[schema(minimum = 0, maximum = 1e6)]
     pub tracker_um_per_m: f64,
-    /// The robot's positional repeatability RP (ISO 9283), µm.
+    /// The robot's positional repeatability RP (ISO 9283), µm (0 … 1e6).
+    #[schema(minimum = 0, maximum = 1e6)]
     pub repeatability_um: f64,
-    /// A measured orientation, mrad.
+    /// A measured orientation, mrad (1e-6 … 1e3).
+    #[schema(minimum = 1e-6, maximum = 1e3)]
     pub rotation_mrad: f64,
 }
 
@@ -56,7 +61,21 @@ impl Default for NoiseSpec {
 }
 
 impl NoiseSpec {
+    /// The σ in SI. On the wire each is bounded (the schema's `minimum`/`maximum`): an instrument
+    /// σ from 1e-6 µm (1e-6 mrad), so that it stays positive in SI and its inverse square
+    /// (the weight) finite, up to 1 m (1 rad); the others from 0.
     pub fn to_model(&self) -> Result<NoiseModel, DomainError> {
+        for (field, v, lo, hi) in [
+            ("noise.trical_um", self.trical_um, 1e-6, 1e6),
+            ("noise.tracker_um", self.tracker_um, 1e-6, 1e6),
+            ("noise.tracker_um_per_m", self.tracker_um_per_m, 0.0, 1e6),
+            ("noise.repeatability_um", self.repeatability_um, 0.0, 1e6),
+            ("noise.rotation_mrad", self.rotation_mrad, 1e-6, 1e3),
+        ] {
+            if !(v.is_finite() && (lo..=hi).contains(&v)) {
+                return Err(DomainError::new(field, format!("must be a σ from {lo:e} to {hi:e}, got {v}")));
+            }
+        }
         let m = NoiseModel {
             trical: self.trical_um * UM,
             tracker: self.tracker_um * UM,
@@ -104,9 +123,11 @@ pub struct DiagnoseSpec {
     pub noise: NoiseSpec,
     /// Family-wise error rate of the screening (Holm).
     #[serde(default = "alpha")]
+    #[schema(exclusive_minimum = 0, exclusive_maximum = 0.5)]
     pub alpha: f64,
     /// Level of the held-out confirmation.
     #[serde(default = "confirm")]
+    #[schema(exclusive_minimum = 0, exclusive_maximum = 0.5)]
     pub confirm_p: f64,
     /// Knot spacing of joint correction tables, deg (0: about 60 knots over each joint's range).
     #[serde(default)]
@@ -114,6 +135,7 @@ pub struct DiagnoseSpec {
     pub map_step_deg: u8,
     /// Edge of the workspace voxels, mm (0: automatic, about ten tested positions per voxel).
     #[serde(default)]
+    #[schema(minimum = 0)]
     pub voxel_mm: f64,
 }
 

@@ -47,6 +47,8 @@ pub fn default_residual_ratio_limit() -> f64 {
 #[serde(deny_unknown_fields)]
 pub struct MeasurementRef {
     pub session: String,
+    /// 0-based (at most 2³¹−1, far beyond any session).
+    #[schema(maximum = 2147483647)]
     pub index: usize,
 }
 
@@ -156,7 +158,7 @@ fn one() -> u64 {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SelectSpec {
-    #[schema(minimum = 1)]
+    #[schema(minimum = 1, maximum = 100000)]
     pub n: usize,
     /// `O1` (default, the thesis's) … `O5`.
     #[serde(default = "o1")]
@@ -177,8 +179,8 @@ pub struct DetmaxSelection {
 impl SelectSpec {
     /// Errors name `n` or `index`.
     pub fn to_selection(&self) -> Result<DetmaxSelection, DomainError> {
-        if self.n == 0 {
-            return Err(DomainError::new("n", "must be at least 1"));
+        if self.n == 0 || self.n > super::limits::MAX_SELECT {
+            return Err(DomainError::new("n", format!("must be 1–{}, got {}", super::limits::MAX_SELECT, self.n)));
         }
         Ok(DetmaxSelection { n: self.n, index: observability_index(&self.index, "index")?, seed: self.seed })
     }

@@ -8,6 +8,9 @@ use super::DomainError;
 pub const MAX_PER_BALL: usize = 2000;
 /// Largest count of laser-tracker validation poses.
 pub const MAX_VALIDATION: usize = 10_000;
+/// Largest DETMAX selection (`select.n`): each exchange scans every candidate, so the work grows
+/// as n times the candidates; 100,000 is ten full batches.
+pub const MAX_SELECT: usize = 100_000;
 
 /// Check a per-ball candidate count (1 … [`MAX_PER_BALL`]); the error names `field`.
 pub fn per_ball(n: usize, field: &str) -> Result<usize, DomainError> {

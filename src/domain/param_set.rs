@@ -37,7 +37,7 @@ pub struct ParamEntry {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ParameterSetFile {
-    #[schema(value_type = Object)]
+    #[schema(value_type = super::robot::RobotDoc)]
     pub robot: Value,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tool: Option<ToolSpec>,
@@ -103,6 +103,9 @@ impl ParameterSetDoc {
 
 impl ParameterSetFile {
     pub fn to_doc(&self) -> Result<ParameterSetDoc, DomainError> {
+        if self.quality.as_ref().is_some_and(|q| !q.is_object()) {
+            return Err(DomainError::new("quality", "must be the identification's quality report (an object)"));
+        }
         let model =
             RobotSpec::from_json_value(&self.robot).and_then(|r| r.to_model()).map_err(|e| e.within("robot"))?;
         let tool = match &self.tool {

@@ -162,8 +162,10 @@ pub struct TargetSpec {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     #[schema(min_items = 4, max_items = 4)]
     pub quaternion: Option<[f64; 4]>,
-    /// Configuration branch, ABB cfx 0–7.
+    /// Configuration branch, ABB cfx 0–7 (another value up to 255 fails that target alone, with its
+    /// error in the answer, as every per-target problem does).
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(minimum = 0, maximum = 255)]
     pub cfx: Option<u8>,
     /// ABB confdata [cf1, cf4, cf6, cfx].
     #[serde(default, skip_serializing_if = "Option::is_none")]

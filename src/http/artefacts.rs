@@ -20,7 +20,8 @@ use crate::units::MM;
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NewArtefact {
-    /// Unique name, e.g. `plate-A`.
+    /// Unique name, e.g. `plate-A` (not blank).
+    #[schema(min_length = 1, pattern = r"\S")]
     pub name: String,
     /// `ball_triangle` (the only kind).
     #[serde(default = "ball_triangle")]
@@ -78,7 +79,7 @@ pub fn artefact_out(row: &records::ArtefactRow) -> Result<ArtefactOut, ApiError>
         (status = 201, description = "Created, with the ball centres", body = ArtefactOut),
         (status = 409, description = "An artefact with this name exists", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Impossible or degenerate triangle, bad diameter", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["measure"])))]
 pub async fn create(
     State(state): State<AppState>,
     _auth: Authorized<MEASURE>,
@@ -118,7 +119,7 @@ pub async fn create(
             ("X-Total-Count" = i64, description = "Artefacts in all"),
             ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
         (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn list(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
@@ -136,7 +137,7 @@ pub async fn list(
     responses(
         (status = 200, description = "The artefact", body = ArtefactOut),
         (status = 404, description = "Unknown artefact", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn get(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
@@ -158,7 +159,7 @@ pub async fn get(
         (status = 404, description = "Unknown artefact", body = super::Problem, content_type = "application/problem+json"),
         (status = 409, description = "Sessions, pose plans or unfinished jobs use the artefact (named in the detail)", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "`reason` missing or empty", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["measure"])))]
 pub async fn delete(
     State(state): State<AppState>,
     auth: Authorized<MEASURE>,

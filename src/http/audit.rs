@@ -31,7 +31,8 @@ pub fn reason(text: Option<&str>) -> Result<String, ApiError> {
 #[derive(Debug, Deserialize, IntoParams)]
 #[into_params(parameter_in = Query)]
 pub struct ReasonQuery {
-    /// Why (required, recorded in the audit timeline).
+    /// Why (required, not blank, at most 2000 characters; recorded in the audit timeline).
+    #[param(value_type = String, required = true, min_length = 1, max_length = 2000, pattern = r"\S")]
     pub reason: Option<String>,
 }
 
@@ -102,7 +103,7 @@ pub struct AuditQuery {
             ("X-Total-Count" = i64, description = "Corrections matching the filters"),
             ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
         (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn list(
     State(state): State<AppState>,
     _auth: Authorized<READ>,

@@ -47,6 +47,9 @@ pub struct CompensationRequest {
     /// is noted.
     #[serde(default)]
     pub allow_outside_envelope: bool,
+    /// At most the server's batch limit (`serve --max-batch`, default 10,000; the served document
+    /// states the server's).
+    #[schema(max_items = 10000)]
     pub targets: Vec<TargetSpec>,
 }
 
@@ -135,7 +138,7 @@ const INLINE_TARGETS: usize = 8;
         (status = 409, description = "No parameter set named and none active; the set has no held-out validation, or its latest found it no better than nominal (unless allow_unvalidated)", body = super::Problem, content_type = "application/problem+json"),
         (status = 413, description = "More targets than the batch limit", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Unknown set, a set of another robot, invalid tool", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["compensate"])))]
 pub async fn compensate(
     State(state): State<AppState>,
     _auth: Authorized<COMPENSATE>,

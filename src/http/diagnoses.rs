@@ -31,7 +31,7 @@ use crate::jobs::run;
         (status = 202, description = "Queued; follow the job. A diagnosis that cannot run ends as a failed job whose error says why.", body = super::jobs::JobOut),
         (status = 404, description = "Unknown parameter set", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Bad options, an unknown session, a session of the wrong purpose or empty, no identification session", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["calibrate"])))]
 pub async fn create(
     State(state): State<AppState>,
     _auth: Authorized<CALIBRATE>,
@@ -106,7 +106,7 @@ async fn find(state: &AppState, id: &str) -> Result<records::DiagnosisRow, ApiEr
             ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
         (status = 404, description = "Unknown parameter set", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn list(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
@@ -126,7 +126,7 @@ pub async fn list(
     responses(
         (status = 200, description = "The diagnosis and its report", body = Diagnosis),
         (status = 404, description = "Unknown diagnosis", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn get(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
@@ -173,7 +173,7 @@ async fn already_accepted(state: &AppState, set_id: &str) -> Result<(StatusCode,
         (status = 200, description = "Already accepted: the set it created, nothing new written", body = ParameterSetOut),
         (status = 404, description = "Unknown diagnosis", body = super::Problem, content_type = "application/problem+json"),
         (status = 409, description = "The diagnosis named no effect (its verdict is `none`, `not_separable` or `unknown_effect`): nothing to accept", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["calibrate"])))]
 pub async fn accept(
     State(state): State<AppState>,
     _auth: Authorized<CALIBRATE>,

@@ -96,7 +96,7 @@ fn file(format: ExportFormat, name: String, body: String) -> Response {
                 (String = "application/xml"))),
         (status = 404, description = "Unknown parameter set", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Unknown `format`, or `rapid` (which needs targets: POST)", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn export(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
@@ -140,7 +140,7 @@ pub async fn export(
         (status = 404, description = "Unknown parameter set", body = super::Problem, content_type = "application/problem+json"),
         (status = 413, description = "More targets than the batch limit", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "`format` other than `rapid`; invalid tool or frame; a target not compensated (without allow_partial)", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["compensate"])))]
 pub async fn export_rapid(
     State(state): State<AppState>,
     _auth: Authorized<COMPENSATE>,

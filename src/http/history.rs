@@ -42,7 +42,7 @@ pub struct HistoryRangeQuery {
             ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
         (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Bad `from`, `to` (not RFC 3339, or `to` before `from`), `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn history(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
@@ -108,7 +108,7 @@ fn doc_of(row: &records::ParameterSetRow) -> Result<ParameterSetDoc, ApiError> {
         (status = 200, description = "The drift of A against B", body = DriftOut),
         (status = 404, description = "Unknown parameter set", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "`against` missing, unknown, or a set of another robot", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn drift(
     State(state): State<AppState>,
     _auth: Authorized<READ>,

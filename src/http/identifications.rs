@@ -34,7 +34,7 @@ pub async fn checked_sessions(
         (status = 202, description = "Queued; follow the job. A refused fit ends as a failed job whose error names the reason.", body = super::jobs::JobOut),
         (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Unknown session, a session of the wrong purpose or empty, bad options", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["calibrate"])))]
 pub async fn create(
     State(state): State<AppState>,
     _auth: Authorized<CALIBRATE>,

@@ -118,7 +118,20 @@ pub async fn submit(
 pub struct JobQuery {
     pub robot_id: Option<String>,
     /// `queued`, `running`, `succeeded`, `failed` or `cancelled`.
+    #[param(value_type = Option<JobStateName>, inline)]
     pub state: Option<String>,
+}
+
+/// A job's state, as the `state` filter names it (the schema of [`JobState`]'s names).
+#[derive(ToSchema)]
+#[schema(rename_all = "snake_case")]
+#[allow(dead_code)] // a schema only: the filter is parsed by `JobState::parse`
+pub enum JobStateName {
+    Queued,
+    Running,
+    Succeeded,
+    Failed,
+    Cancelled,
 }
 
 /// List jobs, newest first, a page at a time.
@@ -128,14 +141,14 @@ pub struct JobQuery {
             ("X-Total-Count" = i64, description = "Jobs matching the filters"),
             ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
         (status = 422, description = "Unknown state, bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn list(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
     Query(q): Query<JobQuery>,
     page: Paging,
 ) -> Result<(HeaderMap, Json<Vec<JobOut>>), ApiError> {
-    let state_filter = match q.state.as_deref().filter(|s| !s.is_empty()) {
+    let state_filter = match q.state.as_deref() {
         None => None,
         Some(s) => Some(JobState::parse(s).ok_or_else(|| {
             let all: Vec<&str> = JobState::ALL.iter().map(|s| s.as_str()).collect();
@@ -155,7 +168,7 @@ pub async fn list(
     responses(
         (status = 200, description = "The job", body = JobOut),
         (status = 404, description = "Unknown job", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn get(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
@@ -173,7 +186,7 @@ pub async fn get(
         (status = 200, description = "Cancelled, or flagged for cancellation", body = JobOut),
         (status = 404, description = "Unknown job", body = super::Problem, content_type = "application/problem+json"),
         (status = 409, description = "The job has already finished", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["calibrate"])))]
 pub async fn cancel(
     State(state): State<AppState>,
     _auth: Authorized<CALIBRATE>,

@@ -16,7 +16,7 @@ use utoipa::{IntoParams, ToSchema};
 
 use super::audit::{Event, reason};
 use super::extract::{Authorized, JsonBody, MEASURE, READ, is_json, parse_json};
-use super::paging::{PageQuery, Paging};
+use super::paging::{MeasurementPageQuery, Paging};
 use super::robots::find as find_robot;
 use super::sessions::find;
 use super::{ApiError, AppState};
@@ -29,6 +29,9 @@ use crate::domain::measurement_csv::parse_csv;
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NewMeasurements {
+    /// At most the server's batch limit (`serve --max-batch`, default 10,000; the served document
+    /// states the server's).
+    #[schema(min_items = 1, max_items = 10000)]
     pub measurements: Vec<MeasurementSpec>,
 }
 
@@ -64,7 +67,8 @@ pub struct AppendQuery {
 #[utoipa::path(post, path = "/v1/sessions/{session_id}/measurements", tag = "sessions",
     params(
         ("session_id" = String, Path, description = "Session id"),
-        ("Idempotency-Key" = Option<String>, Header, description = "Makes a retried upload safe: the same key and body return the first answer"),
+        ("Idempotency-Key" = Option<String>, Header, description = "Makes a retried upload safe: the same key and body return the first answer (1–200 visible ASCII characters)",
+            min_length = 1, max_length = 200, pattern = r"^[!-~]([ -~]{0,198}[!-~])?$"),
         AppendQuery),
     request_body(description = "JSON {\"measurements\": [...]} (the cell-file measurement objects) or CSV with a header row \
 (q1_deg … qN_deg, ball, x_mm y_mm z_mm, a_deg b_deg c_deg, temperature_c, time_s, sequence, approach_1 … approach_N, dx_mm dy_mm dz_mm)",
@@ -77,7 +81,7 @@ pub struct AppendQuery {
         (status = 413, description = "More measurements than the batch limit, or body too large", body = super::Problem, content_type = "application/problem+json"),
         (status = 415, description = "Neither JSON nor CSV", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Invalid measurement (NaN, wrong length, joints outside limits, unknown ball…), naming it", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["measure"])))]
 pub async fn append(
     State(state): State<AppState>,
     _auth: Authorized<MEASURE>,
@@ -270,14 +274,14 @@ pub struct MeasurementPage {
 /// A page of a session's measurements, in order (`offset` is the first measurement's index;
 /// `limit` defaults to 1000 here, at most 10000).
 #[utoipa::path(get, path = "/v1/sessions/{session_id}/measurements", tag = "sessions",
-    params(("session_id" = String, Path, description = "Session id"), PageQuery),
+    params(("session_id" = String, Path, description = "Session id"), MeasurementPageQuery),
     responses(
         (status = 200, description = "Measurements offset … offset + limit", body = MeasurementPage, headers(
             ("X-Total-Count" = i64, description = "Measurements in the session"),
             ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
         (status = 404, description = "Unknown session", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Bad paging values", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn measurements(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
@@ -363,7 +367,7 @@ async fn measurement_out(
     responses(
         (status = 200, description = "The measurement", body = MeasurementOut),
         (status = 404, description = "Unknown session or index", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn get(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
@@ -380,8 +384,9 @@ pub async fn get(
 pub struct MeasurementPatch {
     /// `true`: leave the measurement out of every job from now on; `false`: restore it.
     pub excluded: bool,
-    /// Why (required, non-empty): kept with the exclusion, or with its restoring.
+    /// Why (required, not blank, at most 2000 characters): kept with the exclusion, or with its restoring.
     #[serde(default)]
+    #[schema(value_type = String, required = true, min_length = 1, max_length = 2000, pattern = r"\S")]
     pub reason: Option<String>,
 }
 
@@ -401,7 +406,7 @@ pub struct MeasurementPatch {
         (status = 404, description = "Unknown session or index", body = super::Problem, content_type = "application/problem+json"),
         (status = 409, description = "Already excluded (or, restoring, not excluded)", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "`reason` missing or empty", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["measure"])))]
 pub async fn patch(
     State(state): State<AppState>,
     auth: Authorized<MEASURE>,

@@ -126,11 +126,38 @@ fn api_router() -> OpenApiRouter<AppState> {
         .routes(routes!(audit::list))
 }
 
-/// The OpenAPI document (3.1).
+/// The OpenAPI document (3.1) of a server that requires authentication (`serve --require-auth`,
+/// or bound beyond loopback): every `/v1` operation needs a bearer token with the scope its
+/// security requirement names. This is the committed `openapi/openapi.json`.
 pub fn openapi() -> utoipa::openapi::OpenApi {
+    openapi_for(true)
+}
+
+/// The OpenAPI document as a server in the given mode serves it. Without `require_auth` (a
+/// loopback server) the operations that accept a request without a token declare an empty
+/// security requirement (`[{}]`: no token needed; one that is sent is still checked); those that
+/// need the `admin` scope (token management) keep theirs, since they always ask for a token.
+pub fn openapi_for(require_auth: bool) -> utoipa::openapi::OpenApi {
     let mut api = api_router().split_for_parts().1;
     common_responses(&mut api);
+    if !require_auth {
+        use utoipa::openapi::security::SecurityRequirement;
+        for item in api.paths.paths.values_mut() {
+            for op in [&mut item.get, &mut item.post, &mut item.put, &mut item.patch, &mut item.delete] {
+                let Some(op) = op.as_mut() else { continue };
+                if required_scope(op).is_some_and(|s| s != "admin") {
+                    op.security = Some(vec![SecurityRequirement::default()]);
+                }
+            }
+        }
+    }
     api
+}
+
+/// The scope an operation's bearer requirement names (`read`, `measure`, …, `admin`), if any.
+pub fn required_scope(op: &utoipa::openapi::path::Operation) -> Option<String> {
+    let value = serde_json::to_value(op.security.as_ref()?).ok()?;
+    value.as_array()?.iter().find_map(|req| req.get("bearer")?.get(0)?.as_str().map(str::to_string))
 }
 
 /// Every `/v1` operation can also answer 400 (a query string or body that does not parse), 401
@@ -179,9 +206,28 @@ fn common_responses(api: &mut utoipa::openapi::OpenApi) {
     }
 }
 
-/// The OpenAPI document as committed in `openapi/openapi.json`.
+/// The OpenAPI document as committed in `openapi/openapi.json` (the `--require-auth` form).
 pub fn openapi_json() -> String {
-    let mut s = openapi().to_pretty_json().expect("the OpenAPI document serialises");
+    openapi_json_for(true)
+}
+
+/// The OpenAPI document as a server in the given mode serves it, pretty-printed.
+pub fn openapi_json_for(require_auth: bool) -> String {
+    let mut s = openapi_for(require_auth).to_pretty_json().expect("the OpenAPI document serialises");
+    s.push('\n');
+    s
+}
+
+/// The document of a server whose batch limit (`--max-batch`) is not the default: the batches'
+/// `maxItems` state that server's limit.
+pub fn openapi_json_with(require_auth: bool, max_batch: usize) -> String {
+    let mut doc: serde_json::Value = serde_json::from_str(&openapi_json_for(require_auth)).expect("JSON");
+    for (schema, field) in [("NewMeasurements", "measurements"), ("CompensationRequest", "targets")] {
+        if let Some(p) = doc.pointer_mut(&format!("/components/schemas/{schema}/properties/{field}")) {
+            p["maxItems"] = max_batch.into();
+        }
+    }
+    let mut s = serde_json::to_string_pretty(&doc).expect("JSON");
     s.push('\n');
     s
 }

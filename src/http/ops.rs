@@ -67,12 +67,20 @@ pub async fn metrics(State(state): State<AppState>) -> Result<impl IntoResponse,
     Ok(([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], state.metrics.render()))
 }
 
-/// This OpenAPI 3.1 document.
+/// This OpenAPI 3.1 document, as this server's mode makes it: with authentication required every
+/// `/v1` operation needs a bearer token; on loopback without it only token management does.
 #[utoipa::path(get, path = "/openapi.json", tag = "ops",
     responses((status = 200, description = "The OpenAPI 3.1 document", body = Object)))]
-pub async fn openapi() -> impl IntoResponse {
-    static DOCUMENT: LazyLock<String> = LazyLock::new(super::openapi_json);
-    ([(header::CONTENT_TYPE, "application/json")], DOCUMENT.as_str())
+pub async fn openapi(State(state): State<AppState>) -> impl IntoResponse {
+    static WITH_AUTH: LazyLock<String> = LazyLock::new(|| super::openapi_json_for(true));
+    static LOOPBACK: LazyLock<String> = LazyLock::new(|| super::openapi_json_for(false));
+    let config = &state.config;
+    let doc = if config.max_batch == crate::app::ServiceConfig::default().max_batch {
+        if config.require_auth { WITH_AUTH.clone() } else { LOOPBACK.clone() }
+    } else {
+        super::openapi_json_with(config.require_auth, config.max_batch)
+    };
+    ([(header::CONTENT_TYPE, "application/json")], doc)
 }
 
 /// Unknown paths: a problem document, not an empty 404.

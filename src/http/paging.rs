@@ -21,7 +21,20 @@ pub struct PageQuery {
     /// Items to skip (default 0).
     #[param(value_type = Option<i64>, minimum = 0)]
     pub offset: Option<String>,
-    /// Items at most (default 100, at most 1000; a session's measurements: default 1000, at most 10000).
+    /// Items at most (default 100, at most 1000).
+    #[param(value_type = Option<i64>, minimum = 1, maximum = 1000)]
+    pub limit: Option<String>,
+}
+
+/// The paging parameters of a session's measurements, whose pages are larger (the schema only:
+/// they are read as [`PageQuery`]).
+#[derive(Debug, Default, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct MeasurementPageQuery {
+    /// Items to skip (default 0).
+    #[param(value_type = Option<i64>, minimum = 0)]
+    pub offset: Option<String>,
+    /// Items at most (default 1000, at most 10000).
     #[param(value_type = Option<i64>, minimum = 1, maximum = 10000)]
     pub limit: Option<String>,
 }
@@ -42,14 +55,15 @@ pub struct Paging<const DEFAULT: i64 = 100, const MAX: i64 = 1000> {
 
 /// Parse `offset` and `limit` against a limit's default and largest value.
 pub fn check(q: &PageQuery, default: i64, max: i64) -> Result<(i64, i64), ApiError> {
+    // Absent: the default. Present, it must be a whole number as the document declares (an empty
+    // `?limit=` is not one); an integer-valued decimal (`5.0`) is one, as in JSON Schema.
     let number = |v: &Option<String>, field: &str, what: &str| -> Result<Option<i64>, ApiError> {
-        match v.as_deref().map(str::trim) {
-            None | Some("") => Ok(None),
-            Some(s) => s
-                .parse::<i64>()
-                .map(Some)
-                .map_err(|_| ApiError::invalid(field, format!("'{s}' is not a whole number: {what}"))),
-        }
+        let Some(s) = v.as_deref() else { return Ok(None) };
+        let whole = s
+            .parse::<i64>()
+            .ok()
+            .or_else(|| s.parse::<f64>().ok().filter(|x| x.fract() == 0.0 && x.abs() < 9.2e18).map(|x| x as i64));
+        whole.map(Some).ok_or_else(|| ApiError::invalid(field, format!("'{s}' is not a whole number: {what}")))
     };
     let limits = format!("must be 1–{max}");
     let offset = number(&q.offset, "offset", "must be 0 or more")?.unwrap_or(0);
@@ -128,12 +142,16 @@ mod tests {
     fn values_are_checked_and_the_field_named() {
         assert_eq!(check(&q(None, None), 100, 1000).unwrap(), (0, 100));
         assert_eq!(check(&q(Some("5"), Some("1000")), 100, 1000).unwrap(), (5, 1000));
+        assert_eq!(check(&q(Some("5.0"), Some("1e2")), 100, 1000).unwrap(), (5, 100), "integer-valued decimals");
         for (o, l, field) in [
             (Some("-1"), None, "offset"),
             (Some("x"), None, "offset"),
             (None, Some("0"), "limit"),
             (None, Some("1001"), "limit"),
             (None, Some("1.5"), "limit"),
+            (None, Some(""), "limit"),
+            (Some(" 5"), None, "offset"),
+            (Some("NaN"), None, "offset"),
         ] {
             let e = check(&q(o, l), 100, 1000).unwrap_err().problem();
             assert_eq!((e.status, e.field.as_deref()), (422, Some(field)), "{o:?} {l:?}");

@@ -47,7 +47,8 @@ pub struct ParameterSetOut {
     pub job_id: Option<String>,
     /// Quality summary: `identified`, `kappa_si`, `kappa_scaled`, `rms_residual_mm`,
     /// `measurements` (from the set's quality report, when it has one).
-    #[schema(value_type = Object)]
+    /// `null` for a set without a quality report (an imported one).
+    #[schema(value_type = Option<Object>)]
     pub quality: Value,
     /// Validations of this set, newest first.
     pub validations: Vec<ValidationSummary>,
@@ -149,7 +150,7 @@ pub struct HistoryQuery {
             ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
         (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn history(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
@@ -171,12 +172,12 @@ pub async fn history(
 /// Import a parameter set made elsewhere (a parameter-set file) as the robot's next version.
 #[utoipa::path(post, path = "/v1/robots/{robot_id}/parameter-sets", tag = "parameter-sets",
     params(("robot_id" = String, Path, description = "Robot id")),
-    request_body(content = Object, description = "A parameter-set file: {\"robot\", \"tool\", \"parameters\": [{\"name\", \"value\", \"nominal\", \"unit\"}, …]}", content_type = "application/json"),
+    request_body(content = crate::domain::ParameterSetFile, description = "A parameter-set file: {\"robot\", \"tool\", \"parameters\": [{\"name\", \"value\", \"nominal\", \"unit\"}, …]}", content_type = "application/json"),
     responses(
         (status = 201, description = "Stored as the next version (not activated)", body = ParameterSetOut),
         (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Invalid file, or made for another robot", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["calibrate"])))]
 pub async fn import(
     State(state): State<AppState>,
     _auth: Authorized<CALIBRATE>,
@@ -204,7 +205,7 @@ pub async fn import(
     responses(
         (status = 200, description = "The set, its quality, validations and file", body = ParameterSetOut),
         (status = 404, description = "Unknown parameter set", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn get(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
@@ -221,7 +222,7 @@ pub async fn get(
     responses(
         (status = 200, description = "The active set", body = ParameterSetOut),
         (status = 404, description = "Unknown robot, or no set is active", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn active(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
@@ -253,7 +254,7 @@ pub struct Activate {
         (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
         (status = 409, description = "The set is archived (the `hint` says how to unarchive it)", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Unknown set, or a set of another robot", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["calibrate"])))]
 pub async fn activate(
     State(state): State<AppState>,
     auth: Authorized<CALIBRATE>,
@@ -295,8 +296,9 @@ async fn find_in(tx: &mut sqlx::SqliteConnection, id: &str) -> Result<records::P
 pub struct ParameterSetPatch {
     /// `true`: archive (hidden from the history, never activated); `false`: unarchive.
     pub archived: bool,
-    /// Why (required, non-empty): kept with the set and in the audit timeline.
+    /// Why (required, not blank, at most 2000 characters): kept with the set and in the audit timeline.
     #[serde(default)]
+    #[schema(value_type = String, required = true, min_length = 1, max_length = 2000, pattern = r"\S")]
     pub reason: Option<String>,
 }
 
@@ -313,7 +315,7 @@ pub struct ParameterSetPatch {
         (status = 404, description = "Unknown parameter set", body = super::Problem, content_type = "application/problem+json"),
         (status = 409, description = "The set is the robot's active one; already archived (or, unarchiving, not archived)", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "`reason` missing or empty", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["calibrate"])))]
 pub async fn patch(
     State(state): State<AppState>,
     auth: Authorized<CALIBRATE>,
@@ -382,7 +384,7 @@ pub async fn patch(
     responses(
         (status = 404, description = "Unknown parameter set", body = super::Problem, content_type = "application/problem+json"),
         (status = 405, description = "Never deleted: archive instead (the problem's `hint`)", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["calibrate"])))]
 pub async fn delete(
     State(state): State<AppState>,
     _auth: Authorized<CALIBRATE>,
@@ -423,7 +425,7 @@ pub struct ActivationOut {
             ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
         (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn activations(
     State(state): State<AppState>,
     _auth: Authorized<READ>,

@@ -31,7 +31,7 @@ use crate::jobs::run;
         (status = 202, description = "Queued; follow the job", body = super::jobs::JobOut),
         (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Unknown artefact, bad counts, a robot without closed-form IK or base guess", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["calibrate"])))]
 pub async fn create(
     State(state): State<AppState>,
     _auth: Authorized<CALIBRATE>,
@@ -103,7 +103,7 @@ pub struct PosePlanSummary {
             ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
         (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn list(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
@@ -138,7 +138,7 @@ pub async fn list(
     responses(
         (status = 200, description = "The plan", body = PosePlanOut),
         (status = 404, description = "Unknown plan", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn get(
     State(state): State<AppState>,
     _auth: Authorized<READ>,

@@ -84,7 +84,7 @@ fn validation_doc(row: &records::ValidationRow) -> Result<ValidationDoc, ApiErro
         (status = 200, description = "The validation report: before/after table, per-axis statistics, error distributions (histogram, CDF, Q–Q), error against distance, the poses shaded by error; self-contained HTML", body = String, content_type = "text/html"),
         (status = 404, description = "Unknown validation (a validation exists once its job has succeeded)", body = super::Problem, content_type = "application/problem+json"),
         (status = 406, description = "The client accepts no HTML", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn validation(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
@@ -108,7 +108,7 @@ pub async fn validation(
         (status = 200, description = "The identification report: quality (κ, O1, residual), parameters with their change from nominal and 95 % error bars, and the latest validation of the set when there is one; self-contained HTML", body = String, content_type = "text/html"),
         (status = 404, description = "Unknown parameter set (a parameter set exists once its identification job has succeeded)", body = super::Problem, content_type = "application/problem+json"),
         (status = 406, description = "The client accepts no HTML", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn parameter_set(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
@@ -134,7 +134,7 @@ pub async fn parameter_set(
         (status = 200, description = "The diagnosis report: verdict, decomposition bar, candidates, residual profiles, voxels above the floor, shrink table; self-contained HTML", body = String, content_type = "text/html"),
         (status = 404, description = "Unknown diagnosis (a diagnosis exists once its job has succeeded)", body = super::Problem, content_type = "application/problem+json"),
         (status = 406, description = "The client accepts no HTML", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn diagnosis(
     State(state): State<AppState>,
     _auth: Authorized<READ>,

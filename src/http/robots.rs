@@ -22,10 +22,11 @@ use crate::kinematics::ParamLayout;
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NewRobot {
-    /// Unique name, e.g. `cell-3-irb120`.
+    /// Unique name, e.g. `cell-3-irb120` (not blank).
+    #[schema(min_length = 1, pattern = r"\S")]
     pub name: String,
     /// `{"preset": "irb120"}`, `{"preset": "ur10"}` or a custom joint table (see the README's "Files").
-    #[schema(value_type = Object)]
+    #[schema(value_type = crate::domain::robot::RobotDoc)]
     pub robot: Value,
     /// Guess of the robot base in the cell's world frame T_0^W (ZY'X''); without it identification
     /// registers the base from the measurements.
@@ -82,7 +83,7 @@ pub async fn find(state: &AppState, id: &str) -> Result<std::sync::Arc<records::
         (status = 201, description = "Created", body = RobotOut),
         (status = 409, description = "A robot with this name exists", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Invalid model or base guess", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["measure"])))]
 pub async fn create(
     State(state): State<AppState>,
     _auth: Authorized<MEASURE>,
@@ -126,7 +127,7 @@ pub async fn create(
             ("X-Total-Count" = i64, description = "Robots in all"),
             ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
         (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn list(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
@@ -144,7 +145,7 @@ pub async fn list(
     responses(
         (status = 200, description = "The robot", body = RobotOut),
         (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn get(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
@@ -172,7 +173,7 @@ pub struct CellQuery {
         (status = 200, description = "A cell file (mm, deg)", body = Object),
         (status = 404, description = "Unknown robot or session", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Sessions on different artefacts", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn cell(
     State(state): State<AppState>,
     _auth: Authorized<READ>,

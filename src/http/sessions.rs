@@ -21,7 +21,8 @@ use crate::domain::cell::{InstrumentSpec, OrderSpec, PurposeSpec};
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NewSession {
-    /// Unique per robot, e.g. `trical-1`.
+    /// Unique per robot, e.g. `trical-1` (not blank).
+    #[schema(min_length = 1, pattern = r"\S")]
     pub name: String,
     pub purpose: PurposeSpec,
     pub instrument: InstrumentSpec,
@@ -42,6 +43,7 @@ pub struct NewSession {
     /// naming the same target share one identified TCP and must declare the same tool; without
     /// it, a session whose TCP is identified gets a TCP of its own.
     #[serde(default)]
+    #[schema(min_length = 1, pattern = r"\S")]
     pub target: Option<String>,
 }
 
@@ -99,7 +101,7 @@ pub(super) async fn find(state: &AppState, id: &str) -> Result<records::SessionR
         (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
         (status = 409, description = "The robot has a session with this name", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Invalid tool, missing or unknown artefact", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["measure"])))]
 pub async fn create(
     State(state): State<AppState>,
     _auth: Authorized<MEASURE>,
@@ -179,7 +181,7 @@ pub async fn create(
             ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
         (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn list(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
@@ -199,7 +201,7 @@ pub async fn list(
     responses(
         (status = 200, description = "The session", body = SessionOut),
         (status = 404, description = "Unknown session", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn get(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
@@ -219,7 +221,7 @@ pub async fn get(
         (status = 404, description = "Unknown session", body = super::Problem, content_type = "application/problem+json"),
         (status = 409, description = "Stored results or unfinished jobs refer to the session (named in the detail)", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "`reason` missing or empty", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["measure"])))]
 pub async fn delete(
     State(state): State<AppState>,
     auth: Authorized<MEASURE>,

@@ -16,11 +16,24 @@ use crate::db::tokens::{self, Scope, TokenRow};
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NewToken {
-    /// Who uses it, e.g. `cell-3-pc`.
+    /// Who uses it, e.g. `cell-3-pc` (not blank).
+    #[schema(min_length = 1, pattern = r"\S")]
     pub name: String,
-    /// Any of `measure`, `calibrate`, `compensate`, `read`, `admin`.
-    #[schema(min_items = 1)]
+    /// Any of `measure`, `calibrate`, `compensate`, `read`, `admin` (repeats count once).
+    #[schema(min_items = 1, value_type = Vec<ScopeName>)]
     pub scopes: Vec<String>,
+}
+
+/// A token's scope (the schema of [`Scope`]'s names).
+#[derive(ToSchema)]
+#[schema(rename_all = "snake_case")]
+#[allow(dead_code)] // a schema only: scopes are parsed by `Scope::parse`
+pub enum ScopeName {
+    Measure,
+    Calibrate,
+    Compensate,
+    Read,
+    Admin,
 }
 
 /// A token (never its secret, except once at creation).
@@ -53,7 +66,7 @@ pub fn token_out(t: &TokenRow, secret: Option<String>) -> TokenOut {
     responses(
         (status = 201, description = "Created; the answer carries the secret, shown only here", body = TokenOut),
         (status = 422, description = "Empty name or unknown scope", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["admin"])))]
 pub async fn create(
     State(state): State<AppState>,
     _auth: Authorized<ADMIN>,
@@ -90,7 +103,7 @@ pub async fn create(
             ("X-Total-Count" = i64, description = "Tokens in all"),
             ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
         (status = 422, description = "Bad `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["admin"])))]
 pub async fn list(
     State(state): State<AppState>,
     _auth: Authorized<ADMIN>,
@@ -108,7 +121,7 @@ pub async fn list(
     responses(
         (status = 204, description = "Revoked"),
         (status = 404, description = "Unknown or already revoked token", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["admin"])))]
 pub async fn revoke(
     State(state): State<AppState>,
     _auth: Authorized<ADMIN>,

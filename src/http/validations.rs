@@ -25,7 +25,7 @@ use crate::jobs::requests::{ValidationJob, ValidationRequest};
         (status = 202, description = "Queued; follow the job", body = super::jobs::JobOut),
         (status = 404, description = "Unknown parameter set", body = super::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Unknown session, a session of the wrong purpose or empty", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["calibrate"])))]
 pub async fn create(
     State(state): State<AppState>,
     _auth: Authorized<CALIBRATE>,
@@ -73,7 +73,7 @@ pub fn validation_out(v: &records::ValidationRow) -> Result<ValidationOut, ApiEr
     responses(
         (status = 200, description = "The validation statistics", body = ValidationOut),
         (status = 404, description = "Unknown validation", body = super::Problem, content_type = "application/problem+json")),
-    security(("bearer" = [])))]
+    security(("bearer" = ["read"])))]
 pub async fn get(
     State(state): State<AppState>,
     _auth: Authorized<READ>,
