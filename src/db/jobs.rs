@@ -242,7 +242,10 @@ pub async fn cancel_requested(db: impl SqliteExecutor<'_>, id: &str) -> Result<b
 }
 
 /// Final state of a job this owner holds, inside the caller's transaction (with the result rows).
-/// `false` when the job is no longer held by `owner` (then the caller must roll back).
+/// `false` when the job is no longer held by `owner`, or when it ends `succeeded` or `failed` but
+/// its cancellation was asked for meanwhile (then the caller must roll back, and a cancelled job
+/// is ended with `state = Cancelled`, which the flag does not block). The flag is checked by this
+/// very statement, so a cancel committed before it is never overwritten by a result.
 pub async fn finish(
     db: impl SqliteExecutor<'_>,
     id: &str,
@@ -253,15 +256,13 @@ pub async fn finish(
 ) -> Result<bool, sqlx::Error> {
     let t = now();
     let r = sqlx::query(
-        "UPDATE jobs SET state = ?, result_json = ?, error_json = ?, progress = CASE WHEN ? = 'succeeded' THEN 1 ELSE progress END, \
-             finished_at = ?, updated_at = ?, lease_owner = NULL, lease_expires_at = NULL \
-         WHERE id = ? AND lease_owner = ? AND state = 'running'",
+        "UPDATE jobs SET state = ?1, result_json = ?2, error_json = ?3, progress = CASE WHEN ?1 = 'succeeded' THEN 1 ELSE progress END, \
+             finished_at = ?4, updated_at = ?4, lease_owner = NULL, lease_expires_at = NULL \
+         WHERE id = ?5 AND lease_owner = ?6 AND state = 'running' AND (?1 = 'cancelled' OR cancel_requested = 0)",
     )
     .bind(state)
     .bind(result_json)
     .bind(error_json)
-    .bind(state)
-    .bind(&t)
     .bind(&t)
     .bind(id)
     .bind(owner)
@@ -300,27 +301,50 @@ pub async fn requeue_stale(pool: &SqlitePool, all: bool) -> Result<u64, sqlx::Er
     Ok(r.rows_affected())
 }
 
-/// Cancel: a queued job ends at once; a running one is flagged and ends when its solver returns
-/// (its result is then discarded). Returns the row after the change, `None` if unknown.
-pub async fn cancel(pool: &SqlitePool, id: &str) -> Result<Option<JobRow>, sqlx::Error> {
+/// What a cancel did.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Cancel {
+    /// The job was queued: it is now `cancelled`.
+    Ended,
+    /// The job was running: it is flagged, and ends `cancelled` when its solver returns (its
+    /// result is then discarded; the worker's final write checks the flag in its transaction).
+    Flagged,
+    /// The job had already ended (succeeded, failed or cancelled): nothing changed.
+    AlreadyEnded,
+}
+
+/// Cancel, in one write transaction: a queued job ends at once; a running one is flagged; an
+/// ended one is left as it is. Returns what was done and the row after it, `None` if unknown.
+/// Because a worker ends its job in a write transaction that reads the flag (and its final UPDATE
+/// requires it clear), a cancel is either seen by that transaction or finds the job ended: never
+/// both a stored result and a `cancelled` job, and never a cancel answered yet lost.
+pub async fn cancel(pool: &SqlitePool, id: &str) -> Result<Option<(Cancel, JobRow)>, sqlx::Error> {
     let t = now();
     let mut tx = super::begin_write(pool).await?;
-    sqlx::query(
+    let ended = sqlx::query(
         "UPDATE jobs SET state = 'cancelled', finished_at = ?, updated_at = ? WHERE id = ? AND state = 'queued'",
     )
     .bind(&t)
     .bind(&t)
     .bind(id)
     .execute(&mut *tx)
-    .await?;
-    sqlx::query("UPDATE jobs SET cancel_requested = 1, updated_at = ? WHERE id = ? AND state = 'running'")
-        .bind(&t)
-        .bind(id)
-        .execute(&mut *tx)
-        .await?;
+    .await?
+    .rows_affected();
+    let flagged =
+        sqlx::query("UPDATE jobs SET cancel_requested = 1, updated_at = ? WHERE id = ? AND state = 'running'")
+            .bind(&t)
+            .bind(id)
+            .execute(&mut *tx)
+            .await?
+            .rows_affected();
     let row = get(&mut *tx, id).await?;
     tx.commit().await?;
-    Ok(row)
+    let what = match (ended, flagged) {
+        (1, _) => Cancel::Ended,
+        (_, 1) => Cancel::Flagged,
+        _ => Cancel::AlreadyEnded,
+    };
+    Ok(row.map(|r| (what, r)))
 }
 
 /// Job counts by state (for /metrics).

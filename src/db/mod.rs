@@ -147,6 +147,47 @@ pub fn new_id() -> String {
     uuid::Uuid::now_v7().to_string()
 }
 
+/// Trouble with the storage under the database, not with the request: the disk is full, the
+/// database cannot be written (read-only file or file system), or an I/O error. SQLite rolls the
+/// statement's transaction back in each case, so nothing partial is left behind.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StorageTrouble {
+    /// SQLITE_FULL (13): the disk (or file-size limit) is exhausted.
+    Full,
+    /// SQLITE_READONLY (8): the database file or its file system is read-only.
+    ReadOnly,
+    /// SQLITE_IOERR (10) or SQLITE_CANTOPEN (14): the operating system refused a read or write.
+    Io,
+}
+
+impl StorageTrouble {
+    /// What happened, for an operator: said plainly, without internals.
+    pub fn describe(self) -> &'static str {
+        match self {
+            StorageTrouble::Full => {
+                "the disk holding the database is full (or the file-size limit is reached): nothing of this request was stored; free space and retry"
+            }
+            StorageTrouble::ReadOnly => {
+                "the database is read-only (its file or file system cannot be written): nothing of this request was stored"
+            }
+            StorageTrouble::Io => {
+                "the database could not be written (an I/O error from the operating system): nothing of this request was stored"
+            }
+        }
+    }
+}
+
+/// The storage trouble behind a database error, if that is what it is.
+pub fn storage_trouble(e: &sqlx::Error) -> Option<StorageTrouble> {
+    let code = e.as_database_error()?.code()?.parse::<i32>().ok()?;
+    match code & 0xff {
+        13 => Some(StorageTrouble::Full),
+        8 => Some(StorageTrouble::ReadOnly),
+        10 | 14 => Some(StorageTrouble::Io),
+        _ => None,
+    }
+}
+
 /// Whether an error is a UNIQUE (or primary-key) constraint violation.
 pub fn is_unique_violation(e: &sqlx::Error) -> bool {
     e.as_database_error().is_some_and(|d| d.is_unique_violation())

@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use crate::app::AppError;
+use crate::db;
 use crate::domain::DomainError;
 use crate::domain::measurement_csv::CsvError;
 use crate::jobs::JobError;
@@ -61,6 +62,9 @@ pub enum ApiError {
     Numerical { kind: &'static str, title: &'static str, detail: String },
     #[error("{0}")]
     Unavailable(String),
+    /// The disk holding the database is full (507).
+    #[error("{0}")]
+    InsufficientStorage(String),
     /// Logged, never echoed.
     #[error("internal error: {0}")]
     Internal(String),
@@ -112,6 +116,7 @@ impl ApiError {
             ApiError::UnsupportedMediaType(_) => StatusCode::UNSUPPORTED_MEDIA_TYPE,
             ApiError::Invalid { .. } | ApiError::Numerical { .. } => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
+            ApiError::InsufficientStorage(_) => StatusCode::INSUFFICIENT_STORAGE,
             ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -130,6 +135,7 @@ impl ApiError {
             ApiError::Invalid { field, .. } => ("invalid-value", "Invalid value", field.clone()),
             ApiError::Numerical { kind, title, .. } => (*kind, *title, None),
             ApiError::Unavailable(_) => ("unavailable", "Service unavailable", None),
+            ApiError::InsufficientStorage(_) => ("insufficient-storage", "Insufficient storage", None),
             ApiError::Internal(_) => ("internal", "Internal error", None),
         };
         let detail = match self {
@@ -152,9 +158,20 @@ impl ApiError {
     }
 }
 
+/// Storage trouble (disk full, read-only, I/O) is said as such — 507 or 503 — and logged;
+/// any other database error is internal.
 impl From<sqlx::Error> for ApiError {
     fn from(e: sqlx::Error) -> Self {
-        AppError::from(e).into()
+        match db::storage_trouble(&e) {
+            Some(t) => {
+                tracing::error!(error = %e, "storage trouble");
+                match t {
+                    db::StorageTrouble::Full => ApiError::InsufficientStorage(t.describe().into()),
+                    db::StorageTrouble::ReadOnly | db::StorageTrouble::Io => ApiError::Unavailable(t.describe().into()),
+                }
+            }
+            None => AppError::from(e).into(),
+        }
     }
 }
 

@@ -192,13 +192,12 @@ pub async fn cancel(
     _auth: Authorized<CALIBRATE>,
     Path(job_id): Path<String>,
 ) -> Result<Json<JobOut>, ApiError> {
-    let before = db::jobs::get(&state.pool, &job_id).await?.ok_or_else(|| ApiError::not_found("job", &job_id))?;
-    if before.state.has_ended() {
-        return Err(ApiError::conflict(format!("job {job_id} has already ended ({})", before.state)));
-    }
-    let row = db::jobs::cancel(&state.pool, &job_id).await?.ok_or_else(|| ApiError::not_found("job", &job_id))?;
-    if matches!(row.state, JobState::Succeeded | JobState::Failed) {
-        return Err(ApiError::conflict(format!("job {job_id} ended ({}) before it could be cancelled", row.state)));
+    // One transaction decides (see `db::jobs::cancel`): answered 200, the job ends `cancelled` with
+    // no result stored; an ended job (succeeded, failed or already cancelled) is left as it is.
+    let (what, row) =
+        db::jobs::cancel(&state.pool, &job_id).await?.ok_or_else(|| ApiError::not_found("job", &job_id))?;
+    if what == db::jobs::Cancel::AlreadyEnded {
+        return Err(ApiError::conflict(format!("job {job_id} has already ended ({})", row.state)));
     }
     Ok(Json(job_out(&row)?))
 }

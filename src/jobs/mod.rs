@@ -256,39 +256,97 @@ async fn run_one(
 }
 
 async fn finish(state: &JobContext, owner: &str, job: &db::jobs::JobRow, end: End) -> Result<(), JobError> {
-    let cancelled = db::jobs::cancel_requested(&state.pool, &job.id).await?;
-    match end {
+    let end = match end {
         End::Released => {
             db::jobs::release(&state.pool, &job.id, owner).await?;
             tracing::info!("shutdown: job put back in the queue");
+            return Ok(());
         }
+        End::Done(out) => Ok(out),
+        End::Failed(e) => Err(e),
+    };
+    // One write transaction reads the cancel flag and writes the end (BEGIN IMMEDIATE: the write
+    // lock is held from the start, so no cancel can commit in between). A cancel committed before
+    // it is seen here; one arriving later waits for the commit and finds the job ended. The final
+    // UPDATE also requires the flag clear, so a result is never stored over a cancel.
+    let mut tx = db::begin_write(&state.pool).await?;
+    let cancelled = db::jobs::cancel_requested(&mut *tx, &job.id).await?;
+    let held = match end {
         _ if cancelled => {
-            db::jobs::finish(&state.pool, &job.id, owner, JobState::Cancelled, None, None).await?;
-            tracing::info!("job cancelled; its result was discarded");
+            let held = db::jobs::finish(&mut *tx, &job.id, owner, JobState::Cancelled, None, None).await?;
+            if held {
+                tracing::info!("job cancelled; its result was discarded");
+            }
+            held
         }
-        End::Failed(e) => {
+        Err(e) => {
             if let JobError::Internal(m) = &e {
                 tracing::error!(error = %m, "job failed with an internal error");
             } else {
                 tracing::info!(error = %e, "job failed");
             }
             let problem = (state.failure_json)(&e);
-            db::jobs::finish(&state.pool, &job.id, owner, JobState::Failed, None, Some(&problem)).await?;
+            db::jobs::finish(&mut *tx, &job.id, owner, JobState::Failed, None, Some(&problem)).await?
         }
-        End::Done(out) => {
-            let mut tx = db::begin_write(&state.pool).await?;
+        Ok(out) => {
             let result = run::store(&mut tx, &job.id, &job.robot_id, &job.request_json, out).await?;
             let result_json = serde_json::to_string(&result).expect("a result serialises");
-            if db::jobs::finish(&mut *tx, &job.id, owner, JobState::Succeeded, Some(&result_json), None).await? {
-                tx.commit().await?;
-                // An identification may have activated its set.
-                state.caches.robot_changed(&job.robot_id);
-                tracing::info!("job succeeded");
-            } else {
-                tx.rollback().await?;
-                tracing::warn!("job no longer held at the end; result discarded");
+            db::jobs::finish(&mut *tx, &job.id, owner, JobState::Succeeded, Some(&result_json), None).await?
+        }
+    };
+    if held {
+        tx.commit().await?;
+        if !cancelled {
+            // An identification may have activated its set.
+            state.caches.robot_changed(&job.robot_id);
+            tracing::info!("job finished");
+        }
+    } else {
+        tx.rollback().await?;
+        tracing::warn!("job no longer held at the end; its result was discarded");
+    }
+    Ok(())
+}
+
+/// A job's phases one at a time — claim, solve, end — for tests that put a cancel (or anything
+/// else) between them. The workers run the same functions back to back (plus lease renewal).
+#[doc(hidden)]
+pub mod phases {
+    use super::*;
+
+    /// A job's computed end, not yet written.
+    pub struct Solved(End);
+
+    impl Solved {
+        /// `"succeeded"` or `"failed"`: how the solver ended.
+        pub fn outcome(&self) -> &'static str {
+            match self.0 {
+                End::Done(_) => "succeeded",
+                End::Failed(_) => "failed",
+                End::Released => "released",
             }
         }
     }
-    Ok(())
+
+    /// Claim the oldest queued job for `owner`.
+    pub async fn claim(ctx: &JobContext, owner: &str) -> Result<Option<db::jobs::JobRow>, sqlx::Error> {
+        db::jobs::claim(&ctx.pool, owner, LEASE).await
+    }
+
+    /// Load the job's inputs and run its solver (off the async runtime).
+    pub async fn solve(ctx: &JobContext, job: &db::jobs::JobRow) -> Solved {
+        Solved(match run::load(&ctx.pool, job.kind, &job.robot_id, &job.request_json).await {
+            Err(e) => End::Failed(e),
+            Ok(inputs) => match tokio::task::spawn_blocking(move || run::compute(inputs, &|_, _| {})).await {
+                Ok(Ok(out)) => End::Done(out),
+                Ok(Err(e)) => End::Failed(e),
+                Err(e) => End::Failed(JobError::Internal(format!("the solver task failed: {e}"))),
+            },
+        })
+    }
+
+    /// Write the job's end as a worker does: stored result, failure or (if asked for) cancelled.
+    pub async fn end(ctx: &JobContext, owner: &str, job: &db::jobs::JobRow, solved: Solved) -> Result<(), JobError> {
+        finish(ctx, owner, job, solved.0).await
+    }
 }
