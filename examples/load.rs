@@ -188,7 +188,8 @@ async fn client(url: String, sh: Arc<Shared>, session: String, seed: u64) -> (St
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let mut acknowledged = 0u64;
     let compensate = serde_json::to_vec(&json!({"targets": targets(), "parameter_set_id": sh.set_id,
-        "allow_unvalidated": true, "allow_outside_envelope": true})).unwrap();
+        "allow_unvalidated": true, "allow_outside_envelope": true}))
+    .unwrap();
     let identify = serde_json::to_vec(&json!({"sessions": [sh.id_session]})).unwrap();
     while Instant::now() < sh.deadline {
         let roll: f64 = rng.random();
