@@ -79,6 +79,7 @@ checks=(
   "ur10-identification|$API/v1/parameter-sets/$UR10_SET/report|$(($(call "$API/v1/parameter-sets/$UR10_SET/export" \
     | jq '[.parameters[] | select(.std != null and .nominal != null) | .unit] | unique | length') + 6))"
   "ur10-diagnosis|$API/v1/diagnoses/$UR10_DIAGNOSIS/report|2"
+  "history|$API/v1/robots/$ROBOT/history/report|1"
   "study|file://$tmp/study.html|3"
   "crossval|file://$tmp/crossval.html|1"
 )
@@ -181,7 +182,7 @@ EOF
 done
 if [[ -n "${SHOTS:-}" ]]; then
   mkdir -p "$SHOTS"
-  for t in validation identification diagnosis study crossval; do cp "$tmp/$t.png" "$SHOTS/report-$t.png"; done
+  for t in validation identification diagnosis study crossval history; do cp "$tmp/$t.png" "$SHOTS/report-$t.png"; done
   cp "$tmp/ur10-validation.png" "$SHOTS/report-ur10-validation.png"
   echo "screenshots in $SHOTS/"
 fi

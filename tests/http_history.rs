@@ -186,6 +186,25 @@ async fn the_history_is_a_paged_time_series_filtered_by_date() {
     let r = dated("include_archived=true").await;
     assert_eq!(r.headers["x-total-count"], "3");
     assert_eq!(r.body[0]["archived"], true);
+
+    // The history page plots the same series: one plot, a row per set, the validated figures.
+    let r = app.get(&format!("/v1/robots/{rid}/history/report?include_archived=true")).await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    assert!(r.headers["content-type"].to_str().unwrap().starts_with("text/html"));
+    assert_eq!(r.text.matches("<svg").count(), 1);
+    assert_eq!(r.text.matches("<tr>").count(), 4, "a header and three sets");
+    assert!(r.text.contains("0.2500") && r.text.contains("named"), "{}", r.text);
+    let r = app
+        .raw(
+            Method::GET,
+            &format!("/v1/robots/{rid}/history/report"),
+            None,
+            Vec::new(),
+            &[("accept", "application/json")],
+        )
+        .await;
+    assert_problem(&r, 406, None);
+    assert_problem(&app.get(&format!("/v1/robots/{rid}/history/report?from=yesterday")).await, 422, Some("from"));
     app.stop().await;
 }
 
@@ -272,14 +291,20 @@ async fn exports_in_every_format() {
         {"id": "pick-1", "position_mm": [0, 0, 60], "rotation_deg": [0, 180, 0], "cfx": 0},
         {"id": "home", "joints_deg": [0, 0, 0, 0, 30, 0]}]);
     let post = async |q: &str, body: Value| app.post(&format!("/v1/parameter-sets/{set}/export{q}"), &body).await;
-    let m = post("?format=rapid", json!({"targets": targets})).await;
+    // An imported set has no validation: refused as compensation refuses it, unless asked for.
+    assert_problem(&post("?format=rapid", json!({"targets": targets})).await, 409, None);
+    let m = post("?format=rapid", json!({"targets": targets, "allow_unvalidated": true})).await;
     assert_eq!(m.status, StatusCode::OK, "{}", m.text);
     assert_eq!(m.headers[header::CONTENT_TYPE], "text/plain; charset=utf-8");
     assert_eq!(m.headers[header::CONTENT_DISPOSITION], "attachment; filename=\"targets-v1.mod\"");
     assert_eq!(m.headers["x-failed-targets"], "0");
     assert!(m.text.starts_with("MODULE robocal_v1\n") && m.text.trim_end().ends_with("ENDMODULE"), "{}", m.text);
-    let c =
-        app.post(&format!("/v1/robots/{rid}/compensate"), &json!({"parameter_set_id": set, "targets": targets})).await;
+    let c = app
+        .post(
+            &format!("/v1/robots/{rid}/compensate"),
+            &json!({"parameter_set_id": set, "targets": targets, "allow_unvalidated": true}),
+        )
+        .await;
     assert_eq!(c.status, StatusCode::OK, "{}", c.text);
     for (name, result) in [("pick_1", &c.body["results"][0]), ("home", &c.body["results"][1])] {
         let line = m.text.lines().find(|l| l.contains(&format!("jointtarget j_{name}:="))).unwrap();
@@ -302,7 +327,8 @@ async fn exports_in_every_format() {
     );
 
     // A target out of reach: 422 naming it, unless allow_partial.
-    let with_bad = json!({"targets": [targets[0], {"id": "far", "position_mm": [3000, 0, 60], "rotation_deg": [0, 180, 0], "cfx": 0}]});
+    let with_bad = json!({"targets": [targets[0], {"id": "far", "position_mm": [3000, 0, 60], "rotation_deg": [0, 180, 0], "cfx": 0}],
+        "allow_unvalidated": true});
     assert_problem(&post("?format=rapid", with_bad.clone()).await, 422, Some("targets[1]"));
     let m = post("?format=rapid&allow_partial=true", with_bad).await;
     assert_eq!(m.status, StatusCode::OK, "{}", m.text);

@@ -114,6 +114,7 @@ fn api_router() -> OpenApiRouter<AppState> {
         .routes(routes!(reports::validation))
         .routes(routes!(reports::parameter_set))
         .routes(routes!(reports::diagnosis))
+        .routes(routes!(reports::history))
         .routes(routes!(diagnoses::create, diagnoses::list))
         .routes(routes!(diagnoses::get))
         .routes(routes!(diagnoses::accept))

@@ -172,3 +172,49 @@ mod tests {
         assert!(!accept("text/html;q=0, application/json"));
     }
 }
+
+/// A robot's calibration history as a page: each parameter set's held-out error (its latest
+/// validation's mean, p95 and max, and the nominal mean) against its version, and the table of
+/// the sets. Filtered like the JSON history.
+#[utoipa::path(get, path = "/v1/robots/{robot_id}/history/report", tag = "robots",
+    params(("robot_id" = String, Path, description = "Robot id"), super::history::HistoryRangeQuery),
+    responses(
+        (status = 200, description = "The history page: held-out error per parameter set version, and the sets with their dates, sessions, activation and diagnosis verdicts; self-contained HTML", body = String, content_type = "text/html"),
+        (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
+        (status = 406, description = "The client accepts no HTML", body = super::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Bad `from` or `to`", body = super::Problem, content_type = "application/problem+json")),
+    security(("bearer" = ["read"])))]
+pub async fn history(
+    State(state): State<AppState>,
+    _auth: Authorized<READ>,
+    headers: HeaderMap,
+    Path(robot_id): Path<String>,
+    axum::extract::Query(q): axum::extract::Query<super::history::HistoryRangeQuery>,
+) -> Result<Response, ApiError> {
+    use crate::app::history::{HistoryFilter, history as load_history};
+    if !accepts_html(&headers) {
+        return Ok(not_acceptable());
+    }
+    let range = crate::domain::history::TimeRange::parse(q.from.as_deref(), q.to.as_deref())
+        .map_err(|e| ApiError::domain(e, ""))?;
+    let robot = super::robots::find(&state, &robot_id).await?;
+    let filter = HistoryFilter { range, include_archived: q.include_archived.unwrap_or(false), offset: 0, limit: None };
+    let page = load_history(&state.pool, &robot.id, &filter).await?;
+    let points: Vec<report::HistoryPoint> = page
+        .entries
+        .iter()
+        .map(|e| report::HistoryPoint {
+            version: e.version,
+            created_at: e.created_at.clone(),
+            sessions: e.sessions.clone(),
+            active: e.active,
+            archived: e.archived,
+            mean_mm: e.validation.as_ref().and_then(|v| v.mean_mm),
+            p95_mm: e.validation.as_ref().and_then(|v| v.p95_mm),
+            max_mm: e.validation.as_ref().and_then(|v| v.max_mm),
+            nominal_mean_mm: e.validation.as_ref().and_then(|v| v.nominal_mean_mm),
+            verdict: e.diagnosis.as_ref().map(|d| d.verdict.clone()),
+        })
+        .collect();
+    Ok(html(report::history_report(&robot.name, &points)))
+}

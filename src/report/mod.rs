@@ -14,6 +14,7 @@
 //! dash as well as hue, so they survive grey-scale printing.
 
 pub mod diagnosis;
+pub mod history;
 pub mod html;
 pub mod parameters;
 pub mod plot;
@@ -21,6 +22,7 @@ pub mod studies;
 pub mod validation;
 
 pub use diagnosis::diagnosis_report;
+pub use history::{HistoryPoint, history_report};
 pub use parameters::parameter_set_report;
 pub use studies::{crossval_report, study_report};
 pub use validation::{ValidationDoc, validation_report};
