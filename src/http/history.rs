@@ -66,6 +66,7 @@ pub async fn history(
 #[into_params(parameter_in = Query)]
 pub struct DriftQuery {
     /// The set to compare against (required): another set of the same robot.
+    #[param(value_type = String, required = true)]
     pub against: Option<String>,
 }
 
