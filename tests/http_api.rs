@@ -88,6 +88,22 @@ async fn robots_and_artefacts() {
         Some("robot.preset"),
     );
     assert_problem(&app.post("/v1/robots", &json!({"name": "x"})).await, 422, Some("robot"));
+    // Names are bounded as the spec says (maxLength 200, in characters): 200 fit, 201 do not.
+    let long = "é".repeat(200);
+    assert_problem(
+        &app.post("/v1/robots", &json!({"name": format!("{long}x"), "robot": {"preset": "ur10"}})).await,
+        422,
+        Some("name"),
+    );
+    assert_problem(
+        &app.post(
+            "/v1/artefacts",
+            &json!({"name": format!("{long}x"), "distances_mm": {"d12": 300, "d13": 300, "d23": 300}, "ball_diameter_mm": 12.7}),
+        )
+        .await,
+        422,
+        Some("name"),
+    );
     assert_problem(
         &app.post("/v1/robots", &json!({"name": "x", "robot": {"preset": "ur10"}, "colour": 1})).await,
         422,
@@ -113,6 +129,9 @@ async fn robots_and_artefacts() {
     assert!(r.body["field"].as_str().unwrap().starts_with("robot.joints[2]"), "{}", r.text);
     let r = app.get("/v1/robots").await;
     assert_eq!(r.body.as_array().unwrap().len(), 1, "refused robots were not stored");
+    let r = app.post("/v1/robots", &json!({"name": long, "robot": {"preset": "ur10"}})).await;
+    assert_eq!(r.status, StatusCode::CREATED, "{}", r.body);
+    assert_eq!(r.body["name"].as_str().map(|n| n.chars().count()), Some(200));
 
     let a = artefact(&app, "plate").await;
     let r = app.get(&format!("/v1/artefacts/{a}")).await;

@@ -173,9 +173,7 @@ pub(super) fn token(t: TokenCommand) -> Result<String, CliError> {
         match t {
             TokenCommand::Create { db, name, scopes } => {
                 let scopes = tokens::parse_scopes(&scopes).map_err(|e| CliError::arg("--scopes", e))?;
-                if name.trim().is_empty() {
-                    return Err(CliError::arg("--name", "must not be empty"));
-                }
+                let name = crate::domain::limits::name(&name, "--name").map_err(|e| CliError::arg("--name", e.to_string()))?;
                 let pool = open(db).await?;
                 let (row, secret) = tokens::create(&pool, name.trim(), &scopes).await.map_err(|e| CliError::msg(e.to_string()))?;
                 pool.close().await;

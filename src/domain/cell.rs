@@ -309,17 +309,13 @@ impl CellFile {
         let mut sessions = Vec::with_capacity(self.sessions.len());
         for (si, s) in self.sessions.iter().enumerate() {
             let at = format!("sessions[{si}] \"{}\"", s.name);
-            if s.name.trim().is_empty() {
-                return Err(DomainError::new(format!("sessions[{si}].name"), "must not be empty"));
-            }
+            super::limits::name(&s.name, &format!("sessions[{si}].name"))?;
             if !names.insert(s.name.clone()) {
                 return Err(DomainError::new(format!("{at}.name"), "another session has this name"));
             }
             let tool = s.tool.to_tool().map_err(|e| e.within(&format!("{at}.tool")))?;
             if let Some(t) = &s.target {
-                if t.trim().is_empty() {
-                    return Err(DomainError::new(format!("{at}.target"), "must not be empty"));
-                }
+                super::limits::name(t, &format!("{at}.target"))?;
                 match targets.get(t.as_str()) {
                     Some((first, other)) if *other != &s.tool => {
                         return Err(DomainError::new(

@@ -12,6 +12,24 @@ pub const MAX_VALIDATION: usize = 10_000;
 /// as n times the candidates; 100,000 is ten full batches.
 pub const MAX_SELECT: usize = 100_000;
 
+/// Longest name (robot, artefact, session, TCP target, token, work object, custom robot), in
+/// characters as JSON Schema's `maxLength` counts them (Unicode scalar values).
+pub const MAX_NAME: usize = 200;
+
+/// Check a name: not blank and at most [`MAX_NAME`] characters; the trimmed name is what is stored.
+/// The error names `field`.
+pub fn name<'a>(value: &'a str, field: &str) -> Result<&'a str, DomainError> {
+    let trimmed = value.trim();
+    if trimmed.is_empty() {
+        return Err(DomainError::new(field, "must not be empty"));
+    }
+    let n = value.chars().count();
+    if n > MAX_NAME {
+        return Err(DomainError::new(field, format!("must be at most {MAX_NAME} characters, got {n}")));
+    }
+    Ok(trimmed)
+}
+
 /// Check a per-ball candidate count (1 … [`MAX_PER_BALL`]); the error names `field`.
 pub fn per_ball(n: usize, field: &str) -> Result<usize, DomainError> {
     if n == 0 || n > MAX_PER_BALL {
@@ -42,6 +60,17 @@ pub fn estimate(per_ball: usize, validation: usize) -> (f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn names_are_trimmed_not_blank_and_bounded_in_characters() {
+        assert_eq!(name("  cell-3 ", "name").unwrap(), "cell-3");
+        assert_eq!(name(" \t", "name").unwrap_err().to_string(), "name: must not be empty");
+        let long = "é".repeat(MAX_NAME);
+        assert_eq!(name(&long, "x").unwrap(), long, "200 two-byte characters are 200 characters");
+        let e = name(&format!("{long}a"), "sessions[2].name").unwrap_err();
+        assert_eq!(e.field().as_deref(), Some("sessions[2].name"));
+        assert!(e.to_string().contains("at most 200 characters, got 201"), "{e}");
+    }
 
     #[test]
     fn bounds_name_the_field_and_estimates_grow_linearly() {

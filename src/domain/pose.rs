@@ -346,6 +346,8 @@ pub enum FrameKind {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct WorkObjectSpec {
+    /// Not blank, at most 200 characters.
+    #[schema(min_length = 1, max_length = 200, pattern = r"\S")]
     pub name: String,
     #[schema(min_items = 3, max_items = 3)]
     pub position_mm: [f64; 3],
@@ -427,10 +429,7 @@ impl TargetFrames {
                 },
             }),
             (None | Some(FrameKind::Base), Some(w)) => {
-                let name = w.name.trim();
-                if name.is_empty() {
-                    return Err(DomainError::new("work_object.name", "must not be empty"));
-                }
+                let name = super::limits::name(&w.name, "work_object.name")?;
                 let wobj = frame_from_parts(w.position_mm, w.rotation_deg, w.quaternion)
                     .map_err(|e| e.within("work_object"))?;
                 Ok(TargetFrames {

@@ -49,7 +49,7 @@ pub enum Convention {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CustomRobotSpec {
-    #[schema(min_length = 1, pattern = r"\S")]
+    #[schema(min_length = 1, max_length = 200, pattern = r"\S")]
     pub name: String,
     #[serde(default)]
     pub convention: Convention,
@@ -132,9 +132,7 @@ impl RobotSpec {
             RobotSpec::Preset(p) => return Ok(p.model()),
             RobotSpec::Custom(c) => c,
         };
-        if c.name.trim().is_empty() {
-            return Err(DomainError::new("name", "must not be empty"));
-        }
+        super::limits::name(&c.name, "name")?;
         let gravity = match c.gravity_mps2 {
             None => Vector3::new(0.0, 0.0, -STANDARD_GRAVITY),
             Some(g) => {

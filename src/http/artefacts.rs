@@ -14,6 +14,7 @@ use super::{ApiError, AppState};
 use crate::cell::Artefact;
 use crate::db::{self, corrections, records};
 use crate::domain::cell::{ArtefactKind, ArtefactSpec, Distances};
+use crate::domain::limits;
 use crate::units::MM;
 
 /// An artefact to create.
@@ -21,7 +22,7 @@ use crate::units::MM;
 #[serde(deny_unknown_fields)]
 pub struct NewArtefact {
     /// Unique name, e.g. `plate-A` (not blank).
-    #[schema(min_length = 1, pattern = r"\S")]
+    #[schema(min_length = 1, max_length = 200, pattern = r"\S")]
     pub name: String,
     /// `ball_triangle` (the only kind).
     #[serde(default = "ball_triangle")]
@@ -85,10 +86,7 @@ pub async fn create(
     _auth: Authorized<MEASURE>,
     JsonBody(body): JsonBody<NewArtefact>,
 ) -> Result<(StatusCode, Json<ArtefactOut>), ApiError> {
-    let name = body.name.trim();
-    if name.is_empty() {
-        return Err(ApiError::invalid("name", "must not be empty"));
-    }
+    let name = limits::name(&body.name, "name").map_err(|e| ApiError::domain(e, ""))?;
     let spec =
         ArtefactSpec { kind: body.kind, distances_mm: body.distances_mm, ball_diameter_mm: body.ball_diameter_mm };
     artefact(&spec)?;

@@ -16,6 +16,7 @@ use crate::app::robots::model_of;
 use crate::db::{self, records};
 use crate::domain::RobotSpec;
 use crate::domain::cell::PoseXyzAbc;
+use crate::domain::limits;
 use crate::kinematics::ParamLayout;
 
 /// A robot to create.
@@ -23,7 +24,7 @@ use crate::kinematics::ParamLayout;
 #[serde(deny_unknown_fields)]
 pub struct NewRobot {
     /// Unique name, e.g. `cell-3-irb120` (not blank).
-    #[schema(min_length = 1, pattern = r"\S")]
+    #[schema(min_length = 1, max_length = 200, pattern = r"\S")]
     pub name: String,
     /// `{"preset": "irb120"}`, `{"preset": "ur10"}` or a custom joint table (see the README's "Files").
     #[schema(value_type = crate::domain::robot::RobotDoc)]
@@ -89,10 +90,7 @@ pub async fn create(
     _auth: Authorized<MEASURE>,
     JsonBody(body): JsonBody<NewRobot>,
 ) -> Result<(StatusCode, Json<RobotOut>), ApiError> {
-    let name = body.name.trim();
-    if name.is_empty() {
-        return Err(ApiError::invalid("name", "must not be empty"));
-    }
+    let name = limits::name(&body.name, "name").map_err(|e| ApiError::domain(e, ""))?;
     let spec = RobotSpec::from_json_value(&body.robot).map_err(|e| ApiError::domain(e, "robot"))?;
     spec.to_model().map_err(|e| ApiError::domain(e, "robot"))?;
     if let Some(b) = &body.base_guess {

@@ -16,13 +16,14 @@ use super::{ApiError, AppState};
 use crate::db::{self, corrections, records};
 use crate::domain::ToolSpec;
 use crate::domain::cell::{InstrumentSpec, OrderSpec, PurposeSpec};
+use crate::domain::limits;
 
 /// A session to create.
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NewSession {
     /// Unique per robot, e.g. `trical-1` (not blank).
-    #[schema(min_length = 1, pattern = r"\S")]
+    #[schema(min_length = 1, max_length = 200, pattern = r"\S")]
     pub name: String,
     pub purpose: PurposeSpec,
     pub instrument: InstrumentSpec,
@@ -43,7 +44,7 @@ pub struct NewSession {
     /// naming the same target share one identified TCP and must declare the same tool; without
     /// it, a session whose TCP is identified gets a TCP of its own.
     #[serde(default)]
-    #[schema(min_length = 1, pattern = r"\S")]
+    #[schema(min_length = 1, max_length = 200, pattern = r"\S")]
     pub target: Option<String>,
 }
 
@@ -109,10 +110,7 @@ pub async fn create(
     JsonBody(body): JsonBody<NewSession>,
 ) -> Result<(StatusCode, Json<SessionOut>), ApiError> {
     let robot = find_robot(&state, &robot_id).await?;
-    let name = body.name.trim();
-    if name.is_empty() {
-        return Err(ApiError::invalid("name", "must not be empty"));
-    }
+    let name = limits::name(&body.name, "name").map_err(|e| ApiError::domain(e, ""))?;
     body.tool.to_tool().map_err(|e| ApiError::domain(e, "tool"))?;
     if body.artefact_id.is_none() && body.instrument == InstrumentSpec::Trical {
         return Err(ApiError::invalid(
@@ -127,8 +125,7 @@ pub async fn create(
     }
     let target = match &body.target {
         None => None,
-        Some(t) if t.trim().is_empty() => return Err(ApiError::invalid("target", "must not be empty")),
-        Some(t) => Some(t.trim().to_string()),
+        Some(t) => Some(limits::name(t, "target").map_err(|e| ApiError::domain(e, ""))?.to_string()),
     };
     let tool_json = serde_json::to_string(&body.tool).expect("serialises");
     if let Some(t) = &target {

@@ -11,13 +11,14 @@ use super::extract::{ADMIN, Authorized, JsonBody};
 use super::paging::{PageQuery, Paging};
 use super::{ApiError, AppState};
 use crate::db::tokens::{self, Scope, TokenRow};
+use crate::domain::limits;
 
 /// A token to create.
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NewToken {
     /// Who uses it, e.g. `cell-3-pc` (not blank).
-    #[schema(min_length = 1, pattern = r"\S")]
+    #[schema(min_length = 1, max_length = 200, pattern = r"\S")]
     pub name: String,
     /// Any of `measure`, `calibrate`, `compensate`, `read`, `admin` (repeats count once).
     #[schema(min_items = 1, value_type = Vec<ScopeName>)]
@@ -72,10 +73,7 @@ pub async fn create(
     _auth: Authorized<ADMIN>,
     JsonBody(body): JsonBody<NewToken>,
 ) -> Result<(StatusCode, Json<TokenOut>), ApiError> {
-    let name = body.name.trim();
-    if name.is_empty() {
-        return Err(ApiError::invalid("name", "must not be empty"));
-    }
+    let name = limits::name(&body.name, "name").map_err(|e| ApiError::domain(e, ""))?;
     let mut scopes: Vec<Scope> = Vec::new();
     for (i, s) in body.scopes.iter().enumerate() {
         let sc = Scope::parse(s).ok_or_else(|| {

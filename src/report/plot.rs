@@ -6,6 +6,7 @@
 //! fitted curves are a mid-tone, dashed. Told apart by lightness and shape, not hue alone.
 
 use plotters::coord::Shift;
+use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint};
 use plotters::prelude::*;
 use statrs::distribution::{Continuous, ContinuousCDF, Normal};
 
@@ -310,16 +311,21 @@ pub fn draw_qq(area: &Area<'_>, title: &str, y_desc: &str, values: &[f64], small
     Ok(())
 }
 
-/// Histogram, CDF and Q–Q of one sample, full width, as three SVGs.
+/// Histogram, CDF and Q–Q of the calibrated model's sample of `what`, full width, as three SVGs;
+/// the CDF also draws `other` (e.g. the nominal model's), and its title says so.
 pub fn distribution_svgs(what: &str, unit: &str, values: &[f64], other: Option<(&str, &[f64])>) -> [String; 3] {
     let desc = format!("{what} ({unit})");
-    let hist = svg(WIDTH, 340, |a| draw_histogram(a, &format!("Histogram of {what}"), &desc, values, false));
+    let hist =
+        svg(WIDTH, 340, |a| draw_histogram(a, &format!("Histogram of {what}, calibrated model"), &desc, values, false));
     let mut series = vec![CdfSeries { label: "calibrated", values, fit: true }];
+    let mut cdf_title = format!("Empirical CDF of {what}, calibrated model");
     if let Some((label, v)) = other {
         series.push(CdfSeries { label, values: v, fit: false });
+        cdf_title = format!("Empirical CDF of {what}: calibrated and {label} models");
     }
-    let cdf = svg(WIDTH, 340, |a| draw_ecdf(a, &format!("Empirical CDF of {what}"), &desc, &series, false));
-    let qq = svg(WIDTH, 340, |a| draw_qq(a, &format!("Normal Q–Q plot of {what}"), &desc, values, false));
+    let cdf = svg(WIDTH, 340, |a| draw_ecdf(a, &cdf_title, &desc, &series, false));
+    let qq =
+        svg(WIDTH, 340, |a| draw_qq(a, &format!("Normal Q–Q plot of {what}, calibrated model"), &desc, values, false));
     [hist, cdf, qq]
 }
 
@@ -585,12 +591,16 @@ pub fn learning_curve_svg(title: &str, x_desc: &str, y_desc: &str, curves: &[Cur
             bounds(curves.iter().flat_map(|c| c.points.iter().flat_map(|p| [p.1[1], p.1[3]]).chain(c.pooled)));
         let (x0, x1) = padded(xl, xh, 0.05);
         let (y0, y1) = padded(yl.min(0.0), yh, 0.08);
+        // The x values are counts (poses, set versions): ticks only at whole numbers, at the
+        // values themselves when there are few, so one or two versions do not repeat a label.
+        let xs: Vec<f64> = curves.iter().flat_map(|c| c.points.iter().map(|p| p.0)).collect();
+        let (x0, x1) = if x1 - x0 < 2.0 { (xl - 1.0, xh + 1.0) } else { (x0, x1) };
         let mut chart = ChartBuilder::on(area)
             .caption(title, caption_font(17))
             .margin(8)
             .x_label_area_size(42)
             .y_label_area_size(56)
-            .build_cartesian_2d(x0..x1, y0..y1)?;
+            .build_cartesian_2d(CountAxis { lo: x0, hi: x1, ticks: integer_ticks(&xs, x0, x1) }, y0..y1)?;
         mesh!(chart, x_desc, y_desc, 0, decimals(y1 - y0));
         let shades = [INK, RGBColor(90, 100, 120), PALE, RGBColor(60, 60, 60)];
         for (k, c) in curves.iter().enumerate() {
@@ -602,11 +612,13 @@ pub fn learning_curve_svg(title: &str, x_desc: &str, y_desc: &str, curves: &[Cur
                 1 => chart.draw_series(DashedLineSeries::new(line.clone(), 8, 5, style))?,
                 _ => chart.draw_series(DashedLineSeries::new(line.clone(), 2, 4, style))?,
             };
-            let shape = k % 3;
+            // Four marker shapes, so four curves stay apart in grey.
+            let shape = k % 4;
             anno.label(c.label.clone()).legend(move |(x, y)| match shape {
                 0 => Circle::new((x + 8, y), 4, color.filled()).into_dyn(),
                 1 => TriangleMarker::new((x + 8, y), 5, color.filled()).into_dyn(),
-                _ => Cross::new((x + 8, y), 4, color.stroke_width(2)).into_dyn(),
+                2 => Cross::new((x + 8, y), 4, color.stroke_width(2)).into_dyn(),
+                _ => Rectangle::new([(x + 4, y - 4), (x + 12, y + 4)], color.filled()).into_dyn(),
             });
             for p in &c.points {
                 chart.draw_series(std::iter::once(PathElement::new(vec![(p.0, p.1[1]), (p.0, p.1[3])], style)))?;
@@ -614,7 +626,10 @@ pub fn learning_curve_svg(title: &str, x_desc: &str, y_desc: &str, curves: &[Cur
             match shape {
                 0 => chart.draw_series(line.iter().map(|p| Circle::new(*p, 4, color.filled())))?,
                 1 => chart.draw_series(line.iter().map(|p| TriangleMarker::new(*p, 5, color.filled())))?,
-                _ => chart.draw_series(line.iter().map(|p| Cross::new(*p, 4, color.stroke_width(2))))?,
+                2 => chart.draw_series(line.iter().map(|p| Cross::new(*p, 4, color.stroke_width(2))))?,
+                _ => chart.draw_series(
+                    line.iter().map(|p| EmptyElement::at(*p) + Rectangle::new([(-4, -4), (4, 4)], color.filled())),
+                )?,
             };
             if let Some(v) = c.pooled {
                 chart.draw_series(DashedLineSeries::new(vec![(x0, v), (x1, v)], 3, 5, color.stroke_width(1)))?;
@@ -623,6 +638,56 @@ pub fn learning_curve_svg(title: &str, x_desc: &str, y_desc: &str, curves: &[Cur
         legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         Ok(())
     })
+}
+
+/// A linear f64 axis whose ticks are given (plotters' `with_key_points` wrapper drops the f64
+/// label formatter the mesh needs, hence this small `Ranged`).
+struct CountAxis {
+    lo: f64,
+    hi: f64,
+    ticks: Vec<f64>,
+}
+
+impl Ranged for CountAxis {
+    type FormatOption = DefaultFormatting;
+    type ValueType = f64;
+
+    fn map(&self, value: &f64, limit: (i32, i32)) -> i32 {
+        let t = (value - self.lo) / (self.hi - self.lo);
+        (f64::from(limit.0) + t * f64::from(limit.1 - limit.0)).round() as i32
+    }
+
+    fn key_points<Hint: KeyPointHint>(&self, hint: Hint) -> Vec<f64> {
+        if hint.weight().allow_light_points() { Vec::new() } else { self.ticks.clone() }
+    }
+
+    fn range(&self) -> std::ops::Range<f64> {
+        self.lo..self.hi
+    }
+}
+
+/// Tick positions for an axis of whole numbers on `lo..hi`: the distinct values themselves when
+/// there are at most 12 of them, otherwise multiples of a 1-2-5 step giving at most 12 ticks.
+fn integer_ticks(values: &[f64], lo: f64, hi: f64) -> Vec<f64> {
+    let mut distinct: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).map(f64::round).collect();
+    distinct.sort_by(f64::total_cmp);
+    distinct.dedup();
+    if distinct.len() <= 12 {
+        return distinct;
+    }
+    let span = (hi - lo).max(1.0);
+    let mut step = 1.0;
+    'search: for decade in [1.0, 10.0, 100.0, 1e3, 1e4, 1e5, 1e6, 1e7] {
+        for m in [1.0, 2.0, 5.0] {
+            step = m * decade;
+            if span / step <= 11.0 {
+                break 'search;
+            }
+        }
+    }
+    let first = (lo / step).ceil() as i64;
+    let last = (hi / step).floor() as i64;
+    (first..=last).map(|k| k as f64 * step).collect()
 }
 
 /// One segment of a stacked bar.
@@ -749,6 +814,32 @@ mod tests {
             assert!((p.0 - zr).abs() < 1e-9, "{} vs {zr}", p.0);
         }
         assert_eq!(pts.iter().map(|p| p.1).collect::<Vec<_>>(), vec![-1.0, 0.5, 2.0, 3.0]);
+    }
+
+    #[test]
+    fn integer_ticks_are_the_values_when_few_and_round_steps_when_many() {
+        assert_eq!(integer_ticks(&[2.0, 1.0, 2.0], 0.0, 3.0), vec![1.0, 2.0]);
+        let many: Vec<f64> = (1..=40).map(f64::from).collect();
+        assert_eq!(integer_ticks(&many, 0.0, 41.0), vec![0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0, 40.0]);
+        let sizes: Vec<f64> = (1..=30).map(|k| f64::from(k) * 50.0).collect();
+        let t = integer_ticks(&sizes, 0.0, 1530.0);
+        assert!(t.len() <= 12 && t.iter().all(|v| v.fract() == 0.0), "{t:?}");
+    }
+
+    /// Two set versions: each version labels the x axis once, and no fractional version appears.
+    #[test]
+    fn a_short_history_labels_each_version_once() {
+        let curves =
+            vec![Curve { label: "mean".into(), points: vec![(1.0, [0.1; 5]), (2.0, [0.05; 5])], pooled: None }];
+        let svg = learning_curve_svg("t", "version", "mm", &curves);
+        let labels: Vec<&str> = svg
+            .split("<text")
+            .skip(1)
+            .filter_map(|t| t.split_once('>').map(|(_, r)| r.split('<').next().unwrap_or("").trim()))
+            .collect();
+        assert_eq!(labels.iter().filter(|l| **l == "1").count(), 1, "{labels:?}");
+        assert_eq!(labels.iter().filter(|l| **l == "2").count(), 1, "{labels:?}");
+        assert!(!labels.iter().any(|l| *l == "0" || *l == "3"), "{labels:?}");
     }
 
     #[test]

@@ -298,7 +298,7 @@ pub fn validation_sections(v: &ValidationDoc) -> String {
     let cal: Vec<f64> = res.iter().map(|r| r.error_norm_mm).collect();
     let nom: Vec<f64> = res.iter().map(|r| r.nominal_error_norm_mm).collect();
     s.push_str("<h2>Distribution of the position errors</h2>");
-    let [hist, cdf, qq] = plot::distribution_svgs("|e| calibrated", "mm", &cal, Some(("nominal", &nom)));
+    let [hist, cdf, qq] = plot::distribution_svgs("|e|", "mm", &cal, Some(("nominal", &nom)));
     s.push_str(&figure(&hist, "Calibrated |e| with the normal of the same mean and σ (cf. Fig. 5.17)."));
     s.push_str(&figure(
         &cdf,
