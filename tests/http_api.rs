@@ -1333,6 +1333,20 @@ async fn sessions_and_artefacts_are_deleted_only_when_unused() {
 
     assert_problem(&del(&format!("/v1/sessions/{wrong}")).await, 422, Some("reason"));
     assert_problem(&del(&format!("/v1/sessions/{wrong}?reason=")).await, 422, Some("reason"));
+    // A reason starting with NUL (found by schemathesis: SQLite's length() stops at NUL, so the
+    // store's not-blank check failed with a 500) is refused by the server, as the spec's pattern says.
+    let r = del(&format!("/v1/sessions/{wrong}?reason=%00%C2%86p")).await;
+    assert_problem(&r, 422, Some("reason"));
+    assert!(r.text.contains("NUL"), "{}", r.text);
+    let spec: Value = serde_json::from_str(include_str!("../openapi/openapi.json")).unwrap();
+    let reason = spec["paths"]["/v1/sessions/{session_id}"]["delete"]["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["name"] == "reason")
+        .cloned()
+        .unwrap();
+    assert_eq!(reason["schema"]["pattern"], robocal::domain::limits::TEXT_PATTERN);
     assert_problem(&del("/v1/sessions/none?reason=x").await, 404, None);
 
     // A queued identification reads "used": refused while it waits, allowed once it is cancelled.

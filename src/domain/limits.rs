@@ -16,16 +16,37 @@ pub const MAX_SELECT: usize = 100_000;
 /// characters as JSON Schema's `maxLength` counts them (Unicode scalar values).
 pub const MAX_NAME: usize = 200;
 
-/// Check a name: not blank and at most [`MAX_NAME`] characters; the trimmed name is what is stored.
-/// The error names `field`.
+/// Longest reason given for a correction of stored data (an exclusion, a deletion, an archive).
+pub const MAX_REASON: usize = 2000;
+
+/// The OpenAPI `pattern` of names and reasons: a character that is neither white space nor NUL,
+/// and no NUL anywhere (SQLite's text functions end a string at NUL, so the store's "not blank"
+/// checks could not hold for one).
+pub const TEXT_PATTERN: &str = r"^[^\u0000]*[^\s\u0000][^\u0000]*$";
+
+/// Check a name: not blank, no NUL, at most [`MAX_NAME`] characters; the trimmed name is what is
+/// stored. The error names `field`.
 pub fn name<'a>(value: &'a str, field: &str) -> Result<&'a str, DomainError> {
+    text(value, field, MAX_NAME, "must not be empty")
+}
+
+/// Check the reason of a correction: not blank, no NUL, at most [`MAX_REASON`] characters; the
+/// trimmed reason is what is recorded.
+pub fn reason<'a>(value: &'a str, field: &str) -> Result<&'a str, DomainError> {
+    text(value, field, MAX_REASON, "say why: a correction of stored data is recorded with its reason")
+}
+
+fn text<'a>(value: &'a str, field: &str, max: usize, blank: &str) -> Result<&'a str, DomainError> {
     let trimmed = value.trim();
     if trimmed.is_empty() {
-        return Err(DomainError::new(field, "must not be empty"));
+        return Err(DomainError::new(field, blank));
+    }
+    if value.contains('\0') {
+        return Err(DomainError::new(field, "must not contain NUL (U+0000)"));
     }
     let n = value.chars().count();
-    if n > MAX_NAME {
-        return Err(DomainError::new(field, format!("must be at most {MAX_NAME} characters, got {n}")));
+    if n > max {
+        return Err(DomainError::new(field, format!("must be at most {max} characters, got {n}")));
     }
     Ok(trimmed)
 }
@@ -70,6 +91,18 @@ mod tests {
         let e = name(&format!("{long}a"), "sessions[2].name").unwrap_err();
         assert_eq!(e.field().as_deref(), Some("sessions[2].name"));
         assert!(e.to_string().contains("at most 200 characters, got 201"), "{e}");
+        assert!(name("\0x", "name").unwrap_err().to_string().contains("NUL"));
+        assert!(reason("ok\0", "reason").unwrap_err().to_string().contains("NUL"));
+        assert_eq!(reason(" moved the fixture ", "reason").unwrap(), "moved the fixture");
+        assert!(reason(&"r".repeat(MAX_REASON + 1), "reason").is_err());
+        // The spec's pattern says the same (the regex crate reads the escapes as ECMA and Python do).
+        let re = regex::Regex::new(TEXT_PATTERN).unwrap();
+        for s in ["a", " a ", "é", "a\tb"] {
+            assert!(re.is_match(s) && name(s, "n").is_ok(), "{s:?}");
+        }
+        for s in ["", " ", "\t\n", "\0", "a\0", "\0 a"] {
+            assert!(!re.is_match(s) && name(s, "n").is_err(), "{s:?}");
+        }
     }
 
     #[test]

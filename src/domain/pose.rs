@@ -347,7 +347,7 @@ pub enum FrameKind {
 #[serde(deny_unknown_fields)]
 pub struct WorkObjectSpec {
     /// Not blank, at most 200 characters.
-    #[schema(min_length = 1, max_length = 200, pattern = r"\S")]
+    #[schema(min_length = 1, max_length = 200, pattern = "^[^\\u0000]*[^\\s\\u0000][^\\u0000]*$")]
     pub name: String,
     #[schema(min_items = 3, max_items = 3)]
     pub position_mm: [f64; 3],

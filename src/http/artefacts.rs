@@ -22,7 +22,7 @@ use crate::units::MM;
 #[serde(deny_unknown_fields)]
 pub struct NewArtefact {
     /// Unique name, e.g. `plate-A` (not blank).
-    #[schema(min_length = 1, max_length = 200, pattern = r"\S")]
+    #[schema(min_length = 1, max_length = 200, pattern = "^[^\\u0000]*[^\\s\\u0000][^\\u0000]*$")]
     pub name: String,
     /// `ball_triangle` (the only kind).
     #[serde(default = "ball_triangle")]

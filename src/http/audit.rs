@@ -13,18 +13,12 @@ use super::extract::{Authorized, READ};
 use super::paging::{PageQuery, Paging};
 use super::{ApiError, AppState};
 use crate::db::{self, corrections};
+use crate::domain::limits;
 
 /// Why a correction is made: required, non-empty (trimmed), at most 2000 characters; 422 naming
 /// `reason` otherwise.
 pub fn reason(text: Option<&str>) -> Result<String, ApiError> {
-    let r = text.map(str::trim).unwrap_or("");
-    if r.is_empty() {
-        return Err(ApiError::invalid("reason", "say why: a correction of stored data is recorded with its reason"));
-    }
-    if r.chars().count() > 2000 {
-        return Err(ApiError::invalid("reason", "at most 2000 characters"));
-    }
-    Ok(r.to_string())
+    Ok(limits::reason(text.unwrap_or(""), "reason").map_err(|e| ApiError::domain(e, ""))?.to_string())
 }
 
 /// The reason of a DELETE, as a query parameter (`?reason=…`, URL-encoded).
@@ -32,7 +26,7 @@ pub fn reason(text: Option<&str>) -> Result<String, ApiError> {
 #[into_params(parameter_in = Query)]
 pub struct ReasonQuery {
     /// Why (required, not blank, at most 2000 characters; recorded in the audit timeline).
-    #[param(value_type = String, required = true, min_length = 1, max_length = 2000, pattern = r"\S")]
+    #[param(value_type = String, required = true, min_length = 1, max_length = 2000, pattern = "^[^\\u0000]*[^\\s\\u0000][^\\u0000]*$")]
     pub reason: Option<String>,
 }
 

@@ -386,7 +386,7 @@ pub struct MeasurementPatch {
     pub excluded: bool,
     /// Why (required, not blank, at most 2000 characters): kept with the exclusion, or with its restoring.
     #[serde(default)]
-    #[schema(value_type = String, required = true, min_length = 1, max_length = 2000, pattern = r"\S")]
+    #[schema(value_type = String, required = true, min_length = 1, max_length = 2000, pattern = "^[^\\u0000]*[^\\s\\u0000][^\\u0000]*$")]
     pub reason: Option<String>,
 }
 

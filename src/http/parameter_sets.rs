@@ -298,7 +298,7 @@ pub struct ParameterSetPatch {
     pub archived: bool,
     /// Why (required, not blank, at most 2000 characters): kept with the set and in the audit timeline.
     #[serde(default)]
-    #[schema(value_type = String, required = true, min_length = 1, max_length = 2000, pattern = r"\S")]
+    #[schema(value_type = String, required = true, min_length = 1, max_length = 2000, pattern = "^[^\\u0000]*[^\\s\\u0000][^\\u0000]*$")]
     pub reason: Option<String>,
 }
 

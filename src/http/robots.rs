@@ -24,7 +24,7 @@ use crate::kinematics::ParamLayout;
 #[serde(deny_unknown_fields)]
 pub struct NewRobot {
     /// Unique name, e.g. `cell-3-irb120` (not blank).
-    #[schema(min_length = 1, max_length = 200, pattern = r"\S")]
+    #[schema(min_length = 1, max_length = 200, pattern = "^[^\\u0000]*[^\\s\\u0000][^\\u0000]*$")]
     pub name: String,
     /// `{"preset": "irb120"}`, `{"preset": "ur10"}` or a custom joint table (see the README's "Files").
     #[schema(value_type = crate::domain::robot::RobotDoc)]

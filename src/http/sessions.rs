@@ -23,7 +23,7 @@ use crate::domain::limits;
 #[serde(deny_unknown_fields)]
 pub struct NewSession {
     /// Unique per robot, e.g. `trical-1` (not blank).
-    #[schema(min_length = 1, max_length = 200, pattern = r"\S")]
+    #[schema(min_length = 1, max_length = 200, pattern = "^[^\\u0000]*[^\\s\\u0000][^\\u0000]*$")]
     pub name: String,
     pub purpose: PurposeSpec,
     pub instrument: InstrumentSpec,
@@ -44,7 +44,7 @@ pub struct NewSession {
     /// naming the same target share one identified TCP and must declare the same tool; without
     /// it, a session whose TCP is identified gets a TCP of its own.
     #[serde(default)]
-    #[schema(min_length = 1, max_length = 200, pattern = r"\S")]
+    #[schema(min_length = 1, max_length = 200, pattern = "^[^\\u0000]*[^\\s\\u0000][^\\u0000]*$")]
     pub target: Option<String>,
 }
 

@@ -18,7 +18,7 @@ use crate::domain::limits;
 #[serde(deny_unknown_fields)]
 pub struct NewToken {
     /// Who uses it, e.g. `cell-3-pc` (not blank).
-    #[schema(min_length = 1, max_length = 200, pattern = r"\S")]
+    #[schema(min_length = 1, max_length = 200, pattern = "^[^\\u0000]*[^\\s\\u0000][^\\u0000]*$")]
     pub name: String,
     /// Any of `measure`, `calibrate`, `compensate`, `read`, `admin` (repeats count once).
     #[schema(min_items = 1, value_type = Vec<ScopeName>)]
