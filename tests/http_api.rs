@@ -672,6 +672,14 @@ async fn identification_validation_and_compensation() {
     assert_eq!(h0["sessions"], json!(["trical-1"]));
     assert_eq!(h0["quality"]["identified"], 31);
     assert_eq!(h0["validations"][0]["figures"]["n"], 60);
+    // The listing (which parses only the summary fields, and reads the page's validations in one
+    // query) says what the single-set answer (which parses the whole document) says.
+    let mut single = app.get(&format!("/v1/parameter-sets/{set_id}")).await.body;
+    assert!(single.as_object_mut().unwrap().remove("parameter_set").is_some());
+    assert_eq!(h0, &single);
+    assert_eq!(h0["validations"][0]["figures"]["mean_mm"], rep["mean_mm"]);
+    assert!(rep["nominal"]["mean_mm"].is_f64());
+    assert_eq!(h0["validations"][0]["figures"]["nominal"]["mean_mm"], rep["nominal"]["mean_mm"]);
     assert_problem(&app.get(&format!("/v1/robots/{rid}/active-parameter-set")).await, 404, None);
     let apath = format!("/v1/robots/{rid}/active-parameter-set");
     assert_problem(&app.put(&apath, &json!({"parameter_set_id": "none"})).await, 422, Some("parameter_set_id"));

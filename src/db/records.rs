@@ -562,6 +562,24 @@ pub async fn validations_of_set(db: impl SqliteExecutor<'_>, set_id: &str) -> Re
         .await
 }
 
+/// The validations of several sets (a history page), newest first within each: one query, the
+/// ids bound as one JSON array.
+pub async fn validations_of_sets(
+    db: impl SqliteExecutor<'_>,
+    set_ids: &[&str],
+) -> Result<Vec<ValidationRow>, sqlx::Error> {
+    if set_ids.is_empty() {
+        return Ok(Vec::new());
+    }
+    sqlx::query_as(
+        "SELECT * FROM validations WHERE parameter_set_id IN (SELECT value FROM json_each(?)) \
+         ORDER BY created_at DESC, id DESC",
+    )
+    .bind(serde_json::to_string(set_ids).expect("strings serialise"))
+    .fetch_all(db)
+    .await
+}
+
 /// A diagnosis row.
 #[derive(Clone, Debug, PartialEq, sqlx::FromRow)]
 pub struct DiagnosisRow {

@@ -81,31 +81,92 @@ fn quality_summary(doc: &Value) -> Value {
     })
 }
 
-pub(super) async fn set_out(
-    state: &AppState,
+/// The part of a stored document a history listing shows: the quality report's summary fields.
+/// Everything else (the parameters, the correlation matrix, per-measurement lists) is skipped by
+/// the parser without building values — a page of sets reads as much text but allocates little.
+#[derive(Deserialize)]
+struct QualityOnly {
+    #[serde(default)]
+    quality: Option<QualityFields>,
+}
+
+#[derive(Deserialize)]
+struct QualityFields {
+    #[serde(default)]
+    n_parameters: Value,
+    #[serde(default)]
+    n_measurements: Value,
+    #[serde(default)]
+    iterations: Value,
+    #[serde(default)]
+    kappa_si: Value,
+    #[serde(default)]
+    kappa_scaled: Value,
+    #[serde(default)]
+    rms_residual_mm: Value,
+}
+
+fn listed_quality(doc_json: &str) -> Result<Value, ApiError> {
+    let q: QualityOnly = serde_json::from_str(doc_json).map_err(|e| ApiError::Internal(e.to_string()))?;
+    Ok(q.quality.map_or(Value::Null, |q| {
+        serde_json::json!({
+            "identified": q.n_parameters, "measurements": q.n_measurements, "iterations": q.iterations,
+            "kappa_si": q.kappa_si, "kappa_scaled": q.kappa_scaled, "rms_residual_mm": q.rms_residual_mm,
+        })
+    }))
+}
+
+/// The figures a validation summary shows, read from a stored validation report without its
+/// per-measurement residuals.
+#[derive(Deserialize, Default)]
+struct Figures {
+    #[serde(default)]
+    n: Value,
+    #[serde(default)]
+    mean_mm: Value,
+    #[serde(default)]
+    median_mm: Value,
+    #[serde(default)]
+    std_mm: Value,
+    #[serde(default)]
+    rms_mm: Value,
+    #[serde(default)]
+    p95_mm: Value,
+    #[serde(default)]
+    max_mm: Value,
+    #[serde(default)]
+    nominal: Option<Box<Figures>>,
+}
+
+impl Figures {
+    fn json(self) -> Value {
+        serde_json::json!({
+            "n": self.n, "mean_mm": self.mean_mm, "median_mm": self.median_mm, "std_mm": self.std_mm,
+            "rms_mm": self.rms_mm, "p95_mm": self.p95_mm, "max_mm": self.max_mm,
+        })
+    }
+}
+
+fn validation_summary(v: records::ValidationRow) -> Result<ValidationSummary, ApiError> {
+    let mut report: Figures = serde_json::from_str(&v.report_json).map_err(|e| ApiError::Internal(e.to_string()))?;
+    let nominal = report.nominal.take().map_or_else(Figures::default, |b| *b);
+    let mut figures = report.json();
+    figures["nominal"] = nominal.json();
+    Ok(ValidationSummary {
+        validation_id: v.id,
+        created_at: v.created_at,
+        sessions: serde_json::from_str(&v.sessions_json).map_err(|e| ApiError::Internal(e.to_string()))?,
+        figures,
+    })
+}
+
+fn summary_out(
     row: &records::ParameterSetRow,
     active: bool,
-    full: bool,
+    quality: Value,
+    validations: Vec<ValidationSummary>,
+    doc: Option<Value>,
 ) -> Result<ParameterSetOut, ApiError> {
-    let doc: Value = serde_json::from_str(&row.doc_json).map_err(|e| ApiError::Internal(e.to_string()))?;
-    let mut validations = Vec::new();
-    for v in records::validations_of_set(&state.pool, &row.id).await? {
-        let report: Value = serde_json::from_str(&v.report_json).map_err(|e| ApiError::Internal(e.to_string()))?;
-        let pick = |r: &Value| {
-            serde_json::json!({
-                "n": r["n"], "mean_mm": r["mean_mm"], "median_mm": r["median_mm"], "std_mm": r["std_mm"],
-                "rms_mm": r["rms_mm"], "p95_mm": r["p95_mm"], "max_mm": r["max_mm"],
-            })
-        };
-        let mut figures = pick(&report);
-        figures["nominal"] = pick(&report["nominal"]);
-        validations.push(ValidationSummary {
-            validation_id: v.id.clone(),
-            created_at: v.created_at.clone(),
-            sessions: serde_json::from_str(&v.sessions_json).map_err(|e| ApiError::Internal(e.to_string()))?,
-            figures,
-        });
-    }
     Ok(ParameterSetOut {
         id: row.id.clone(),
         robot_id: row.robot_id.clone(),
@@ -114,15 +175,35 @@ pub(super) async fn set_out(
         active,
         sessions: serde_json::from_str(&row.sessions_json).map_err(|e| ApiError::Internal(e.to_string()))?,
         job_id: row.job_id.clone(),
-        quality: quality_summary(&doc),
+        quality,
         validations,
         archived: row.archived_at.as_ref().map(|at| ArchivedOut {
             at: at.clone(),
             by: row.archived_by.clone(),
             reason: row.archive_reason.clone().unwrap_or_default(),
         }),
-        parameter_set: full.then_some(doc),
+        parameter_set: doc,
     })
+}
+
+/// One set with its validations; `full` adds the parameter-set file.
+pub(super) async fn set_out(
+    state: &AppState,
+    row: &records::ParameterSetRow,
+    active: bool,
+    full: bool,
+) -> Result<ParameterSetOut, ApiError> {
+    let validations = records::validations_of_set(&state.pool, &row.id)
+        .await?
+        .into_iter()
+        .map(validation_summary)
+        .collect::<Result<Vec<_>, _>>()?;
+    if full {
+        let doc: Value = serde_json::from_str(&row.doc_json).map_err(|e| ApiError::Internal(e.to_string()))?;
+        summary_out(row, active, quality_summary(&doc), validations, Some(doc))
+    } else {
+        summary_out(row, active, listed_quality(&row.doc_json)?, validations, None)
+    }
 }
 
 async fn find(state: &AppState, id: &str) -> Result<records::ParameterSetRow, ApiError> {
@@ -161,10 +242,18 @@ pub async fn history(
     let robot = find_robot(&state, &robot_id).await?;
     let archived = q.include_archived.unwrap_or(false);
     let total = records::parameter_set_count(&state.pool, &robot.id, archived).await?;
-    let mut out = Vec::new();
-    for row in records::parameter_sets_of_robot(&state.pool, &robot.id, archived, page.offset, page.limit).await? {
+    let rows = records::parameter_sets_of_robot(&state.pool, &robot.id, archived, page.offset, page.limit).await?;
+    // The page's validations in one query, not one per set.
+    let ids: Vec<&str> = rows.iter().map(|r| r.id.as_str()).collect();
+    let mut by_set: std::collections::HashMap<String, Vec<ValidationSummary>> = std::collections::HashMap::new();
+    for v in records::validations_of_sets(&state.pool, &ids).await? {
+        by_set.entry(v.parameter_set_id.clone()).or_default().push(validation_summary(v)?);
+    }
+    let mut out = Vec::with_capacity(rows.len());
+    for row in &rows {
         let active = robot.active_parameter_set_id.as_deref() == Some(row.id.as_str());
-        out.push(set_out(&state, &row, active, false).await?);
+        let validations = by_set.remove(&row.id).unwrap_or_default();
+        out.push(summary_out(row, active, listed_quality(&row.doc_json)?, validations, None)?);
     }
     Ok((page.headers(total, out.len()), Json(out)))
 }
