@@ -27,25 +27,11 @@ pub const FAILED_TARGETS: HeaderName = HeaderName::from_static("x-failed-targets
 #[into_params(parameter_in = Query)]
 pub struct ExportQuery {
     /// `json` (default: the parameter-set file as stored), `csv-dh`, `urdf`; `rapid` with POST.
-    #[param(value_type = Option<ExportFormatName>, inline)]
+    #[param(value_type = Option<crate::domain::export::ExportFormat>, inline)]
     pub format: Option<String>,
     /// RAPID only: write the module even when targets fail (they are listed in a comment and
     /// counted in `X-Failed-Targets`); default false: 422.
     pub allow_partial: Option<bool>,
-}
-
-/// An export format, as the `format` parameter names it (the schema of [`ExportFormat`]'s names).
-#[derive(ToSchema)]
-#[allow(dead_code)] // a schema only: the parameter is parsed by `ExportFormat::parse`
-pub enum ExportFormatName {
-    #[schema(rename = "json")]
-    Json,
-    #[schema(rename = "csv-dh")]
-    CsvDh,
-    #[schema(rename = "urdf")]
-    Urdf,
-    #[schema(rename = "rapid")]
-    Rapid,
 }
 
 /// The targets of a RAPID export: a compensation request, the set being the path's.

@@ -70,18 +70,7 @@ pub struct ArchivedOut {
     pub reason: String,
 }
 
-fn quality_summary(doc: &Value) -> Value {
-    let q = &doc["quality"];
-    if q.is_null() {
-        return Value::Null;
-    }
-    serde_json::json!({
-        "identified": q["n_parameters"], "measurements": q["n_measurements"], "iterations": q["iterations"],
-        "kappa_si": q["kappa_si"], "kappa_scaled": q["kappa_scaled"], "rms_residual_mm": q["rms_residual_mm"],
-    })
-}
-
-/// The part of a stored document a history listing shows: the quality report's summary fields.
+/// The part of a stored document a set's summary shows: the quality report's summary fields.
 /// Everything else (the parameters, the correlation matrix, per-measurement lists) is skipped by
 /// the parser without building values — a page of sets reads as much text but allocates little.
 #[derive(Deserialize)]
@@ -106,7 +95,7 @@ struct QualityFields {
     rms_residual_mm: Value,
 }
 
-fn listed_quality(doc_json: &str) -> Result<Value, ApiError> {
+fn quality_summary(doc_json: &str) -> Result<Value, ApiError> {
     let q: QualityOnly = serde_json::from_str(doc_json).map_err(|e| ApiError::Internal(e.to_string()))?;
     Ok(q.quality.map_or(Value::Null, |q| {
         serde_json::json!({
@@ -198,12 +187,9 @@ pub(super) async fn set_out(
         .into_iter()
         .map(validation_summary)
         .collect::<Result<Vec<_>, _>>()?;
-    if full {
-        let doc: Value = serde_json::from_str(&row.doc_json).map_err(|e| ApiError::Internal(e.to_string()))?;
-        summary_out(row, active, quality_summary(&doc), validations, Some(doc))
-    } else {
-        summary_out(row, active, listed_quality(&row.doc_json)?, validations, None)
-    }
+    let doc =
+        full.then(|| serde_json::from_str(&row.doc_json)).transpose().map_err(|e| ApiError::Internal(e.to_string()))?;
+    summary_out(row, active, quality_summary(&row.doc_json)?, validations, doc)
 }
 
 async fn find(state: &AppState, id: &str) -> Result<records::ParameterSetRow, ApiError> {
@@ -253,7 +239,7 @@ pub async fn history(
     for row in &rows {
         let active = robot.active_parameter_set_id.as_deref() == Some(row.id.as_str());
         let validations = by_set.remove(&row.id).unwrap_or_default();
-        out.push(summary_out(row, active, listed_quality(&row.doc_json)?, validations, None)?);
+        out.push(summary_out(row, active, quality_summary(&row.doc_json)?, validations, None)?);
     }
     Ok((page.headers(total, out.len()), Json(out)))
 }

@@ -151,28 +151,6 @@ pub async fn diagnosis(
     Ok(html(report::diagnosis_report(&d)))
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn accept(v: &str) -> bool {
-        let mut h = HeaderMap::new();
-        h.insert(header::ACCEPT, HeaderValue::from_str(v).unwrap());
-        accepts_html(&h)
-    }
-
-    #[test]
-    fn negotiation() {
-        assert!(accepts_html(&HeaderMap::new()));
-        assert!(accept("text/html,application/xhtml+xml,application/xml;q=0.9,*/*;q=0.8"));
-        assert!(accept("*/*"));
-        assert!(accept("application/json, text/*;q=0.5"));
-        assert!(!accept("application/json"));
-        assert!(!accept("application/json, application/problem+json"));
-        assert!(!accept("text/html;q=0, application/json"));
-    }
-}
-
 /// A robot's calibration history as a page: each parameter set's held-out error (its latest
 /// validation's mean, p95 and max, and the nominal mean) against its version, and the table of
 /// the sets. Filtered like the JSON history.
@@ -217,4 +195,26 @@ pub async fn history(
         })
         .collect();
     Ok(html(report::history_report(&robot.name, &points)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn accept(v: &str) -> bool {
+        let mut h = HeaderMap::new();
+        h.insert(header::ACCEPT, HeaderValue::from_str(v).unwrap());
+        accepts_html(&h)
+    }
+
+    #[test]
+    fn negotiation() {
+        assert!(accepts_html(&HeaderMap::new()));
+        assert!(accept("text/html,application/xhtml+xml,application/xml;q=0.9,*/*;q=0.8"));
+        assert!(accept("*/*"));
+        assert!(accept("application/json, text/*;q=0.5"));
+        assert!(!accept("application/json"));
+        assert!(!accept("application/json, application/problem+json"));
+        assert!(!accept("text/html;q=0, application/json"));
+    }
 }

@@ -11,7 +11,8 @@ pub mod urdf;
 use super::DomainError;
 
 /// An export format, as `--format` and `?format=` name it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, utoipa::ToSchema)]
+#[schema(rename_all = "kebab-case")]
 pub enum ExportFormat {
     Json,
     CsvDh,
