@@ -47,7 +47,7 @@ pub struct HistoryValidation {
 pub struct HistoryDiagnosis {
     pub diagnosis_id: String,
     pub created_at: String,
-    /// `named`, `none`, `not_separable` or `unknown_effect`.
+    /// `named`, `none`, `not_separable`, `unknown_effect` or `partial`.
     pub verdict: String,
     pub summary: String,
 }

@@ -157,7 +157,26 @@ pub(super) fn identify(a: IdentifyArgs) -> Result<String, CliError> {
         q.rms_residual / MM,
         q.residual_ratio,
         q.expected_rms / MM
-    ) + &reported)
+    ) + &payload_note(&id)
+        + &reported)
+}
+
+/// What was done about a payload the sessions do not declare (0 kg), in one sentence.
+fn payload_note(id: &crate::identify::Identification) -> String {
+    let Some(i) = id.set.layout.index_of(crate::kinematics::Param::ToolMass) else { return String::new() };
+    if id.set.tool.mass != 0.0 {
+        return String::new();
+    }
+    match id.std[i] {
+        Some(s) => format!(
+            "; payload not declared (0 kg): identified {:.3} ± {:.3} kg at the tool's centre of mass",
+            id.set.values[i], s
+        ),
+        None => format!(
+            "; payload not declared (0 kg) and not identifiable from these data ({}): compliance fitted with 0 kg — declare it",
+            id.status[i]
+        ),
+    }
 }
 
 pub(super) fn validate(a: ValidateArgs) -> Result<String, CliError> {

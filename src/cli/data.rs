@@ -71,6 +71,40 @@ pub struct SimulateArgs {
     pub truth_out: Option<PathBuf>,
 }
 
+#[derive(Args, Debug)]
+pub struct SimulateTrackerArgs {
+    /// Seed of the poses, the errors and the rows removed: the same seed gives the same files.
+    #[arg(long)]
+    pub seed: u64,
+    /// Stops measured (before rows are removed).
+    #[arg(long, default_value_t = 982)]
+    pub poses: usize,
+    /// Rows removed afterwards, at random (the outliers a metrologist deletes).
+    #[arg(long, default_value_t = 10)]
+    pub removed: usize,
+    /// The true robot's unmodelled effects (see `simulate --effects`); backlash is the
+    /// hysteresis by direction of motion.
+    #[arg(long, default_value = "backlash:j=1:deg=0.006,backlash:j=2:deg=0.006,backlash:j=3:deg=0.006")]
+    pub effects: String,
+    /// The plate's true mass, kg (the files do not declare it).
+    #[arg(long, default_value_t = 1.0)]
+    pub payload_kg: f64,
+    /// 1σ of a random turn of every joint at every stop, degrees: the pose-to-pose error no term
+    /// explains (0.012° is ≈0.2 mm at the SMRs).
+    #[arg(long, default_value_t = 0.012)]
+    pub jitter_deg: f64,
+    /// Tracker noise, 1σ per axis: µm + µm per metre of range.
+    #[arg(long, default_value_t = 20.0)]
+    pub tracker_sigma_um: f64,
+    #[arg(long, default_value_t = 5.0)]
+    pub tracker_sigma_um_per_m: f64,
+    /// The folder the files are written to (created): TAG-joints.txt, TAG-smr1.txt, …
+    #[arg(long)]
+    pub out_dir: PathBuf,
+    #[arg(long, default_value = "run")]
+    pub tag: String,
+}
+
 #[derive(Subcommand, Debug)]
 pub enum ImportCommand {
     /// The UR10 laser-tracker data set (../shared/datasets/ur10-ipa): one session per series.
@@ -108,8 +142,60 @@ pub struct ThreeReflectorArgs {
     /// identification or validation.
     #[arg(long, default_value = "identification")]
     pub purpose: String,
+    /// Mass of what the flange carries (the reflectors' plate), kg. Without it the payload is
+    /// unknown: the tools declare 0 kg and an identification with compliance estimates the mass.
+    #[arg(long, allow_hyphen_values = true)]
+    pub payload_kg: Option<f64>,
+    /// Its centre of mass in the flange frame, mm (default: the reflectors' centroid, found by a
+    /// registration on the nominal robot).
+    #[arg(long, allow_hyphen_values = true)]
+    pub payload_com_mm: Option<String>,
     #[arg(long)]
     pub out: PathBuf,
+}
+
+pub(super) fn simulate_tracker(a: SimulateTrackerArgs) -> Result<String, CliError> {
+    use crate::sim::tracker_run::{TrackerRunOptions, tracker_run};
+    let effects = crate::sim::effects::Effects::parse(&a.effects, 6).map_err(|e| CliError::arg("--effects", e))?;
+    for (arg, v) in [
+        ("--payload-kg", a.payload_kg),
+        ("--jitter-deg", a.jitter_deg),
+        ("--tracker-sigma-um", a.tracker_sigma_um),
+        ("--tracker-sigma-um-per-m", a.tracker_sigma_um_per_m),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(CliError::arg(arg, "must be a non-negative number"));
+        }
+    }
+    if a.poses == 0 || a.poses > crate::domain::limits::MAX_VALIDATION {
+        return Err(CliError::arg("--poses", format!("must be 1–{}", crate::domain::limits::MAX_VALIDATION)));
+    }
+    let o = TrackerRunOptions {
+        seed: a.seed,
+        poses: a.poses,
+        removed: a.removed,
+        payload_kg: a.payload_kg,
+        effects,
+        jitter: a.jitter_deg * crate::units::DEG,
+        tracker_sigma: a.tracker_sigma_um * UM,
+        tracker_sigma_per_m: a.tracker_sigma_um_per_m * UM,
+        ..TrackerRunOptions::default()
+    };
+    let run = tracker_run(&o).map_err(|e| CliError::msg(e.to_string()))?;
+    std::fs::create_dir_all(&a.out_dir).map_err(|e| CliError::msg(format!("{}: {e}", a.out_dir.display())))?;
+    let (joints, files) =
+        run.write(&a.out_dir, &a.tag, 6).map_err(|e| CliError::msg(format!("{}: {e}", a.out_dir.display())))?;
+    let mut text = format!(
+        "wrote {} ({} rows of {} measured) and {} positions file(s):",
+        joints.display(),
+        run.joints.len(),
+        a.poses,
+        files.len()
+    );
+    for f in &files {
+        text.push_str(&format!(" {}", f.display()));
+    }
+    Ok(text)
 }
 
 pub(super) fn simulate(a: SimulateArgs) -> Result<String, CliError> {
@@ -242,7 +328,19 @@ pub(super) fn import_ur10(a: Ur10IpaArgs) -> Result<String, CliError> {
 pub(super) fn import_three(a: ThreeReflectorArgs) -> Result<String, CliError> {
     let model = robot_model("--robot", &a.robot)?;
     let p = purpose("--purpose", &a.purpose)?;
-    let imported = crate::import::three_reflector::import(&a.joints, &a.positions, model, p)
-        .map_err(|e| CliError::msg(e.to_string()))?;
+    use crate::import::three_reflector::{Payload, import_with_payload};
+    let payload = match (a.payload_kg, &a.payload_com_mm) {
+        (None, None) => Payload::Unknown,
+        (None, Some(_)) => return Err(CliError::arg("--payload-com-mm", "needs --payload-kg")),
+        (Some(m), com) => {
+            if !(m.is_finite() && (0.0..=1000.0).contains(&m)) {
+                return Err(CliError::arg("--payload-kg", format!("must be a mass of 0–1000 kg, got {m}")));
+            }
+            let com = com.as_deref().map(|t| three("--payload-com-mm", t)).transpose()?;
+            Payload::Declared { mass_kg: m, com: com.map(|c| nalgebra::Vector3::new(c[0], c[1], c[2]) * MM) }
+        }
+    };
+    let imported =
+        import_with_payload(&a.joints, &a.positions, model, p, payload).map_err(|e| CliError::msg(e.to_string()))?;
     write_imported(&a.out, imported)
 }

@@ -60,6 +60,10 @@ pub enum Command {
     Import(ImportCommand),
     /// Simulate the virtual cell: plan the TriCal and tracker runs, measure a true robot, write the cell file.
     Simulate(SimulateArgs),
+    /// Simulate a real tracker run (a realistic twin): SMRs on a plate, random workspace poses in
+    /// measuring order, an undeclared payload, hysteresis, pose-to-pose errors no term explains,
+    /// rows removed; written as three-reflector files (joints in degrees, positions in mm).
+    SimulateTracker(data::SimulateTrackerArgs),
     /// Plan the measuring poses (as the service's pose plans): TriCal candidates, an optional DETMAX
     /// selection in measuring order, laser-tracker validation poses.
     Plan(plan::PlanArgs),
@@ -133,6 +137,7 @@ pub fn run(cli: Cli) -> Result<String, CliError> {
         Command::Import(ImportCommand::Ur10Ipa(a)) => data::import_ur10(a),
         Command::Import(ImportCommand::ThreeReflector(a)) => data::import_three(a),
         Command::Simulate(a) => data::simulate(a),
+        Command::SimulateTracker(a) => data::simulate_tracker(a),
         Command::Plan(a) => plan::plan(a),
         Command::Identify(a) => calibrate::identify(a),
         Command::Validate(a) => calibrate::validate(a),

@@ -601,6 +601,11 @@ pub struct BenchOutcome {
     pub final_mean_mm: f64,
     pub oracle_mean_mm: Option<f64>,
     pub closure_ratio: Option<f64>,
+    /// The first round's best confirmed candidate: its share of what a smooth function of the
+    /// configuration explains beyond the model, and whether it lies inside the smoother's span.
+    pub share: Option<f64>,
+    pub within_smoother: Option<bool>,
+    pub closure: Option<f64>,
     pub seconds: f64,
     pub error: Option<String>,
 }
@@ -682,7 +687,7 @@ impl BenchDiagnosisReport {
                     summary.not_separable_runs += mine.len();
                     summary.not_separable_correct += correct;
                 }
-                Expect::NotNamed => {
+                Expect::NotNamed | Expect::NoName => {
                     summary.link_bending_runs += mine.len();
                     summary.link_bending_named +=
                         mine.iter().filter(|o| o.status == crate::diagnose::Status::Named).count();
@@ -725,6 +730,9 @@ impl BenchDiagnosisReport {
                 final_mean_mm: o.final_mean / MM,
                 oracle_mean_mm: o.oracle_mean.map(|v| v / MM),
                 closure_ratio: o.closure_ratio,
+                share: o.share.map(|s| s.0),
+                within_smoother: o.share.map(|s| s.1),
+                closure: o.closure,
                 seconds: o.seconds,
                 error: o.error.clone(),
             })

@@ -8,7 +8,7 @@
 //! | `compliance_cubic` | d_j (Δθ_j = d_j·τ_j³) | torque varying on the joint |
 //! | `cyclic` | sin and cos of h·q_j, h = 1, 2, and the best quarter-cycle frequency up to 40 cycles/rev (the periodogram) | — |
 //! | `joint_map` | a correction table of q_j, knots a few degrees apart, smoothness-regularised | — |
-//! | `backlash` | Δθ_j = b_j·(direction of joint j's last move) | an approach log, or sessions in measuring order |
+//! | `backlash` | Δθ_j = b_j·(direction of joint j's last move), one joint or every joint | an approach log, or sessions in measuring order |
 //! | `thermal` | α of every link length (× (T − 20 °C)) | logged temperatures that vary |
 //! | `coupling` | Δθ_k = ε·q_j | — |
 //! | `tool_mass` | the payload error δm (through the compliances) | compliance in the model |
@@ -235,11 +235,19 @@ pub fn candidates(ctx: &Context<'_>) -> (Vec<Candidate>, Vec<Unavailable>) {
     }
     // Backlash.
     if ctx.approach_available {
-        for j in 0..n {
-            let p = Param::Joint(j, JointTerm::Backlash);
-            if !ctx.has(p) {
-                out.push(Candidate::new(Kind::Backlash, Some(j), vec![p]));
-            }
+        let lacking: Vec<usize> =
+            (0..n).filter(|&j| ctx.joint_range[j] > 0.0 && !ctx.has(Param::Joint(j, JointTerm::Backlash))).collect();
+        for &j in &lacking {
+            out.push(Candidate::new(Kind::Backlash, Some(j), vec![Param::Joint(j, JointTerm::Backlash)]));
+        }
+        // Every joint's at once: hysteresis is a property of every gear, and a greedy search
+        // taking one joint a round would spend its rounds on them.
+        if lacking.len() > 1 {
+            out.push(Candidate::new(
+                Kind::Backlash,
+                None,
+                lacking.iter().map(|&j| Param::Joint(j, JointTerm::Backlash)).collect(),
+            ));
         }
     } else {
         missing.push(Unavailable {

@@ -23,6 +23,7 @@ pub mod floor;
 pub mod library;
 pub mod linalg;
 pub mod locate;
+pub mod refit;
 pub mod screen;
 pub mod search;
 pub mod stage;
@@ -130,6 +131,9 @@ pub enum Status {
     NotSeparable,
     /// Structure no candidate explains.
     UnknownEffect,
+    /// A library term explains part of what a smooth function of the configuration explains,
+    /// not most of it: named as a partial explanation with its share, the rest unexplained.
+    Partial,
 }
 
 impl Status {
@@ -139,6 +143,7 @@ impl Status {
             Status::None => "none",
             Status::NotSeparable => "not_separable",
             Status::UnknownEffect => "unknown_effect",
+            Status::Partial => "partial",
         }
     }
 }
@@ -262,6 +267,8 @@ fn start_options(input: &Input<'_>, opts: &DiagnoseOptions, sessions: Vec<String
     for (i, p) in set.layout.params().iter().enumerate() {
         match p {
             Param::Beta(_) | Param::Joint(_, JointTerm::Compliance) if fitted(i) => model.extra.push(*p),
+            // A payload the identification held (not determined by its data) stays held.
+            Param::ToolMass if !fitted(i) => {}
             p if full.index_of(*p).is_none() => model.extra.push(*p),
             _ => {}
         }
@@ -286,9 +293,16 @@ fn start_options(input: &Input<'_>, opts: &DiagnoseOptions, sessions: Vec<String
 
 /// Identification options whose fits are never refused for their residual: the diagnosis studies
 /// models that miss (a withheld effect, a nominal start) and poses they miss by much; that is its
-/// evidence, not an error (issue 13's refusals are for calibrations).
+/// evidence, not an error (issue 13's refusals are for calibrations). The set's own decision
+/// about an undeclared payload (identified: a term of its model; held: left out) is every model's
+/// here; the diagnosis does not decide it again.
 fn unrefused() -> IdentifyOptions {
-    IdentifyOptions { residual_ratio_limit: f64::INFINITY, outlier_factor: f64::INFINITY, ..IdentifyOptions::default() }
+    IdentifyOptions {
+        residual_ratio_limit: f64::INFINITY,
+        outlier_factor: f64::INFINITY,
+        identify_payload: false,
+        ..IdentifyOptions::default()
+    }
 }
 
 /// Diagnose `input`.
@@ -393,8 +407,14 @@ pub fn diagnose_with_progress(
     let location =
         locate::locate(&s.stages[0], &s.baselines[0], &fl, &calib, &calib_joints, zone, base, voxel, opts.fdr);
 
-    // Decomposition.
-    let heldout = ErrorStats::of(&s.baselines[0].norms()).expect("tested poses");
+    // Decomposition. One model, one figure: the held-out errors of the models refitted in full on
+    // the folds where that worked (always, unless a fold's refit failed: then the linearised
+    // folds', and a note says so).
+    let figures: Vec<&cv::Heldout> = s.baselines.iter().zip(&s.refits).map(|(b, r)| r.as_ref().unwrap_or(b)).collect();
+    let refit_note = s.refits.iter().find_map(|r| r.as_ref().err()).map(|e| {
+        format!("a model could not be refitted on the folds ({e}): its held-out figures are the linearised folds'")
+    });
+    let heldout = ErrorStats::of(&figures[0].norms()).ok_or_else(|| DiagnoseError::Option("no tested pose".into()))?;
     let calibrated = if validation.is_empty() {
         None
     } else {
@@ -410,8 +430,8 @@ pub fn diagnose_with_progress(
 
     // Shrink.
     let mut shrink = Vec::new();
-    for (k, b) in s.baselines.iter().enumerate() {
-        let stats = ErrorStats::of(&b.norms()).expect("tested poses");
+    for (k, b) in figures.iter().enumerate() {
+        let stats = ErrorStats::of(&b.norms()).ok_or_else(|| DiagnoseError::Option("no tested pose".into()))?;
         let closure = (k > 0).then(|| {
             let gap = decomposition.heldout.mean - decomposition.floor.mean;
             if gap > 0.0 { (decomposition.heldout.mean - stats.mean) / gap } else { 0.0 }
@@ -487,7 +507,10 @@ pub fn diagnose_with_progress(
         approach,
         approach_notes,
         unavailable: s.unavailable.clone(),
-        start_note,
+        start_note: match (start_note, refit_note) {
+            (Some(a), Some(b)) => Some(format!("{a}; {b}")),
+            (a, b) => a.or(b),
+        },
         identification,
         validation,
         model,
@@ -532,7 +555,9 @@ pub fn heldout_with(input: &Input<'_>, opts: &DiagnoseOptions, extra: &[Param]) 
     let tested: Vec<bool> = pr.obs.iter().map(|o| tested_sessions.contains(&pr.session_names[o.session])).collect();
     let joints: Vec<Vec<f64>> = pr.obs.iter().map(|o| o.state.q[..pr.model.dof()].to_vec()).collect();
     let folds = Folds::new(&joints, &tested, opts.folds, opts.seed);
-    let h = cv::cross_validate(&st, &folds, None);
+    // Refitted in full on the folds, as the diagnosis's own figures are.
+    let h = refit::refit_heldout(&work, &st, &folds, opts.threads)
+        .unwrap_or_else(|_| cv::cross_validate(&st, &folds, None));
     ErrorStats::of(&h.norms()).ok_or_else(|| DiagnoseError::Option("no tested pose".into()))
 }
 
@@ -600,14 +625,20 @@ fn effect_of(s: &search::Search, round: usize, index: usize, stage_after: Option
         }
     }
     let (estimate, std, unit) = magnitude(&c, &parameters);
+    // An accepted effect's gain is the refitted model's (what is reported and accepted); a
+    // suspect's, the linearised confirmation's.
+    let gain = match (stage_after, &r.refit) {
+        (Some(_), Some(refit)) => Some(refit),
+        _ => ev.map(|e| &e.vs_model),
+    };
     Effect {
         estimate,
         std,
         unit,
         parameters,
-        gain_mean: ev.map_or(0.0, |e| e.vs_model.gain_mean),
-        gain_rms: ev.map_or(0.0, |e| e.vs_model.gain_rms),
-        confirm_p: ev.and_then(|e| e.vs_model.p),
+        gain_mean: gain.map_or(0.0, |g| g.gain_mean),
+        gain_rms: gain.map_or(0.0, |g| g.gain_rms),
+        confirm_p: gain.and_then(|g| g.p),
         screen_log10_p: sc.log10_p_holm,
         separability: sc.score.rho,
         candidate: c,
@@ -643,6 +674,19 @@ fn magnitude(c: &Candidate, p: &[ParamEstimate]) -> (Option<f64>, Option<f64>, U
     }
 }
 
+/// A number in four significant digits, without an exponent where it reads as plain decimals.
+fn num(v: f64) -> String {
+    let a = v.abs();
+    if a == 0.0 {
+        "0".into()
+    } else if (1e-3..1e5).contains(&a) {
+        let digits = (3 - a.log10().floor() as i32).clamp(0, 6) as usize;
+        format!("{v:.digits$}")
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
 /// A held-out RMS this many times the floor's, and this much above it (m), is an excess that a
 /// `none` would hide.
 const EXCESS_RATIO: f64 = 2.0;
@@ -665,7 +709,11 @@ fn verdict(s: &search::Search, d: &Decomposition) -> Verdict {
             // An excess far above the floor that nothing predicts comes first (its cause may be
             // untestable on these data); then screening evidence that no held-out test could
             // confirm: an effect the current model absorbs.
-            let now = ErrorStats::of(&s.baselines.last().expect("a baseline").norms()).expect("tested poses");
+            let last_fig = match s.refits.last() {
+                Some(Ok(h)) => h,
+                _ => s.baselines.last().expect("a baseline"),
+            };
+            let now = ErrorStats::of(&last_fig.norms()).unwrap_or(d.heldout);
             let strong = lr
                 .screened
                 .iter()
@@ -764,6 +812,37 @@ fn verdict(s: &search::Search, d: &Decomposition) -> Verdict {
                 sus,
             )
         }
+        Decision::Partial { best, share, smoother_gain_rms } => {
+            let b = &lr.screened[*best];
+            let gain = lr.evaluated.iter().find(|e| e.index == *best).map_or(0.0, |e| e.vs_model.gain_rms);
+            (
+                Status::Partial,
+                format!(
+                    "{} explains {:.0} % of what a smooth function of the configuration explains beyond the model (held-out RMS gain {} against {}); the rest is unexplained: an effect outside the library, of which this term is a look-alike",
+                    b.candidate.label(),
+                    share * 100.0,
+                    gap(gain),
+                    gap(*smoother_gain_rms)
+                ),
+                None,
+                None,
+                b.absorbed_by.clone(),
+                Some(experiment(b.candidate.kind, None)),
+                vec![effect_of(s, last, *best, None)],
+            )
+        }
+        Decision::Refuted { best, reason, .. } => {
+            let b = &lr.screened[*best];
+            (
+                Status::NotSeparable,
+                format!("{}: {reason}; not named, and the model is kept without it", b.candidate.label()),
+                None,
+                None,
+                b.absorbed_by.clone(),
+                Some(experiment(b.candidate.kind, None)),
+                vec![effect_of(s, last, *best, None)],
+            )
+        }
         Decision::Unknown { best } => {
             let what = match best {
                 Some(i) => format!(
@@ -787,10 +866,55 @@ fn verdict(s: &search::Search, d: &Decomposition) -> Verdict {
             remaining: None,
         };
     }
-    let names: Vec<String> = effects.iter().map(|e| e.candidate.label()).collect();
+    // Each name with its numbers: the estimate ± σ, and the held-out mean of the refitted models
+    // before and after it (the shrink table's rows), with the gap closure.
+    let figures: Vec<Option<f64>> = s
+        .refits
+        .iter()
+        .zip(&s.baselines)
+        .map(|(r, b)| ErrorStats::of(&r.as_ref().unwrap_or(b).norms()).map(|e| e.mean))
+        .collect();
+    let gap_mean = d.heldout.mean - d.floor.mean;
+    let named: Vec<String> = effects
+        .iter()
+        .enumerate()
+        .map(|(k, e)| {
+            let one = |v: f64, sd: Option<f64>, unit: crate::kinematics::Unit| match sd {
+                Some(sd) => format!("{} ± {} {}", num(v / unit.to_si()), num(sd / unit.to_si()), unit.as_str()),
+                None => format!("{} {}", num(v / unit.to_si()), unit.as_str()),
+            };
+            // A group (every joint's backlash or compliance) says each term; a table its RMS; a
+            // cyclic pair its amplitude.
+            let value = if e.candidate.joint.is_none() && e.parameters.len() > 1 && e.candidate.kind != Kind::JointMap {
+                let terms: Vec<String> = e
+                    .parameters
+                    .iter()
+                    .map(|p| format!("{} {}", p.param, one(p.value, p.std, p.param.unit())))
+                    .collect();
+                format!(" ({})", terms.join(", "))
+            } else {
+                match e.estimate {
+                    Some(v) => format!(" {}", one(v, e.std, e.unit)),
+                    None => String::new(),
+                }
+            };
+            let held = match (figures.get(k).copied().flatten(), figures.get(k + 1).copied().flatten()) {
+                (Some(a), Some(b)) => {
+                    let closure = if gap_mean > 0.0 {
+                        format!(", closing {:.0} % of the gap to the floor", (d.heldout.mean - b) / gap_mean * 100.0)
+                    } else {
+                        String::new()
+                    };
+                    format!(" (held-out mean {} → {}{closure})", gap(a), gap(b))
+                }
+                _ => String::new(),
+            };
+            format!("{}{value}{held}", e.candidate.label())
+        })
+        .collect();
     Verdict {
         status: Status::Named,
-        summary: format!("{} named and confirmed on held-out poses", names.join(", ")),
+        summary: format!("{} named and confirmed on held-out poses by the refitted model", named.join("; ")),
         effects,
         lookalike: None,
         canonical_correlation: None,

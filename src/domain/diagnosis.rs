@@ -263,7 +263,7 @@ pub struct SessionsOut {
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct VerdictOut {
-    /// `named`, `none`, `not_separable` or `unknown_effect`.
+    /// `named`, `none`, `not_separable`, `unknown_effect` or `partial`.
     pub status: String,
     pub summary: String,
     /// Named effects, most important first; for `not_separable`, the suspects.
@@ -491,12 +491,17 @@ pub struct ShrinkOut {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct RoundOut {
     pub round: usize,
-    /// `accept`, `nothing`, `not_separable` or `unknown_effect`.
+    /// `accept`, `nothing`, `not_separable`, `unknown_effect`, `partial` (the best candidate explains a
+    /// minority of what a smooth function explains) or `refuted` (confirmed on linearised folds, not
+    /// by the model refitted in full on them).
     pub decision: String,
     pub candidate: Option<String>,
     /// The smoother (a generic joint-space correction) against the round's model.
     pub smoother_gain_rms_mm: f64,
     pub smoother_p: Option<f64>,
+    /// Why a `refuted` round's candidate was not named: the linearised and the refitted gains.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
@@ -714,11 +719,17 @@ pub fn diagnosis_out(d: &Diagnosis) -> DiagnosisOut {
                 absorbed_by: absorbed(&s.absorbed_by),
             });
         }
+        let reason = match &r.decision {
+            Decision::Refuted { reason, .. } => Some(reason.clone()),
+            _ => None,
+        };
         let (decision, cand) = match &r.decision {
             Decision::Accept(i) => ("accept", Some(r.screened[*i].candidate.label())),
             Decision::Nothing => ("nothing", None),
             Decision::NotSeparable { best, .. } => ("not_separable", Some(r.screened[*best].candidate.label())),
             Decision::Unknown { best } => ("unknown_effect", best.map(|i| r.screened[i].candidate.label())),
+            Decision::Partial { best, .. } => ("partial", Some(r.screened[*best].candidate.label())),
+            Decision::Refuted { best, .. } => ("refuted", Some(r.screened[*best].candidate.label())),
         };
         rounds.push(RoundOut {
             round: k + 1,
@@ -726,6 +737,7 @@ pub fn diagnosis_out(d: &Diagnosis) -> DiagnosisOut {
             candidate: cand,
             smoother_gain_rms_mm: r.smoother.gain_rms / MM,
             smoother_p: r.smoother.p,
+            reason,
         });
     }
     let shrink = d

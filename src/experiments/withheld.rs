@@ -9,7 +9,7 @@
 //! | a separable effect | `named`, the right kind first, the right joint (and harmonic) |
 //! | no effect | `none` (anything else is a false alarm) |
 //! | a payload error with one payload; backlash with neither approach log nor measuring order | `not_separable` (never a confident name) |
-//! | link bending | `unknown_effect` or `not_separable`, never `named` |
+//! | link bending | `unknown_effect`, `not_separable` or `partial`, never `named` |
 //! | thermal growth without a temperature log | anything but a confident wrong name |
 //!
 //! and the gap closure of the named model against the oracle's (the true effect's terms added).
@@ -41,10 +41,12 @@ pub enum Expect {
     },
     None,
     NotSeparable,
-    /// `unknown_effect` or `not_separable`.
+    /// `unknown_effect`, `not_separable` or `partial` (never a confident name).
     NotNamed,
     /// Anything but a name of another effect (an effect whose log is missing).
     NoWrongName,
+    /// No confident name: anything but `named` (`partial` included).
+    NoName,
 }
 
 /// One case of the suite.
@@ -61,7 +63,22 @@ pub struct Case {
     pub noise: NoiseVariant,
     /// Validate with a heavier tool (the thesis's 2.7 kg artefact tool, set-up 3): a second payload.
     pub heavy_validation: bool,
+    /// Where the data come from: the thesis's lab, or a realistic twin of a real tracker run.
+    pub rig: Rig,
     pub expect: Expect,
+}
+
+/// The measuring set-up of a case.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Rig {
+    /// The virtual cell of the thesis's lab: TriCal on three balls, tracker validation poses.
+    Lab,
+    /// A realistic twin of a real tracker run ([`crate::sim::tracker_run`]): three SMRs on a
+    /// plate, random workspace poses in measuring order, written as three-reflector files and
+    /// imported as a user would (payload unknown), with a random turn of every joint at every
+    /// stop (`jitter_deg`, 1σ per joint: an error that changes from pose to pose and that no
+    /// term explains) and `removed` rows deleted afterwards.
+    TrackerTwin { jitter_deg: f64, removed: usize, payload_kg: f64 },
 }
 
 /// How the virtual cell's instruments are simulated (the diagnosis's own instrument model
@@ -96,6 +113,12 @@ pub struct Outcome {
     pub oracle_mean: Option<f64>,
     /// Gap closure of the diagnosis's model relative to the oracle's.
     pub closure_ratio: Option<f64>,
+    /// The first round's best confirmed candidate's share of what a smooth function of the
+    /// configuration explains, and whether it lies inside the smoother's span (the data the
+    /// `partial` threshold is chosen on).
+    pub share: Option<(f64, bool)>,
+    /// That candidate's gap closure on the RMS (what `name_closure` is compared with).
+    pub closure: Option<f64>,
     pub seconds: f64,
     pub error: Option<String>,
 }
@@ -118,6 +141,7 @@ pub fn suite() -> Vec<Case> {
             shuffle: false,
             noise: NoiseVariant::Default,
             heavy_validation: false,
+            rig: Rig::Lab,
             expect: with,
         });
         cases.push(Case {
@@ -127,6 +151,7 @@ pub fn suite() -> Vec<Case> {
             shuffle: false,
             noise: NoiseVariant::Default,
             heavy_validation: false,
+            rig: Rig::Lab,
             expect: without,
         });
     };
@@ -142,6 +167,7 @@ pub fn suite() -> Vec<Case> {
             shuffle: false,
             noise,
             heavy_validation: false,
+            rig: Rig::Lab,
             expect: Expect::None,
         });
     }
@@ -168,6 +194,7 @@ pub fn suite() -> Vec<Case> {
         shuffle: true,
         noise: NoiseVariant::Default,
         heavy_validation: false,
+        rig: Rig::Lab,
         expect: Expect::NotSeparable,
     });
     both(&mut cases, "thermal", "thermal", named(Kind::Thermal, None, None, None), Expect::NoWrongName);
@@ -187,6 +214,7 @@ pub fn suite() -> Vec<Case> {
         shuffle: false,
         noise: NoiseVariant::Default,
         heavy_validation: true,
+        rig: Rig::Lab,
         expect: named(Kind::ToolMass, None, None, None),
     });
     cases.push(Case {
@@ -196,6 +224,7 @@ pub fn suite() -> Vec<Case> {
         shuffle: false,
         noise: NoiseVariant::Default,
         heavy_validation: true,
+        rig: Rig::Lab,
         expect: Expect::None,
     });
     both(&mut cases, "link_bending", "link_bending:deg_per_nm=0.00286", Expect::NotNamed, Expect::NotNamed);
@@ -203,6 +232,50 @@ pub fn suite() -> Vec<Case> {
     both(&mut cases, "-beta", "no_beta", hb.clone(), hb);
     let cm = named(Kind::Compliance, None, None, None);
     both(&mut cases, "-compliance", "no_compliance", cm.clone(), cm);
+    // Out-of-library effects too weak for the smoother to stand out (issue 24): a look-alike
+    // may take a share of them, never a confident name.
+    for (name, k) in [("link_bending (weak, 0.1 mm)", 0.00057), ("link_bending (very weak, 0.04 mm)", 0.00025)] {
+        cases.push(Case {
+            name: name.into(),
+            effects: format!("link_bending:deg_per_nm={k}"),
+            aux: true,
+            shuffle: false,
+            noise: NoiseVariant::Default,
+            heavy_validation: false,
+            rig: Rig::Lab,
+            expect: Expect::NoName,
+        });
+    }
+    // Realistic twins of a real tracker run: the payload unknown, an error from pose to pose of
+    // 0.1–0.3 mm that no term explains, rows removed; the hysteresis is named from the order of
+    // the rows, the random part left unexplained.
+    let twin = |jitter_deg: f64| Rig::TrackerTwin { jitter_deg, removed: 10, payload_kg: 1.0 };
+    for (name, effects, jitter, expect) in [
+        (
+            "twin: hysteresis j1–j3, jitter 0.1 mm",
+            "backlash:j=1:deg=0.006,backlash:j=2:deg=0.006,backlash:j=3:deg=0.006",
+            0.006,
+            named(Kind::Backlash, None, None, None),
+        ),
+        (
+            "twin: hysteresis j2, jitter 0.2 mm",
+            "backlash:j=2:deg=0.01",
+            0.012,
+            named(Kind::Backlash, Some(1), None, None),
+        ),
+        ("twin: no hysteresis, jitter 0.2 mm", "", 0.012, Expect::NoName),
+    ] {
+        cases.push(Case {
+            name: name.into(),
+            effects: effects.into(),
+            aux: true,
+            shuffle: false,
+            noise: NoiseVariant::Default,
+            heavy_validation: false,
+            rig: twin(jitter),
+            expect,
+        });
+    }
     cases
 }
 
@@ -262,22 +335,7 @@ fn prepare_cell(mut cell: Cell, case: &Case, seed: u64) -> Cell {
 /// Run one case at one seed.
 pub fn run_case(case: &Case, seed: u64, opts: &DiagnoseOptions) -> Outcome {
     let t0 = std::time::Instant::now();
-    let fail = |e: String| Outcome {
-        case: case.name.clone(),
-        seed,
-        status: Status::None,
-        first: None,
-        summary: String::new(),
-        correct: false,
-        wrong_name: false,
-        heldout_mean: f64::NAN,
-        floor_mean: f64::NAN,
-        final_mean: f64::NAN,
-        oracle_mean: None,
-        closure_ratio: None,
-        seconds: t0.elapsed().as_secs_f64(),
-        error: Some(e),
-    };
+    let fail = |e: String| failed(case, seed, t0, e);
     let effects = match Effects::parse(&case.effects, 6) {
         Ok(e) => e,
         Err(e) => return fail(e.to_string()),
@@ -291,6 +349,12 @@ pub fn run_case(case: &Case, seed: u64, opts: &DiagnoseOptions) -> Outcome {
             noise.tracker_sigma_per_m *= 1.5;
         }
     }
+    if let Rig::TrackerTwin { jitter_deg, removed, payload_kg } = case.rig {
+        return match twin_cell(&effects, jitter_deg, removed, payload_kg, seed) {
+            Ok(cell) => score(case, seed, &cell, &effects, ModelOptions::default(), opts, t0),
+            Err(e) => fail(e),
+        };
+    }
     let validation_payload = case.heavy_validation.then(|| (2.7, nalgebra::Vector3::new(0.050, 0.025, 0.100)));
     let sim = match simulate(&SimulateOptions {
         seed,
@@ -303,9 +367,76 @@ pub fn run_case(case: &Case, seed: u64, opts: &DiagnoseOptions) -> Outcome {
         Err(e) => return fail(e.to_string()),
     };
     let cell = prepare_cell(sim.cell, case, seed);
+    let model = ModelOptions { beta: !effects.no_beta, compliance: !effects.no_compliance, ..ModelOptions::default() };
+    score(case, seed, &cell, &effects, model, opts, t0)
+}
+
+/// A realistic twin's cell: the run written as three-reflector files and imported as a user
+/// would, payload unknown.
+fn twin_cell(effects: &Effects, jitter_deg: f64, removed: usize, payload_kg: f64, seed: u64) -> Result<Cell, String> {
+    use crate::sim::tracker_run::{TrackerRunOptions, tracker_run};
+    let o = TrackerRunOptions {
+        seed,
+        removed,
+        payload_kg,
+        effects: effects.clone(),
+        jitter: jitter_deg * crate::units::DEG,
+        ..TrackerRunOptions::default()
+    };
+    let run = tracker_run(&o).map_err(|e| e.to_string())?;
+    static RUNS: AtomicUsize = AtomicUsize::new(0);
+    let k = RUNS.fetch_add(1, Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!("robocal-twin-{}-{seed}-{k}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+    let written = run.write(&dir, "run", 6).map_err(|e| e.to_string());
+    let imported = written.and_then(|(j, f)| {
+        crate::import::three_reflector::import(
+            &j,
+            &f,
+            crate::kinematics::model::irb120(),
+            crate::cell::Purpose::Identification,
+        )
+        .map_err(|e| e.to_string())
+    });
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(imported?.cell)
+}
+
+/// The outcome of a run that could not be scored, and why.
+fn failed(case: &Case, seed: u64, t0: std::time::Instant, e: String) -> Outcome {
+    Outcome {
+        case: case.name.clone(),
+        seed,
+        status: Status::None,
+        first: None,
+        summary: String::new(),
+        correct: false,
+        wrong_name: false,
+        heldout_mean: f64::NAN,
+        floor_mean: f64::NAN,
+        final_mean: f64::NAN,
+        oracle_mean: None,
+        closure_ratio: None,
+        share: None,
+        closure: None,
+        seconds: t0.elapsed().as_secs_f64(),
+        error: Some(e),
+    }
+}
+
+/// Identify `model` on the case's cell, diagnose it, and score the verdict.
+fn score(
+    case: &Case,
+    seed: u64,
+    cell: &Cell,
+    effects: &Effects,
+    model: ModelOptions,
+    opts: &DiagnoseOptions,
+    t0: std::time::Instant,
+) -> Outcome {
+    let fail = |e: String| failed(case, seed, t0, e);
     // The calibration the engineer has: the model without the withheld effect, identified on
     // the identification sessions.
-    let model = ModelOptions { beta: !effects.no_beta, compliance: !effects.no_compliance, ..ModelOptions::default() };
     let id = match identify(&cell, &IdentifyOptions { model, ..IdentifyOptions::default() }) {
         Ok(id) => id,
         Err(e) => return fail(format!("identification: {e}")),
@@ -333,8 +464,9 @@ pub fn run_case(case: &Case, seed: u64, opts: &DiagnoseOptions) -> Outcome {
         }
         Expect::None => v.status == Status::None,
         Expect::NotSeparable => v.status == Status::NotSeparable,
-        Expect::NotNamed => matches!(v.status, Status::NotSeparable | Status::UnknownEffect),
+        Expect::NotNamed => matches!(v.status, Status::NotSeparable | Status::UnknownEffect | Status::Partial),
         Expect::NoWrongName => !wrong_name,
+        Expect::NoName => v.status != Status::Named,
     };
     let heldout_mean = d.decomposition.heldout.mean;
     let floor_mean = d.decomposition.floor.mean;
@@ -357,6 +489,8 @@ pub fn run_case(case: &Case, seed: u64, opts: &DiagnoseOptions) -> Outcome {
         final_mean,
         oracle_mean,
         closure_ratio,
+        share: d.rounds.first().and_then(|r| r.share),
+        closure: d.rounds.first().and_then(|r| r.closure),
         seconds: t0.elapsed().as_secs_f64(),
         error: None,
     }

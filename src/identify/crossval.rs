@@ -293,7 +293,8 @@ impl Split<'_> {
         o.selection.sessions = id_cell.sessions.iter().map(|s| s.name.clone()).collect();
         o.selection.subset.clear();
         let id = identify(&id_cell, &o).map_err(|e| e.to_string())?;
-        let test_cell = subsets_cell(cell, &self.indices(test));
+        let mut test_cell = subsets_cell(cell, &self.indices(test));
+        with_identified_tools(&mut test_cell, &id);
         let names: Vec<String> = test_cell.sessions.iter().map(|s| s.name.clone()).collect();
         let r = validate(&id.set, &test_cell, &names, Reference::Measured).map_err(|e| e.to_string())?;
         let scored = r
@@ -306,6 +307,18 @@ impl Split<'_> {
             })
             .collect();
         Ok(FoldErrors { scored, identified: id.free_names.len(), kappa_scaled: id.quality.kappa_scaled })
+    }
+}
+
+/// Give every session of `cell` that the identification fitted a TCP for (its own tool block)
+/// that TCP, so that each held-out measurement is predicted with its own target's TCP. Sessions
+/// whose declared tools are equal (several reflectors imported with the flange as their guess)
+/// are otherwise all predicted with the parameter set's one tool — the first reflector's.
+pub fn with_identified_tools(cell: &mut Cell, id: &super::Identification) {
+    for s in &mut cell.sessions {
+        if let Some(t) = id.tools.iter().find(|t| t.sessions.contains(&s.name)) {
+            s.tool.tcp = t.tool.tcp;
+        }
     }
 }
 

@@ -60,6 +60,15 @@ fn priority(problem: &Problem, g: usize) -> (u8, i64) {
             Param::Alpha(_) | Param::A(_) | Param::D(_) | Param::Theta(_) => (5, 0),
             Param::Tool(k) => (6, k as i64),
         },
+        // The position of a TCP the data identify comes right after the base: it is linear in
+        // the data, while the parameters it is one gauge with (θ and d of the last joint, which
+        // turn and shift every TCP about and along the last axis) are not. Swept after them, a
+        // TCP near the last axis would be left in polar form — one component held at its
+        // start value, θ6 turning the rest — whose Jacobian is singular on the axis: the fit
+        // crawls there (issue 24). The gauge then falls on θ6 and d6, held at their start values.
+        GlobalParam::Tool { tool, k } if k < 3 && problem.tools[tool].identify_tcp => {
+            (0, 10 + 10 * tool as i64 + k as i64)
+        }
         GlobalParam::Tool { tool, k } => (6, 10 * tool as i64 + k as i64),
     }
 }

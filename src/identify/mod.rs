@@ -186,6 +186,12 @@ pub struct IdentifyOptions {
     /// Refuse a fit with a measurement whose residual exceeds this many times the typical one
     /// ([`OUTLIER_FACTOR`]), unless the Huber loss down-weighted it; `f64::INFINITY` never does.
     pub outlier_factor: f64,
+    /// When every chosen session's tool declares no payload (0 kg: unknown, as a three-reflector
+    /// file or a tracker run without a tool mass) and the model has compliance, identify the
+    /// payload's mass (`tool_mass`, at the tools' declared centre of mass) instead of fitting the
+    /// compliances with 0 kg. A compliance is a deflection per N·m of holding torque: with the
+    /// payload's torque left out, the wrist's compliances have almost nothing to act on.
+    pub identify_payload: bool,
 }
 
 /// The default of [`IdentifyOptions::residual_ratio_limit`]: a fit is refused when its residual RMS
@@ -247,6 +253,7 @@ impl Default for IdentifyOptions {
             anchor: None,
             residual_ratio_limit: RESIDUAL_RATIO_LIMIT,
             outlier_factor: OUTLIER_FACTOR,
+            identify_payload: true,
         }
     }
 }
@@ -390,6 +397,8 @@ pub struct Prepared {
     /// Parameters fixed by the options and the sessions (global index → reason), before
     /// identifiability.
     pub fixed: HashMap<usize, String>,
+    /// The payload is unknown (every tool declares 0 kg) and identified as `tool_mass`.
+    pub payload_unknown: bool,
 }
 
 /// Build the problem, the starting point and the identifiable set.
@@ -402,6 +411,10 @@ pub fn prepare(cell: &Cell, opts: &IdentifyOptions) -> Result<Prepared, Identify
         }
     }
     layout.extend(&opts.model.extra);
+    let payload_unknown = payload_is_unknown(cell, opts)?;
+    if payload_unknown {
+        layout.extend(&[Param::ToolMass]);
+    }
     if !opts.model.maps.is_empty() {
         let picks = opts.selection.picks(cell)?;
         for &(j, step) in &opts.model.maps {
@@ -554,7 +567,25 @@ pub fn prepare(cell: &Cell, opts: &IdentifyOptions) -> Result<Prepared, Identify
         let priors = anchor_priors(&problem, &free, &x0, a, opts.noise.is_some());
         problem.add_priors(priors);
     }
-    Ok(Prepared { problem, x0, free, status, base, fixed })
+    Ok(Prepared { problem, x0, free, status, base, fixed, payload_unknown })
+}
+
+/// Whether the payload is unknown and identified ([`IdentifyOptions::identify_payload`]): every
+/// chosen session's tool declares 0 kg, the model has compliance and no payload term of its own
+/// (a start set's payload term is taken as the start value).
+fn payload_is_unknown(cell: &Cell, opts: &IdentifyOptions) -> Result<bool, IdentifyError> {
+    if !opts.identify_payload || opts.model.extra.contains(&Param::ToolMass) {
+        return Ok(false);
+    }
+    let compliance =
+        opts.model.compliance || opts.model.extra.iter().any(|p| matches!(p, Param::Joint(_, JointTerm::Compliance)));
+    if !compliance {
+        return Ok(false);
+    }
+    let picks = opts.selection.picks(cell)?;
+    let mut sessions: Vec<usize> = picks.iter().map(|p| p.0).collect();
+    sessions.dedup();
+    Ok(!sessions.is_empty() && sessions.iter().all(|&s| cell.sessions[s].tool.mass == 0.0))
 }
 
 /// Anchors of the free geometric parameters to their start values (see [`Anchor`]): one row
@@ -809,9 +840,13 @@ pub fn select_detmax(
     DetmaxPool::new(cell, opts)?.select(n, index, seed)
 }
 
+/// An unknown payload's identified mass must exceed this many of its standard deviations to be
+/// kept (see [`IdentifyOptions::identify_payload`]).
+pub const PAYLOAD_SIGNIFICANCE: f64 = 3.0;
+
 /// Identify a cell's robot.
 pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, IdentifyError> {
-    let Prepared { problem, x0, mut free, mut status, base, fixed } = prepare(cell, opts)?;
+    let Prepared { problem, x0, mut free, mut status, base, fixed, payload_unknown } = prepare(cell, opts)?;
     if problem.n_obs_rows + problem.priors.len() <= free.len() {
         return Err(IdentifyError::Underdetermined { rows: problem.n_obs_rows, params: free.len() });
     }
@@ -821,8 +856,10 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
     // from where the registration started it, and which of its components is one gauge with d6
     // and θ6 depends on where it lies (a point on the flange's y axis moves along x when θ6
     // turns): judge again at the solution, and refit from there when the choice changed. A TCP
-    // with a guess stays judged at its guess (the UR10 probe: θ6 has no effect there).
-    if problem.tools.iter().any(|b| b.identify_tcp && b.tool.tcp[..3] == [0.0; 3]) {
+    // with a guess stays judged at its guess (the UR10 probe: θ6 has no effect there). An
+    // unknown payload acts through the compliances, which are zero at the start: its mass has
+    // no effect there and is judged at the solution too.
+    if payload_unknown || problem.tools.iter().any(|b| b.identify_tcp && b.tool.tcp[..3] == [0.0; 3]) {
         let all: Vec<usize> = (0..problem.n_params()).collect();
         let mut j = Mat::<f64>::zeros(problem.n_rows, all.len());
         let mut r = vec![0.0; problem.n_rows];
@@ -834,6 +871,30 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
         }
     }
     let rows: Vec<(usize, usize)> = problem.obs.iter().map(|o| (o.row, o.rows)).collect();
+    // An unknown payload is kept only when the data determine it: a mass below
+    // PAYLOAD_SIGNIFICANCE of its own σ is one direction with the compliances (c5·m, c3·m… act
+    // as products when the arm's own weight barely loads a joint), the fit crawls along it and
+    // every fold lands elsewhere. It is then held at the declared 0 kg and reported as such.
+    if payload_unknown {
+        let mass = problem
+            .layout
+            .index_of(Param::ToolMass)
+            .and_then(|i| problem.params.iter().position(|p| *p == GlobalParam::Robot(i)));
+        if let Some((g, c)) = mass.and_then(|g| free.iter().position(|&f| f == g).map(|c| (g, c))) {
+            let q = Quality::of(&fit, problem.obs.len(), &rows);
+            let (m, sd) = (fit.x[g], q.std[c]);
+            if !(m > PAYLOAD_SIGNIFICANCE * sd) {
+                free.remove(c);
+                status[g] = Status::Fixed(format!(
+                    "payload not determined by these data ({:.3} ± {:.3} kg, below {PAYLOAD_SIGNIFICANCE} σ): held at the declared 0 kg",
+                    m, sd
+                ));
+                let mut x = fit.x.clone();
+                x[g] = x0[g];
+                fit = solver::solve(&problem, &free, &x, &opts.solver)?;
+            }
+        }
+    }
     let mut quality = Quality::of(&fit, problem.obs.len(), &rows);
     if opts.noise.is_some() {
         // Weighted rows: the RMS of the measurement residuals in metres, from the rows divided

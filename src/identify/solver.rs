@@ -13,7 +13,7 @@
 //! (iteratively reweighted least squares) and reports the ones it down-weighted.
 
 use faer::Mat;
-use faer::linalg::solvers::{Solve, SolveLstsq};
+use faer::linalg::solvers::{DenseSolveCore, Solve, SolveLstsq};
 
 use super::problem::Problem;
 
@@ -24,13 +24,19 @@ pub struct SolverOptions {
     pub step_tol: f64,
     /// …or when an accepted step lowers the cost by less than this fraction.
     pub cost_tol: f64,
+    /// …or when the Gauss–Newton step would move the parameters by at most this many of their
+    /// own standard deviations (jointly, in the metric of their covariance σ̂²(JᵀJ)⁻¹, with σ̂²
+    /// the residual variance of the data themselves). On real data the residual is 10–30 times
+    /// the instrument's noise and a flat direction of the cost takes steps that change nothing
+    /// anyone could measure: a cost-ratio rule never fires there, this one does.
+    pub sigma_tol: f64,
     /// Huber threshold in robust standard deviations per axis; `None` = plain least squares.
     pub huber: Option<f64>,
 }
 
 impl Default for SolverOptions {
     fn default() -> Self {
-        Self { max_iterations: 100, step_tol: 1e-13, cost_tol: 1e-12, huber: None }
+        Self { max_iterations: 100, step_tol: 1e-13, cost_tol: 1e-12, sigma_tol: 1e-3, huber: None }
     }
 }
 
@@ -39,9 +45,29 @@ pub enum SolveError {
     #[error("diverged at iteration {iteration}: {reason}")]
     Diverged { iteration: usize, reason: String },
     #[error(
-        "no convergence in {iterations} iterations (last scaled step {step_m:.3e} m, relative cost change {cost_change:.3e})"
+        "no convergence in {iterations} iterations (last scaled step {step_m:.3e} m, relative cost change {cost_change:.3e}; the step still moves {} by {:.2} of its standard deviation): {}",
+        moving.first().map_or("no parameter", |m| m.0.as_str()), moving.first().map_or(0.0, |m| m.1), advice(moving)
     )]
-    IterationLimit { iterations: usize, step_m: f64, cost_change: f64 },
+    IterationLimit {
+        iterations: usize,
+        step_m: f64,
+        cost_change: f64,
+        /// The free parameters the last Gauss–Newton step moved most, in units of their own
+        /// standard deviation (name, |step|/σ), largest first (at most 4).
+        moving: Vec<(String, f64)>,
+    },
+}
+
+/// What to try when a fit keeps moving.
+fn advice(moving: &[(String, f64)]) -> String {
+    let names: Vec<&str> = moving.iter().map(|m| m.0.as_str()).collect();
+    if names.is_empty() {
+        return "the cost keeps falling without a direction standing out; allow more iterations".into();
+    }
+    format!(
+        "these data barely determine {}: hold them fixed, give a guess of the base and of the TCPs, or measure poses that vary them more",
+        names.join(", ")
+    )
 }
 
 /// A converged fit.
@@ -59,6 +85,16 @@ pub struct Fit {
 }
 
 /// Fit the free parameters `free` (global indices) from `x0`.
+///
+/// Levenberg–Marquardt on the column-scaled normal equations: a Gauss–Newton step (λ = 0) while
+/// it lowers the cost as predicted, damping (λ) raised when a step fails or achieves less than a
+/// quarter of its predicted decrease and lowered when it achieves most of it (Nielsen's rule),
+/// so the method stays globally convergent and ends with Gauss–Newton's fast steps.
+///
+/// Converged when any of: the scaled step is below `step_tol`; an accepted step lowers the cost
+/// by less than `cost_tol` of it; or the undamped Gauss–Newton step would move the parameters
+/// by less than `sigma_tol` of their standard deviations (the Newton decrement bᵀA⁻¹b, which is
+/// the cost decrease it predicts, against σ̂² = cost/(n − m)).
 pub fn solve(problem: &Problem, free: &[usize], x0: &[f64], opts: &SolverOptions) -> Result<Fit, SolveError> {
     let n = problem.n_rows;
     let m = free.len();
@@ -73,6 +109,8 @@ pub fn solve(problem: &Problem, free: &[usize], x0: &[f64], opts: &SolverOptions
     let mut lambda = 0.0f64;
     let mut last_step = f64::INFINITY;
     let mut last_change = f64::INFINITY;
+    let mut moving: Vec<(String, f64)> = Vec::new();
+    let dof = (problem.n_obs_rows.saturating_sub(m)).max(1) as f64;
 
     for iteration in 1..=opts.max_iterations {
         problem.linearise(&x, free, &mut jac, &mut res);
@@ -100,17 +138,26 @@ pub fn solve(problem: &Problem, free: &[usize], x0: &[f64], opts: &SolverOptions
         let a = Mat::<f64>::from_fn(m, m, |i, k| gram[(i, k)] / (scale[i] * scale[k]));
         let b: Vec<f64> = (0..m).map(|c| grad[c] / scale[c]).collect();
         let mut scaled_qr: Option<Mat<f64>> = None;
-        // Try steps until one lowers the cost.
-        let mut accepted = false;
-        loop {
-            let y = match spd_solve(&a, &b, lambda) {
+        let mut step_for = |lambda: f64| -> Vec<f64> {
+            match spd_solve(&a, &b, lambda) {
                 Some(y) => y,
                 None => {
                     let js = scaled_qr
                         .get_or_insert_with(|| Mat::<f64>::from_fn(n, m, |r, c| jac[(r, c)] * row_w[r] / scale[c]));
                     if lambda == 0.0 { lstsq(js, &rhs) } else { damped_lstsq(js, &rhs, lambda) }
                 }
-            };
+            }
+        };
+        // The undamped step, and how far it would move the parameters in units of their σ.
+        let gn = step_for(0.0);
+        let sigma2 = cost / dof;
+        let decrement = gn.iter().zip(&b).map(|(y, g)| y * g).sum::<f64>().max(0.0);
+        let settled = gn.iter().all(|v| v.is_finite()) && sigma2 > 0.0 && decrement <= opts.sigma_tol.powi(2) * sigma2;
+        moving = moving_parameters(problem, free, &a, &gn, sigma2);
+        // Try steps until one lowers the cost.
+        let mut accepted = false;
+        loop {
+            let y = if lambda == 0.0 { gn.clone() } else { step_for(lambda) };
             if y.iter().any(|v| !v.is_finite()) {
                 return Err(SolveError::Diverged { iteration, reason: "the least-squares step is not finite".into() });
             }
@@ -121,16 +168,26 @@ pub fn solve(problem: &Problem, free: &[usize], x0: &[f64], opts: &SolverOptions
             problem.residual(&xt, &mut trial_res);
             let trial = weighted_cost(problem, &trial_res, &weights);
             let step = y.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            // The decrease the linear model predicts for this step: 2yᵀb − yᵀAy.
+            let ay: Vec<f64> = (0..m).map(|i| (0..m).map(|k| a[(i, k)] * y[k]).sum()).collect();
+            let predicted = 2.0 * y.iter().zip(&b).map(|(p, q)| p * q).sum::<f64>()
+                - y.iter().zip(&ay).map(|(p, q)| p * q).sum::<f64>();
             if trial.is_finite() && trial <= cost {
                 accepted = true;
                 x = xt;
                 last_step = step;
                 last_change = if cost > 0.0 { (cost - trial) / cost } else { 0.0 };
-                lambda = if lambda > 1e-9 { lambda / 10.0 } else { 0.0 };
+                let gain = if predicted > 0.0 { (cost - trial) / predicted } else { 1.0 };
+                lambda = if gain > 0.25 {
+                    let l = lambda * (1.0f64 / 3.0).max(1.0 - (2.0 * gain - 1.0).powi(3));
+                    if l > 1e-9 { l } else { 0.0 }
+                } else {
+                    (lambda * 2.0).max(1e-6)
+                };
                 break;
             }
             // No decrease: a step this small means we are at the minimum already.
-            if step <= opts.step_tol {
+            if step <= opts.step_tol || settled {
                 last_step = step;
                 last_change = 0.0;
                 break;
@@ -143,11 +200,11 @@ pub fn solve(problem: &Problem, free: &[usize], x0: &[f64], opts: &SolverOptions
                 });
             }
         }
-        if last_step <= opts.step_tol || last_change <= opts.cost_tol {
+        if settled || last_step <= opts.step_tol || last_change <= opts.cost_tol {
             // The quality report needs J and the residual at the solution. When the last step was
             // negligible (≤ 1e-9 on unit-scaled columns) this iteration's J is that Jacobian to
             // ~1e-9 relative and the trial residual is the residual there: no re-linearisation.
-            if last_step > REUSE_JACOBIAN_STEP {
+            if accepted && last_step > REUSE_JACOBIAN_STEP {
                 problem.linearise(&x, free, &mut jac, &mut res);
             } else if accepted {
                 res.copy_from_slice(&trial_res);
@@ -169,7 +226,27 @@ pub fn solve(problem: &Problem, free: &[usize], x0: &[f64], opts: &SolverOptions
             return Ok(Fit { x, iterations: iteration, residual: res, jacobian: jac, weights, cost });
         }
     }
-    Err(SolveError::IterationLimit { iterations: opts.max_iterations, step_m: last_step, cost_change: last_change })
+    Err(SolveError::IterationLimit {
+        iterations: opts.max_iterations,
+        step_m: last_step,
+        cost_change: last_change,
+        moving,
+    })
+}
+
+/// The free parameters a Gauss–Newton step `y` (scaled columns) moves most in units of their
+/// standard deviation √(σ̂²·(A⁻¹)_cc), largest first, at most four.
+fn moving_parameters(problem: &Problem, free: &[usize], a: &Mat<f64>, y: &[f64], sigma2: f64) -> Vec<(String, f64)> {
+    let m = free.len();
+    if m == 0 || !(sigma2 > 0.0) || y.iter().any(|v| !v.is_finite()) {
+        return Vec::new();
+    }
+    let Ok(llt) = a.llt(faer::Side::Lower) else { return Vec::new() };
+    let inv = llt.inverse();
+    let mut z: Vec<(usize, f64)> =
+        (0..m).map(|c| (c, y[c].abs() / (sigma2 * inv[(c, c)].max(f64::MIN_POSITIVE)).sqrt())).collect();
+    z.sort_by(|p, q| q.1.total_cmp(&p.1));
+    z.into_iter().take(4).map(|(c, v)| (problem.name(free[c]), v)).collect()
 }
 
 /// Largest final step (unit-scaled columns) after which the last linearisation is reused.
@@ -510,12 +587,56 @@ mod tests {
         x0[free[3]] += 0.1;
         let opts = SolverOptions { max_iterations: 1, ..Default::default() };
         match solve(&p, &free, &x0, &opts) {
-            Err(SolveError::IterationLimit { iterations: 1, step_m, .. }) => assert!(step_m > 1e-6),
+            Err(SolveError::IterationLimit { iterations: 1, step_m, moving, .. }) => {
+                assert!(step_m > 1e-6);
+                // The rotation started 0.1 rad off is what still moves, by many σ.
+                assert!(moving[0].0.starts_with("base_") && moving[0].1 > 10.0, "{moving:?}");
+            }
             other => panic!("{other:?}"),
         }
         // Given the iterations, it converges to the true base.
         let fit = solve(&p, &free, &x0, &SolverOptions::default()).unwrap();
         assert!(free.iter().all(|&g| (fit.x[g] - p.nominal[g]).abs() < 1e-10));
+    }
+
+    /// The stopping rule's promise, checked apart: at the returned solution of a nonlinear fit on
+    /// noisy data, the Gauss–Newton step (normal equations by nalgebra, from a central-difference
+    /// Jacobian) would move the parameters by less than `sigma_tol` of their standard deviation,
+    /// jointly: δᵀ(JᵀJ)δ ≤ sigma_tol²·σ̂² with σ̂² = RSS/(n − m).
+    #[test]
+    fn stops_when_the_step_is_far_below_sigma() {
+        let p = problem(&cell(40, [0.001, 0.0, -0.002], [0.0; 3], 0.2e-3));
+        let mut free: Vec<usize> = (0..6).map(|k| p.robot_index(Param::Base(k)).unwrap()).collect();
+        free.extend((1..5).map(|j| p.robot_index(Param::Theta(j)).unwrap()));
+        let mut x0 = p.nominal.clone();
+        x0[free[3]] += 0.02;
+        let opts = SolverOptions::default();
+        let fit = solve(&p, &free, &x0, &opts).unwrap();
+        let n = p.n_rows;
+        let res = |x: &[f64]| {
+            let mut r = vec![0.0; n];
+            p.residual(x, &mut r);
+            DVector::from_vec(r)
+        };
+        let r = res(&fit.x);
+        let mut j = DMatrix::<f64>::zeros(n, free.len());
+        for (c, &g) in free.iter().enumerate() {
+            let h = 1e-7;
+            let (mut xp, mut xm) = (fit.x.clone(), fit.x.clone());
+            xp[g] += h;
+            xm[g] -= h;
+            let d = (res(&xp) - res(&xm)) / (2.0 * h);
+            for i in 0..n {
+                j[(i, c)] = -d[i];
+            }
+        }
+        let a = j.transpose() * &j;
+        let g = j.transpose() * &r;
+        let step = a.clone().cholesky().unwrap().solve(&g);
+        let decrement = (step.transpose() * &a * &step)[(0, 0)];
+        let sigma2 = r.norm_squared() / (n - free.len()) as f64;
+        assert!(decrement <= opts.sigma_tol.powi(2) * sigma2, "δᵀAδ = {decrement:e} against σ̂² = {sigma2:e}");
+        assert!(fit.iterations < 20, "{} iterations", fit.iterations);
     }
 
     /// Huber weights: a gross outlier among 10 µm noise is down-weighted, the others keep full

@@ -16,9 +16,13 @@
 //! the files are given, with its measurements in file (measuring) order: the sessions are marked
 //! `order: measured`, and each measurement's `sequence` is its pose's index (0-based, among the
 //! pose lines), the same in every reflector's session — one stop, one number. Where a reflector sits on
-//! the flange is unknown, so its tool has a zero TCP (and no payload) with `identify_tcp` set: the
-//! identification gives each reflector a TCP of its own and starts them, and the base, from an
-//! alternating registration (`identify::base`). The cell has no base guess and no artefact.
+//! the flange is unknown, so its tool has a zero TCP with `identify_tcp` set: the identification
+//! gives each reflector a TCP of its own and starts them, and the base, from an alternating
+//! registration (`identify::base`). The cell has no base guess and no artefact.
+//!
+//! The payload (the plate with its reflectors) is what the user declares ([`Payload`]); when it is
+//! unknown the tools declare 0 kg, which the identification reads as unknown and estimates, and
+//! the import says so. Its centre of mass is the reflectors' centroid unless declared.
 
 use std::path::{Path, PathBuf};
 
@@ -29,9 +33,92 @@ use crate::cell::{Cell, Instrument, Measurement, MeasuringOrder, Observation, Pu
 use crate::kinematics::{RobotModel, Tool};
 use crate::units::{DEG, MM};
 
+/// What the reflectors' plate weighs, as far as the user knows.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Payload {
+    /// Not known (the files carry none): the tools declare 0 kg, which the identification takes
+    /// as unknown and estimates when its model has compliance
+    /// ([`crate::identify::IdentifyOptions::identify_payload`]).
+    Unknown,
+    /// Known mass (kg) and, when known, centre of mass in the flange frame (m).
+    Declared { mass_kg: f64, com: Option<Vector3<f64>> },
+}
+
 /// Import a joints file and one positions file per reflector for `model`, every session with
-/// `purpose`.
+/// `purpose`, the payload unknown.
 pub fn import(
+    joints: &Path,
+    positions: &[PathBuf],
+    model: RobotModel,
+    purpose: Purpose,
+) -> Result<Imported, ImportError> {
+    import_with_payload(joints, positions, model, purpose, Payload::Unknown)
+}
+
+/// As [`import`], with what is known of the payload. Its centre of mass, when not given, is put
+/// at the reflectors' centroid on the flange (a plate carrying them), found by registering the
+/// base and the reflectors' positions on the nominal robot (to a millimetre or so: the torques
+/// it drives are insensitive to that).
+pub fn import_with_payload(
+    joints: &Path,
+    positions: &[PathBuf],
+    model: RobotModel,
+    purpose: Purpose,
+    payload: Payload,
+) -> Result<Imported, ImportError> {
+    if let Payload::Declared { mass_kg, com } = payload {
+        if !(mass_kg.is_finite() && (0.0..=1000.0).contains(&mass_kg)) {
+            return Err(ImportError::Input(format!("payload mass must be 0–1000 kg, got {mass_kg}")));
+        }
+        if com.is_some_and(|c| !(c.iter().all(|v| v.is_finite() && v.abs() <= 10.0))) {
+            return Err(ImportError::Input(
+                "payload centre of mass must be finite and within 10 m of the flange".into(),
+            ));
+        }
+    }
+    let mut imported = read_files(joints, positions, model, purpose)?;
+    let (mass, com) = match payload {
+        Payload::Unknown => (0.0, None),
+        Payload::Declared { mass_kg, com } => (mass_kg, com),
+    };
+    let com = match com {
+        Some(c) => Some((c, "as declared")),
+        None => reflector_centroid(&imported.cell)
+            .map(|c| (c, "at the reflectors' centroid, from a registration on the nominal robot")),
+    };
+    for s in &mut imported.cell.sessions {
+        s.tool.mass = mass;
+        if let Some((c, _)) = com {
+            s.tool.com = c;
+        }
+    }
+    let at = match com {
+        Some((c, how)) => format!("({:.1}, {:.1}, {:.1}) mm in the flange frame, {how}", c.x / MM, c.y / MM, c.z / MM),
+        None => "the flange origin (the registration failed)".into(),
+    };
+    imported.notes.push(match payload {
+        Payload::Unknown => format!(
+            "payload unknown (the files carry none): the tools declare 0 kg with the centre of mass at {at}; an identification with compliance estimates the mass (tool_mass), or give it (--payload-kg)"
+        ),
+        Payload::Declared { .. } => format!("payload {mass} kg, centre of mass at {at}"),
+    });
+    Ok(imported)
+}
+
+/// The centroid of the reflectors' positions on the flange, from the alternating registration
+/// of the base and the TCPs on the nominal robot; `None` when it fails.
+fn reflector_centroid(cell: &Cell) -> Option<Vector3<f64>> {
+    use crate::identify::{base::register_base_and_tcps, tool_blocks};
+    let picks: Vec<(usize, usize)> =
+        cell.sessions.iter().enumerate().flat_map(|(s, x)| (0..x.measurements.len()).map(move |i| (s, i))).collect();
+    let (blocks, session_tool) = tool_blocks(cell, &picks);
+    let r = register_base_and_tcps(cell, &picks, &blocks, &session_tool, None).ok()?;
+    let n = r.tcps.len();
+    (n > 0).then(|| r.tcps.iter().map(|t| Vector3::new(t[0], t[1], t[2])).sum::<Vector3<f64>>() / n as f64)
+}
+
+/// The files as sessions (payload not yet set).
+fn read_files(
     joints: &Path,
     positions: &[PathBuf],
     model: RobotModel,

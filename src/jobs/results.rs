@@ -120,7 +120,7 @@ pub struct ValidationResult {
 pub struct DiagnosisResult {
     pub diagnosis_id: String,
     pub parameter_set_id: String,
-    /// The verdict: `named`, `none`, `not_separable` or `unknown_effect`.
+    /// The verdict: `named`, `none`, `not_separable`, `unknown_effect` or `partial`.
     pub status: String,
     pub summary: String,
     /// Labels of the named effects (for `not_separable`, the suspects), most important first.

@@ -9,4 +9,5 @@ pub mod instruments;
 pub mod measure;
 pub mod poses;
 pub mod simulate;
+pub mod tracker_run;
 pub mod truth;

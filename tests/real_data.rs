@@ -1,0 +1,237 @@
+//! Real data nobody here has seen (issue 24), on its realistic twin: a tracker following three
+//! SMRs on a plate over random workspace poses in measuring order, written as three-reflector
+//! text files and imported as a user would — no base or TCP guess, no payload, errors from pose
+//! to pose of 0.1–0.3 mm that no term explains, rows removed ([`robocal::sim::tracker_run`]).
+//!
+//! - Identification converges from zero guesses with one, two or three reflectors, to the
+//!   minimum a plain Levenberg–Marquardt with finite differences reaches on the same problem.
+//! - Cross-validation with several targets predicts each held-out measurement with its own
+//!   target's TCP: a plate's per-reflector figures agree with the one-reflector ones.
+//! - An unknown payload is identified, not taken as 0 kg.
+
+use std::path::PathBuf;
+
+use nalgebra::{DMatrix, DVector};
+
+use robocal::cell::{Cell, Purpose};
+use robocal::identify::crossval::{CrossvalOptions, Variant, crossval};
+use robocal::identify::{IdentifyOptions, ModelOptions, Prepared, Problem, identify, prepare};
+use robocal::import::three_reflector;
+use robocal::kinematics::Param;
+use robocal::kinematics::model::irb120;
+use robocal::sim::tracker_run::{TrackerRun, TrackerRunOptions, tracker_run};
+use robocal::units::{DEG, MM};
+
+mod common;
+
+/// A run of `poses` stops, the plate centred on the flange axis (so the first SMR lies on the
+/// flange's y axis: its x is 0, the case where a TCP left in polar form crawls), written and
+/// imported. Returns the run and the cell.
+fn twin(poses: usize, seed: u64) -> (TrackerRun, Cell) {
+    let centre = nalgebra::Vector3::new(0.0, 0.0, 0.040);
+    let r = 0.150 / 3f64.sqrt();
+    let smrs = [90.0f64, 210.0, 330.0]
+        .iter()
+        .map(|a| centre + nalgebra::Vector3::new(r * (a * DEG).cos(), r * (a * DEG).sin(), 0.0))
+        .collect();
+    let o = TrackerRunOptions { seed, poses, removed: poses / 100, smrs, ..Default::default() };
+    let run = tracker_run(&o).unwrap();
+    let dir = common::fresh_dir("real-data");
+    let (joints, files) = run.write(&dir, "run", 6).unwrap();
+    let cell = import(&joints, &files);
+    (run, cell)
+}
+
+fn import(joints: &PathBuf, files: &[PathBuf]) -> Cell {
+    three_reflector::import(joints, files, irb120(), Purpose::Identification).unwrap().cell
+}
+
+fn options(model: &str, sessions: &[&str]) -> IdentifyOptions {
+    let mut o = IdentifyOptions { model: ModelOptions::parse(model, 6).unwrap(), ..Default::default() };
+    o.selection.sessions = sessions.iter().map(|s| s.to_string()).collect();
+    o
+}
+
+/// A plain Levenberg–Marquardt on the same problem, written apart: central finite differences of
+/// the problem's residual for the Jacobian, Marquardt's damping λ·diag(JᵀJ), normal equations by
+/// nalgebra's Cholesky; until 8 accepted steps in a row lower the cost by less than 1e-14 of it,
+/// or 300 iterations. Returns the cost reached.
+fn plain_lm(problem: &Problem, free: &[usize], x0: &[f64]) -> f64 {
+    let n = problem.n_rows;
+    let cost_at = |x: &[f64]| {
+        let mut r = vec![0.0; n];
+        problem.residual(x, &mut r);
+        (r.iter().map(|v| v * v).sum::<f64>(), r)
+    };
+    let mut x = x0.to_vec();
+    let (mut cost, mut r) = cost_at(&x);
+    let mut lambda = 1e-3;
+    let mut quiet = 0;
+    for _ in 0..300 {
+        let mut j = DMatrix::<f64>::zeros(n, free.len());
+        for (c, &g) in free.iter().enumerate() {
+            let h = 1e-7 * x[g].abs().max(1.0);
+            let (mut xp, mut xm) = (x.clone(), x.clone());
+            xp[g] += h;
+            xm[g] -= h;
+            let (_, rp) = cost_at(&xp);
+            let (_, rm) = cost_at(&xm);
+            for i in 0..n {
+                // The residual is target − model: its derivative is −∂model/∂x.
+                j[(i, c)] = -(rp[i] - rm[i]) / (2.0 * h);
+            }
+        }
+        let a = j.transpose() * &j;
+        let g = j.transpose() * DVector::from_vec(r.clone());
+        loop {
+            let mut ad = a.clone();
+            for k in 0..free.len() {
+                ad[(k, k)] += lambda * a[(k, k)];
+            }
+            let step = ad.cholesky().map(|c| c.solve(&g));
+            let Some(step) = step else {
+                lambda *= 10.0;
+                continue;
+            };
+            let mut xt = x.clone();
+            for (c, &gl) in free.iter().enumerate() {
+                xt[gl] += step[c];
+            }
+            let (ct, rt) = cost_at(&xt);
+            if ct <= cost {
+                quiet = if cost - ct < 1e-14 * cost { quiet + 1 } else { 0 };
+                (x, cost, r) = (xt, ct, rt);
+                lambda = (lambda / 3.0).max(1e-12);
+                break;
+            }
+            lambda *= 2.0;
+            if lambda > 1e12 {
+                return cost;
+            }
+        }
+        if quiet >= 8 {
+            break;
+        }
+    }
+    cost
+}
+
+/// Issue 24, item 1: one, two or three reflectors, from zero base and TCP guesses, converge —
+/// geometry alone and the default model with an unknown payload — and each one-reflector fit
+/// reaches the cost a plain LM reaches on the same problem (it stops no later than that: within
+/// 1e-6 of it).
+#[test]
+fn one_two_or_three_reflectors_converge_from_zero_guesses() {
+    let (_, cell) = twin(400, 3);
+    for sessions in [
+        vec!["reflector-1"],
+        vec!["reflector-2"],
+        vec!["reflector-3"],
+        vec!["reflector-1", "reflector-3"],
+        vec!["reflector-1", "reflector-2", "reflector-3"],
+    ] {
+        for model in ["-compliance", ""] {
+            let o = options(model, &sessions);
+            let id = identify(&cell, &o).unwrap_or_else(|e| panic!("{sessions:?} {model:?}: {e}"));
+            // 10–30 times the tracker's noise, as on real data: the pose-to-pose error.
+            assert!(
+                (3.0..60.0).contains(&id.quality.residual_ratio),
+                "{sessions:?} {model:?}: ratio {}",
+                id.quality.residual_ratio
+            );
+            if sessions.len() == 1 && model == "-compliance" {
+                let Prepared { problem, x0, .. } = prepare(&cell, &o).unwrap();
+                let reference = plain_lm(&problem, &id.free, &x0);
+                let ours: f64 = id.linearised().1.iter().map(|v| v * v).sum();
+                assert!(
+                    ours <= reference * (1.0 + 1e-6),
+                    "{sessions:?}: robocal's cost {ours:.6e} m² against a plain LM's {reference:.6e} m²"
+                );
+            }
+        }
+    }
+}
+
+/// Issue 24, item 2: cross-validation of the three reflectors together predicts each held-out
+/// measurement with its own reflector's TCP. Each reflector's held-out figure agrees with the one
+/// it gets when cross-validated alone on the same folds of poses (same seed; within 25 %: the
+/// three-reflector model is fitted on three times the data), and every figure is at the scale
+/// of the pose-to-pose error (a wrong TCP is ~150 mm).
+#[test]
+fn several_targets_are_cross_validated_each_with_its_own_tcp() {
+    let (_, cell) = twin(300, 5);
+    let names = ["reflector-1", "reflector-2", "reflector-3"];
+    let run = |sessions: &[&str]| {
+        let variant = Variant { name: "geometry".into(), options: options("-compliance", &[]) };
+        let o = CrossvalOptions {
+            sessions: sessions.iter().map(|s| s.to_string()).collect(),
+            folds: 5,
+            sizes: Vec::new(),
+            draws: 0,
+            transfer: Vec::new(),
+            transfer_kappa_limit: None,
+            transfer_fixed: Vec::new(),
+            variants: vec![variant],
+            before: IdentifyOptions::default(),
+            seed: 1,
+            threads: 2,
+        };
+        let cv = crossval(&cell, &o).unwrap();
+        let f = cv.folds.iter().find(|f| f.variant == "geometry").unwrap();
+        f.pooled.clone().unwrap_or_else(|| panic!("{sessions:?}: {:?}", f.per_fold))
+    };
+    let together = run(&names);
+    assert!(together.position.mean < 1.0 * MM, "pooled held-out mean {} mm", together.position.mean / MM);
+    for (k, name) in names.iter().enumerate() {
+        let alone = run(&[name]);
+        let mine = together.per_session.iter().find(|s| s.session == *name).unwrap();
+        let (a, b) = (mine.position.mean, alone.position.mean);
+        eprintln!("{name}: together {:.4} mm, alone {:.4} mm", a / MM, b / MM);
+        assert!((a - b).abs() <= 0.25 * b, "reflector {}: {:.4} mm together, {:.4} mm alone", k + 1, a / MM, b / MM);
+    }
+}
+
+/// Issue 24, item 3: the import says the payload is unknown and puts its centre of mass at the
+/// reflectors' centroid; the default model identifies its mass (the true plate weighs 1 kg)
+/// within three standard deviations, and predicts held-out poses better than compliance fitted
+/// with 0 kg.
+#[test]
+fn an_unknown_payload_is_identified() {
+    let (run, cell) = twin(500, 7);
+    let dir = common::fresh_dir("payload");
+    let (joints, files) = run.write(&dir, "p", 6).unwrap();
+    let imported = three_reflector::import(&joints, &files, irb120(), Purpose::Identification).unwrap();
+    assert!(imported.notes.iter().any(|n| n.contains("payload unknown")), "{:?}", imported.notes);
+    let com = imported.cell.sessions[0].tool.com;
+    let centroid = nalgebra::Vector3::new(0.0, 0.0, 0.040);
+    assert!((com - centroid).norm() < 2.0 * MM, "centre of mass {com:?}");
+    assert_eq!(imported.cell.sessions[0].tool.mass, 0.0);
+
+    let id = identify(&cell, &options("", &[])).unwrap();
+    let i = id.set.layout.index_of(Param::ToolMass).expect("a payload term");
+    let (m, s) = (id.set.values[i], id.std[i].expect("identified"));
+    eprintln!("payload {m:.3} ± {s:.3} kg");
+    assert!((m - 1.0).abs() < 3.0 * s && s < 0.3, "payload {m} ± {s} kg (true 1 kg)");
+
+    let without = IdentifyOptions { identify_payload: false, ..options("", &[]) };
+    let mean_of = |options: IdentifyOptions| {
+        let o = CrossvalOptions {
+            sessions: vec!["reflector-1".into(), "reflector-2".into(), "reflector-3".into()],
+            folds: 5,
+            sizes: Vec::new(),
+            draws: 0,
+            transfer: Vec::new(),
+            transfer_kappa_limit: None,
+            transfer_fixed: Vec::new(),
+            variants: vec![Variant { name: "m".into(), options }],
+            before: IdentifyOptions::default(),
+            seed: 1,
+            threads: 2,
+        };
+        let cv = crossval(&cell, &o).unwrap();
+        cv.folds.iter().find(|f| f.variant == "m").unwrap().pooled.clone().unwrap().position.mean
+    };
+    let (with_payload, zero) = (mean_of(options("", &[])), mean_of(without));
+    eprintln!("held-out mean: payload identified {:.4} mm, 0 kg {:.4} mm", with_payload / MM, zero / MM);
+    assert!(with_payload < zero, "payload identified {with_payload} m, 0 kg {zero} m");
+}
