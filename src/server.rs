@@ -35,6 +35,8 @@ pub struct ServeOptions {
     /// How long a client may take to send a request's headers (and an idle kept-alive
     /// connection may stay open).
     pub header_timeout: Duration,
+    /// Most connections open at once; past it new ones wait in the listener's backlog.
+    pub max_connections: usize,
     pub config: ServiceConfig,
 }
 
@@ -47,6 +49,7 @@ impl ServeOptions {
             require_auth: false,
             grace: Duration::from_secs(10),
             header_timeout: Duration::from_secs(10),
+            max_connections: 1000,
             config: ServiceConfig::default(),
         }
     }
@@ -137,7 +140,7 @@ pub async fn serve(
     }
     // One deadline for the requests in flight and the running jobs, from the signal on.
     let grace = opts.grace;
-    let limits = conn::ConnLimits { header_timeout: opts.header_timeout };
+    let limits = conn::ConnLimits { header_timeout: opts.header_timeout, max_connections: opts.max_connections };
     conn::serve(listener, app(state), limits, shutdown, || {
         let deadline = tokio::time::Instant::now() + grace;
         tracing::info!(grace_s = grace.as_secs_f64(), "shutting down: no new connections or jobs");

@@ -3,7 +3,8 @@
 //! trickled below the minimum rate is cut with 408, a declared body over the limit is refused
 //! with 413 before any of it is sent, and hyper's own refusals — a URI too long (414), headers
 //! too large (431), a request that is not HTTP (400) — are problem documents like every other.
-//! Meanwhile the server answers other clients.
+//! Meanwhile the server answers other clients. The connection limit is tested against the real
+//! `robocal serve` process (its flags), with slowloris connections taking every slot.
 
 mod common;
 
@@ -240,5 +241,91 @@ async fn protocol_refusals_are_problem_documents() {
     }
     healthy(&r);
     r.stop().await.unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Kills the server process when dropped: a test that fails leaves nothing behind.
+struct Process(std::process::Child);
+
+impl Drop for Process {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// A `GET /healthz` on its own connection: the status, and how long the answer took.
+fn get_healthz(addr: std::net::SocketAddr) -> (u16, Duration) {
+    let t = Instant::now();
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    s.write_all(b"GET /healthz HTTP/1.1\r\nHost: t\r\nConnection: close\r\n\r\n").unwrap();
+    let a = read_all(&mut s);
+    (parse(&a).0, t.elapsed())
+}
+
+/// The real `robocal serve` process with `--max-connections 2 --header-timeout-s 1`: two
+/// slowloris connections (headers never ended) take both slots; a third client is neither
+/// refused nor answered while they hold them — it waits in the listener's backlog — and is
+/// answered 200 once the header timeout closes them (about 1 s after they connected), while the
+/// slow connections get no answer. Without the limit it would be answered at once; without the
+/// header timeout, never.
+#[test]
+fn the_connection_limit_holds_new_clients_until_the_slow_ones_are_cut() {
+    let dir = common::fresh_dir("conn-limit");
+    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let addr: std::net::SocketAddr = format!("127.0.0.1:{port}").parse().unwrap();
+    let db = dir.join("robocal.db");
+    let _server = Process(
+        std::process::Command::new(env!("CARGO_BIN_EXE_robocal"))
+            .args(["serve", "--db", db.to_str().unwrap(), "--bind", &addr.to_string()])
+            .args(["--header-timeout-s", "1", "--max-connections", "2", "--grace-s", "1"])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let t = Instant::now();
+    loop {
+        if let Ok(mut s) = TcpStream::connect(addr) {
+            s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+            if s.write_all(b"GET /healthz HTTP/1.1\r\nHost: t\r\nConnection: close\r\n\r\n").is_ok()
+                && read_all(&mut s).starts_with(b"HTTP/1.1 200")
+            {
+                break;
+            }
+        }
+        assert!(t.elapsed() < Duration::from_secs(20), "the server never answered");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // The ready check's connection is closed: both slots are free. An idle server answers at once.
+    std::thread::sleep(Duration::from_millis(200));
+    let (status, quick) = get_healthz(addr);
+    assert_eq!(status, 200);
+    assert!(quick < Duration::from_millis(300), "an idle server took {quick:?}");
+    std::thread::sleep(Duration::from_millis(200));
+    let slow: Vec<TcpStream> = (0..2)
+        .map(|_| {
+            let mut s = TcpStream::connect(addr).unwrap();
+            s.write_all(b"GET /healthz HTTP/1.1\r\nHost: t\r\n").unwrap();
+            s
+        })
+        .collect();
+    let opened = Instant::now();
+    std::thread::sleep(Duration::from_millis(100));
+    let (status, waited) = get_healthz(addr);
+    assert_eq!(status, 200);
+    assert!(
+        waited >= Duration::from_millis(600) && waited < Duration::from_secs(3),
+        "the third client was answered after {waited:?} (the slow ones were cut after about 1 s)"
+    );
+    eprintln!(
+        "connection limit 2, two slowloris connections: a third client answered after {waited:?} ({:?} after they connected)",
+        opened.elapsed()
+    );
+    for mut s in slow {
+        s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+        assert_eq!(read_all(&mut s), b"", "a slow connection got an answer to headers it never ended");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -35,6 +35,10 @@ pub struct ServeArgs {
     /// long is closed too.
     #[arg(long, env = "ROBOCAL_HEADER_TIMEOUT_S", default_value_t = 10)]
     pub header_timeout_s: u64,
+    /// Most client connections open at once; past it new connections wait (in the listener's
+    /// backlog) until one closes. Keep it under the process's open-file limit (`ulimit -n`).
+    #[arg(long, env = "ROBOCAL_MAX_CONNECTIONS", default_value_t = 1000)]
+    pub max_connections: usize,
     /// Slowest accepted request body, bytes per second on average once 10 s have passed (the
     /// time allowed grows by a second for each this many bytes received); slower is cut with 408.
     #[arg(long, env = "ROBOCAL_MIN_BODY_RATE", default_value_t = 1024)]
@@ -158,6 +162,9 @@ pub(super) fn serve(a: ServeArgs) -> Result<String, CliError> {
     if a.header_timeout_s == 0 {
         return Err(CliError::arg("--header-timeout-s", "must be at least 1"));
     }
+    if a.max_connections == 0 {
+        return Err(CliError::arg("--max-connections", "must be at least 1"));
+    }
     if a.min_body_rate == 0 {
         return Err(CliError::arg("--min-body-rate", "must be at least 1 byte a second"));
     }
@@ -168,6 +175,7 @@ pub(super) fn serve(a: ServeArgs) -> Result<String, CliError> {
     opts.require_auth = a.require_auth;
     opts.grace = std::time::Duration::from_secs(a.grace_s);
     opts.header_timeout = std::time::Duration::from_secs(a.header_timeout_s);
+    opts.max_connections = a.max_connections;
     opts.config.max_batch = a.max_batch;
     opts.config.body_min_rate = a.min_body_rate;
     opts.config.cors = cors;

@@ -9,12 +9,17 @@
 //!   (414), headers over its buffer (431) — answered as problem documents like every other
 //!   refusal: hyper writes those answers itself, without calling the service, with an empty body;
 //!   [`Refusals`] rewrites them on the way out;
+//! - a connection limit: at most `max_connections` open at once; past it the server stops
+//!   accepting (new clients wait in the listener's backlog) until one closes, so a flood of
+//!   connections cannot exhaust the process's file descriptors, and with the header timeout a
+//!   slowloris holds a slot for that long at most;
 //! - a bounded shutdown: on the signal the listener is closed and every connection told to finish
 //!   the request in flight and close; at the deadline the rest are dropped.
 
 use std::future::Future;
 use std::io;
 use std::pin::{Pin, pin};
+use std::sync::Arc;
 use std::task::{Context, Poll, ready};
 use std::time::Duration;
 
@@ -24,7 +29,7 @@ use hyper_util::rt::{TokioIo, TokioTimer};
 use hyper_util::service::TowerToHyperService;
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::net::{TcpListener, TcpStream};
-use tokio::sync::watch;
+use tokio::sync::{OwnedSemaphorePermit, Semaphore, watch};
 use tokio::task::JoinSet;
 
 use crate::http::{Problem, error::PROBLEM_JSON};
@@ -34,6 +39,8 @@ use crate::http::{Problem, error::PROBLEM_JSON};
 pub struct ConnLimits {
     /// How long a client may take to send a request's headers.
     pub header_timeout: Duration,
+    /// Most connections open at once (at least 1).
+    pub max_connections: usize,
 }
 
 /// Accept and serve connections until `shutdown` resolves; then stop accepting, let requests in
@@ -49,13 +56,18 @@ pub async fn serve(
     let mut conns = JoinSet::new();
     let (closing_tx, closing) = watch::channel(false);
     let mut shutdown = pin!(shutdown);
+    let slots = Arc::new(Semaphore::new(limits.max_connections.max(1)));
     loop {
         tokio::select! {
             _ = &mut shutdown => break,
-            accepted = listener.accept() => match accepted {
+            (slot, accepted) = accept(&listener, &slots, limits.max_connections) => match accepted {
                 Ok((stream, _)) => {
                     let _ = stream.set_nodelay(true);
-                    conns.spawn(connection(stream, app.clone(), limits, closing.clone()));
+                    let served = connection(stream, app.clone(), limits, closing.clone());
+                    conns.spawn(async move {
+                        served.await;
+                        drop(slot);
+                    });
                 }
                 // Out of file descriptors or the like: wait a moment rather than spin.
                 Err(e) if !is_connection_error(&e) => {
@@ -77,6 +89,22 @@ pub async fn serve(
         conns.abort_all();
         while conns.join_next().await.is_some() {}
     }
+}
+
+/// A free connection slot (waited for when every one is taken), then the next connection.
+async fn accept(
+    listener: &TcpListener,
+    slots: &Arc<Semaphore>,
+    max: usize,
+) -> (OwnedSemaphorePermit, io::Result<(TcpStream, std::net::SocketAddr)>) {
+    let slot = match slots.clone().try_acquire_owned() {
+        Ok(s) => s,
+        Err(_) => {
+            tracing::warn!(max_connections = max, "connection limit reached: new connections wait until one closes");
+            slots.clone().acquire_owned().await.expect("the semaphore is never closed")
+        }
+    };
+    (slot, listener.accept().await)
 }
 
 /// Errors of one connection's accept that say nothing about the listener.
