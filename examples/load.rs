@@ -11,8 +11,15 @@
 //! duplicated), every job ended. It prints p50 / p99 / max per endpoint and exits 1 on any
 //! failed check.
 //!
+//! `--slowloris N` adds N hostile connections for the same time: each sends a request line and
+//! then one header line every `--slow-every-ms` (default 2000), never the blank line that ends the
+//! headers, and connects again when the server closes it — a slowloris attack. It reports how
+//! long the server let them hold a connection (its header timeout), while the table shows what
+//! they cost the other clients; a connection held longer than `--slow-limit-s` (default 15: the
+//! server's 10 s header timeout and a slow-loris period) fails the run.
+//!
 //! ```text
-//! cargo run --release --example load -- --url http://127.0.0.1:8080 --seconds 60 --clients 64
+//! cargo run --release --example load -- --url http://127.0.0.1:8080 --seconds 60 --clients 64 [--slowloris 500]
 //! ```
 
 use std::collections::BTreeMap;
@@ -36,6 +43,9 @@ struct Args {
     clients: usize,
     batch: usize,
     job_every: Duration,
+    slowloris: usize,
+    slow_every: Duration,
+    slow_limit: Duration,
 }
 
 fn args() -> Args {
@@ -45,6 +55,9 @@ fn args() -> Args {
         clients: 64,
         batch: 100,
         job_every: Duration::from_millis(2000),
+        slowloris: 0,
+        slow_every: Duration::from_millis(2000),
+        slow_limit: Duration::from_secs(15),
     };
     let mut it = std::env::args().skip(1);
     while let Some(k) = it.next() {
@@ -56,7 +69,12 @@ fn args() -> Args {
             "--clients" => a.clients = num(&v).max(1) as usize,
             "--batch" => a.batch = num(&v).clamp(1, 10_000) as usize,
             "--job-every-ms" => a.job_every = Duration::from_millis(num(&v)),
-            _ => die(&format!("unknown option {k} (--url, --seconds, --clients, --batch, --job-every-ms)")),
+            "--slowloris" => a.slowloris = num(&v) as usize,
+            "--slow-every-ms" => a.slow_every = Duration::from_millis(num(&v).max(1)),
+            "--slow-limit-s" => a.slow_limit = Duration::from_secs(num(&v)),
+            _ => die(&format!(
+                "unknown option {k} (--url, --seconds, --clients, --batch, --job-every-ms, --slowloris, --slow-every-ms, --slow-limit-s)"
+            )),
         }
     }
     a
@@ -253,6 +271,55 @@ async fn client(url: String, sh: Arc<Shared>, session: String, seed: u64) -> (St
     (st, acknowledged)
 }
 
+/// What the slowloris connections met.
+#[derive(Default)]
+struct Slow {
+    opened: u64,
+    /// How long each connection the server closed had been open.
+    closed_after: Vec<Duration>,
+    /// How long the connections still open at the end had been.
+    open_for: Vec<Duration>,
+    /// Bytes the server sent them (an answer to headers it never received would be a bug).
+    answered: u64,
+}
+
+/// One slowloris connection after another until `deadline`: a request line, then a header line
+/// every `every`, never the end of the headers.
+async fn slowloris(addr: String, deadline: Instant, every: Duration, seed: u64) -> Slow {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let mut out = Slow::default();
+    // Spread the connections' starts over one period, so they do not move in step.
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    tokio::time::sleep(every.mul_f64(rng.random())).await;
+    while Instant::now() < deadline {
+        let Ok(mut s) = tokio::net::TcpStream::connect(&addr).await else {
+            tokio::time::sleep(Duration::from_millis(100)).await;
+            continue;
+        };
+        out.opened += 1;
+        let t = Instant::now();
+        let mut buf = [0u8; 1024];
+        let mut closed = s.write_all(b"POST /v1/robots HTTP/1.1\r\nHost: slowloris\r\n").await.is_err();
+        while !closed && Instant::now() < deadline {
+            tokio::select! {
+                _ = tokio::time::sleep(every) => closed = s.write_all(b"X-Slow: 1\r\n").await.is_err(),
+                r = s.read(&mut buf) => {
+                    if let Ok(n) = r {
+                        out.answered += n as u64;
+                    }
+                    closed = true;
+                }
+            }
+        }
+        if closed {
+            out.closed_after.push(t.elapsed());
+        } else {
+            out.open_for.push(t.elapsed());
+        }
+    }
+    out
+}
+
 fn pct(v: &mut [Duration], p: f64) -> f64 {
     v.sort();
     let i = ((v.len() as f64 - 1.0) * p).round() as usize;
@@ -352,7 +419,17 @@ async fn main() {
         key_seq: AtomicU64::new(0),
     });
 
-    eprintln!("load: {} clients for {} s against {} …", a.clients, a.seconds, a.url);
+    eprintln!(
+        "load: {} clients{} for {} s against {} …",
+        a.clients,
+        if a.slowloris > 0 { format!(" and {} slowloris connections", a.slowloris) } else { String::new() },
+        a.seconds,
+        a.url
+    );
+    let addr = a.url.strip_prefix("http://").unwrap_or(&a.url).trim_end_matches('/').to_string();
+    let slow: Vec<_> = (0..a.slowloris)
+        .map(|i| tokio::spawn(slowloris(addr.clone(), sh.deadline, a.slow_every, 1_000_000 + i as u64)))
+        .collect();
     let t0 = Instant::now();
     let handles: Vec<_> = sessions
         .iter()
@@ -367,6 +444,14 @@ async fn main() {
         sent.push(n);
     }
     let ran = t0.elapsed();
+    let mut slow_stats = Slow::default();
+    for h in slow {
+        let s = h.await.expect("a slowloris task");
+        slow_stats.opened += s.opened;
+        slow_stats.closed_after.extend(s.closed_after);
+        slow_stats.open_for.extend(s.open_for);
+        slow_stats.answered += s.answered;
+    }
 
     // The queue drains: every job submitted ends.
     let t = Instant::now();
@@ -438,6 +523,39 @@ async fn main() {
         sessions.len() - mismatches,
         sessions.len()
     );
+    if a.slowloris > 0 {
+        let closed = slow_stats.closed_after.len();
+        let held = if closed > 0 {
+            format!(
+                "closed by the server after a median {:.1} s (max {:.1} s)",
+                pct(&mut slow_stats.closed_after, 0.5) / 1000.0,
+                pct(&mut slow_stats.closed_after, 1.0) / 1000.0
+            )
+        } else {
+            "none closed by the server".to_string()
+        };
+        println!(
+            "slowloris: {} connections at a time, a header line every {} ms: {} opened, {closed} {held}; {} bytes answered to them",
+            a.slowloris,
+            a.slow_every.as_millis(),
+            slow_stats.opened,
+            slow_stats.answered
+        );
+        let longest = slow_stats.closed_after.iter().chain(&slow_stats.open_for).max().copied().unwrap_or_default();
+        if longest > a.slow_limit {
+            failures.push(format!(
+                "a slowloris connection stayed open {:.1} s (more than --slow-limit-s {}): no header timeout?",
+                longest.as_secs_f64(),
+                a.slow_limit.as_secs()
+            ));
+        }
+        if slow_stats.answered > 0 {
+            failures.push(format!(
+                "the server sent {} bytes to clients that never ended their headers",
+                slow_stats.answered
+            ));
+        }
+    }
     for (ep, errs) in &stats.errors {
         for e in errs.iter().take(3) {
             println!("error {ep}: {e}");

@@ -10,18 +10,27 @@
 #   - an identification job from submission to success, and a plain GET.
 # Medians of repeated runs. The load generator shares the machine's cores with the server.
 #   scripts/bench_service.sh            (needs curl, jq, python3; installs oha with cargo if missing)
+#   scripts/bench_service.sh --uploads  (the uploads only: 10,000 and 100 measurements)
+# ROBOCAL=path/to/robocal uses that binary instead of building one (to compare two builds). The
+# database is in mktemp's directory: put TMPDIR on the disk the server would use (a tmpfs makes
+# fsync free).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-command -v oha >/dev/null || cargo install --locked oha
-cargo build --quiet --release
+uploads_only=false
+[ "${1:-}" = --uploads ] && uploads_only=true
+if [ -z "${ROBOCAL:-}" ]; then
+  cargo build --quiet --release
+  ROBOCAL=target/release/robocal
+fi
+$uploads_only || command -v oha >/dev/null || cargo install --locked oha
 tmp=$(mktemp -d)
 port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
-target/release/robocal serve --db "$tmp/bench.db" --bind "127.0.0.1:$port" >"$tmp/serve.log" 2>&1 &
+"$ROBOCAL" serve --db "$tmp/bench.db" --bind "127.0.0.1:$port" >"$tmp/serve.log" 2>&1 &
 server=$!
 trap 'kill $server 2>/dev/null; rm -rf "$tmp"' EXIT
 API=http://127.0.0.1:$port; J='Content-Type: application/json'
 for _ in $(seq 100); do curl -sf "$API/readyz" >/dev/null && break; sleep 0.1; done
-TOKEN=$(target/release/robocal token create --db "$tmp/bench.db" --name bench --scopes compensate | grep -o 'rc_[0-9a-f]*')
+TOKEN=$("$ROBOCAL" token create --db "$tmp/bench.db" --name bench --scopes compensate | grep -o 'rc_[0-9a-f]*')
 
 median() { sort -n | awk '{a[NR]=$1} END {printf "%.2f", a[int((NR+1)/2)]}'; }
 # One timed curl: its total and the server's Server-Timing (app;dur=…) appended to the samples.
@@ -41,7 +50,7 @@ timed() {
   report
 }
 
-target/release/robocal simulate --seed 1 --out "$tmp/sim.json" >/dev/null
+"$ROBOCAL" simulate --seed 1 --out "$tmp/sim.json" >/dev/null
 ROBOT=$(curl -s $API/v1/robots -H "$J" -d '{"name": "bench", "robot": {"preset": "irb120"}, "base_guess": {"x_mm": 160.211, "y_mm": -255.727, "z_mm": -220.548, "a_deg": 91.603, "b_deg": 0.496, "c_deg": -1.384}}' | jq -r .id)
 PLATE=$(curl -s $API/v1/artefacts -H "$J" -d '{"name": "plate", "distances_mm": {"d12": 300, "d13": 300, "d23": 300}, "ball_diameter_mm": 12.7}' | jq -r .id)
 session() {
@@ -52,6 +61,7 @@ import json, sys
 d = json.load(open(sys.argv[1] + "/sim.json"))
 m = d["sessions"][0]["measurements"]
 json.dump({"measurements": m}, open(sys.argv[1] + "/b360.json", "w"))
+json.dump({"measurements": m[:100]}, open(sys.argv[1] + "/b100.json", "w"))
 big = (m * 28)[:10000]  # the 360 TriCal poses repeated
 json.dump({"measurements": big}, open(sys.argv[1] + "/b10k.json", "w"))
 cols = [f"q{j}_deg" for j in range(1, 7)] + ["ball", "temperature_c", "time_s"] + [f"approach_{j}" for j in range(1, 7)]
@@ -75,6 +85,13 @@ upload() { # content type, file, session name prefix
 }
 echo "upload 10,000 measurements, JSON ($(du -h "$tmp/b10k.json" | cut -f1)): $(upload application/json "$tmp/b10k.json" j)"
 echo "upload 10,000 measurements, CSV ($(du -h "$tmp/b10k.csv" | cut -f1)): $(upload text/csv "$tmp/b10k.csv" c)"
+SMALL=$(session small)
+timed_small() {
+  for i in $(seq 51); do sample "$API/v1/sessions/$SMALL/measurements" -H "$J" -H "Idempotency-Key: small-$i" --data-binary @"$tmp/b100.json"; done
+  report
+}
+echo "upload 100 measurements, JSON, 51 batches into one session: $(timed_small)"
+$uploads_only && exit 0
 
 SID=$(session trical-1)
 curl -s -o /dev/null $API/v1/sessions/$SID/measurements -H "$J" -d @"$tmp/b360.json"

@@ -4,12 +4,16 @@
 # identification jobs run (examples/load.rs); then the checks — zero errors, every session holding
 # exactly the measurements acknowledged (nothing lost or duplicated), the job queue drained — the
 # p50/p99 table, and `PRAGMA integrity_check` on the database after a clean stop.
-#   scripts/load_test.sh [seconds=60] [clients=64]     (needs python3 for a free port; sqlite3 optional)
+# With `slow` > 0, that many slowloris connections run alongside (each sends a header line every
+# 2 s and never ends its headers; the server must close each within its 10 s header timeout), and
+# the table shows the other clients' latencies under that attack.
+#   scripts/load_test.sh [seconds=60] [clients=64] [slow=0]   (needs python3 for a free port; sqlite3 optional)
 # Exit status 0 only when every check passes.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 seconds=${1:-60}
 clients=${2:-64}
+slow=${3:-0}
 cargo build --quiet --release --bin robocal --example load
 tmp=$(mktemp -d)
 port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
@@ -21,7 +25,7 @@ for _ in $(seq 200); do
   sleep 0.05
 done
 status=0
-target/release/examples/load --url "http://127.0.0.1:$port" --seconds "$seconds" --clients "$clients" || status=$?
+target/release/examples/load --url "http://127.0.0.1:$port" --seconds "$seconds" --clients "$clients" --slowloris "$slow" || status=$?
 kill -TERM $server
 wait $server || { echo "FAILED: the server did not stop cleanly"; status=1; }
 if command -v sqlite3 >/dev/null; then

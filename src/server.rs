@@ -1,9 +1,11 @@
 //! `robocal serve`: one long-running process on an embedded SQLite database. Takes the database's
 //! lock (one server per database: [`lock`]), opens (creating it on first start) and migrates the
 //! database, binds, requeues jobs a killed predecessor left running, starts the job workers, serves
-//! HTTP until SIGTERM or Ctrl-C, then stops accepting, lets running jobs finish within a grace
-//! period and requeues the rest.
+//! HTTP until SIGTERM or Ctrl-C, then stops accepting, lets requests in flight and running jobs
+//! finish within a grace period, requeues the jobs still running and drops the connections still
+//! open when it ends.
 
+pub mod conn;
 pub mod lock;
 
 use std::future::Future;
@@ -27,8 +29,14 @@ pub struct ServeOptions {
     pub workers: usize,
     /// Require bearer tokens even on a loopback address (always required on other addresses).
     pub require_auth: bool,
-    /// How long a shutdown waits for running jobs before requeueing them.
+    /// How long a shutdown waits for requests in flight and running jobs: then jobs still running
+    /// are put back in the queue and connections still open are dropped.
     pub grace: Duration,
+    /// How long a client may take to send a request's headers (and an idle kept-alive
+    /// connection may stay open).
+    pub header_timeout: Duration,
+    /// Most connections open at once; past it new ones wait in the listener's backlog.
+    pub max_connections: usize,
     pub config: ServiceConfig,
 }
 
@@ -40,6 +48,8 @@ impl ServeOptions {
             workers: 1,
             require_auth: false,
             grace: Duration::from_secs(10),
+            header_timeout: Duration::from_secs(10),
+            max_connections: 1000,
             config: ServiceConfig::default(),
         }
     }
@@ -128,12 +138,23 @@ pub async fn serve(
     if let Some(tx) = ready {
         let _ = tx.send(addr);
     }
-    let served = axum::serve(listener, app(state)).with_graceful_shutdown(shutdown).await;
+    // One deadline for the requests in flight and the running jobs, from the signal on.
+    let grace = opts.grace;
+    let limits = conn::ConnLimits { header_timeout: opts.header_timeout, max_connections: opts.max_connections };
+    conn::serve(listener, app(state), limits, shutdown, || {
+        let deadline = tokio::time::Instant::now() + grace;
+        tracing::info!(grace_s = grace.as_secs_f64(), "shutting down: no new connections or jobs");
+        workers.stop(deadline);
+        deadline
+    })
+    .await;
     workers.shutdown().await;
-    pool.close().await;
+    if tokio::time::timeout(Duration::from_secs(1), pool.close()).await.is_err() {
+        tracing::warn!("shutdown: database connections still busy after 1 s; closing regardless");
+    }
     drop(lock); // only now may another server open the database
     tracing::info!("stopped");
-    served.map_err(ServeError::Serve)
+    Ok(())
 }
 
 /// A server running in this process (the demo's default, tests): its address and how to stop it.

@@ -162,6 +162,72 @@ async fn a_job_survives_a_killed_server() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `--grace-s` bounds the shutdown: SIGTERM during a large pose plan, with a client sending its
+/// headers slowly and another trickling a body, and the process exits within grace + 2 s (it used
+/// to wait for the solver's thread, 12 s more, holding the database). The job is put back in the
+/// queue at the deadline: a new server on the database (the lock is free) claims it again.
+#[tokio::test]
+async fn a_shutdown_ends_within_the_grace_period() {
+    use std::io::Write;
+    let dir = common::fresh_dir("grace");
+    let db = dir.join("robocal.db");
+    let port = free_port();
+    let mut child = start(&db, port);
+    let client = Client::new(&format!("http://127.0.0.1:{port}"), None).unwrap();
+    ready(&client).await;
+    let (rid, aid) = setup(&client).await;
+    let job: Value = client
+        .post(
+            &format!("/v1/robots/{rid}/pose-plans"),
+            &json!({"artefact_id": aid, "tool": {"tcp_mm": [40, 0, 130], "mass_kg": 1.7, "com_mm": [30, 0, 64]},
+                    "per_ball": 2000, "validation": 10000, "select": {"n": 75}, "seed": 5}),
+        )
+        .await
+        .unwrap();
+    let id = job["id"].as_str().unwrap().to_string();
+    let t = Instant::now();
+    loop {
+        let j: Value = client.get(&format!("/v1/jobs/{id}")).await.unwrap();
+        match j["state"].as_str().unwrap() {
+            "running" => break,
+            "queued" => {}
+            other => panic!("the job ended ({other}) before the shutdown: make it bigger"),
+        }
+        assert!(t.elapsed() < Duration::from_secs(30), "the job never started");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    // Two hostile connections open across the shutdown.
+    let mut slow_headers = std::net::TcpStream::connect(("127.0.0.1", port)).unwrap();
+    slow_headers.write_all(b"GET /healthz HTTP/1.1\r\nHost: t\r\n").unwrap();
+    let mut slow_body = std::net::TcpStream::connect(("127.0.0.1", port)).unwrap();
+    slow_body.write_all(b"POST /v1/robots HTTP/1.1\r\nHost: t\r\nContent-Length: 100\r\n\r\n{").unwrap();
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    let t = Instant::now();
+    signal(&child, "-TERM");
+    let status = wait_exit(&mut child, Duration::from_secs(30));
+    let took = t.elapsed();
+    assert!(status.success(), "a bounded shutdown still exits 0, got {status}");
+    assert!(took < Duration::from_secs(3), "exited {took:?} after SIGTERM with --grace-s 1");
+    eprintln!("SIGTERM during a pose plan, --grace-s 1: exited after {took:?}");
+    drop((slow_headers, slow_body));
+    let mut child = start(&db, port);
+    ready(&client).await;
+    let j: Value = client.get(&format!("/v1/jobs/{id}")).await.unwrap();
+    assert!(j["state"] == "queued" || j["state"] == "running", "{j}");
+    let t = Instant::now();
+    let again = loop {
+        let j: Value = client.get(&format!("/v1/jobs/{id}")).await.unwrap();
+        if j["attempts"] == 2 || t.elapsed() > Duration::from_secs(30) {
+            break j;
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    };
+    assert_eq!(again["attempts"], 2, "put back in the queue at the deadline, claimed again: {again}");
+    child.kill().unwrap();
+    let _ = child.wait();
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A server and two `robocal token create` started together on a database that does not exist
 /// yet: all three open it (one creates and migrates it, the others wait their turn), the tokens
 /// are both stored, and the server accepts them.

@@ -32,6 +32,11 @@ pub struct ServiceConfig {
     pub request_timeout: Duration,
     /// Browser origins allowed to call the API from a web page (CORS); off by default.
     pub cors: CorsOrigins,
+    /// The slowest a request body may arrive: after `body_grace` from its first read, on average
+    /// at least `body_min_rate` bytes a second (the time allowed grows by a second for each
+    /// `body_min_rate` bytes received); slower is cut with 408.
+    pub body_min_rate: u64,
+    pub body_grace: Duration,
 }
 
 impl Default for ServiceConfig {
@@ -42,6 +47,8 @@ impl Default for ServiceConfig {
             max_body_bytes: 32 * 1024 * 1024,
             request_timeout: Duration::from_secs(60),
             cors: CorsOrigins::Off,
+            body_min_rate: 1024,
+            body_grace: Duration::from_secs(10),
         }
     }
 }
@@ -56,6 +63,9 @@ pub struct AppState {
     pub wake: Arc<Notify>,
     /// Robots and compiled parameter sets (the compensation hot path).
     pub caches: Arc<cache::Caches>,
+    /// Whether writes are failing for storage trouble, and which jobs wait for storage (for
+    /// `/readyz` and the jobs' `phase`).
+    pub storage: Arc<crate::db::StorageHealth>,
 }
 
 impl AppState {
@@ -66,6 +76,7 @@ impl AppState {
             metrics: Arc::new(Metrics::new()),
             wake: Arc::new(Notify::new()),
             caches: Arc::new(cache::Caches::new(256)),
+            storage: Arc::new(crate::db::StorageHealth::default()),
         }
     }
 }
@@ -77,6 +88,9 @@ pub enum AppError {
     /// sessions on different artefacts, a robot without a base guess): the field and why.
     #[error("{detail}")]
     Invalid { detail: String, field: Option<String> },
+    /// The storage under the database refused: full, read-only or an I/O error.
+    #[error("{}", .0.describe())]
+    Storage(crate::db::StorageTrouble),
     /// The store failed, or holds what it should not; logged, never echoed.
     #[error("internal error: {0}")]
     Internal(String),
@@ -90,6 +104,12 @@ impl AppError {
 
 impl From<sqlx::Error> for AppError {
     fn from(e: sqlx::Error) -> Self {
-        AppError::Internal(format!("database: {e}"))
+        match crate::db::storage_trouble(&e) {
+            Some(t) => {
+                tracing::error!(error = %e, "storage trouble");
+                AppError::Storage(t)
+            }
+            None => AppError::Internal(format!("database: {e}")),
+        }
     }
 }

@@ -26,9 +26,23 @@ pub struct ServeArgs {
     /// Most measurements or compensation targets per request.
     #[arg(long, env = "ROBOCAL_MAX_BATCH", default_value_t = 10_000)]
     pub max_batch: usize,
-    /// Seconds a shutdown waits for running jobs before requeueing them.
+    /// Seconds a shutdown (SIGTERM, Ctrl-C) waits for requests in flight and running jobs: then
+    /// jobs still running go back in the queue, open connections are dropped, and the process
+    /// exits (within a second or two more).
     #[arg(long, env = "ROBOCAL_SHUTDOWN_GRACE_S", default_value_t = 10)]
     pub grace_s: u64,
+    /// Seconds a client may take to send a request's headers; a kept-alive connection idle that
+    /// long is closed too.
+    #[arg(long, env = "ROBOCAL_HEADER_TIMEOUT_S", default_value_t = 10)]
+    pub header_timeout_s: u64,
+    /// Most client connections open at once; past it new connections wait (in the listener's
+    /// backlog) until one closes. Keep it under the process's open-file limit (`ulimit -n`).
+    #[arg(long, env = "ROBOCAL_MAX_CONNECTIONS", default_value_t = 1000)]
+    pub max_connections: usize,
+    /// Slowest accepted request body, bytes per second on average once 10 s have passed (the
+    /// time allowed grows by a second for each this many bytes received); slower is cut with 408.
+    #[arg(long, env = "ROBOCAL_MIN_BODY_RATE", default_value_t = 1024)]
+    pub min_body_rate: u64,
     /// Log format on stderr: text (coloured only on a terminal, never with NO_COLOR set) or json
     /// (one object per line, for log shippers). RUST_LOG sets the levels (default info).
     #[arg(long, env = "ROBOCAL_LOG_FORMAT", value_enum, default_value_t = LogFormat::Text)]
@@ -145,15 +159,32 @@ pub(super) fn serve(a: ServeArgs) -> Result<String, CliError> {
     if a.max_batch == 0 {
         return Err(CliError::arg("--max-batch", "must be at least 1"));
     }
+    if a.header_timeout_s == 0 {
+        return Err(CliError::arg("--header-timeout-s", "must be at least 1"));
+    }
+    if a.max_connections == 0 {
+        return Err(CliError::arg("--max-connections", "must be at least 1"));
+    }
+    if a.min_body_rate == 0 {
+        return Err(CliError::arg("--min-body-rate", "must be at least 1 byte a second"));
+    }
     let cors = CorsOrigins::parse(&a.cors_origins, "--cors-origin").map_err(|e| CliError::msg(e.to_string()))?;
     init_tracing(a.log_format);
     let mut opts = ServeOptions::new(a.db.clone(), bind);
     opts.workers = a.workers;
     opts.require_auth = a.require_auth;
     opts.grace = std::time::Duration::from_secs(a.grace_s);
+    opts.header_timeout = std::time::Duration::from_secs(a.header_timeout_s);
+    opts.max_connections = a.max_connections;
     opts.config.max_batch = a.max_batch;
+    opts.config.body_min_rate = a.min_body_rate;
     opts.config.cors = cors;
-    runtime()?.block_on(serve(opts, None, shutdown_signal())).map_err(|e| {
+    let rt = runtime()?;
+    let served = rt.block_on(serve(opts, None, shutdown_signal()));
+    // A solver thread still running (its job was put back in the queue at the deadline) is not
+    // waited for: the process exits and the thread with it.
+    rt.shutdown_timeout(std::time::Duration::from_millis(200));
+    served.map_err(|e| {
         if a.log_format == LogFormat::Json {
             // A log shipper sees why the server stopped too (the plain `error:` line follows).
             tracing::error!(error = %e, "robocal cannot serve");

@@ -286,16 +286,23 @@ pub async fn release(pool: &SqlitePool, id: &str, owner: &str) -> Result<bool, s
 }
 
 /// Requeue running jobs whose lease has expired — at start-up, every running job (`all`): the
-/// process that held them is gone. Returns the number requeued.
-pub async fn requeue_stale(pool: &SqlitePool, all: bool) -> Result<u64, sqlx::Error> {
+/// process that held them is gone. Leases whose owner starts with `except` (this process's
+/// workers: `instance/`) are left alone: their worker is alive, and may hold a computed result
+/// it waits to store while the disk is full — the lease it could not renew meanwhile must not
+/// make the job run again. Returns the number requeued.
+pub async fn requeue_stale(pool: &SqlitePool, all: bool, except: Option<&str>) -> Result<u64, sqlx::Error> {
     let t = now();
     let r = sqlx::query(
         "UPDATE jobs SET state = 'queued', lease_owner = NULL, lease_expires_at = NULL, updated_at = ? \
-         WHERE state = 'running' AND (? OR lease_expires_at IS NULL OR lease_expires_at < ?)",
+         WHERE state = 'running' AND (? OR lease_expires_at IS NULL OR lease_expires_at < ?) \
+           AND (? IS NULL OR lease_owner IS NULL OR substr(lease_owner, 1, length(?)) <> ?)",
     )
     .bind(&t)
     .bind(all)
     .bind(&t)
+    .bind(except)
+    .bind(except)
+    .bind(except)
     .execute(pool)
     .await?;
     Ok(r.rows_affected())
@@ -400,5 +407,31 @@ mod tests {
         assert_eq!(text, "diagnosis");
         assert_eq!(get(&pool, "d").await.unwrap().unwrap().kind, JobKind::Diagnosis);
         assert_eq!(serde_json::to_value(JobKind::Diagnosis).unwrap(), JobKind::Diagnosis.as_str());
+    }
+
+    /// The periodic sweep requeues an expired lease of another process, never one of this
+    /// process's workers (alive, perhaps waiting for the disk to store a computed result); the
+    /// start-up requeue takes every running job.
+    #[tokio::test]
+    async fn the_sweep_leaves_this_processs_leases_alone() {
+        let pool = pool_with_robot().await;
+        for id in ["mine", "theirs"] {
+            insert(&pool, id, JobKind::Identification, "r", "{}").await.unwrap();
+        }
+        let a = claim(&pool, "inst-1/0", Duration::ZERO).await.unwrap().unwrap();
+        let b = claim(&pool, "inst-2/0", Duration::ZERO).await.unwrap().unwrap();
+        assert_eq!((a.id.as_str(), b.id.as_str()), ("mine", "theirs"));
+        tokio::time::sleep(Duration::from_millis(5)).await; // both leases expired
+        assert_eq!(requeue_stale(&pool, false, Some("inst-1/")).await.unwrap(), 1);
+        assert_eq!(get(&pool, "mine").await.unwrap().unwrap().state, JobState::Running);
+        assert_eq!(get(&pool, "theirs").await.unwrap().unwrap().state, JobState::Queued);
+        // A prefix of the owner's text only, not a pattern: `inst-1` does not match `inst-1/0`'s
+        // sibling `inst-10/0`.
+        let c = claim(&pool, "inst-10/0", Duration::ZERO).await.unwrap().unwrap();
+        tokio::time::sleep(Duration::from_millis(5)).await;
+        assert_eq!(requeue_stale(&pool, false, Some("inst-1/")).await.unwrap(), 1);
+        assert_eq!(get(&pool, &c.id).await.unwrap().unwrap().state, JobState::Queued);
+        assert_eq!(requeue_stale(&pool, true, None).await.unwrap(), 1);
+        assert_eq!(get(&pool, "mine").await.unwrap().unwrap().state, JobState::Queued);
     }
 }

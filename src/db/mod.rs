@@ -3,8 +3,13 @@
 //! contract. Every write that must be all-or-nothing runs in one `BEGIN IMMEDIATE` transaction
 //! (immediate: the write lock is taken up front, so two writers never deadlock upgrading a
 //! read lock).
+//!
+//! Durability: WAL with `synchronous = FULL`, so a transaction is on the disk (the WAL fsynced)
+//! before its COMMIT returns — an answered write survives a power cut, not only a killed
+//! process. Connections go back to the pool only outside a transaction ([`connect`]).
 
 pub mod corrections;
+pub mod health;
 pub mod jobs;
 pub mod records;
 pub mod tokens;
@@ -13,14 +18,23 @@ use std::path::Path;
 use std::str::FromStr;
 use std::time::{Duration, SystemTime};
 
+pub use health::StorageHealth;
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
 pub use sqlx::{Sqlite, SqlitePool, Transaction};
 
 /// The migrations of `migrations/`, embedded at compile time and applied at start-up.
 pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations");
 
-/// Open (creating it if missing) and migrate the database at `path`: WAL, foreign keys on, a
-/// busy timeout so concurrent writers wait instead of failing.
+/// Open (creating it if missing) and migrate the database at `path`: WAL, `synchronous = FULL`,
+/// foreign keys on, a busy timeout so concurrent writers wait instead of failing.
+///
+/// A connection goes back to the pool only outside any transaction. When a statement or the
+/// COMMIT of a transaction fails for a full disk, a read-only file system or an I/O error,
+/// SQLite may roll the transaction back by itself; the ROLLBACK sqlx then sends finds none, fails,
+/// and sqlx goes on counting the transaction open. Back in the pool, that connection would answer
+/// every later `BEGIN IMMEDIATE` with "attempted to call begin_with at non-zero transaction
+/// depth" — each write that drew it a 500, long after the disk had space again. Such a connection
+/// is closed instead (the pool opens a fresh one when needed).
 pub async fn connect(path: &Path) -> Result<SqlitePool, sqlx::Error> {
     // Switching a new database to WAL needs an exclusive lock that SQLite's busy timeout does not
     // wait for, so a process opening the file while another creates it can get "database is
@@ -43,12 +57,37 @@ async fn open_and_migrate(path: &Path) -> Result<SqlitePool, sqlx::Error> {
         .filename(path)
         .create_if_missing(true)
         .journal_mode(SqliteJournalMode::Wal)
-        .synchronous(SqliteSynchronous::Normal)
+        .synchronous(SqliteSynchronous::Full)
         .foreign_keys(true)
         .busy_timeout(BUSY_TIMEOUT);
-    let pool = SqlitePoolOptions::new().max_connections(8).acquire_timeout(BUSY_TIMEOUT).connect_with(opts).await?;
+    let pool = SqlitePoolOptions::new()
+        .max_connections(8)
+        .acquire_timeout(BUSY_TIMEOUT)
+        .after_release(|conn, _| {
+            Box::pin(async move {
+                // A dropped transaction's ROLLBACK is queued on the connection's worker: the ping
+                // waits for it, so the depth read next is the one it left.
+                sqlx::Connection::ping(&mut *conn).await?;
+                Ok(outside_transaction(conn, "returned to the pool"))
+            })
+        })
+        .before_acquire(|conn, _| Box::pin(async move { Ok(outside_transaction(conn, "taken from the pool")) }))
+        .connect_with(opts)
+        .await?;
     migrate(&pool).await?;
     Ok(pool)
+}
+
+/// Whether a pooled connection is outside any transaction (sqlx's count); logged when not, since
+/// the pool then closes it.
+fn outside_transaction(conn: &sqlx::SqliteConnection, when: &str) -> bool {
+    let clean = !sqlx::Connection::is_in_transaction(conn);
+    if !clean {
+        tracing::warn!(
+            "a database connection {when} was still inside a transaction (its rollback failed after a storage error): closed"
+        );
+    }
+    clean
 }
 
 /// Apply the pending migrations on one connection of `pool`.
@@ -114,7 +153,7 @@ fn migration_error(msg: &str) -> sqlx::Error {
 }
 
 /// SQLITE_BUSY ("database is locked", primary result code 5).
-fn is_busy(e: &sqlx::Error) -> bool {
+pub fn is_busy(e: &sqlx::Error) -> bool {
     e.as_database_error().and_then(|d| d.code()).is_some_and(|c| c.parse::<i32>().is_ok_and(|c| c & 0xff == 5))
 }
 
@@ -161,7 +200,17 @@ pub enum StorageTrouble {
 }
 
 impl StorageTrouble {
-    /// What happened, for an operator: said plainly, without internals.
+    /// What is wrong, said plainly, without internals.
+    pub fn cause(self) -> &'static str {
+        match self {
+            StorageTrouble::Full => "the disk holding the database is full (or the file-size limit is reached)",
+            StorageTrouble::ReadOnly => "the database is read-only (its file or file system cannot be written)",
+            StorageTrouble::Io => "the database could not be written (an I/O error from the operating system)",
+        }
+    }
+
+    /// What happened to a refused request, for an operator: the cause, and that nothing of it
+    /// was stored.
     pub fn describe(self) -> &'static str {
         match self {
             StorageTrouble::Full => {

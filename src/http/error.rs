@@ -62,9 +62,16 @@ pub enum ApiError {
     Numerical { kind: &'static str, title: &'static str, detail: String },
     #[error("{0}")]
     Unavailable(String),
-    /// The disk holding the database is full (507).
+    /// The storage under the database refused a write or a read: 507 when full, 503 when
+    /// read-only or an I/O error. The answer carries [`StorageRefused`] for the readiness record.
+    #[error("{}", .0.describe())]
+    Storage(db::StorageTrouble),
+    /// A job ran to its end but its result could not be stored: said in the job's `error`.
     #[error("{0}")]
-    InsufficientStorage(String),
+    NotStored(String),
+    /// The request body arrived slower than the server's minimum rate (408).
+    #[error("{0}")]
+    BodyTooSlow(String),
     /// Logged, never echoed.
     #[error("internal error: {0}")]
     Internal(String),
@@ -116,8 +123,10 @@ impl ApiError {
             ApiError::UnsupportedMediaType(_) => StatusCode::UNSUPPORTED_MEDIA_TYPE,
             ApiError::Invalid { .. } | ApiError::Numerical { .. } => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
-            ApiError::InsufficientStorage(_) => StatusCode::INSUFFICIENT_STORAGE,
-            ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
+            ApiError::Storage(db::StorageTrouble::Full) => StatusCode::INSUFFICIENT_STORAGE,
+            ApiError::Storage(_) => StatusCode::SERVICE_UNAVAILABLE,
+            ApiError::BodyTooSlow(_) => StatusCode::REQUEST_TIMEOUT,
+            ApiError::NotStored(_) | ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
 
@@ -135,7 +144,10 @@ impl ApiError {
             ApiError::Invalid { field, .. } => ("invalid-value", "Invalid value", field.clone()),
             ApiError::Numerical { kind, title, .. } => (*kind, *title, None),
             ApiError::Unavailable(_) => ("unavailable", "Service unavailable", None),
-            ApiError::InsufficientStorage(_) => ("insufficient-storage", "Insufficient storage", None),
+            ApiError::Storage(db::StorageTrouble::Full) => ("insufficient-storage", "Insufficient storage", None),
+            ApiError::Storage(_) => ("unavailable", "Service unavailable", None),
+            ApiError::BodyTooSlow(_) => ("request-timeout", "Request Timeout", None),
+            ApiError::NotStored(_) => ("result-not-stored", "The job's result could not be stored", None),
             ApiError::Internal(_) => ("internal", "Internal error", None),
         };
         let detail = match self {
@@ -165,10 +177,7 @@ impl From<sqlx::Error> for ApiError {
         match db::storage_trouble(&e) {
             Some(t) => {
                 tracing::error!(error = %e, "storage trouble");
-                match t {
-                    db::StorageTrouble::Full => ApiError::InsufficientStorage(t.describe().into()),
-                    db::StorageTrouble::ReadOnly | db::StorageTrouble::Io => ApiError::Unavailable(t.describe().into()),
-                }
+                ApiError::Storage(t)
             }
             None => AppError::from(e).into(),
         }
@@ -179,6 +188,7 @@ impl From<AppError> for ApiError {
     fn from(e: AppError) -> Self {
         match e {
             AppError::Invalid { detail, field } => ApiError::Invalid { detail, field },
+            AppError::Storage(t) => ApiError::Storage(t),
             AppError::Internal(m) => ApiError::Internal(m),
         }
     }
@@ -201,6 +211,9 @@ impl From<JobError> for ApiError {
         match e {
             JobError::Invalid { detail, field } => ApiError::Invalid { detail, field },
             JobError::Numerical { kind, title, detail } => ApiError::Numerical { kind, title, detail },
+            JobError::Storage(t) => ApiError::Storage(t),
+            JobError::NotStored(d) => ApiError::NotStored(d),
+            JobError::Busy => ApiError::Unavailable(JobError::Busy.to_string()),
             JobError::Internal(m) => ApiError::Internal(m),
         }
     }
@@ -229,9 +242,17 @@ impl IntoResponse for ApiError {
         if let ApiError::MethodNotAllowed { allow, .. } = &self {
             res.headers_mut().insert(header::ALLOW, HeaderValue::from_static(allow));
         }
+        if let ApiError::Storage(t) = &self {
+            res.extensions_mut().insert(StorageRefused(*t));
+        }
         res
     }
 }
+
+/// Marks an answer given because the storage refused (see [`ApiError::Storage`]): the service's
+/// middleware records it for `/readyz`.
+#[derive(Clone, Copy, Debug)]
+pub struct StorageRefused(pub db::StorageTrouble);
 
 /// Errors produced outside the handlers — a query string or path that does not parse, a method
 /// the route does not have, a request timeout — arrive as plain text or empty bodies; give them

@@ -32,7 +32,9 @@ pub struct JobOut {
     pub progress: f64,
     /// What a running job is doing now (`loading`, `selecting poses`, `identifying`,
     /// `validating`, `fitting the current model`, `cross-validating candidate effects`, …); once it
-    /// ended, the last phase it reached.
+    /// ended, the last phase it reached. A job whose end the storage refused (a full disk, a
+    /// read-only file system) says `storing the result: waiting for the storage (…)` until it is
+    /// written.
     pub phase: Option<String>,
     /// The request as stored (sessions resolved to ids).
     #[schema(value_type = Object)]
@@ -83,11 +85,30 @@ pub fn job_out(j: &JobRow) -> Result<JobOut, ApiError> {
     })
 }
 
+/// A job as stored, with what a running job waits for when the storage refused its end (that is
+/// held in memory: the row is what could not be written).
+fn job_out_now(state: &AppState, j: &JobRow) -> Result<JobOut, ApiError> {
+    let mut out = job_out(j)?;
+    if j.state == JobState::Running
+        && let Some(w) = state.storage.job_waiting(&j.id)
+    {
+        out.phase = Some(w);
+    }
+    Ok(out)
+}
+
 /// The job workers' context from the service's state; the failures they store are this API's
 /// problem documents.
 impl From<AppState> for JobContext {
     fn from(s: AppState) -> Self {
-        JobContext { pool: s.pool, wake: s.wake, caches: s.caches, metrics: s.metrics, failure_json }
+        JobContext {
+            pool: s.pool,
+            wake: s.wake,
+            caches: s.caches,
+            metrics: s.metrics,
+            failure_json,
+            storage: s.storage,
+        }
     }
 }
 
@@ -158,7 +179,7 @@ pub async fn list(
     let robot = q.robot_id.as_deref().filter(|s| !s.is_empty());
     let total = db::jobs::count(&state.pool, robot, state_filter).await?;
     let rows = db::jobs::list(&state.pool, robot, state_filter, page.offset, page.limit).await?;
-    let out: Vec<JobOut> = rows.iter().map(job_out).collect::<Result<_, _>>()?;
+    let out: Vec<JobOut> = rows.iter().map(|r| job_out_now(&state, r)).collect::<Result<_, _>>()?;
     Ok((page.headers(total, out.len()), Json(out)))
 }
 
@@ -175,7 +196,7 @@ pub async fn get(
     Path(job_id): Path<String>,
 ) -> Result<Json<JobOut>, ApiError> {
     let row = db::jobs::get(&state.pool, &job_id).await?.ok_or_else(|| ApiError::not_found("job", &job_id))?;
-    Ok(Json(job_out(&row)?))
+    Ok(Json(job_out_now(&state, &row)?))
 }
 
 /// Cancel a job: a queued job ends at once; a running one ends as `cancelled` when its solver

@@ -9,6 +9,7 @@ pub mod diagnoses;
 pub mod error;
 pub mod exports;
 pub mod extract;
+pub mod guard;
 pub mod history;
 pub mod identifications;
 pub mod jobs;
@@ -162,8 +163,8 @@ pub fn required_scope(op: &utoipa::openapi::path::Operation) -> Option<String> {
 }
 
 /// Every `/v1` operation can also answer 400 (a query string or body that does not parse), 401
-/// and 403 (token), 503 (request timeout); those with a body 413 and 415. Documented once here
-/// rather than on each handler.
+/// and 403 (token), 503 (request timeout); those with a body 408 (body too slow), 413 and 415.
+/// Documented once here rather than on each handler.
 fn common_responses(api: &mut utoipa::openapi::OpenApi) {
     use utoipa::openapi::{ContentBuilder, Ref, RefOr, ResponseBuilder};
     let problem = |description: &str| {
@@ -197,6 +198,7 @@ fn common_responses(api: &mut utoipa::openapi::OpenApi) {
                 ("503", "The request exceeded the server's timeout"),
             ];
             if body {
+                add.push(("408", "The request body arrived slower than the server's minimum rate"));
                 add.push(("413", "Request body over the server's limit"));
                 add.push(("415", "Content type not accepted"));
             }
@@ -269,12 +271,16 @@ pub fn app(state: AppState) -> Router {
     let router = router
         .with_state(state.clone())
         .fallback(ops::not_found)
-        // Innermost first: body limit and timeout, then every error made a problem document
-        // (before compression, so it reads and replaces plain bodies), then metrics (which see
-        // timed-out requests as the 503s they are), compression, CORS, request ids and tracing.
+        // Innermost first: body limit, the body guard (a declared length over the limit, a body
+        // too slow) and timeout, then every error made a problem document (before compression,
+        // so it reads and replaces plain bodies), the storage record for /readyz, then metrics
+        // (which see timed-out requests as the 503s they are), compression, CORS, request ids and
+        // tracing.
         .layer(DefaultBodyLimit::max(limit))
+        .layer(axum::middleware::from_fn_with_state(state.clone(), guard::body))
         .layer(TimeoutLayer::with_status_code(StatusCode::SERVICE_UNAVAILABLE, timeout))
         .layer(axum::middleware::map_response(error::problem_fallback))
+        .layer(axum::middleware::from_fn_with_state(state.clone(), guard::storage))
         .layer(axum::middleware::from_fn_with_state(state, metrics::track))
         .layer(CompressionLayer::new());
     // CORS outside everything that answers for the API: a preflight is answered here, before

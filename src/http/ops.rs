@@ -34,22 +34,43 @@ pub struct Readiness {
     pub migrations: i64,
 }
 
-/// Readiness: the database answers and is migrated.
+/// Readiness: the database answers, is migrated and takes writes.
+///
+/// Writes are taken when none has failed for storage trouble lately (a full disk, a read-only
+/// file system, an I/O error; a failure counts for 30 s unless a write succeeds after it) and a
+/// one-page probe write is committed.
 #[utoipa::path(get, path = "/readyz", tag = "ops",
     responses(
         (status = 200, description = "Ready to serve", body = Readiness),
-        (status = 503, description = "The database is not usable", body = super::Problem, content_type = "application/problem+json")))]
+        (status = 503, description = "The database is not usable, or writes are failing", body = super::Problem, content_type = "application/problem+json")))]
 pub async fn readyz(State(state): State<AppState>) -> Result<Json<Readiness>, ApiError> {
     let applied: Result<i64, sqlx::Error> =
         sqlx::query_scalar("SELECT COUNT(*) FROM _sqlx_migrations WHERE success = 1").fetch_one(&state.pool).await;
-    match applied {
-        Ok(n) if n as usize == db::MIGRATOR.iter().count() => {
-            Ok(Json(Readiness { status: "ready".into(), migrations: n }))
+    let n = match applied {
+        Ok(n) if n as usize == db::MIGRATOR.iter().count() => n,
+        Ok(n) => {
+            return Err(ApiError::Unavailable(format!("{n} of {} migrations applied", db::MIGRATOR.iter().count())));
         }
-        Ok(n) => Err(ApiError::Unavailable(format!("{n} of {} migrations applied", db::MIGRATOR.iter().count()))),
         Err(e) => {
             tracing::warn!(error = %e, "readiness: database check failed");
-            Err(ApiError::Unavailable("the database does not answer".into()))
+            return Err(ApiError::Unavailable("the database does not answer".into()));
+        }
+    };
+    if let Some((t, ago)) = state.storage.recent() {
+        return Err(ApiError::Unavailable(format!(
+            "writes are failing: {} ({:.0} s ago)",
+            t.cause(),
+            ago.as_secs_f64()
+        )));
+    }
+    match db::health::probe(&state.pool).await {
+        db::health::Probe::Written | db::health::Probe::Busy => {
+            Ok(Json(Readiness { status: "ready".into(), migrations: n }))
+        }
+        db::health::Probe::Trouble(t) => Err(ApiError::Unavailable(format!("writes are failing: {}", t.cause()))),
+        db::health::Probe::Failed(e) => {
+            tracing::warn!(error = %e, "readiness: the probe write failed");
+            Err(ApiError::Unavailable("the database cannot be written".into()))
         }
     }
 }

@@ -36,6 +36,17 @@ pub enum JobError {
     /// plan. `kind` is the problem slug, `title` its short description.
     #[error("{detail}")]
     Numerical { kind: &'static str, title: &'static str, detail: String },
+    /// The storage under the database refused (full, read-only, I/O error): the job's inputs
+    /// could not be read or its result could not be written.
+    #[error("{}", .0.describe())]
+    Storage(db::StorageTrouble),
+    /// The database stayed locked by other writers longer than its busy timeout: try again.
+    #[error("the database is busy (locked by other writes); try again")]
+    Busy,
+    /// The job ran to its end but its result could not be written (not for storage trouble,
+    /// which is waited out): what happened, in words for the user; the cause is logged.
+    #[error("{0}")]
+    NotStored(String),
     /// Logged, never echoed.
     #[error("internal error: {0}")]
     Internal(String),
@@ -62,6 +73,7 @@ impl From<AppError> for JobError {
     fn from(e: AppError) -> Self {
         match e {
             AppError::Invalid { detail, field } => JobError::Invalid { detail, field },
+            AppError::Storage(t) => JobError::Storage(t),
             AppError::Internal(m) => JobError::Internal(m),
         }
     }
@@ -69,12 +81,16 @@ impl From<AppError> for JobError {
 
 impl From<sqlx::Error> for JobError {
     fn from(e: sqlx::Error) -> Self {
+        if db::is_busy(&e) {
+            return JobError::Busy;
+        }
         AppError::from(e).into()
     }
 }
 
 /// What the workers need: the store, the queue's wake-up, the caches a finished job invalidates,
-/// the metrics they time the solver into, and how a failure is written to `jobs.error_json`.
+/// the metrics they time the solver into, how a failure is written to `jobs.error_json`, and
+/// where storage trouble is recorded (for `/readyz`, and a waiting job's `phase`).
 #[derive(Clone)]
 pub struct JobContext {
     pub pool: SqlitePool,
@@ -84,6 +100,7 @@ pub struct JobContext {
     /// The stored form of a failure: the service's problem document (the HTTP layer supplies it,
     /// so `GET /v1/jobs/{id}` shows a failed job's error as it shows any error).
     pub failure_json: fn(&JobError) -> String,
+    pub storage: Arc<db::StorageHealth>,
 }
 
 /// A claimed job's lease; renewed every [`HEARTBEAT`] while it runs.
@@ -93,51 +110,75 @@ pub const HEARTBEAT: Duration = Duration::from_secs(10);
 pub const PROGRESS_EVERY: Duration = Duration::from_secs(1);
 /// Idle workers look for work (and for expired leases) at least this often.
 const POLL: Duration = Duration::from_secs(2);
+/// A job end the storage refused is written again after this wait, doubled after each refusal up
+/// to [`STORE_RETRY_MAX`].
+pub const STORE_RETRY_FIRST: Duration = Duration::from_millis(500);
+pub const STORE_RETRY_MAX: Duration = Duration::from_secs(10);
+
+/// The workers' stop signal: `None` while they run; the deadline by which running jobs must end
+/// once a shutdown began (after it, they are put back in the queue).
+type Stop = watch::Receiver<Option<tokio::time::Instant>>;
 
 /// The running workers.
 pub struct Workers {
     handles: Vec<JoinHandle<()>>,
-    stop: watch::Sender<bool>,
+    stop: watch::Sender<Option<tokio::time::Instant>>,
+    grace: Duration,
 }
 
 impl Workers {
-    /// Requeue the jobs a previous process left running, then start `n` workers.
+    /// Requeue the jobs a previous process left running, then start `n` workers. `grace` is how
+    /// long [`Workers::shutdown`] lets running jobs go on.
     pub async fn start(ctx: impl Into<JobContext>, n: usize, grace: Duration) -> Result<Workers, sqlx::Error> {
         let state: JobContext = ctx.into();
-        let requeued = db::jobs::requeue_stale(&state.pool, true).await?;
+        let requeued = db::jobs::requeue_stale(&state.pool, true, None).await?;
         if requeued > 0 {
             tracing::warn!(requeued, "requeued jobs left running by a previous process");
         }
-        let (stop, rx) = watch::channel(false);
+        let (stop, rx) = watch::channel(None);
         let instance = db::new_id();
         let handles = (0..n.max(1))
             .map(|i| {
                 let owner = format!("{instance}/{i}");
-                tokio::spawn(worker(state.clone(), owner, rx.clone(), grace))
+                tokio::spawn(worker(state.clone(), instance.clone(), owner, rx.clone()))
             })
             .collect();
-        Ok(Workers { handles, stop })
+        Ok(Workers { handles, stop, grace })
     }
 
-    /// Stop claiming; wait for the workers (each waits at most the grace period for its solver,
-    /// then requeues its job).
+    /// Stop claiming now; a running job may go on until `deadline`, then it is put back in the
+    /// queue (its solver's thread is abandoned).
+    pub fn stop(&self, deadline: tokio::time::Instant) {
+        self.stop.send_if_modified(|d| {
+            let first = d.is_none();
+            if first {
+                *d = Some(deadline);
+            }
+            first
+        });
+    }
+
+    /// Stop (if [`Workers::stop`] was not called: with the grace period from now) and wait for
+    /// the workers: each ends its job by the deadline or requeues it.
     pub async fn shutdown(self) {
-        let _ = self.stop.send(true);
+        self.stop(tokio::time::Instant::now() + self.grace);
         for h in self.handles {
             let _ = h.await;
         }
     }
 }
 
-async fn worker(state: JobContext, owner: String, mut stop: watch::Receiver<bool>, grace: Duration) {
+async fn worker(state: JobContext, instance: String, owner: String, mut stop: Stop) {
+    let mine = format!("{instance}/");
     let mut last_sweep = Instant::now();
     loop {
-        if *stop.borrow() {
+        if stop.borrow().is_some() {
             return;
         }
         if last_sweep.elapsed() > LEASE {
-            // Another process sharing the database may have died holding a lease.
-            if let Err(e) = db::jobs::requeue_stale(&state.pool, false).await {
+            // Another process sharing the database may have died holding a lease (this process's
+            // own workers are alive: their leases are theirs to end).
+            if let Err(e) = db::jobs::requeue_stale(&state.pool, false, Some(&mine)).await {
                 tracing::warn!(error = %e, "requeueing expired leases");
             }
             last_sweep = Instant::now();
@@ -145,7 +186,12 @@ async fn worker(state: JobContext, owner: String, mut stop: watch::Receiver<bool
         match db::jobs::claim(&state.pool, &owner, LEASE).await {
             Ok(Some(job)) => {
                 let span = tracing::info_span!("job", id = %job.id, kind = %job.kind, attempt = job.attempts);
-                run_one(&state, &owner, job, &mut stop, grace).instrument(span).await
+                if run_one(&state, &owner, job, &stop).instrument(span).await {
+                    tokio::select! {
+                        _ = tokio::time::sleep(POLL) => {}
+                        _ = stop.changed() => {}
+                    }
+                }
             }
             Ok(None) => {
                 tokio::select! {
@@ -156,13 +202,17 @@ async fn worker(state: JobContext, owner: String, mut stop: watch::Receiver<bool
             }
             Err(e) => {
                 tracing::warn!(error = %e, "claiming a job");
-                tokio::time::sleep(POLL).await;
+                tokio::select! {
+                    _ = tokio::time::sleep(POLL) => {}
+                    _ = stop.changed() => {}
+                }
             }
         }
     }
 }
 
 /// How a job ended, for the final write.
+#[derive(Clone)]
 enum End {
     Done(run::Output),
     Failed(JobError),
@@ -170,20 +220,40 @@ enum End {
     Released,
 }
 
-async fn run_one(
-    state: &JobContext,
-    owner: &str,
-    job: db::jobs::JobRow,
-    stop: &mut watch::Receiver<bool>,
-    grace: Duration,
-) {
+/// The shutdown deadline, once one is set: resolves then (never before a shutdown).
+async fn deadline(stop: &mut Stop) {
+    loop {
+        let d = *stop.borrow_and_update();
+        match d {
+            Some(d) => return tokio::time::sleep_until(d).await,
+            None => {
+                if stop.changed().await.is_err() {
+                    return std::future::pending().await;
+                }
+            }
+        }
+    }
+}
+
+/// Run a claimed job to its end (written). `true` when the worker should wait before claiming
+/// again (the storage would not give the job's inputs).
+async fn run_one(state: &JobContext, owner: &str, job: db::jobs::JobRow, stop: &Stop) -> bool {
     tracing::info!("job started");
+    let mut backoff = false;
     let started = Instant::now();
     // Progress in thousandths and the phase, shared with the blocking solver.
     let progress = Arc::new(AtomicU64::new(0));
     let phase: Arc<std::sync::Mutex<&'static str>> = Arc::new(std::sync::Mutex::new("loading"));
     let _ = db::jobs::progress(&state.pool, &job.id, owner, 0.0, "loading").await;
     let end = match run::load(&state.pool, job.kind, &job.robot_id, &job.request_json).await {
+        // The storage failed to give the inputs: not the job's fault; it goes back in the queue,
+        // and this worker waits a poll interval before claiming again.
+        Err(JobError::Storage(t)) => {
+            state.storage.failed(t);
+            tracing::warn!(trouble = t.cause(), "the job's inputs could not be read; it goes back in the queue");
+            backoff = true;
+            End::Released
+        }
         Err(e) => End::Failed(e),
         Ok(inputs) => {
             progress.store(50, Ordering::Relaxed);
@@ -201,10 +271,10 @@ async fn run_one(
             let mut tick = tokio::time::interval(PROGRESS_EVERY);
             tick.tick().await;
             let mut written = (0u64, "loading");
-            let mut stopping: Option<tokio::time::Instant> = None;
+            let mut stop_at = stop.clone();
+            let shutdown = deadline(&mut stop_at);
+            tokio::pin!(shutdown);
             loop {
-                let deadline =
-                    stopping.map_or_else(|| tokio::time::Instant::now() + Duration::from_secs(3600), |t| t + grace);
                 tokio::select! {
                     r = &mut task => {
                         break match r {
@@ -228,17 +298,12 @@ async fn run_one(
                             Ok(true) => {}
                             Ok(false) => {
                                 tracing::warn!("lease lost (requeued elsewhere); abandoning the result");
-                                return;
+                                return false;
                             }
                             Err(e) => tracing::warn!(error = %e, "heartbeat"),
                         }
                     }
-                    _ = stop.changed(), if stopping.is_none() => {
-                        stopping = Some(tokio::time::Instant::now());
-                    }
-                    _ = tokio::time::sleep_until(deadline), if stopping.is_some() => {
-                        break End::Released;
-                    }
+                    _ = &mut shutdown => break End::Released,
                 }
             }
         }
@@ -250,8 +315,101 @@ async fn run_one(
         End::Released => "released",
     };
     state.metrics.solver.with_label_values(&[job.kind.as_str(), outcome]).observe(elapsed);
-    if let Err(e) = finish(state, owner, &job, end).await {
-        tracing::error!(error = %e, "writing the job's end; it stays leased and will be requeued");
+    write_end(state, owner, &job, end, stop).await;
+    backoff
+}
+
+/// Write a job's end, whatever the storage does meanwhile:
+/// - refused for storage trouble (a full disk, a read-only file system, an I/O error): the end
+///   stays in memory and is written again after a wait that doubles from [`STORE_RETRY_FIRST`]
+///   to [`STORE_RETRY_MAX`], until it is taken (nothing is computed again) or a shutdown's
+///   deadline passes (then the job is put back in the queue, or, if even that cannot be written,
+///   requeued at the next start). Meanwhile the job's `phase` says what it waits for (from
+///   memory: its row is what cannot be written), its lease is renewed when it can be, and
+///   `/readyz` answers 503;
+/// - refused for any other reason: the job ends `failed` with a problem that says its result
+///   could not be stored (the cause is logged).
+async fn write_end(state: &JobContext, owner: &str, job: &db::jobs::JobRow, mut end: End, stop: &Stop) {
+    let mut wait = STORE_RETRY_FIRST;
+    let mut refusals = 0u32;
+    let mut past_deadline = false;
+    let mut stop_at = stop.clone();
+    let shutdown = deadline(&mut stop_at);
+    tokio::pin!(shutdown);
+    loop {
+        let e = match finish(state, owner, job, end.clone()).await {
+            Ok(()) => {
+                state.storage.succeeded();
+                state.storage.job_done(&job.id);
+                if refusals > 0 {
+                    tracing::info!(refusals, "the job's end was written once the storage took it");
+                }
+                return;
+            }
+            Err(e) => e,
+        };
+        match e {
+            JobError::Storage(_) | JobError::Busy => {
+                let cause = match e {
+                    JobError::Storage(t) => {
+                        state.storage.failed(t);
+                        t.cause()
+                    }
+                    _ => "the database stays locked by other writes",
+                };
+                refusals += 1;
+                let what = match end {
+                    End::Released => "putting the job back in the queue",
+                    _ => "storing the result",
+                };
+                state.storage.job_waits(
+                    &job.id,
+                    format!(
+                        "{what}: waiting for the storage ({cause}); refused {refusals}×, next try in {:.1} s",
+                        wait.as_secs_f64()
+                    ),
+                );
+                tracing::warn!(
+                    refusals,
+                    retry_in_s = wait.as_secs_f64(),
+                    trouble = cause,
+                    "{what}: the storage refused; waiting"
+                );
+                if past_deadline {
+                    tracing::error!("shutdown: the job could not be put back in the queue; the next start requeues it");
+                    state.storage.job_done(&job.id);
+                    return;
+                }
+                tokio::select! {
+                    _ = tokio::time::sleep(wait) => {}
+                    _ = &mut shutdown, if !past_deadline => {
+                        // Out of time: put the job back in the queue (one try), the result dropped.
+                        past_deadline = true;
+                        end = End::Released;
+                        continue;
+                    }
+                }
+                wait = (wait * 2).min(STORE_RETRY_MAX);
+                if let Ok(false) = db::jobs::heartbeat(&state.pool, &job.id, owner, LEASE, 0.0).await {
+                    tracing::warn!("lease lost while waiting for the storage; abandoning the result");
+                    state.storage.job_done(&job.id);
+                    return;
+                }
+            }
+            other => {
+                if matches!(end, End::Done(_)) {
+                    tracing::error!(error = %other, "the job's result could not be stored; it ends failed");
+                    end = End::Failed(JobError::NotStored(format!(
+                        "job {} computed its result, but the database refused to store it (the server's log has the cause); submit it again",
+                        job.id
+                    )));
+                } else {
+                    tracing::error!(error = %other, "writing the job's end failed; it stays leased and is requeued at the next start");
+                    state.storage.job_done(&job.id);
+                    return;
+                }
+            }
+        }
     }
 }
 
@@ -345,8 +503,15 @@ pub mod phases {
         })
     }
 
-    /// Write the job's end as a worker does: stored result, failure or (if asked for) cancelled.
+    /// Write the job's end once: stored result, failure or (if asked for) cancelled.
     pub async fn end(ctx: &JobContext, owner: &str, job: &db::jobs::JobRow, solved: Solved) -> Result<(), JobError> {
         finish(ctx, owner, job, solved.0).await
+    }
+
+    /// Write the job's end as a worker does: storage trouble waited out (no shutdown comes here),
+    /// a result that cannot be stored otherwise ending the job `failed`.
+    pub async fn write(ctx: &JobContext, owner: &str, job: &db::jobs::JobRow, solved: Solved) {
+        let (_never, stop) = watch::channel(None);
+        write_end(ctx, owner, job, solved.0, &stop).await
     }
 }

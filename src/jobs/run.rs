@@ -61,6 +61,7 @@ pub enum Inputs {
 }
 
 /// What a job computed.
+#[derive(Clone)]
 pub enum Output {
     PosePlan {
         plan: PosePlan,
