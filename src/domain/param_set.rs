@@ -79,7 +79,7 @@ impl ParameterSetDoc {
             .map(|(i, p)| {
                 let k = p.unit().to_si();
                 // In file units to 12 significant digits: the conversion's binary noise
-                // (-253.83500000000004) goes, the model keeps its precision (1e-12 relative).
+                // (-253.83500000000004) goes, the model keeps its precision (5e-12 relative at worst).
                 let out = |v: f64| super::rounding::significant(v / k, super::rounding::SIGNIFICANT);
                 ParamEntry {
                     name: p.to_string(),
