@@ -71,13 +71,13 @@ echo "== the CLI's study (virtual cell) and crossval (UR10) reports, opened as f
 
 # name | URL | plots expected (<svg> elements)
 checks=(
-  "validation|$API/v1/validations/$VALIDATION/report|7"
+  "validation|$API/v1/validations/$VALIDATION/report|10"
   "identification|$API/v1/parameter-sets/$SET/report|$(($(call "$API/v1/parameter-sets/$SET/export" \
-    | jq '[.parameters[] | select(.std != null and .nominal != null) | .unit] | unique | length') + 7))"
+    | jq '[.parameters[] | select(.std != null and .nominal != null) | .unit] | unique | length') + 10))"
   "diagnosis|$API/v1/diagnoses/$DIAGNOSIS/report|2"
-  "ur10-validation|$API/v1/validations/$UR10_VALIDATION/report|6"
+  "ur10-validation|$API/v1/validations/$UR10_VALIDATION/report|8"
   "ur10-identification|$API/v1/parameter-sets/$UR10_SET/report|$(($(call "$API/v1/parameter-sets/$UR10_SET/export" \
-    | jq '[.parameters[] | select(.std != null and .nominal != null) | .unit] | unique | length') + 6))"
+    | jq '[.parameters[] | select(.std != null and .nominal != null) | .unit] | unique | length') + 8))"
   "ur10-diagnosis|$API/v1/diagnoses/$UR10_DIAGNOSIS/report|2"
   "history|$API/v1/robots/$ROBOT/history/report|1"
   "study|file://$tmp/study.html|3"

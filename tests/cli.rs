@@ -309,8 +309,12 @@ fn simulate_identify_validate_study() {
         .unwrap();
     assert_eq!(out.status.code(), Some(1), "{}", String::from_utf8_lossy(&out.stderr));
     let c: Value = serde_json::from_slice(&out.stdout).unwrap();
-    let u = c["results"][0]["uncertainty_mm"].as_f64().unwrap();
+    // Without a held-out validation only the covariance part is known: it is given, named for
+    // what it includes, and no uncertainty_mm claims more (issue 25).
+    let u = c["results"][0]["uncertainty"]["covariance_mm"].as_f64().unwrap();
     assert!(u > 1e-4 && u < 0.05, "{u}");
+    assert!(c["results"][0].get("uncertainty_mm").is_none(), "{c}");
+    assert!(c["results"][0]["uncertainty"]["unknown"][0].as_str().unwrap().starts_with("unexplained"), "{c}");
     let e = c["results"][1]["error"].as_str().unwrap();
     assert!(e.contains("outside the calibrated envelope") && e.contains("joint 1"), "{e}");
     assert_eq!(c["validity"]["envelope"]["n_measurements"], 75);

@@ -557,7 +557,7 @@ async fn identification_validation_and_compensation() {
     // A set without a held-out validation is refused unless asked for, saying what to do.
     let r = app.post(&cpath, &json!({"targets": targets, "parameter_set_id": set_id})).await;
     assert_problem(&r, 409, None);
-    assert!(r.body["detail"].as_str().unwrap().contains("no validation"), "{}", r.text);
+    assert!(r.body["detail"].as_str().unwrap().contains("no held-out validation"), "{}", r.text);
     assert!(r.body["hint"].as_str().unwrap().contains("allow_unvalidated"), "{}", r.text);
     let r = app.post(&cpath, &json!({"targets": targets, "parameter_set_id": set_id, "allow_unvalidated": true})).await;
     assert_eq!(r.status, StatusCode::OK, "{}", r.text);

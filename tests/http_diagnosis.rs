@@ -137,17 +137,36 @@ async fn a_withheld_cyclic_error_is_named_stored_and_accepted_once() {
     assert_eq!(again.body["version"], 2);
     assert_eq!(app.get(&format!("/v1/robots/{rid}/parameter-sets")).await.body.as_array().unwrap().len(), 2);
 
+    // The accepted set was fitted on the validation sessions too: the answer says it needs a
+    // new held-out validation, and what to measure (issue 25: held out means held out).
+    let needed = a.body["validation_needed"].as_str().unwrap();
+    assert!(needed.contains("Measure a new validation session") && needed.contains(validation[0]), "{needed}");
+    assert_eq!(a.body["fit_sessions"], json!(sessions));
     // The accepted set is a parameter set like any other: the validation job reads its extended
-    // model, and so does compensation once it is activated.
+    // model. On the sessions it was fitted on, that is in-sample, and compensation does not count it.
     let r = app.post(&format!("/v1/parameter-sets/{new_id}/validations"), &json!({"sessions": validation})).await;
     let v = app.wait(&r.body).await;
     assert_eq!(v["state"], "succeeded", "{v}");
     assert!(v["result"]["summary"]["mean_mm"].as_f64().unwrap() < 0.1, "{v}");
+    assert_eq!(v["result"]["summary"]["held_out"], false, "{v}");
     let r = app.put(&format!("/v1/robots/{rid}/active-parameter-set"), &json!({"parameter_set_id": new_id})).await;
     assert_eq!(r.status, StatusCode::OK, "{}", r.text);
-    let r = app
-        .post(&format!("/v1/robots/{rid}/compensate"), &json!({"targets": [{"joints_deg": [10, 20, -10, 0, 45, 0]}]}))
-        .await;
+    let target = json!({"targets": [{"joints_deg": [10, 20, -10, 0, 45, 0]}]});
+    let r = app.post(&format!("/v1/robots/{rid}/compensate"), &target).await;
+    assert_problem(&r, 409, None);
+    assert!(r.body["detail"].as_str().unwrap().contains("no held-out validation"), "{}", r.text);
+    let h = app.get(&format!("/v1/robots/{rid}/history")).await.body;
+    assert!(h[1]["validation"].is_null() && h[1]["in_sample"]["held_out"] == false, "{h}");
+    // A new validation session (the same robot measured at other poses) holds it out.
+    let other = cell("cyclic:j=3:h=2:amp_deg=0.01", 4);
+    let mut fresh = other.sessions.into_iter().find(|s| s.name == "tracker-n1").unwrap();
+    fresh.name = "tracker-new".into();
+    let aid = app.get(&format!("/v1/robots/{rid}/sessions")).await.body[0]["artefact_id"].as_str().unwrap().to_string();
+    upload(&app, &rid, &aid, &CellFile { sessions: vec![fresh], ..c.clone() }).await;
+    let r = app.post(&format!("/v1/parameter-sets/{new_id}/validations"), &json!({"sessions": ["tracker-new"]})).await;
+    let v = app.wait(&r.body).await;
+    assert_eq!(v["result"]["summary"]["held_out"], true, "{v}");
+    let r = app.post(&format!("/v1/robots/{rid}/compensate"), &target).await;
     assert_eq!(
         (r.status, r.body["parameter_set_id"].as_str(), r.body["failed"].as_u64()),
         (StatusCode::OK, Some(&*new_id), Some(0))

@@ -54,7 +54,10 @@ async fn set_created(app: &TestApp, id: &str, at: &str) {
 
 async fn validation(app: &TestApp, set: &str, at: &str, mean: f64, p95: f64, max: f64) -> String {
     let id = robocal::db::new_id();
-    let report = json!({"n": 120, "mean_mm": mean, "p95_mm": p95, "max_mm": max, "nominal": {"mean_mm": 1.234}});
+    // A stored report names its sessions' purposes: a validation session the set (imported, its
+    // fit unrecorded) was not fitted on makes it held out.
+    let report = json!({"n": 120, "mean_mm": mean, "p95_mm": p95, "max_mm": max, "nominal": {"mean_mm": 1.234},
+                        "purposes": ["validation"]});
     records::insert_validation(
         &app.state.pool,
         &records::ValidationRow {

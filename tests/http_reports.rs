@@ -108,11 +108,15 @@ async fn identification_validation_and_diagnosis_reports() {
         "--report".as_ref(),
         id_report.as_os_str(),
     ]);
-    assert_eq!(
-        std::fs::read_to_string(&id_report).unwrap(),
-        before.text,
-        "the CLI's identification report is the service's"
-    );
+    // The same page but for the one line saying where the set comes from (the service names
+    // its stored set, version and date; the command line its files).
+    let source =
+        |t: &str| t.lines().filter(|l| !l.starts_with("<p class=\"meta source\">")).collect::<Vec<_>>().join("\n");
+    let cli_page = std::fs::read_to_string(&id_report).unwrap();
+    assert_eq!(source(&cli_page), source(&before.text), "the CLI's identification report is the service's");
+    assert!(before.text.contains(&format!("Parameter set {set_id}, version 1; made ")), "date and set id");
+    assert!(before.text.contains("from sessions trical-1 of robot cell."), "the input");
+    assert!(cli_page.contains("from sessions trical-1 of cell file "), "the CLI names its input file");
 
     // The validation's report: histogram, CDF, Q–Q, per-axis grid, two regressions, projections.
     let r = app
@@ -125,7 +129,7 @@ async fn identification_validation_and_diagnosis_reports() {
     assert_eq!(j["state"], "succeeded", "{j}");
     let vid = j["result"]["validation_id"].as_str().unwrap().to_string();
     let v = get_html(&app, &format!("/v1/validations/{vid}/report")).await;
-    assert_eq!(svgs(&v.text), 7);
+    assert_eq!(svgs(&v.text), 10);
     let stored = app.get(&format!("/v1/validations/{vid}")).await.body;
     let mean = stored["report"]["mean_mm"].as_f64().unwrap();
     let nominal = stored["report"]["nominal"]["mean_mm"].as_f64().unwrap();
@@ -151,7 +155,7 @@ async fn identification_validation_and_diagnosis_reports() {
 
     // The identification's report now ends with its validation.
     let after = get_html(&app, &path).await;
-    assert_eq!(svgs(&after.text), groups + 7);
+    assert_eq!(svgs(&after.text), groups + 10);
     assert!(after.text.contains("Latest validation"));
 
     // The diagnosis's report: the decomposition bar and the residual profiles.

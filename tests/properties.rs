@@ -38,7 +38,9 @@ proptest! {
         }
     }
 
-    /// Any parameter perturbation survives the JSON round trip to 1e-15 relative.
+    /// Any parameter perturbation survives the JSON round trip to 5e-12 relative (half a unit of
+    /// the 12th digit): the file writes each value in its unit to 12 significant digits
+    /// (`domain::rounding`, README), and nothing finer.
     #[test]
     fn parameter_sets_round_trip(d in prop::collection::vec(-1e-3..1e-3f64, 43)) {
         let mut set = ParameterSet::nominal(irb120(), Tool::flange(), [0.1, -0.2, 0.3, 0.4, -0.5, 0.6]);
@@ -47,9 +49,10 @@ proptest! {
         }
         let back = ParameterSetDoc::from_json(&ParameterSetDoc::new(set.clone()).to_json_pretty()).unwrap().set;
         for (a, b) in back.values.iter().zip(&set.values) {
-            prop_assert!((a - b).abs() <= 1e-15 * (1.0 + b.abs()));
+            prop_assert!((a - b).abs() <= 5e-12 * b.abs() + 1e-300, "{} vs {}", a, b);
         }
-        prop_assert_eq!(back.value(Param::Base(3)).map(|v| (v * 1e12).round()), set.value(Param::Base(3)).map(|v| (v * 1e12).round()));
+        let (a, b) = (back.value(Param::Base(3)).unwrap(), set.value(Param::Base(3)).unwrap());
+        prop_assert!((a - b).abs() < 1e-11, "base rotation {} vs {}", a, b);
     }
 
     /// TriCal readings → ball centre inverts the tip simulation anywhere in a ±1 mm cube.

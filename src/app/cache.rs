@@ -40,6 +40,9 @@ pub struct CompiledSet {
     pub envelope: Option<Envelope>,
     /// Its parameter covariance, when it records one.
     pub covariance: Option<PredictionCovariance>,
+    /// The sessions it was fitted on (its document's and the store's record joined): a
+    /// validation on any of them is not held out.
+    pub fit_sessions: Vec<String>,
 }
 
 /// How long a verified token is trusted before the store is asked again.
@@ -126,7 +129,10 @@ impl Caches {
         let envelope = Envelope::of_doc(&doc).map_err(stored)?;
         let covariance = PredictionCovariance::of_doc(&doc).map_err(stored)?;
         let compensator = Compensator::new(&doc.set);
-        let compiled = Arc::new(CompiledSet { row, set: doc.set, compensator, envelope, covariance });
+        let listed: Vec<String> = serde_json::from_str(&row.sessions_json)
+            .map_err(|e| AppError::Internal(format!("stored set {}: sessions: {e}", row.id)))?;
+        let fit_sessions = crate::domain::validation::fit_data(&doc, &listed).sessions;
+        let compiled = Arc::new(CompiledSet { row, set: doc.set, compensator, envelope, covariance, fit_sessions });
         self.sets.insert(id.to_string(), compiled.clone());
         Ok(Some(compiled))
     }

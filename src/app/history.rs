@@ -26,13 +26,16 @@ pub struct HistoryFilter {
     pub limit: Option<i64>,
 }
 
-/// The latest validation of a set (figures in mm, the calibrated model's).
+/// A validation of a set (figures in mm, the calibrated model's).
 #[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
 pub struct HistoryValidation {
     pub validation_id: String,
     pub created_at: String,
     /// Sessions validated on.
     pub sessions: Vec<String>,
+    /// Held out: none of these sessions was used to fit the set (and one is a validation
+    /// session). `false`: in-sample, the figures are fit residuals.
+    pub held_out: bool,
     /// Measurements in the figures.
     pub n: Option<u64>,
     pub mean_mm: Option<f64>,
@@ -72,8 +75,16 @@ pub struct HistoryEntry {
     /// recorded).
     pub first_activated_at: Option<String>,
     pub archived: bool,
-    /// Absent until the set is validated.
+    /// The latest held-out validation (on sessions the set was not fitted on): absent until
+    /// there is one.
     pub validation: Option<HistoryValidation>,
+    /// The latest in-sample validation (on sessions the set was fitted on, e.g. after accepting a
+    /// diagnosis that pooled them), when it is newer than the held-out one or there is none:
+    /// shown apart, never as held out.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub in_sample: Option<HistoryValidation>,
+    /// The sessions the set was fitted on (its file's record and the store's joined).
+    pub fit_sessions: Vec<String>,
     /// Absent until the set is diagnosed.
     pub diagnosis: Option<HistoryDiagnosis>,
 }
@@ -87,6 +98,29 @@ pub struct HistoryPage {
 
 fn json(text: &str, what: &str) -> Result<Value, AppError> {
     serde_json::from_str(text).map_err(|e| AppError::Internal(format!("{what}: stored JSON: {e}")))
+}
+
+/// The sessions a stored set was fitted on: its document's `quality.sessions` (read without the
+/// rest of the document) joined with the store's list.
+fn fit_sessions(doc_json: &str, listed: &[String]) -> Result<Vec<String>, serde_json::Error> {
+    #[derive(serde::Deserialize)]
+    struct Doc {
+        #[serde(default)]
+        quality: Option<Quality>,
+    }
+    #[derive(serde::Deserialize)]
+    struct Quality {
+        #[serde(default)]
+        sessions: Vec<String>,
+    }
+    let d: Doc = serde_json::from_str(doc_json)?;
+    let mut out = d.quality.map(|q| q.sessions).unwrap_or_default();
+    for s in listed {
+        if !out.contains(s) {
+            out.push(s.clone());
+        }
+    }
+    Ok(out)
 }
 
 /// The history of robot `robot_id` (which must exist: the caller has found it) in `filter`.
@@ -103,23 +137,46 @@ pub async fn history(pool: &SqlitePool, robot_id: &str, filter: &HistoryFilter) 
     let mut entries = Vec::with_capacity(rows.len());
     for row in rows {
         let what = format!("parameter set {}", row.id);
-        let validation = match records::validations_of_set(pool, &row.id).await?.into_iter().next() {
-            None => None,
-            Some(v) => {
-                let r = json(&v.report_json, &what)?;
-                Some(HistoryValidation {
-                    validation_id: v.id,
-                    created_at: v.created_at,
-                    sessions: serde_json::from_str(&v.sessions_json)
-                        .map_err(|e| AppError::Internal(format!("{what}: validation sessions: {e}")))?,
-                    n: r["n"].as_u64(),
-                    mean_mm: r["mean_mm"].as_f64(),
-                    p95_mm: r["p95_mm"].as_f64(),
-                    max_mm: r["max_mm"].as_f64(),
-                    nominal_mean_mm: r["nominal"]["mean_mm"].as_f64(),
+        let listed: Vec<String> = serde_json::from_str(&row.sessions_json)
+            .map_err(|e| AppError::Internal(format!("{what}: sessions: {e}")))?;
+        let fit_sessions =
+            fit_sessions(&row.doc_json, &listed).map_err(|e| AppError::Internal(format!("{what}: {e}")))?;
+        // Newest first: the latest held-out one, and an in-sample one newer than it.
+        let (mut validation, mut in_sample) = (None, None);
+        for v in records::validations_of_set(pool, &row.id).await? {
+            let r = json(&v.report_json, &what)?;
+            let sessions: Vec<String> = serde_json::from_str(&v.sessions_json)
+                .map_err(|e| AppError::Internal(format!("{what}: validation sessions: {e}")))?;
+            let purposes: Vec<crate::cell::Purpose> = r["purposes"]
+                .as_array()
+                .map(|a| {
+                    a.iter()
+                        .filter_map(|p| match p.as_str() {
+                            Some("validation") => Some(crate::cell::Purpose::Validation),
+                            Some("identification") => Some(crate::cell::Purpose::Identification),
+                            _ => None,
+                        })
+                        .collect()
                 })
+                .unwrap_or_default();
+            let held_out = crate::validate::report::is_held_out(&sessions, &purposes, &fit_sessions);
+            let entry = HistoryValidation {
+                validation_id: v.id,
+                created_at: v.created_at,
+                sessions,
+                held_out,
+                n: r["n"].as_u64(),
+                mean_mm: r["mean_mm"].as_f64(),
+                p95_mm: r["p95_mm"].as_f64(),
+                max_mm: r["max_mm"].as_f64(),
+                nominal_mean_mm: r["nominal"]["mean_mm"].as_f64(),
+            };
+            if held_out {
+                validation = Some(entry);
+                break;
             }
-        };
+            in_sample.get_or_insert(entry);
+        }
         let diagnosis = match records::diagnoses_of_set(pool, &row.id, 0, 1).await?.into_iter().next() {
             None => None,
             Some(d) => {
@@ -145,6 +202,8 @@ pub async fn history(pool: &SqlitePool, robot_id: &str, filter: &HistoryFilter) 
             first_activated_at: activations.iter().find_map(|a| a.activated_at.clone()),
             archived: row.archived_at.is_some(),
             validation,
+            in_sample,
+            fit_sessions,
             diagnosis,
             parameter_set_id: row.id,
         });

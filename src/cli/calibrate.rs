@@ -142,7 +142,19 @@ pub(super) fn identify(a: IdentifyArgs) -> Result<String, CliError> {
     write(&a.out, &doc.to_json_pretty())?;
     let mut reported = String::new();
     if let Some(path) = &a.report {
-        write_report(path, &crate::report::parameter_set_report(&doc.to_file(), None))?;
+        let sessions = doc
+            .quality
+            .as_ref()
+            .and_then(|q| q.get("sessions"))
+            .and_then(|v| v.as_array())
+            .map(|a| a.iter().filter_map(|s| s.as_str()).collect::<Vec<_>>().join(", "))
+            .unwrap_or_default();
+        let source = crate::report::ReportSource {
+            set: format!("Parameter-set file {}", a.out.display()),
+            made: Some(humantime::format_rfc3339_millis(std::time::SystemTime::now()).to_string()),
+            input: Some(format!("sessions {sessions} of cell file {}", a.cell.display())),
+        };
+        write_report(path, &crate::report::parameter_set_report(&doc.to_file(), None, &source))?;
         reported = format!("\nwrote {}", path.display());
     }
     Ok(format!(
@@ -180,7 +192,7 @@ fn payload_note(id: &crate::identify::Identification) -> String {
 }
 
 pub(super) fn validate(a: ValidateArgs) -> Result<String, CliError> {
-    use crate::validate::report::{Reference, validate, validation_sessions};
+    use crate::validate::report::{Reference, validate_fitted, validation_sessions};
     let doc = ParameterSetDoc::from_json(&read(&a.params)?).map_err(|e| CliError::file(&a.params, e))?;
     let cell = load_cell(&a.cell)?;
     let sessions = if a.session.is_empty() { validation_sessions(&cell) } else { a.session.clone() };
@@ -197,13 +209,22 @@ pub(super) fn validate(a: ValidateArgs) -> Result<String, CliError> {
         Some(run) => Reference::Truth(run),
         None => Reference::Measured,
     };
-    let report = validate(&doc.set, &cell, &sessions, reference).map_err(|e| validate_error(&a, e))?;
-    let json =
-        serde_json::to_string_pretty(&crate::domain::validation::report_to_json(&report, a.residuals)).expect("json");
+    // What the set was fitted on (its file records it): a session among them is in-sample.
+    let fit = crate::domain::validation::fit_data(&doc, &[]);
+    let report =
+        validate_fitted(&doc.set, &cell, &sessions, reference, Some(&fit)).map_err(|e| validate_error(&a, e))?;
+    let uncertainty = crate::domain::validity::HeldOutUncertainty::of_report(&doc, &cell, &report)
+        .map_err(|e| CliError::file(&a.params, e))?;
+    let json = serde_json::to_string_pretty(&crate::domain::validation::report_to_json_with(
+        &report,
+        uncertainty.clone(),
+        a.residuals,
+    ))
+    .expect("json");
     if let Some(path) = &a.report {
         // The report draws every measurement: its document carries the residuals, as the
         // service stores them.
-        let full = crate::domain::validation::report_to_json(&report, true);
+        let full = crate::domain::validation::report_to_json_with(&report, uncertainty, true);
         let doc = crate::report::ValidationDoc::from_value(&full).map_err(CliError::msg)?;
         write_report(path, &crate::report::validation_report(&doc))?;
         // On stderr when the JSON goes to stdout, so stdout stays the report alone.

@@ -34,6 +34,10 @@ pub struct ExportArgs {
     /// rapid: compensate targets outside the set's calibrated envelope instead of leaving them out.
     #[arg(long)]
     pub allow_outside_envelope: bool,
+    /// urdf: a payload-specific URDF, the compliance deflection at this payload (kg, at the set's
+    /// tool centre of mass) folded into the joint zero offsets (the header says what is left).
+    #[arg(long)]
+    pub payload_kg: Option<f64>,
 }
 
 pub(super) fn export(a: ExportArgs) -> Result<String, CliError> {
@@ -50,13 +54,22 @@ pub(super) fn export(a: ExportArgs) -> Result<String, CliError> {
         }
         _ => {}
     }
+    if a.payload_kg.is_some() && format != ExportFormat::Urdf {
+        return Err(CliError::arg("--payload-kg", "only a urdf export folds a payload's deflection"));
+    }
+    let payload = a
+        .payload_kg
+        .map(|kg| crate::domain::limits::mass(kg, "--payload-kg").map_err(|e| CliError::arg(&e.path, e.reason)))
+        .transpose()?
+        .map(|kg| crate::kinematics::Tool { mass: kg, ..doc.set.tool.clone() });
     let text = match format {
         ExportFormat::Json => doc.to_json_pretty(),
         ExportFormat::CsvDh => csv_dh::write(&doc, &source).trim_end().to_string(),
-        ExportFormat::Urdf => urdf::write(&doc, &source).trim_end().to_string(),
+        ExportFormat::Urdf => urdf::write_with(&doc, &source, &urdf::UrdfOptions { payload }).trim_end().to_string(),
         ExportFormat::Rapid => {
             let path = a.targets.as_ref().expect("checked above");
             let file: TargetsFile = from_json(&read(path)?).map_err(|e| CliError::file(path, e))?;
+            crate::domain::pose::check_targets(&file.targets, &doc.set.model).map_err(|e| CliError::file(path, e))?;
             let comp = Compensator::new(&doc.set);
             let frames =
                 TargetFrames::new(&comp, file.frame, file.work_object.as_ref()).map_err(|e| CliError::file(path, e))?;
@@ -66,6 +79,7 @@ pub(super) fn export(a: ExportArgs) -> Result<String, CliError> {
                 envelope: envelope.as_ref(),
                 allow_outside: a.allow_outside_envelope,
                 covariance: covariance.as_ref(),
+                held_out: None,
             };
             let results = compensate_targets(&comp, doc.set.dof(), &frames, &guard, &file.targets);
             let date = humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
@@ -76,6 +90,8 @@ pub(super) fn export(a: ExportArgs) -> Result<String, CliError> {
                     date: &date,
                     frame: &frames.out,
                     tool: "the parameter set's own (identified) tool",
+                    tooldata: Some(&doc.set.tool),
+                    work_object: frames.work_object.as_ref(),
                 },
                 &results,
             );

@@ -10,7 +10,7 @@ use super::{CliError, numbers, read, robot_model, three, write_or_return};
 use crate::domain::pose::{
     FrameKind, TargetFrames, WorkObjectSpec, compensate_targets, frame_from_parts_noted, position_mm,
 };
-use crate::domain::validity::{Envelope, Guard, PredictionCovariance, ValidityOut};
+use crate::domain::validity::{Envelope, EnvelopeFile, Guard, HeldOutUncertainty, PredictionCovariance, ValidityOut};
 use crate::domain::{
     DomainError, ParameterSetDoc, PoseOut, Target, TargetSpec, ToolSpec, from_json, joints_deg, to_deg,
 };
@@ -106,6 +106,37 @@ pub struct CompensateArgs {
     /// joint ranges ± 5°) instead of refusing them; each is noted.
     #[arg(long)]
     pub allow_outside_envelope: bool,
+    /// A held-out validation of this set (`robocal validate … --format json` output): its
+    /// validated region joins the envelope, and its uncertainty model gives each target's
+    /// unexplained and extrapolation parts (without it they are unknown and no uncertainty_mm is
+    /// given). A validation that is not held out is refused.
+    #[arg(long)]
+    pub validation: Option<PathBuf>,
+}
+
+/// A held-out validation report given on the command line: its validated envelope and its
+/// uncertainty model. Refused (exit 2) when the report is not held out.
+pub(super) fn held_out_report(path: &std::path::Path) -> Result<(Option<Envelope>, HeldOutUncertainty), CliError> {
+    let v: Value =
+        serde_json::from_str(&read(path)?).map_err(|e| CliError::file(path, DomainError::new("", e.to_string())))?;
+    let bad = |field: &str, why: String| CliError::file(path, DomainError::new(field, why));
+    if v["held_out"] != json!(true) {
+        let why = v["held_out_statement"].as_str().unwrap_or("the report does not say it is held out");
+        return Err(bad("held_out", format!("not a held-out validation: {why}")));
+    }
+    let envelope = match v.get("validated_envelope") {
+        None | Some(Value::Null) => None,
+        Some(e) => {
+            let f: EnvelopeFile =
+                serde_json::from_value(e.clone()).map_err(|e| bad("validated_envelope", e.to_string()))?;
+            Some(Envelope::from_file(&f).map_err(|e| CliError::file(path, e.within("validated_envelope")))?)
+        }
+    };
+    let u: HeldOutUncertainty =
+        serde_json::from_value(v.get("uncertainty").cloned().unwrap_or(Value::Null)).map_err(|e| {
+            bad("uncertainty", format!("{e} (a validation report from this version of robocal carries it)"))
+        })?;
+    Ok((envelope, u))
 }
 
 #[derive(Args, Debug)]
@@ -325,10 +356,26 @@ pub(super) struct TargetsFile {
 pub(super) fn compensate(a: CompensateArgs) -> Result<String, CliError> {
     let doc = ParameterSetDoc::from_json(&read(&a.params)?).map_err(|e| CliError::file(&a.params, e))?;
     let file: TargetsFile = from_json(&read(&a.targets)?).map_err(|e| CliError::file(&a.targets, e))?;
-    let envelope = Envelope::of_doc(&doc).map_err(|e| CliError::file(&a.params, e))?;
+    let mut envelope = Envelope::of_doc(&doc).map_err(|e| CliError::file(&a.params, e))?;
     let covariance = PredictionCovariance::of_doc(&doc).map_err(|e| CliError::file(&a.params, e))?;
-    let guard =
-        Guard { envelope: envelope.as_ref(), allow_outside: a.allow_outside_envelope, covariance: covariance.as_ref() };
+    let held_out = match &a.validation {
+        None => None,
+        Some(path) => {
+            let (validated, u) = held_out_report(path)?;
+            envelope = match (envelope, validated) {
+                (Some(e), Some(v)) => Some(e.union(&v)),
+                (e, v) => e.or(v),
+            };
+            Some(u)
+        }
+    };
+    let guard = Guard {
+        envelope: envelope.as_ref(),
+        allow_outside: a.allow_outside_envelope,
+        covariance: covariance.as_ref(),
+        held_out: held_out.as_ref(),
+    };
+    crate::domain::pose::check_targets(&file.targets, &doc.set.model).map_err(|e| CliError::file(&a.targets, e))?;
     let set = doc.set;
     let comp = Compensator::new(&set);
     let dof = set.dof();

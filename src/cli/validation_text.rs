@@ -60,6 +60,7 @@ pub fn text(v: &ValidationOut) -> String {
     let mut s = String::new();
     let reference = if v.reference == "truth" { "the simulator's true TCP positions" } else { "the measurements" };
     let _ = writeln!(s, "Validation on {} against {reference}", v.sessions.join(", "));
+    let _ = writeln!(s, "{}", v.held_out_statement);
     let per_session: Vec<(String, String, &crate::domain::validation::SessionErrorsOut)> = if v.per_session.len() > 1 {
         v.per_session
             .iter()

@@ -535,23 +535,43 @@ pub async fn validation(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<
     sqlx::query_as("SELECT * FROM validations WHERE id = ?").bind(id).fetch_optional(db).await
 }
 
-/// The latest validation of a set that holds out at least one validation session: (id, calibrated
-/// mean, nominal mean in mm, the validated envelope as JSON), read from the stored report without
-/// parsing its residuals.
+/// The latest held-out validation of a set — one that validates at least one validation session
+/// and none of `fit_sessions`, the sessions the set was fitted on (the rule of
+/// `validate::report::is_held_out`, stated here in SQL so old reports are judged as new ones) —
+/// read from the stored report without parsing its residuals.
 pub async fn latest_held_out_validation(
     db: impl SqliteExecutor<'_>,
     set_id: &str,
-) -> Result<Option<(String, f64, f64, Option<String>)>, sqlx::Error> {
+    fit_sessions: &[String],
+) -> Result<Option<HeldOutValidation>, sqlx::Error> {
     sqlx::query_as(
-        "SELECT id, json_extract(report_json, '$.mean_mm'), json_extract(report_json, '$.nominal.mean_mm'), \
-         json_extract(report_json, '$.validated_envelope') \
+        "SELECT id, json_extract(report_json, '$.mean_mm') AS mean_mm, \
+         json_extract(report_json, '$.nominal.mean_mm') AS nominal_mean_mm, \
+         json_extract(report_json, '$.validated_envelope') AS envelope, \
+         json_extract(report_json, '$.uncertainty') AS uncertainty \
          FROM validations WHERE parameter_set_id = ?1 \
          AND EXISTS (SELECT 1 FROM json_each(report_json, '$.purposes') WHERE value = 'validation') \
+         AND NOT EXISTS (SELECT 1 FROM json_each(sessions_json) AS v \
+                         WHERE v.value IN (SELECT value FROM json_each(?2))) \
          ORDER BY created_at DESC, id DESC LIMIT 1",
     )
     .bind(set_id)
+    .bind(serde_json::to_string(fit_sessions).expect("strings serialise"))
     .fetch_optional(db)
     .await
+}
+
+/// What compensation reads of a set's latest held-out validation.
+#[derive(Clone, Debug, PartialEq, sqlx::FromRow)]
+pub struct HeldOutValidation {
+    pub id: String,
+    /// The calibrated and nominal models' mean errors, mm.
+    pub mean_mm: f64,
+    pub nominal_mean_mm: f64,
+    /// The validated envelope, JSON (absent in reports without one).
+    pub envelope: Option<String>,
+    /// The uncertainty model the validation measured, JSON (absent in older reports).
+    pub uncertainty: Option<String>,
 }
 
 /// A parameter set's validations, newest first.

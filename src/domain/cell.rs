@@ -54,7 +54,12 @@ impl PoseXyzAbc {
         let names = ["x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg"];
         let mut out = [0.0; 6];
         for k in 0..6 {
-            out[k] = finite(v[k], &format!("{path}.{}", names[k]))? * if k < 3 { MM } else { DEG };
+            let field = format!("{path}.{}", names[k]);
+            out[k] = if k < 3 {
+                super::limits::position_mm(v[k], &field)? * MM
+            } else {
+                super::limits::angle_deg(v[k], &field)? * DEG
+            };
         }
         Ok(out)
     }
@@ -107,9 +112,31 @@ impl ArtefactSpec {
             ArtefactError::Distance { field, reason } => DomainError::new(format!("distances_mm.{field}"), reason),
             other => DomainError::new("distances_mm", other.to_string()),
         })?;
+        for (field, v) in [("d12", d.d12), ("d13", d.d13), ("d23", d.d23)] {
+            if v > super::limits::MAX_ARTEFACT_MM {
+                return Err(DomainError::new(
+                    format!("distances_mm.{field}"),
+                    format!(
+                        "{} mm is beyond the plausible {} mm",
+                        super::limits::show(v),
+                        super::limits::MAX_ARTEFACT_MM
+                    ),
+                ));
+            }
+        }
         let diameter = self.ball_diameter_mm;
         if !(diameter.is_finite() && diameter > 0.0) {
             return Err(DomainError::new("ball_diameter_mm", "must be a positive number"));
+        }
+        if diameter > super::limits::MAX_ARTEFACT_MM {
+            return Err(DomainError::new(
+                "ball_diameter_mm",
+                format!(
+                    "{} mm is beyond the plausible {} mm",
+                    super::limits::show(diameter),
+                    super::limits::MAX_ARTEFACT_MM
+                ),
+            ));
         }
         Ok(Artefact { triangle, ball_diameter: diameter * MM })
     }
@@ -306,6 +333,7 @@ impl CellFile {
         let artefact = self.artefact.as_ref().map(|a| a.to_artefact().map_err(|e| e.within("artefact"))).transpose()?;
         let mut names = HashSet::new();
         let mut targets: std::collections::HashMap<&str, (usize, &ToolSpec)> = Default::default();
+        let bounds = position_bounds(&model, base_guess.as_ref());
         let mut sessions = Vec::with_capacity(self.sessions.len());
         for (si, s) in self.sessions.iter().enumerate() {
             let at = format!("sessions[{si}] \"{}\"", s.name);
@@ -339,7 +367,8 @@ impl CellFile {
             let mut measurements = Vec::with_capacity(s.measurements.len());
             for (mi, m) in s.measurements.iter().enumerate() {
                 let mp = format!("{at}.measurements[{mi}]");
-                measurements.push(measurement(m, &model, instrument, artefact.as_ref()).map_err(|e| e.within(&mp))?);
+                measurements
+                    .push(measurement(m, &model, instrument, artefact.as_ref(), &bounds).map_err(|e| e.within(&mp))?);
             }
             sessions.push(Session {
                 name: s.name.clone(),
@@ -378,20 +407,33 @@ impl CellFile {
     }
 }
 
-/// Validate one measurement against the robot, the session's instrument and the artefact (SI).
+/// Where a robot's measured positions may lie (domain::limits): within
+/// [`super::limits::REACH_MULTIPLE`] times its reach of its base guess, and ±100 m anyway.
+pub fn position_bounds(
+    model: &crate::kinematics::RobotModel,
+    base_guess: Option<&[f64; 6]>,
+) -> super::limits::PositionBounds {
+    let reach_mm: f64 = model.links.iter().map(|l| l.a.abs() + l.d.abs()).sum::<f64>() / MM;
+    super::limits::PositionBounds::of(reach_mm, base_guess.map(|b| [b[0] / MM, b[1] / MM, b[2] / MM]))
+}
+
+/// Validate one measurement against the robot, the session's instrument and the artefact (SI),
+/// and against the physical bounds (`bounds`: where the robot's positions may lie).
 pub fn measurement(
     m: &MeasurementSpec,
     model: &crate::kinematics::RobotModel,
     instrument: Instrument,
     artefact: Option<&Artefact>,
+    bounds: &super::limits::PositionBounds,
 ) -> Result<Measurement, DomainError> {
     let q = joints_deg(&m.joints_deg, model.dof(), "joints_deg")?;
     for (j, &v) in q.iter().enumerate() {
         if !model.within_limits(j, v) {
             let [lo, hi] = model.links[j].limits;
+            let shown = if (v / DEG).abs() < 1e9 { format!("{:.4}", v / DEG) } else { super::limits::show(v / DEG) };
             return Err(DomainError::new(
                 format!("joints_deg[{j}]"),
-                format!("{:.4}° is outside joint {}'s limits [{:.1}°, {:.1}°]", v / DEG, j + 1, lo / DEG, hi / DEG),
+                format!("{shown}° is outside joint {}'s limits [{:.1}°, {:.1}°]", j + 1, lo / DEG, hi / DEG),
             ));
         }
     }
@@ -414,13 +456,12 @@ pub fn measurement(
             if instrument == Instrument::TriCal {
                 return Err(DomainError::new("position_mm", "a trical session measures balls: give ball"));
             }
+            bounds.check(p, "position_mm")?;
             let t = super::vec3_mm(p, "position_mm")?;
             match rot {
                 None => Observation::Position(t),
                 Some(r) => {
-                    for (i, v) in r.iter().enumerate() {
-                        finite(*v, &format!("rotation_deg[{i}]"))?;
-                    }
+                    super::limits::angle3_deg(r, "rotation_deg")?;
                     Observation::Pose(Frame::new(rot_zyx(r[0] * DEG, r[1] * DEG, r[2] * DEG), t))
                 }
             }
@@ -428,12 +469,16 @@ pub fn measurement(
         (None, None, _) => return Err(DomainError::new("ball", "a measurement needs ball or position_mm")),
     };
     let temperature_c = m.temperature_c.map(|t| finite(t, "temperature_c")).transpose()?;
+    let [t_lo, t_hi] = super::limits::TEMPERATURE_C;
     if let Some(t) = temperature_c
-        && !(-50.0..=150.0).contains(&t)
+        && !(t_lo..=t_hi).contains(&t)
     {
-        return Err(DomainError::new("temperature_c", format!("{t} °C is not a plausible robot temperature")));
+        return Err(DomainError::new(
+            "temperature_c",
+            format!("{t} °C is not a plausible robot temperature ([{t_lo}, {t_hi}] °C)"),
+        ));
     }
-    let time_s = m.time_s.map(|t| finite(t, "time_s")).transpose()?;
+    let time_s = m.time_s.map(|t| super::limits::time_s(t, "time_s")).transpose()?;
     if let Some(a) = &m.approach {
         if a.len() != model.dof() {
             return Err(DomainError::new("approach", format!("expected {} values, got {}", model.dof(), a.len())));
@@ -448,6 +493,10 @@ pub fn measurement(
             if instrument != Instrument::TriCal {
                 return Err(DomainError::new("indicators_mm", "only a trical measurement has indicator readings"));
             }
+            for (i, x) in d.iter().enumerate() {
+                let m = super::limits::MAX_INDICATOR_MM;
+                super::limits::within(*x, -m, m, "mm", &format!("indicators_mm[{i}]"))?;
+            }
             let v = super::vec3_mm(d, "indicators_mm")?;
             Some([v.x, v.y, v.z])
         }
@@ -458,13 +507,13 @@ pub fn measurement(
             return Err(DomainError::new("sigma_rotation_deg", "give sigma_mm too (the position's σ)"));
         }
         (Some(p), r) => {
-            let position = positive3(p, MM, "sigma_mm")?;
+            let position = positive3(p, MM, super::limits::MAX_SIGMA_MM, "sigma_mm")?;
             let rotation = match r {
                 None => None,
                 Some(_) if !matches!(observation, Observation::Pose(_)) => {
                     return Err(DomainError::new("sigma_rotation_deg", "only a full pose (rotation_deg) has one"));
                 }
-                Some(r) => Some(positive3(r, DEG, "sigma_rotation_deg")?),
+                Some(r) => Some(positive3(r, DEG, super::limits::MAX_SIGMA_DEG, "sigma_rotation_deg")?),
             };
             Some(Sigma { position, rotation })
         }
@@ -481,12 +530,18 @@ pub fn measurement(
     })
 }
 
-/// Three standard deviations in file units → SI, each finite and positive.
-fn positive3(v: [f64; 3], unit: f64, path: &str) -> Result<[f64; 3], DomainError> {
+/// Three standard deviations in file units → SI, each finite, positive and at most `max`.
+fn positive3(v: [f64; 3], unit: f64, max: f64, path: &str) -> Result<[f64; 3], DomainError> {
     let mut out = [0.0; 3];
     for i in 0..3 {
         if !(v[i].is_finite() && v[i] > 0.0) {
             return Err(DomainError::new(format!("{path}[{i}]"), "must be a positive number (1σ)"));
+        }
+        if v[i] > max {
+            return Err(DomainError::new(
+                format!("{path}[{i}]"),
+                format!("{} is beyond the plausible {max} (1σ)", super::limits::show(v[i])),
+            ));
         }
         out[i] = v[i] * unit;
     }

@@ -85,16 +85,24 @@ pub fn drift(a: &ParameterSetDoc, b: &ParameterSetDoc, field: &str) -> Result<Dr
                 }
                 let change = va - vb;
                 let combined = sa.hypot(sb);
+                // Printed as README promises: mm at 0.1 µm, deg at 1e-6°, the rest to 12
+                // significant digits; the decision uses the unrounded figures.
+                let unit = p.unit().as_str();
+                let out = |v: f64| match unit {
+                    "mm" => crate::units::round_to(v, crate::units::OUT_MM),
+                    "deg" => crate::units::round_to(v, crate::units::OUT_DEG),
+                    _ => super::rounding::significant(v, super::rounding::SIGNIFICANT),
+                };
                 parameters.push(DriftEntry {
                     name: p.to_string(),
-                    unit: p.unit().as_str().to_string(),
-                    value_a: va,
-                    value_b: vb,
-                    change,
-                    std_a: sa,
-                    std_b: sb,
-                    combined_std: combined,
-                    n_sigma: (combined > 0.0).then(|| change.abs() / combined),
+                    unit: unit.to_string(),
+                    value_a: out(va),
+                    value_b: out(vb),
+                    change: out(change),
+                    std_a: out(sa),
+                    std_b: out(sb),
+                    combined_std: out(combined),
+                    n_sigma: (combined > 0.0).then(|| super::rounding::significant(change.abs() / combined, 6)),
                     moved: change.abs() > combined,
                 });
             }
@@ -149,7 +157,9 @@ mod tests {
         let t2 = &r.parameters[1];
         assert_eq!(t2.unit, "deg");
         assert!((t2.change + 0.005).abs() < 1e-9);
-        assert!((t2.combined_std - 0.01 * std::f64::consts::SQRT_2).abs() < 1e-12);
+        // Printed at 1e-6°, as README promises: √2 · 0.01 = 0.0141421… → 0.014142.
+        assert_eq!(t2.combined_std, 0.014142);
+        assert_eq!(a2.combined_std, 0.005);
         assert!((t2.n_sigma.unwrap() - 0.35355339).abs() < 1e-6);
         assert!(!t2.moved);
         assert_eq!(r.moved, 1);

@@ -211,6 +211,28 @@ pub fn run_identification(
     Ok((id, doc))
 }
 
+/// The measurements an identification fitted, per session in cell order: `[{"session": name,
+/// "indices": [i, …]}]` (0-based, ascending) — what a validation checks to tell a held-out figure
+/// from an in-sample one.
+pub fn fit_measurements(id: &Identification) -> Value {
+    let names = &id.problem.session_names;
+    let mut per: Vec<Vec<usize>> = vec![Vec::new(); names.len()];
+    for o in &id.problem.obs {
+        per[o.session].push(o.index);
+    }
+    let out: Vec<Value> = names
+        .iter()
+        .zip(per)
+        .filter(|(_, ix)| !ix.is_empty())
+        .map(|(name, mut ix)| {
+            ix.sort_unstable();
+            ix.dedup();
+            json!({"session": name, "indices": ix})
+        })
+        .collect();
+    Value::Array(out)
+}
+
 /// The parameter-set document of an identification; `selection` describes how the measurements
 /// were chosen (e.g. DETMAX settings), carried into the quality report.
 pub fn identification_doc(id: &Identification, sessions: &[String], selection: Option<Value>) -> ParameterSetDoc {
@@ -236,6 +258,7 @@ pub fn identification_doc(id: &Identification, sessions: &[String], selection: O
     let corr: Vec<Vec<f64>> = (0..m).map(|a| (0..m).map(|b| q.correlation[(a, b)]).collect()).collect();
     doc.quality = Some(json!({
         "sessions": sessions,
+        "fit_measurements": fit_measurements(id),
         "selection": selection,
         "n_measurements": q.n_configs,
         "n_rows": q.n_rows,
@@ -262,6 +285,9 @@ pub fn identification_doc(id: &Identification, sessions: &[String], selection: O
         // Rows weighted by an instrument model: σ̂ is a ratio to the instrument's σ, not a length.
         obj.remove("sigma_mm");
         obj.insert("sigma_ratio".into(), json!(q.sigma));
+    }
+    if let Some(q) = doc.quality.as_mut() {
+        super::rounding::round_json(q);
     }
     doc
 }

@@ -70,6 +70,15 @@ pub fn parse_csv(text: &[u8], dof: usize) -> Result<Vec<MeasurementSpec>, CsvErr
             ),
         ));
     }
+    // A column named twice would leave one of its values unread: refused, naming it.
+    for (i, h) in headers.iter().enumerate() {
+        if let Some(first) = headers[..i].iter().position(|g| g == h) {
+            return Err(invalid(
+                format!("csv column '{h}'"),
+                format!("column '{h}' appears twice (columns {} and {}): which value is meant?", first + 1, i + 1),
+            ));
+        }
+    }
     for j in &joints {
         if col(j).is_none() {
             return Err(invalid("csv header", format!("missing column '{j}'")));
@@ -177,6 +186,12 @@ mod tests {
             matches!(err("q1_deg,q2_deg,x_mm\n1,2,3\n"), CsvError::Invalid(e) if e.path == "csv line 2, column x_mm")
         );
         assert!(matches!(err("q1_deg,q2_deg\n1,2,3\n"), CsvError::Malformed(e) if e.path == "csv line 2"));
+        // A column named twice (the issue's `…,z_mm,x_mm`): refused naming it, not half read.
+        let e = err("q1_deg,q2_deg,x_mm,y_mm,z_mm,x_mm\n1,2,3,4,5,6\n");
+        assert!(
+            matches!(&e, CsvError::Invalid(d) if d.path == "csv column 'x_mm'" && d.reason.contains("columns 3 and 6")),
+            "{e}"
+        );
     }
 
     /// `sequence` is a whole number, kept exactly (beyond 2^53 too), absent when empty.

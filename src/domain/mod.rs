@@ -15,6 +15,7 @@ pub mod origin;
 pub mod param_set;
 pub mod pose;
 pub mod robot;
+pub mod rounding;
 pub mod truth;
 pub mod validation;
 pub mod validity;

@@ -6,7 +6,7 @@
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use super::validity::Guard;
+use super::validity::{Guard, UncertaintyOut};
 use super::{DomainError, finite, joints_deg, to_deg, vec3_mm};
 use crate::kinematics::frame::{quaternion_from_rot, rot_from_quaternion, rot_zyx, zyx_from_rot};
 use crate::kinematics::{Branch, Compensated, Compensator, Confdata, Frame, IkError, JointState, Seed};
@@ -46,6 +46,7 @@ pub fn frame_from_parts_noted(
     rotation_deg: Option<[f64; 3]>,
     quaternion: Option<[f64; 4]>,
 ) -> Result<(Frame, Option<String>), DomainError> {
+    super::limits::position3_mm(position_mm, "position_mm")?;
     let t = vec3_mm(position_mm, "position_mm")?;
     let mut note = None;
     let r = match (rotation_deg, quaternion) {
@@ -59,9 +60,7 @@ pub fn frame_from_parts_noted(
             ));
         }
         (Some(r), None) => {
-            for (i, v) in r.iter().enumerate() {
-                finite(*v, &format!("rotation_deg[{i}]"))?;
-            }
+            super::limits::angle3_deg(r, "rotation_deg")?;
             rot_zyx(r[0] * DEG, r[1] * DEG, r[2] * DEG)
         }
         (None, Some(q)) => {
@@ -179,6 +178,61 @@ pub struct TargetSpec {
     pub joints_deg: Option<Vec<f64>>,
 }
 
+/// Check a batch of targets at the door, before any is solved (the service answers 422, the
+/// command line exits 2), naming the field: at least one target; ids given for all or none, none
+/// blank, none twice; every value within the physical bounds of `domain::limits` — positions
+/// within ±100 m, angles within a turn, joint values (targets and seeds) within `model`'s limits
+/// widened by a turn. What only solving can tell (a pose out of reach, a wrong branch) stays each
+/// target's own error.
+pub fn check_targets(targets: &[TargetSpec], model: &crate::kinematics::RobotModel) -> Result<(), DomainError> {
+    use super::limits;
+    if targets.is_empty() {
+        return Err(DomainError::new("targets", "at least one target is needed"));
+    }
+    let with_id = targets.iter().filter(|t| t.id.is_some()).count();
+    let mut seen: std::collections::HashMap<&str, usize> = std::collections::HashMap::new();
+    for (i, t) in targets.iter().enumerate() {
+        let at = |f: &str| format!("targets[{i}].{f}");
+        match &t.id {
+            None if with_id > 0 => {
+                return Err(DomainError::new(
+                    at("id"),
+                    format!(
+                        "{with_id} of the {} targets have an id and this one has none: give every target an id, or none",
+                        targets.len()
+                    ),
+                ));
+            }
+            None => {}
+            Some(id) => {
+                let id = limits::name(id, &at("id"))?;
+                if let Some(first) = seen.insert(id, i) {
+                    return Err(DomainError::new(at("id"), format!("'{id}' is the id of targets[{first}] too")));
+                }
+            }
+        }
+        for (field, q) in [("joints_deg", &t.joints_deg), ("seed_joints_deg", &t.seed_joints_deg)] {
+            let Some(q) = q else { continue };
+            for (j, (v, link)) in q.iter().zip(&model.links).enumerate() {
+                let l = [link.limits[0] / DEG, link.limits[1] / DEG];
+                limits::joint_deg(*v, j, l, &at(&format!("{field}[{j}]")))?;
+            }
+        }
+        if let Some(p) = t.position_mm {
+            limits::position3_mm(p, &at("position_mm"))?;
+        }
+        if let Some(r) = t.rotation_deg {
+            limits::angle3_deg(r, &at("rotation_deg"))?;
+        }
+        if let Some(q) = t.quaternion {
+            for (k, v) in q.iter().enumerate() {
+                limits::within(*v, -2.0, 2.0, "", &at(&format!("quaternion[{k}]")))?;
+            }
+        }
+    }
+    Ok(())
+}
+
 /// A validated target.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Target {
@@ -275,11 +329,14 @@ pub struct CompensationResult {
     pub residual_urad: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub iterations: Option<usize>,
-    /// The model's predicted standard uncertainty of the TCP position at the commanded joints,
-    /// √trace(J·Cov·Jᵀ) from the identification's parameter covariance, mm (absent when the set
-    /// carries no covariance).
+    /// The predicted standard uncertainty of the TCP position at the commanded joints (the RMS of
+    /// the 3-D error), mm: √(covariance² + unexplained² + extrapolation²), the parts under
+    /// `uncertainty`. Absent when a part is unknown (no held-out validation, no recorded region).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncertainty_mm: Option<f64>,
+    /// The parts of the uncertainty, each named for what it includes, and a 95 % bound.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<UncertaintyOut>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
     /// What was mended in the target before solving (a quaternion normalised).
@@ -295,10 +352,12 @@ impl CompensationResult {
             joints_deg: Some(to_deg(c.joints()).into_iter().map(|v| round_to(v, OUT_DEG)).collect()),
             fake_pose: Some(fake_pose),
             confdata: c.confdata.map(|d| [d.cf1, d.cf4, d.cf6, d.cfx.cfx() as i32]),
-            residual_mm: Some(c.residual_position / MM),
-            residual_urad: Some(c.residual_rotation * 1e6),
+            residual_mm: Some(round_to(c.residual_position / MM, OUT_MM)),
+            // 0.01 µrad: finer than the 1e-6° (0.017 µrad) of every printed angle.
+            residual_urad: Some(round_to(c.residual_rotation * 1e6, 0.01)),
             iterations: Some(c.iterations),
             uncertainty_mm: None,
+            uncertainty: None,
             error: None,
             notes: Vec::new(),
         }
@@ -314,6 +373,7 @@ impl CompensationResult {
             residual_urad: None,
             iterations: None,
             uncertainty_mm: None,
+            uncertainty: None,
             error: Some(error),
             notes: Vec::new(),
         }
@@ -380,6 +440,10 @@ pub struct TargetFrames {
     /// {W} through the nominal base → the frame the controller is programmed in.
     out_of_world: Frame,
     pub out: FrameOut,
+    /// The work object the fake poses are programmed in, as the controller declares it: its name
+    /// and its frame in the robot's base frame; `None`: wobj0 (the base frame itself), or not
+    /// known (targets in {W} without a compensator's nominal base).
+    pub work_object: Option<(String, Frame)>,
 }
 
 impl TargetFrames {
@@ -398,6 +462,7 @@ impl TargetFrames {
                               command joints_deg"
                     .into(),
             },
+            work_object: None,
         }
     }
 
@@ -411,7 +476,11 @@ impl TargetFrames {
         let calibrated_base = *comp.calibrated_chain().base();
         let nominal_base = *comp.nominal_chain().base();
         match (frame, work_object) {
-            (None | Some(FrameKind::World), None) => Ok(Self::world()),
+            // Fake poses in {W} through the nominal base: a work object whose frame in the base is
+            // that base's inverse.
+            (None | Some(FrameKind::World), None) => {
+                Ok(TargetFrames { work_object: Some(("W".into(), nominal_base.inverse())), ..Self::world() })
+            }
             (Some(FrameKind::World), Some(_)) => Err(DomainError::new(
                 "work_object",
                 "a work object is declared in the robot's base frame; drop \"frame\": \"world\" (or say \"base\")",
@@ -427,6 +496,7 @@ impl TargetFrames {
                                   with wobj0 and the tool the request named"
                         .into(),
                 },
+                work_object: None,
             }),
             (None | Some(FrameKind::Base), Some(w)) => {
                 let name = super::limits::name(&w.name, "work_object.name")?;
@@ -445,6 +515,7 @@ impl TargetFrames {
                              '{name}' and the tool the request named"
                         ),
                     },
+                    work_object: Some((name.to_string(), wobj)),
                 })
             }
         }
@@ -477,9 +548,12 @@ pub fn compensate_target(
         Ok(c) => {
             let fake = PoseOut::like(&frames.out_of_world.compose(&c.fake_pose), t.rotation_deg, t.quaternion);
             match guard_target(comp, guard, &c) {
-                Ok((sigma, notes)) => {
+                Ok((uncertainty, notes)) => {
                     let mut r = CompensationResult::ok(id, &c, fake);
-                    r.uncertainty_mm = sigma.map(|s| round_to(s / MM, OUT_MM));
+                    if let Some((u, combined)) = uncertainty {
+                        r.uncertainty_mm = combined;
+                        r.uncertainty = Some(u);
+                    }
                     r.notes = notes;
                     r
                 }
@@ -492,23 +566,57 @@ pub fn compensate_target(
                 ),
             }
         }
-        Err(e) => CompensationResult::from_ik_error(id, &e),
+        Err(e) => match &target {
+            // A joint target that cannot be compensated: name the joints that lie outside their
+            // limits, the likely cause (the solver starts from them).
+            Target::NominalJoints(q) => {
+                let outside: Vec<String> = q
+                    .iter()
+                    .zip(comp.limits())
+                    .enumerate()
+                    .filter(|(_, (v, [lo, hi]))| *v < lo || *v > hi)
+                    .map(|(j, (v, [lo, hi]))| {
+                        format!(
+                            "targets[{i}].joints_deg[{j}]: joint {} at {:.4}° is outside its limits [{:.1}°, {:.1}°]",
+                            j + 1,
+                            v / DEG,
+                            lo / DEG,
+                            hi / DEG
+                        )
+                    })
+                    .collect();
+                if outside.is_empty() {
+                    CompensationResult::from_ik_error(id, &e)
+                } else {
+                    CompensationResult::failed(id, format!("{e}: {}", outside.join("; ")))
+                }
+            }
+            Target::Pose { .. } => CompensationResult::from_ik_error(id, &e),
+        },
     };
     r.notes.extend(note);
     r
 }
 
+/// A target's uncertainty parts and their combination (mm, when every part is known).
+type TargetUncertainty = Option<(UncertaintyOut, Option<f64>)>;
+
 /// The envelope check and the predicted uncertainty of a solved target: `Err(why)` when its
-/// joints lie outside the envelope and that was not allowed; otherwise σ (m) and the notes (outside
-/// as asked; the distance to the measured region).
-fn guard_target(comp: &Compensator, guard: &Guard, c: &Compensated) -> Result<(Option<f64>, Vec<String>), String> {
-    if guard.envelope.is_none() && guard.covariance.is_none() {
+/// joints lie outside the envelope and that was not allowed; otherwise its uncertainty by part
+/// and the notes (outside as asked; the distance to the measured region).
+fn guard_target(
+    comp: &Compensator,
+    guard: &Guard,
+    c: &Compensated,
+) -> Result<(TargetUncertainty, Vec<String>), String> {
+    if guard.envelope.is_none() && guard.covariance.is_none() && guard.held_out.is_none() {
         return Ok((None, Vec::new()));
     }
     let q = c.joints();
     let tau = comp.gravity().torques(q);
     let s = JointState::with_torques(q, &tau[..q.len()]);
     let mut notes = Vec::new();
+    let tcp = comp.calibrated_chain().fk(&s).t;
     if let Some(e) = guard.envelope {
         if let Some(why) = e.outside(q) {
             if !guard.allow_outside {
@@ -516,9 +624,11 @@ fn guard_target(comp: &Compensator, guard: &Guard, c: &Compensated) -> Result<(O
             }
             notes.push(format!("outside the calibrated envelope, compensated as asked: {why}"));
         }
-        notes.extend(e.distance_note(&comp.calibrated_chain().fk(&s).t));
+        notes.extend(e.distance_note(&tcp));
     }
-    Ok((guard.covariance.map(|pc| pc.sigma(comp.calibrated_chain(), &s)), notes))
+    let sigma = guard.covariance.map(|pc| pc.sigma(comp.calibrated_chain(), &s));
+    let outside = guard.envelope.map(|e| e.outside_measured(&tcp));
+    Ok((Some(UncertaintyOut::of(sigma, &tcp, outside, guard.held_out)), notes))
 }
 
 /// Targets per thread below which splitting a batch across cores is not worth a thread.

@@ -133,11 +133,12 @@ impl RobotSpec {
             RobotSpec::Custom(c) => c,
         };
         super::limits::name(&c.name, "name")?;
+        use super::limits;
         let gravity = match c.gravity_mps2 {
             None => Vector3::new(0.0, 0.0, -STANDARD_GRAVITY),
             Some(g) => {
                 for (i, x) in g.iter().enumerate() {
-                    finite(*x, &format!("gravity_mps2[{i}]"))?;
+                    limits::gravity(*x, &format!("gravity_mps2[{i}]"))?;
                 }
                 Vector3::new(g[0], g[1], g[2])
             }
@@ -146,18 +147,29 @@ impl RobotSpec {
         let mut rows = Vec::with_capacity(c.joints.len());
         for (j, s) in c.joints.iter().enumerate() {
             let p = |f: &str| format!("joints[{j}].{f}");
+            limits::length3_mm(s.com_mm, &p("com_mm"))?;
             let com = vec3_mm(s.com_mm, &p("com_mm"))?;
-            for (name, v) in [
-                ("alpha_deg", s.alpha_deg),
-                ("a_mm", s.a_mm),
-                ("theta_deg", s.theta_deg),
-                ("d_mm", s.d_mm),
-                ("mass_kg", s.mass_kg),
-            ] {
-                finite(v, &p(name))?;
+            for (name, v) in [("alpha_deg", s.alpha_deg), ("theta_deg", s.theta_deg)] {
+                limits::angle_deg(v, &p(name))?;
+            }
+            if let Some(b) = s.beta_deg {
+                limits::angle_deg(b, &p("beta_deg"))?;
+            }
+            for (name, v) in [("a_mm", s.a_mm), ("d_mm", s.d_mm)] {
+                limits::length_mm(v, &p(name))?;
+            }
+            finite(s.mass_kg, &p("mass_kg"))?;
+            if s.mass_kg >= 0.0 {
+                limits::mass(s.mass_kg, &p("mass_kg"))?;
             }
             for (i, v) in s.limits_deg.iter().enumerate() {
-                finite(*v, &format!("joints[{j}].limits_deg[{i}]"))?;
+                limits::within(
+                    *v,
+                    -limits::MAX_JOINT_LIMIT_DEG,
+                    limits::MAX_JOINT_LIMIT_DEG,
+                    "deg",
+                    &format!("joints[{j}].limits_deg[{i}]"),
+                )?;
             }
             if s.beta_deg.is_some() {
                 beta_joints.push(j);
@@ -280,17 +292,22 @@ pub struct ToolSpec {
 
 impl ToolSpec {
     pub fn to_tool(&self) -> Result<Tool, DomainError> {
+        use super::limits;
+        limits::length3_mm(self.tcp_mm, "tcp_mm")?;
         let t = vec3_mm(self.tcp_mm, "tcp_mm")?;
         let mut tcp = [t.x, t.y, t.z, 0.0, 0.0, 0.0];
         if let Some(r) = self.tcp_rotation_deg {
+            limits::angle3_deg(r, "tcp_rotation_deg")?;
             for i in 0..3 {
-                tcp[3 + i] = finite(r[i], &format!("tcp_rotation_deg[{i}]"))? * DEG;
+                tcp[3 + i] = r[i] * DEG;
             }
         }
         let mass = finite(self.mass_kg, "mass_kg")?;
         if mass < 0.0 {
             return Err(DomainError::new("mass_kg", "must not be negative"));
         }
+        limits::mass(mass, "mass_kg")?;
+        limits::length3_mm(self.com_mm, "com_mm")?;
         Ok(Tool { tcp, mass, com: vec3_mm(self.com_mm, "com_mm")? })
     }
 

@@ -11,7 +11,7 @@ use utoipa::ToSchema;
 use crate::units::{MM, MRAD};
 use crate::validate::normality::ShapiroWilk;
 use crate::validate::regression::LinearFit;
-use crate::validate::report::{AxisStats, ModelErrors, Residual, SessionErrors, ValidationReport};
+use crate::validate::report::{AxisStats, FitData, ModelErrors, Residual, SessionErrors, ValidationReport};
 use crate::validate::stats::ErrorStats;
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -19,6 +19,16 @@ pub struct ValidationOut {
     pub sessions: Vec<String>,
     /// "identification" or "validation", per session.
     pub purposes: Vec<&'static str>,
+    /// Whether these figures are held out: none of the validated sessions was used to fit the set,
+    /// and at least one is a validation session. Only a held-out validation vouches for the set
+    /// (the service's compensation gate counts no other).
+    pub held_out: bool,
+    /// What the set was fitted on, as its document records it.
+    pub fit: FitRecordOut,
+    /// The validated sessions the set was fitted on: their figures are fit residuals.
+    pub in_sample_sessions: Vec<String>,
+    /// The same in words.
+    pub held_out_statement: String,
     /// "measured" or "truth".
     pub reference: &'static str,
     #[serde(flatten)]
@@ -26,10 +36,16 @@ pub struct ValidationOut {
     pub nominal: ModelErrorsOut,
     /// Each session's figures (several reflectors, or sessions of different purposes, apart).
     pub per_session: Vec<SessionErrorsOut>,
-    /// The joint ranges and the box of {W} the held-out (validation-purpose) sessions cover:
-    /// where this validation shows the model to hold (compensation accepts targets there).
+    /// The joint ranges and the box of {W} the held-out sessions cover (validation sessions the
+    /// set was not fitted on): where this validation shows the model to hold (compensation
+    /// accepts targets there). Absent when the validation is not held out.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub validated_envelope: Option<super::validity::EnvelopeFile>,
+    /// What this held-out validation measured about the error the set's parameter covariance
+    /// does not predict, and how it grows with distance: compensation's uncertainty per target
+    /// reads it. Absent when the validation is not held out.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<super::validity::HeldOutUncertainty>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub residuals: Option<Vec<ResidualOut>>,
     /// The artefact's ball centres in {W} (the calibration zone), when the cell has one.
@@ -37,21 +53,36 @@ pub struct ValidationOut {
     pub balls_mm: Option<[[f64; 3]; 3]>,
 }
 
+/// What a parameter set was fitted on.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FitRecordOut {
+    /// Whether the set records it (a table typed in or imported from elsewhere does not).
+    pub recorded: bool,
+    /// The sessions it was fitted on, by name.
+    pub sessions: Vec<String>,
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct SessionErrorsOut {
     pub session: String,
     /// "identification" or "validation".
     pub purpose: &'static str,
+    /// The set was fitted on (some of) this session's measurements.
+    pub fitted: bool,
+    /// How many of this session's validated measurements the fit used.
+    pub fitted_measurements: usize,
     #[serde(flatten)]
     pub calibrated: ModelErrorsOut,
     pub nominal: ModelErrorsOut,
 }
 
 impl SessionErrorsOut {
-    fn from_errors(s: &SessionErrors) -> Self {
+    fn from_errors(s: &SessionErrors, r: &ValidationReport) -> Self {
         Self {
             session: s.session.clone(),
             purpose: s.purpose.as_str(),
+            fitted: r.fit.as_ref().is_some_and(|f| f.has_session(&s.session)),
+            fitted_measurements: r.fitted_measurements(&s.session),
             calibrated: ModelErrorsOut::from_errors(&s.calibrated),
             nominal: ModelErrorsOut::from_errors(&s.nominal),
         }
@@ -163,14 +194,26 @@ pub struct ResidualOut {
 
 impl ValidationOut {
     pub fn from_report(r: &ValidationReport, include_residuals: bool) -> Self {
+        let held_out = r.held_out();
+        let fit = r.fit.clone().unwrap_or_default();
         Self {
             sessions: r.sessions.clone(),
             purposes: r.purposes.iter().map(|p| p.as_str()).collect(),
+            held_out,
+            fit: FitRecordOut { recorded: fit.recorded, sessions: fit.sessions.clone() },
+            in_sample_sessions: r.in_sample_sessions(),
+            held_out_statement: held_out_statement(r),
             reference: if r.against_truth { "truth" } else { "measured" },
             calibrated: ModelErrorsOut::from_errors(&r.calibrated),
             nominal: ModelErrorsOut::from_errors(&r.nominal),
-            per_session: r.per_session.iter().map(SessionErrorsOut::from_errors).collect(),
-            validated_envelope: r.region.as_ref().map(|g| super::validity::Envelope::of_region(g).file().clone()),
+            per_session: r.per_session.iter().map(|s| SessionErrorsOut::from_errors(s, r)).collect(),
+            validated_envelope: r
+                .region
+                .as_ref()
+                .filter(|_| held_out)
+                .and_then(super::validity::Envelope::of_region)
+                .map(|e| e.file().clone()),
+            uncertainty: None,
             residuals: include_residuals.then(|| r.residuals.iter().map(ResidualOut::from_residual).collect()),
             balls_mm: r.balls.map(|b| b.map(|c| [c.x / MM, c.y / MM, c.z / MM])),
         }
@@ -263,8 +306,87 @@ impl ResidualOut {
     }
 }
 
+/// Whether a validation is held out, in words: what was fitted on what.
+pub fn held_out_statement(r: &ValidationReport) -> String {
+    let fitted = r.in_sample_sessions();
+    let list = |v: &[String]| v.join(", ");
+    if !fitted.is_empty() {
+        let n: usize = fitted.iter().map(|s| r.fitted_measurements(s)).sum();
+        return format!(
+            "in-sample, not held out: the set was fitted on {} ({n} of the measurements validated here were in its fit), \
+            so these figures are fit residuals; validate it on sessions it was not fitted on",
+            list(&fitted)
+        );
+    }
+    let validation: Vec<String> = r
+        .sessions
+        .iter()
+        .zip(&r.purposes)
+        .filter(|(_, p)| **p == crate::cell::Purpose::Validation)
+        .map(|(s, _)| s.clone())
+        .collect();
+    if validation.is_empty() {
+        return "not held out: no validation session was validated on (identification sessions score the fit, \
+               not the model)"
+            .into();
+    }
+    match &r.fit {
+        Some(f) if f.recorded => format!(
+            "held out: the set was fitted on {}, none of the sessions validated here",
+            if f.sessions.is_empty() { "no recorded session".into() } else { list(&f.sessions) }
+        ),
+        _ => format!(
+            "held out as far as is known: the set does not record what it was fitted on (a table typed in or \
+            imported); validated on {}",
+            list(&validation)
+        ),
+    }
+}
+
+/// What a parameter-set document records it was fitted on: `quality.sessions` and
+/// `quality.fit_measurements` (identification and an accepted diagnosis write them), joined with
+/// `also` (the sessions the store lists for the set). Not recorded when neither names a session.
+pub fn fit_data(doc: &super::ParameterSetDoc, also: &[String]) -> FitData {
+    let q = doc.quality.as_ref();
+    let mut sessions: Vec<String> = q
+        .and_then(|q| q.get("sessions"))
+        .and_then(serde_json::Value::as_array)
+        .map(|a| a.iter().filter_map(|v| v.as_str().map(str::to_string)).collect())
+        .unwrap_or_default();
+    for s in also {
+        if !sessions.contains(s) {
+            sessions.push(s.clone());
+        }
+    }
+    let mut measurements = std::collections::BTreeMap::new();
+    if let Some(items) = q.and_then(|q| q.get("fit_measurements")).and_then(serde_json::Value::as_array) {
+        for item in items {
+            let (Some(name), Some(ix)) = (item["session"].as_str(), item["indices"].as_array()) else { continue };
+            let mut ix: Vec<usize> = ix.iter().filter_map(|v| v.as_u64().map(|i| i as usize)).collect();
+            ix.sort_unstable();
+            measurements.insert(name.to_string(), ix);
+        }
+    }
+    // A session the store names but the document's list does not: fitted on whole.
+    measurements.retain(|name, _| sessions.contains(name));
+    FitData { recorded: !sessions.is_empty(), sessions, measurements }
+}
+
 /// The report as the CLI prints it.
 pub fn report_to_json(report: &ValidationReport, include_residuals: bool) -> serde_json::Value {
-    serde_json::to_value(ValidationOut::from_report(report, include_residuals))
-        .expect("the validation report has only string keys and numbers")
+    report_to_json_with(report, None, include_residuals)
+}
+
+/// The report with the uncertainty model a held-out validation measured
+/// ([`super::validity::HeldOutUncertainty::of_report`]).
+pub fn report_to_json_with(
+    report: &ValidationReport,
+    uncertainty: Option<super::validity::HeldOutUncertainty>,
+    include_residuals: bool,
+) -> serde_json::Value {
+    let mut out = ValidationOut::from_report(report, include_residuals);
+    out.uncertainty = uncertainty;
+    let mut v = serde_json::to_value(out).expect("the validation report has only string keys and numbers");
+    super::rounding::round_json(&mut v);
+    v
 }

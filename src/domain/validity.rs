@@ -59,11 +59,12 @@ impl Envelope {
     /// The envelope of measurements given as (joints in rad, measured position in {W} in m).
     /// `None` without measurements.
     pub fn of_measurements<'a>(points: impl IntoIterator<Item = (&'a [f64], Vector3<f64>)>) -> Option<Envelope> {
-        Region::of(points).map(|r| Envelope::of_region(&r))
+        Region::of(points).and_then(|r| Envelope::of_region(&r))
     }
 
-    /// The envelope of a region (the margins added).
-    pub fn of_region(r: &Region) -> Envelope {
+    /// The envelope of a region (the margins added); `None` when the region's figures do not
+    /// make one (a coordinate beyond a double in mm).
+    pub fn of_region(r: &Region) -> Option<Envelope> {
         let file = EnvelopeFile {
             joints_deg: r.joints.iter().map(|j| [j[0] / DEG, j[1] / DEG]).collect(),
             position_min_mm: [r.lo.x / MM, r.lo.y / MM, r.lo.z / MM],
@@ -72,7 +73,7 @@ impl Envelope {
             position_margin_mm: POSITION_MARGIN_MM,
             n_measurements: r.n,
         };
-        Envelope::from_file(&file).expect("an envelope of finite measurements is valid")
+        Envelope::from_file(&file).ok()
     }
 
     /// The smallest envelope holding both (measured ranges joined, the larger margins): the
@@ -129,6 +130,11 @@ impl Envelope {
         &self.file
     }
 
+    /// Each joint's range, margin included, rad.
+    pub fn joint_ranges(&self) -> &[(f64, f64)] {
+        &self.joints
+    }
+
     /// Why joints `q` (rad) lie outside the calibrated joint ranges, or `None` inside. The
     /// envelope is judged in joint space: the model's parameters are excited by joint motion,
     /// and a TriCal calibration measures a small zone of {W} from many configurations. The model
@@ -176,6 +182,13 @@ impl Envelope {
                 self.file.position_margin_mm
             )
         })
+    }
+
+    /// How far the TCP position `p` ({W}, m) lies outside the *measured* box (no margin), m; 0
+    /// inside. The distance the error's growth outside the measured region is charged for.
+    pub fn outside_measured(&self, p: &Vector3<f64>) -> f64 {
+        let (lo, hi) = (Vector3::from(self.file.position_min_mm) * MM, Vector3::from(self.file.position_max_mm) * MM);
+        (p - hi).sup(&(lo - p)).sup(&Vector3::zeros()).norm()
     }
 
     /// The envelope a parameter-set document records, if any.
@@ -284,12 +297,250 @@ pub struct Guard<'a> {
     pub envelope: Option<&'a Envelope>,
     pub allow_outside: bool,
     pub covariance: Option<&'a PredictionCovariance>,
+    /// What the set's latest held-out validation measured: the error the covariance does not
+    /// explain and its growth with distance. `None`: unknown (no held-out validation given).
+    pub held_out: Option<&'a HeldOutUncertainty>,
 }
 
 impl<'a> Guard<'a> {
     /// No envelope, no uncertainty: what a set without either gets.
     pub fn none() -> Guard<'static> {
         Guard::default()
+    }
+}
+
+/// Coverage factor of a 1-D normal variable at 95 % (two-sided), for the growth's slope.
+const Z95: f64 = 1.959_963_984_540_054;
+/// p95 / RMS of the length of an isotropic 3-D normal error (Maxwell: √(χ²₃(0.95) / 3)), the shape
+/// factor used when a validation gives none.
+pub const MAXWELL_K95: f64 = 1.613_881_245_898_081_5;
+
+/// What a held-out validation measured about the error a parameter set's covariance does not
+/// predict (its report's `uncertainty`; compensation reads it from the set's latest held-out
+/// validation). Lengths mm; each an RMS of the 3-D position error over the held-out measurements.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct HeldOutUncertainty {
+    /// Held-out measurements these figures come from.
+    pub n: usize,
+    /// RMS of the calibrated model's |error| on them.
+    pub rms_mm: f64,
+    /// √(mean σ²) of the parameter covariance's prediction at their joints (0 when the set
+    /// records no covariance: the unexplained part then holds it).
+    pub covariance_rms_mm: f64,
+    /// √(mean σ²) of the reference's own noise: the instrument (its model, or each reading's
+    /// `sigma_mm`), the robot's repeatability left in (it is an error at the target too); 0 when
+    /// validated against the simulator's truth.
+    pub instrument_rms_mm: f64,
+    /// √max(0, rms² − covariance² − instrument²): the held-out error neither the parameter
+    /// covariance nor the instrument explains (unmodelled effects, the data's own spread). The
+    /// same for every target.
+    pub unexplained_mm: f64,
+    /// The shape factor turning an RMS into a 95 % bound: the held-out |error|'s p95 / RMS, at
+    /// least an isotropic normal error's (1.614).
+    pub k95: f64,
+    /// How the held-out |error| grows with distance, when a regression could be fitted.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub growth: Option<GrowthFit>,
+}
+
+/// The held-out |error| against a distance: what its growth away from the validated poses is
+/// extrapolated from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct GrowthFit {
+    /// `zone` (the distance to the calibration zone, the artefact's ball centroid) or `base` (to
+    /// the base origin, when the cell has no artefact).
+    pub against: String,
+    /// The point distances are taken from, {W}, mm.
+    pub from_mm: [f64; 3],
+    /// The held-out poses' mean and largest distance from it, mm: the unexplained part is their
+    /// RMS error, so a target farther than the mean is charged the growth beyond it.
+    pub mean_distance_mm: f64,
+    pub max_distance_mm: f64,
+    pub slope_mm_per_mm: f64,
+    pub slope_stderr_mm_per_mm: f64,
+    pub n: usize,
+}
+
+impl GrowthFit {
+    /// How far a TCP at `p` ({W}, m) lies beyond the held-out poses' mean distance, m (0 nearer).
+    pub fn beyond(&self, p: &Vector3<f64>) -> f64 {
+        ((p - Vector3::from(self.from_mm) * MM).norm() - self.mean_distance_mm * MM).max(0.0)
+    }
+}
+
+impl HeldOutUncertainty {
+    /// The uncertainty model of a held-out validation report of `set` (its document `doc`) on
+    /// `cell`; `None` when the report is not held out. The residuals must still carry the cell's
+    /// measurement indices.
+    pub fn of_report(
+        doc: &ParameterSetDoc,
+        cell: &crate::cell::Cell,
+        report: &crate::validate::report::ValidationReport,
+    ) -> Result<Option<HeldOutUncertainty>, DomainError> {
+        use crate::validate::report::{joint_state, session_chains};
+        if !report.held_out() || report.residuals.is_empty() {
+            return Ok(None);
+        }
+        let set = &doc.set;
+        let covariance = PredictionCovariance::of_doc(doc)?;
+        let robot_only = covariance.as_ref().map(PredictionCovariance::without_tool);
+        let noise = crate::identify::noise::NoiseModel::default();
+        let rep2 = noise.repeatability.powi(2);
+        let (mut cov2, mut inst2, mut e2) = (0.0, 0.0, 0.0);
+        let mut n = 0usize;
+        for session in cell.sessions.iter().filter(|s| report.sessions.contains(&s.name)) {
+            let (chain, _) = session_chains(set, session);
+            let gravity = set.gravity_for(&session.tool);
+            let pc = if session.tool == set.tool { covariance.as_ref() } else { robot_only.as_ref() };
+            for r in report.residuals.iter().filter(|r| r.session == session.name) {
+                let Some(m) = session.measurements.get(r.index) else { continue };
+                if let Some(pc) = pc {
+                    let s = joint_state(&gravity, &m.q, m.approach.as_deref(), m.temperature_c, set.dof());
+                    cov2 += pc.sigma(&chain, &s).powi(2);
+                }
+                if !report.against_truth {
+                    let row = noise.row_sigmas(session.instrument, &r.position, m.sigma.as_ref());
+                    inst2 += (0..3).map(|k| (row[k].powi(2) - rep2).max(0.0)).sum::<f64>();
+                }
+                e2 += r.error.norm_squared();
+                n += 1;
+            }
+        }
+        if n == 0 {
+            return Ok(None);
+        }
+        let nf = n as f64;
+        let (cov2, inst2, e2) = (cov2 / nf, inst2 / nf, e2 / nf);
+        let stats = &report.calibrated.position;
+        // The shape factor: the held-out errors' own p95/RMS, and at least an isotropic normal
+        // error's (a sample whose tail is thinner than a normal's is not trusted to stay so).
+        let k95 = if stats.rms > 0.0 { (stats.p95 / stats.rms).max(MAXWELL_K95) } else { MAXWELL_K95 };
+        let zone = cell.artefact.as_ref().map(|a| a.triangle.centroid());
+        let base_origin = set.chain().base().t;
+        let growth = match (&report.calibrated.vs_zone_distance, &report.calibrated.vs_base_distance, zone) {
+            (Some(f), _, Some(z)) => Some(("zone", f, z)),
+            (_, Some(f), _) => Some(("base", f, base_origin)),
+            _ => None,
+        }
+        .filter(|(_, f, _)| f.slope.is_finite() && f.slope_stderr.is_finite())
+        .map(|(against, f, from)| {
+            let d: Vec<f64> = report.residuals.iter().map(|r| (r.position - from).norm()).collect();
+            GrowthFit {
+                against: against.into(),
+                from_mm: [from.x / MM, from.y / MM, from.z / MM],
+                mean_distance_mm: d.iter().sum::<f64>() / d.len().max(1) as f64 / MM,
+                max_distance_mm: d.iter().copied().fold(0.0, f64::max) / MM,
+                slope_mm_per_mm: f.slope,
+                slope_stderr_mm_per_mm: f.slope_stderr,
+                n: f.n,
+            }
+        });
+        Ok(Some(HeldOutUncertainty {
+            n,
+            rms_mm: e2.sqrt() / MM,
+            covariance_rms_mm: cov2.sqrt() / MM,
+            instrument_rms_mm: inst2.sqrt() / MM,
+            unexplained_mm: (e2 - cov2 - inst2).max(0.0).sqrt() / MM,
+            k95,
+            growth,
+        }))
+    }
+}
+
+/// A compensated target's predicted position uncertainty, part by part (mm; each part the RMS of
+/// the 3-D position error it accounts for).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct UncertaintyOut {
+    /// From the identification's parameter covariance at these joints, √trace(J·Cov·Jᵀ); absent
+    /// when the set records no covariance (a held-out validation's unexplained part then holds
+    /// it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub covariance_mm: Option<f64>,
+    /// The set's latest held-out validation's RMS error beyond the covariance and the
+    /// instrument's noise: what the model misses that its covariance does not say. Absent when
+    /// unknown (no held-out validation).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unexplained_mm: Option<f64>,
+    /// How far the TCP lies outside the measured region: the box of the positions the
+    /// identification and the held-out validation measured. Absent when the set records none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub outside_measured_mm: Option<f64>,
+    /// How far the TCP lies beyond the held-out poses' mean distance from the calibration zone
+    /// (or from the base, without an artefact): what the growth is charged on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub beyond_validated_mm: Option<f64>,
+    /// The error's growth there: the held-out |error|'s slope against that distance (when
+    /// positive) times `beyond_validated_mm`. Absent when unknown (no held-out validation, or one
+    /// without a regression, for a TCP outside the measured region).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub extrapolation_mm: Option<f64>,
+    /// A radius expected to hold 95 % of the position errors: k95 · √(covariance² +
+    /// unexplained²) + (slope + 1.96 · its standard error) · beyond_validated_mm, k95 the held-out
+    /// errors' p95/RMS. Absent when a part is unknown.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bound_95_mm: Option<f64>,
+    /// The parts that are not known, and why (then `uncertainty_mm` is not given).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub unknown: Vec<String>,
+}
+
+impl UncertaintyOut {
+    /// The parts at a target whose covariance σ is `sigma` (m), whose TCP is at `tcp` ({W}, m)
+    /// and lies `outside` (m) outside the measured region (`None`: no region recorded), with a
+    /// validation's model `held_out`. Returns the parts and the combined standard uncertainty (mm)
+    /// when every part is known.
+    pub fn of(
+        sigma: Option<f64>,
+        tcp: &Vector3<f64>,
+        outside: Option<f64>,
+        held_out: Option<&HeldOutUncertainty>,
+    ) -> (UncertaintyOut, Option<f64>) {
+        use crate::units::{OUT_MM, round_to};
+        let mut u = UncertaintyOut { covariance_mm: sigma.map(|s| s / MM), ..UncertaintyOut::default() };
+        if sigma.is_none() && held_out.is_none() {
+            u.unknown.push("covariance: the set records no parameter covariance".into());
+        }
+        match held_out {
+            None => u.unknown.push(
+                "unexplained: no held-out validation to measure the error the covariance does not predict".into(),
+            ),
+            Some(h) => u.unexplained_mm = Some(h.unexplained_mm),
+        }
+        u.outside_measured_mm = outside.map(|d| d / MM);
+        let (mut growth, mut growth95) = (None, None);
+        match (held_out.and_then(|h| h.growth.as_ref()), outside) {
+            (Some(g), _) => {
+                let d = g.beyond(tcp);
+                u.beyond_validated_mm = Some(d / MM);
+                growth = Some(g.slope_mm_per_mm.max(0.0) * d / MM);
+                growth95 = Some((g.slope_mm_per_mm + Z95 * g.slope_stderr_mm_per_mm).max(0.0) * d / MM);
+            }
+            (None, Some(0.0)) => (growth, growth95) = (Some(0.0), Some(0.0)),
+            (None, Some(_)) => u.unknown.push(
+                "extrapolation: the TCP is outside the measured region and no held-out validation says how the \
+                 error grows with distance"
+                    .into(),
+            ),
+            (None, None) => u.unknown.push("extrapolation: the set records no measured region".into()),
+        }
+        u.extrapolation_mm = growth;
+        let cov = u.covariance_mm.unwrap_or(0.0);
+        let combined = match (u.unexplained_mm, growth) {
+            (Some(un), Some(g)) if u.unknown.is_empty() => Some((cov * cov + un * un + g * g).sqrt()),
+            _ => None,
+        };
+        if let (Some(h), Some(un), Some(g95)) = (held_out, u.unexplained_mm, growth95)
+            && u.unknown.is_empty()
+        {
+            u.bound_95_mm = Some(round_to(h.k95 * (cov * cov + un * un).sqrt() + g95, OUT_MM));
+        }
+        let r = |v: Option<f64>| v.map(|x| round_to(x, OUT_MM));
+        u.covariance_mm = r(u.covariance_mm);
+        u.unexplained_mm = r(u.unexplained_mm);
+        u.outside_measured_mm = r(u.outside_measured_mm);
+        u.beyond_validated_mm = r(u.beyond_validated_mm);
+        u.extrapolation_mm = r(u.extrapolation_mm);
+        (u, r(combined))
     }
 }
 
@@ -302,13 +553,20 @@ pub struct ValidityOut {
     pub envelope: Option<EnvelopeFile>,
     /// Targets outside the envelope were compensated (and noted) rather than refused.
     pub allow_outside_envelope: bool,
-    /// Whether each result carries `uncertainty_mm` (the set records its covariance).
+    /// Whether each result carries a covariance part (`uncertainty.covariance_mm`: the set
+    /// records its parameter covariance).
     pub uncertainty: bool,
+    /// What the unexplained and extrapolation parts of each target's uncertainty come from: the
+    /// set's latest held-out validation's measurements; absent when there is none (those parts
+    /// are then unknown and `uncertainty_mm` is not given).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out_uncertainty: Option<HeldOutUncertainty>,
     /// What could not be checked, in words.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub notes: Vec<String>,
-    /// The validation the set was accepted on (service only): its id, and its held-out mean
-    /// errors, calibrated and nominal, mm; absent when unvalidated use was asked for.
+    /// The held-out validation the set was accepted on (service only): its id, and its mean
+    /// errors, calibrated and nominal, mm; absent when there is none that passed and unvalidated
+    /// use was asked for.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub validation: Option<ValidationCheck>,
 }
@@ -330,10 +588,18 @@ impl ValidityOut {
         if guard.covariance.is_none() {
             notes.push("the parameter set records no parameter covariance: no predicted uncertainty".into());
         }
+        if guard.held_out.is_none() {
+            notes.push(
+                "no held-out validation's uncertainty model: each target's uncertainty gives its covariance part \
+                 only, and no uncertainty_mm"
+                    .into(),
+            );
+        }
         ValidityOut {
             envelope: guard.envelope.map(|e| e.file().clone()),
             allow_outside_envelope: guard.allow_outside,
             uncertainty: guard.covariance.is_some(),
+            held_out_uncertainty: guard.held_out.cloned(),
             notes,
             validation: None,
         }

@@ -15,7 +15,7 @@ use super::robots::find as find_robot;
 use super::{ApiError, AppState};
 use crate::app::cache::CompiledSet;
 use crate::domain::pose::{FrameKind, FrameOut, TargetFrames, WorkObjectSpec, compensate_target, compensate_targets};
-use crate::domain::validity::{Envelope, EnvelopeFile, Guard, ValidationCheck, ValidityOut};
+use crate::domain::validity::{Envelope, EnvelopeFile, Guard, HeldOutUncertainty, ValidationCheck, ValidityOut};
 use crate::domain::{CompensationResult, TargetSpec, ToolSpec};
 use crate::kinematics::{Compensator, Param, ParameterSet, Tool};
 
@@ -47,9 +47,9 @@ pub struct CompensationRequest {
     /// is noted.
     #[serde(default)]
     pub allow_outside_envelope: bool,
-    /// At most the server's batch limit (`serve --max-batch`, default 10,000; the served document
-    /// states the server's).
-    #[schema(max_items = 10000)]
+    /// At least one, at most the server's batch limit (`serve --max-batch`, default 10,000; the
+    /// served document states the server's); ids for all or none, each once.
+    #[schema(min_items = 1, max_items = 10000)]
     pub targets: Vec<TargetSpec>,
 }
 
@@ -85,44 +85,63 @@ pub fn with_tool(set: &ParameterSet, tool: Tool) -> ParameterSet {
     s
 }
 
-/// The set's latest held-out validation, refused when there is none or when it found the set no
-/// better than the nominal model; with the envelope it validated, when it records one.
+/// The set's latest held-out validation (on validation sessions it was not fitted on), refused
+/// when there is none or when it found the set no better than the nominal model; with the
+/// envelope it validated and the uncertainty model it measured, when it records them.
 async fn validation_check(
     state: &AppState,
-    set_id: &str,
-    version: i64,
-) -> Result<(ValidationCheck, Option<Envelope>), ApiError> {
+    compiled: &CompiledSet,
+) -> Result<(ValidationCheck, Option<Envelope>, Option<HeldOutUncertainty>), ApiError> {
+    let (set_id, version) = (&compiled.row.id, compiled.row.version);
     let hint = format!(
-        "validate it on held-out sessions (POST /v1/parameter-sets/{set_id}/validations), or set \
-         allow_unvalidated to use it anyway"
+        "validate it on held-out sessions: validation sessions it was not fitted on (POST \
+         /v1/parameter-sets/{set_id}/validations), or set allow_unvalidated to use it anyway"
     );
-    match crate::db::records::latest_held_out_validation(&state.pool, set_id).await? {
-        None => Err(ApiError::conflict_hint(
-            format!("parameter set v{version} has no validation on held-out (validation-purpose) sessions"),
-            hint,
-        )),
-        Some((validation_id, mean_mm, nominal_mean_mm, envelope)) if mean_mm < nominal_mean_mm => {
-            let envelope = match envelope {
-                None => None,
-                Some(text) => {
-                    let file: EnvelopeFile = serde_json::from_str(&text).map_err(|e| {
-                        ApiError::Internal(format!("stored validation {validation_id}: validated_envelope: {e}"))
-                    })?;
-                    Some(Envelope::from_file(&file).map_err(|e| {
-                        ApiError::Internal(format!("stored validation {validation_id}: validated_envelope: {e}"))
-                    })?)
-                }
-            };
-            Ok((ValidationCheck { validation_id, mean_mm, nominal_mean_mm }, envelope))
-        }
-        Some((validation_id, mean_mm, nominal_mean_mm, _)) => Err(ApiError::conflict_hint(
+    let found = crate::db::records::latest_held_out_validation(&state.pool, set_id, &compiled.fit_sessions).await?;
+    let Some(v) = found else {
+        let fitted = if compiled.fit_sessions.is_empty() {
+            String::new()
+        } else {
             format!(
-                "parameter set v{version} failed its latest validation ({validation_id}): its held-out mean \
-                 error {mean_mm:.4} mm is no better than the nominal model's {nominal_mean_mm:.4} mm"
+                " (it was fitted on {}: a validation on any of them is in-sample and does not count)",
+                compiled.fit_sessions.join(", ")
+            )
+        };
+        return Err(ApiError::conflict_hint(
+            format!(
+                "parameter set v{version} has no held-out validation: none on validation sessions it was not fitted on{fitted}"
             ),
             hint,
-        )),
+        ));
+    };
+    if v.mean_mm >= v.nominal_mean_mm {
+        return Err(ApiError::conflict_hint(
+            format!(
+                "parameter set v{version} failed its latest held-out validation ({}): its mean error {:.4} mm is no \
+                 better than the nominal model's {:.4} mm",
+                v.id, v.mean_mm, v.nominal_mean_mm
+            ),
+            hint,
+        ));
     }
+    let internal = |what: &str, e: String| ApiError::Internal(format!("stored validation {}: {what}: {e}", v.id));
+    let envelope = match &v.envelope {
+        None => None,
+        Some(text) => {
+            let file: EnvelopeFile =
+                serde_json::from_str(text).map_err(|e| internal("validated_envelope", e.to_string()))?;
+            Some(Envelope::from_file(&file).map_err(|e| internal("validated_envelope", e.to_string()))?)
+        }
+    };
+    let uncertainty = match &v.uncertainty {
+        None => None,
+        Some(text) => Some(serde_json::from_str(text).map_err(|e| internal("uncertainty", e.to_string()))?),
+    };
+    Ok((
+        ValidationCheck { validation_id: v.id, mean_mm: v.mean_mm, nominal_mean_mm: v.nominal_mean_mm },
+        envelope,
+        uncertainty,
+    ))
 }
 
 /// Batches up to this size are solved on the request's own task.
@@ -165,13 +184,15 @@ pub async fn compensate(
     if compiled.row.robot_id != robot.id {
         return Err(ApiError::invalid("parameter_set_id", "the set belongs to another robot"));
     }
-    let (validation, envelope) = checks(&state, &compiled, body.allow_unvalidated).await?;
+    crate::domain::pose::check_targets(&body.targets, &compiled.set.model).map_err(|e| ApiError::domain(e, ""))?;
+    let mut checked = checks(&state, &compiled, body.allow_unvalidated).await?;
+    let validation = checked.validation.take();
     let (frame, results, mut validity) = run_batch(
         compiled.clone(),
         body.tool.as_ref(),
         body.frame,
         body.work_object.as_ref(),
-        envelope,
+        checked,
         body.allow_outside_envelope,
         body.targets,
     )
@@ -188,24 +209,34 @@ pub async fn compensate(
     }))
 }
 
-/// The set's held-out validation (unless `allow_unvalidated`) and the envelope targets are
-/// checked against: the identification's data and the validation's, joined.
+/// What the checks before a batch found.
+pub(super) struct Checked {
+    /// The held-out validation the set is accepted on (none when unvalidated use was asked for).
+    pub validation: Option<ValidationCheck>,
+    /// The envelope targets are checked against: the identification's data and the validation's.
+    pub envelope: Option<Envelope>,
+    /// The uncertainty model that validation measured.
+    pub held_out: Option<HeldOutUncertainty>,
+}
+
+/// The set's held-out validation (unless `allow_unvalidated`), the envelope targets are checked
+/// against (the identification's data and the validation's, joined) and the uncertainty model.
+/// With `allow_unvalidated` a held-out validation is still used when there is one that passed.
 pub(super) async fn checks(
     state: &AppState,
     compiled: &CompiledSet,
     allow_unvalidated: bool,
-) -> Result<(Option<ValidationCheck>, Option<Envelope>), ApiError> {
-    let (validation, validated) = if allow_unvalidated {
-        (None, None)
-    } else {
-        let (check, envelope) = validation_check(state, &compiled.row.id, compiled.row.version).await?;
-        (Some(check), envelope)
+) -> Result<Checked, ApiError> {
+    let (validation, validated, held_out) = match validation_check(state, compiled).await {
+        Ok((check, envelope, held_out)) => (Some(check), envelope, held_out),
+        Err(ApiError::Conflict { .. }) if allow_unvalidated => (None, None, None),
+        Err(e) => return Err(e),
     };
     let envelope = match (&compiled.envelope, validated) {
         (Some(a), Some(b)) => Some(a.union(&b)),
         (a, b) => a.clone().or(b),
     };
-    Ok((validation, envelope))
+    Ok(Checked { validation, envelope, held_out })
 }
 
 /// 413 naming `targets` when a batch is over the server's limit.
@@ -227,10 +258,11 @@ pub(super) async fn run_batch(
     tool: Option<&ToolSpec>,
     frame: Option<FrameKind>,
     work_object: Option<&WorkObjectSpec>,
-    envelope: Option<Envelope>,
+    checked: Checked,
     allow_outside: bool,
     targets: Vec<TargetSpec>,
 ) -> Result<(FrameOut, Vec<CompensationResult>, ValidityOut), ApiError> {
+    let Checked { envelope, held_out, .. } = checked;
     let custom = match tool {
         None => None,
         Some(t) => Some(with_tool(&compiled.set, t.to_tool().map_err(|e| ApiError::domain(e, "tool"))?)),
@@ -240,7 +272,8 @@ pub(super) async fn run_batch(
     // With another tool, only the robot's parameters carry uncertainty (the identification did
     // not see that tool).
     let robot_only = custom.as_ref().and(compiled.covariance.as_ref()).map(|c| c.without_tool());
-    let guard = |covariance| Guard { envelope: envelope.as_ref(), allow_outside, covariance };
+    let guard =
+        |covariance| Guard { envelope: envelope.as_ref(), allow_outside, covariance, held_out: held_out.as_ref() };
     let validity = ValidityOut::new(&guard(robot_only.as_ref().or(compiled.covariance.as_ref())));
     let results = if custom.is_none() && targets.len() <= INLINE_TARGETS {
         // A few solves (~4 µs each) cost less than handing them to the blocking pool.
@@ -253,6 +286,7 @@ pub(super) async fn run_batch(
             .collect()
     } else {
         let envelope = envelope.clone();
+        let held_out = held_out.clone();
         tokio::task::spawn_blocking(move || {
             let own;
             let (comp, dof, covariance) = match &custom {
@@ -262,7 +296,7 @@ pub(super) async fn run_batch(
                     (&own, set.dof(), robot_only.as_ref())
                 }
             };
-            let g = Guard { envelope: envelope.as_ref(), allow_outside, covariance };
+            let g = Guard { envelope: envelope.as_ref(), allow_outside, covariance, held_out: held_out.as_ref() };
             compensate_targets(comp, dof, &frames, &g, &targets)
         })
         .await?

@@ -165,11 +165,13 @@ async fn already_accepted(state: &AppState, set_id: &str) -> Result<(StatusCode,
 
 /// Accept a diagnosis: its named effects' model, fitted on the diagnosed identification and
 /// validation sessions together, becomes the robot's next parameter-set version (not activated).
-/// Accepting again answers the same set.
+/// Accepting again answers the same set. The new set was fitted on those validation sessions, so
+/// a validation on them is in-sample: compensation needs a new held-out validation (sessions it
+/// was not fitted on), and the answer's `validation_needed` says what to measure.
 #[utoipa::path(post, path = "/v1/diagnoses/{diagnosis_id}/accept", tag = "diagnoses",
     params(("diagnosis_id" = String, Path, description = "Diagnosis id")),
     responses(
-        (status = 201, description = "The new parameter set (the robot's next version, not activated)", body = ParameterSetOut),
+        (status = 201, description = "The new parameter set (the robot's next version, not activated); `validation_needed` says which held-out validation it still needs", body = ParameterSetOut),
         (status = 200, description = "Already accepted: the set it created, nothing new written", body = ParameterSetOut),
         (status = 404, description = "Unknown diagnosis", body = super::Problem, content_type = "application/problem+json"),
         (status = 409, description = "The diagnosis named no effect (its verdict is `none`, `not_separable` or `unknown_effect`): nothing to accept", body = super::Problem, content_type = "application/problem+json")),

@@ -32,6 +32,11 @@ pub struct ExportQuery {
     /// RAPID only: write the module even when targets fail (they are listed in a comment and
     /// counted in `X-Failed-Targets`); default false: 422.
     pub allow_partial: Option<bool>,
+    /// URDF only: a payload-specific URDF, the compliance deflection at this payload (kg, at the
+    /// set's tool centre of mass) folded into the joint zero offsets; its header says what is
+    /// left and whether that is a fair approximation.
+    #[param(minimum = 0, maximum = 5000)]
+    pub payload_kg: Option<f64>,
 }
 
 /// The targets of a RAPID export: a compensation request, the set being the path's.
@@ -53,6 +58,8 @@ pub struct RapidExportRequest {
     /// As in a compensation request: compensate targets outside the calibrated envelope.
     #[serde(default)]
     pub allow_outside_envelope: bool,
+    /// At least one target; ids for all or none, each once.
+    #[schema(min_items = 1)]
     pub targets: Vec<TargetSpec>,
 }
 
@@ -105,13 +112,24 @@ pub async fn export(
     Query(q): Query<ExportQuery>,
 ) -> Result<Response, ApiError> {
     let format = format_of(&q)?;
+    let payload = match q.payload_kg {
+        None => None,
+        Some(_) if format != ExportFormat::Urdf => {
+            return Err(ApiError::invalid("payload_kg", "only a urdf export folds a payload's deflection"));
+        }
+        Some(kg) => Some(crate::domain::limits::mass(kg, "payload_kg").map_err(|e| ApiError::domain(e, ""))?),
+    };
     let row = find(&state, &set_id).await?;
     let name = format!("parameter-set-v{}.{}", row.version, format.extension());
     let source = ExportSource::stored(&row.id, row.version);
     let body = match format {
         ExportFormat::Json => row.doc_json.clone(),
         ExportFormat::CsvDh => csv_dh::write(&doc_of(&row)?, &source),
-        ExportFormat::Urdf => urdf::write(&doc_of(&row)?, &source),
+        ExportFormat::Urdf => {
+            let doc = doc_of(&row)?;
+            let payload = payload.map(|kg| crate::kinematics::Tool { mass: kg, ..doc.set.tool.clone() });
+            urdf::write_with(&doc, &source, &urdf::UrdfOptions { payload })
+        }
         ExportFormat::Rapid => {
             return Err(ApiError::invalid(
                 "format",
@@ -166,17 +184,24 @@ pub async fn export_rapid(
         .parameter_set(&state.pool, &set_id)
         .await?
         .ok_or_else(|| ApiError::not_found("parameter set", &set_id))?;
+    crate::domain::pose::check_targets(&body.targets, &compiled.set.model).map_err(|e| ApiError::domain(e, ""))?;
     let tool = match &body.tool {
         Some(_) => "the tool of the request (program the targets with it)".to_string(),
         None => "the parameter set's own (identified) tool".to_string(),
     };
-    let (_, envelope) = checks(&state, &compiled, body.allow_unvalidated).await?;
+    let checked = checks(&state, &compiled, body.allow_unvalidated).await?;
+    let frames = crate::domain::pose::TargetFrames::new(&compiled.compensator, body.frame, body.work_object.as_ref())
+        .map_err(|e| ApiError::domain(e, ""))?;
+    let tool_spec = match &body.tool {
+        Some(t) => t.to_tool().map_err(|e| ApiError::domain(e, "tool"))?,
+        None => compiled.set.tool.clone(),
+    };
     let (frame, results, _) = run_batch(
         compiled.clone(),
         body.tool.as_ref(),
         body.frame,
         body.work_object.as_ref(),
-        envelope,
+        checked,
         body.allow_outside_envelope,
         body.targets,
     )
@@ -184,7 +209,15 @@ pub async fn export_rapid(
     let source = ExportSource::stored(&compiled.row.id, compiled.row.version);
     let date = crate::db::now();
     let module = write_rapid(
-        &RapidHeader { robot: &compiled.set.model.name, source: &source, date: &date, frame: &frame, tool: &tool },
+        &RapidHeader {
+            robot: &compiled.set.model.name,
+            source: &source,
+            date: &date,
+            frame: &frame,
+            tool: &tool,
+            tooldata: Some(&tool_spec),
+            work_object: frames.work_object.as_ref(),
+        },
         &results,
     );
     if let Some(first) = module.failed.first()

@@ -148,10 +148,16 @@ pub async fn append(
             Some(super::artefacts::artefact(&spec)?)
         }
     };
+    // Where this robot's readings may lie: near its base guess (when it has one), ±100 m anyway.
+    let base_guess = match robot.base_guess_json {
+        None => None,
+        Some(_) => Some(crate::app::robots::robot_base(&robot)?),
+    };
+    let bounds = crate::domain::cell::position_bounds(&model, base_guess.as_ref());
     let mut rows = Vec::with_capacity(specs.len());
     for (i, m) in specs.iter().enumerate() {
         let at = if prefix == "csv row" { format!("csv line {}", i + 2) } else { format!("{prefix}[{i}]") };
-        measurement(m, &model, instrument, artefact.as_ref()).map_err(|e| ApiError::domain(e, &at))?;
+        measurement(m, &model, instrument, artefact.as_ref(), &bounds).map_err(|e| ApiError::domain(e, &at))?;
         rows.push(serde_json::to_string(m).expect("serialises"));
     }
     let hash = {

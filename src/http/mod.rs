@@ -142,6 +142,7 @@ pub fn openapi() -> utoipa::openapi::OpenApi {
 pub fn openapi_for(require_auth: bool) -> utoipa::openapi::OpenApi {
     let mut api = api_router().split_for_parts().1;
     common_responses(&mut api);
+    physical_bounds(&mut api);
     if !require_auth {
         use utoipa::openapi::security::SecurityRequirement;
         for item in api.paths.paths.values_mut() {
@@ -154,6 +155,49 @@ pub fn openapi_for(require_auth: bool) -> utoipa::openapi::OpenApi {
         }
     }
     api
+}
+
+/// The physical bounds of `domain::limits::SCHEMA_BOUNDS` written into the request schemas
+/// (`minimum`/`maximum`, on the number or on an array's items, through a nullable `oneOf`), so
+/// the document states every constant bound the server enforces.
+fn physical_bounds(api: &mut utoipa::openapi::OpenApi) {
+    use crate::domain::limits::{Applies, SCHEMA_BOUNDS};
+    use serde_json::{Value, json};
+    let Ok(mut doc) = serde_json::to_value(&*api) else { return };
+    fn set(s: &mut Value, lo: f64, hi: f64, exclusive: bool) {
+        if exclusive {
+            s["exclusiveMinimum"] = json!(lo);
+        } else {
+            s["minimum"] = json!(lo);
+        }
+        s["maximum"] = json!(hi);
+    }
+    fn apply(s: &mut Value, lo: f64, hi: f64, to: Applies, exclusive: bool) {
+        for key in ["oneOf", "anyOf"] {
+            if let Some(alts) = s.get_mut(key).and_then(Value::as_array_mut) {
+                for a in alts.iter_mut().filter(|a| a.get("type") != Some(&json!("null"))) {
+                    apply(a, lo, hi, to, exclusive);
+                }
+                return;
+            }
+        }
+        match to {
+            Applies::Items => {
+                if let Some(items) = s.get_mut("items") {
+                    set(items, lo, hi, exclusive);
+                }
+            }
+            Applies::Value => set(s, lo, hi, exclusive),
+        }
+    }
+    for &(schema, property, lo, hi, to, exclusive) in SCHEMA_BOUNDS {
+        let at = format!("/components/schemas/{schema}/properties/{property}");
+        let p = doc.pointer_mut(&at).unwrap_or_else(|| panic!("SCHEMA_BOUNDS names {at}, which the document lacks"));
+        apply(p, lo, hi, to, exclusive);
+    }
+    if let Ok(back) = serde_json::from_value(doc) {
+        *api = back;
+    }
 }
 
 /// The scope an operation's bearer requirement names (`read`, `measure`, …, `admin`), if any.

@@ -27,6 +27,10 @@ pub struct ValidationSummary {
     pub validation_id: String,
     pub created_at: String,
     pub sessions: Vec<String>,
+    /// Held out: none of its sessions was used to fit the set, and one is a validation session.
+    /// An in-sample validation's figures are fit residuals; only a held-out one vouches for the
+    /// set (compensation counts no other).
+    pub held_out: bool,
     #[schema(value_type = Object)]
     pub figures: Value,
 }
@@ -43,6 +47,13 @@ pub struct ParameterSetOut {
     pub active: bool,
     /// Names of the sessions it was identified from (empty when imported).
     pub sessions: Vec<String>,
+    /// The sessions it was fitted on, as its file and the store record them (an imported file
+    /// may record some): a validation on any of them is in-sample, not held out.
+    pub fit_sessions: Vec<String>,
+    /// Single-set answers: what to do when the set has no held-out validation yet (a set accepted
+    /// from a diagnosis that pooled the validation sessions has none: it was fitted on them).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub validation_needed: Option<String>,
     /// The identification job, when it came from one.
     pub job_id: Option<String>,
     /// Quality summary: `identified`, `kappa_si`, `kappa_scaled`, `rms_residual_mm`,
@@ -81,6 +92,9 @@ struct QualityOnly {
 
 #[derive(Deserialize)]
 struct QualityFields {
+    /// The sessions fitted on.
+    #[serde(default)]
+    sessions: Vec<String>,
     #[serde(default)]
     n_parameters: Value,
     #[serde(default)]
@@ -95,14 +109,25 @@ struct QualityFields {
     rms_residual_mm: Value,
 }
 
-fn quality_summary(doc_json: &str) -> Result<Value, ApiError> {
-    let q: QualityOnly = serde_json::from_str(doc_json).map_err(|e| ApiError::Internal(e.to_string()))?;
-    Ok(q.quality.map_or(Value::Null, |q| {
+/// The quality summary of a stored set and the sessions it was fitted on (its document's
+/// `quality.sessions` joined with the store's list, as `domain::validation::fit_data` joins them).
+fn quality_summary(row: &records::ParameterSetRow) -> Result<(Value, Vec<String>), ApiError> {
+    let q: QualityOnly = serde_json::from_str(&row.doc_json).map_err(|e| ApiError::Internal(e.to_string()))?;
+    let mut fit: Vec<String> = q.quality.as_ref().map(|q| q.sessions.clone()).unwrap_or_default();
+    let listed: Vec<String> =
+        serde_json::from_str(&row.sessions_json).map_err(|e| ApiError::Internal(e.to_string()))?;
+    for s in listed {
+        if !fit.contains(&s) {
+            fit.push(s);
+        }
+    }
+    let summary = q.quality.map_or(Value::Null, |q| {
         serde_json::json!({
             "identified": q.n_parameters, "measurements": q.n_measurements, "iterations": q.iterations,
             "kappa_si": q.kappa_si, "kappa_scaled": q.kappa_scaled, "rms_residual_mm": q.rms_residual_mm,
         })
-    }))
+    });
+    Ok((summary, fit))
 }
 
 /// The figures a validation summary shows, read from a stored validation report without its
@@ -125,6 +150,8 @@ struct Figures {
     max_mm: Value,
     #[serde(default)]
     nominal: Option<Box<Figures>>,
+    #[serde(default)]
+    purposes: Vec<crate::domain::cell::PurposeSpec>,
 }
 
 impl Figures {
@@ -136,15 +163,20 @@ impl Figures {
     }
 }
 
-fn validation_summary(v: records::ValidationRow) -> Result<ValidationSummary, ApiError> {
+/// A validation's summary; `fit_sessions`: what its set was fitted on.
+fn validation_summary(v: records::ValidationRow, fit_sessions: &[String]) -> Result<ValidationSummary, ApiError> {
     let mut report: Figures = serde_json::from_str(&v.report_json).map_err(|e| ApiError::Internal(e.to_string()))?;
     let nominal = report.nominal.take().map_or_else(Figures::default, |b| *b);
+    let purposes: Vec<_> = report.purposes.iter().map(|p| p.to_purpose()).collect();
     let mut figures = report.json();
     figures["nominal"] = nominal.json();
+    let sessions: Vec<String> =
+        serde_json::from_str(&v.sessions_json).map_err(|e| ApiError::Internal(e.to_string()))?;
     Ok(ValidationSummary {
         validation_id: v.id,
         created_at: v.created_at,
-        sessions: serde_json::from_str(&v.sessions_json).map_err(|e| ApiError::Internal(e.to_string()))?,
+        held_out: crate::validate::report::is_held_out(&sessions, &purposes, fit_sessions),
+        sessions,
         figures,
     })
 }
@@ -152,7 +184,7 @@ fn validation_summary(v: records::ValidationRow) -> Result<ValidationSummary, Ap
 fn summary_out(
     row: &records::ParameterSetRow,
     active: bool,
-    quality: Value,
+    (quality, fit_sessions): (Value, Vec<String>),
     validations: Vec<ValidationSummary>,
     doc: Option<Value>,
 ) -> Result<ParameterSetOut, ApiError> {
@@ -163,6 +195,8 @@ fn summary_out(
         created_at: row.created_at.clone(),
         active,
         sessions: serde_json::from_str(&row.sessions_json).map_err(|e| ApiError::Internal(e.to_string()))?,
+        fit_sessions,
+        validation_needed: None,
         job_id: row.job_id.clone(),
         quality,
         validations,
@@ -182,14 +216,59 @@ pub(super) async fn set_out(
     active: bool,
     full: bool,
 ) -> Result<ParameterSetOut, ApiError> {
+    let (quality, fit_sessions) = quality_summary(row)?;
     let validations = records::validations_of_set(&state.pool, &row.id)
         .await?
         .into_iter()
-        .map(validation_summary)
+        .map(|v| validation_summary(v, &fit_sessions))
         .collect::<Result<Vec<_>, _>>()?;
     let doc =
         full.then(|| serde_json::from_str(&row.doc_json)).transpose().map_err(|e| ApiError::Internal(e.to_string()))?;
-    summary_out(row, active, quality_summary(&row.doc_json)?, validations, doc)
+    let needed = if full && !validations.iter().any(|v| v.held_out) {
+        Some(validation_needed(state, row, &fit_sessions).await?)
+    } else {
+        None
+    };
+    let mut out = summary_out(row, active, (quality, fit_sessions), validations, doc)?;
+    out.validation_needed = needed;
+    Ok(out)
+}
+
+/// What a set without a held-out validation needs, in words: the robot's validation sessions it
+/// was not fitted on, or — when it was fitted on all of them (a diagnosis that pooled them) — a
+/// new validation session to measure.
+async fn validation_needed(
+    state: &AppState,
+    row: &records::ParameterSetRow,
+    fit_sessions: &[String],
+) -> Result<String, ApiError> {
+    let sessions = records::sessions_of_robot(&state.pool, &row.robot_id).await?;
+    let validation: Vec<&records::SessionRow> =
+        sessions.iter().filter(|s| s.purpose == crate::domain::cell::PurposeSpec::Validation).collect();
+    let fitted: Vec<&str> =
+        validation.iter().filter(|s| fit_sessions.contains(&s.name)).map(|s| s.name.as_str()).collect();
+    let free: Vec<&str> =
+        validation.iter().filter(|s| !fit_sessions.contains(&s.name)).map(|s| s.name.as_str()).collect();
+    let pooled = if fitted.is_empty() {
+        String::new()
+    } else {
+        format!(" It was fitted on the validation sessions {}: a validation on them is in-sample.", fitted.join(", "))
+    };
+    Ok(if free.is_empty() {
+        format!(
+            "no held-out validation.{pooled} Measure a new validation session (POST /v1/robots/{}/sessions with \
+             \"purpose\": \"validation\", then its measurements) and validate the set on it (POST \
+             /v1/parameter-sets/{}/validations); until then compensation refuses it (409) unless allow_unvalidated.",
+            row.robot_id, row.id
+        )
+    } else {
+        format!(
+            "no held-out validation.{pooled} Validate it on {} (POST /v1/parameter-sets/{}/validations): sessions it \
+             was not fitted on; until then compensation refuses it (409) unless allow_unvalidated.",
+            free.join(", "),
+            row.id
+        )
+    })
 }
 
 async fn find(state: &AppState, id: &str) -> Result<records::ParameterSetRow, ApiError> {
@@ -232,14 +311,19 @@ pub async fn history(
     // The page's validations in one query, not one per set.
     let ids: Vec<&str> = rows.iter().map(|r| r.id.as_str()).collect();
     let mut by_set: std::collections::HashMap<String, Vec<ValidationSummary>> = std::collections::HashMap::new();
+    let summaries: std::collections::HashMap<&str, (Value, Vec<String>)> =
+        rows.iter().map(|r| Ok((r.id.as_str(), quality_summary(r)?))).collect::<Result<_, ApiError>>()?;
     for v in records::validations_of_sets(&state.pool, &ids).await? {
-        by_set.entry(v.parameter_set_id.clone()).or_default().push(validation_summary(v)?);
+        let fit = summaries.get(v.parameter_set_id.as_str()).map_or(&[][..], |(_, f)| &f[..]);
+        by_set.entry(v.parameter_set_id.clone()).or_default().push(validation_summary(v, fit)?);
     }
     let mut out = Vec::with_capacity(rows.len());
+    let mut summaries = summaries;
     for row in &rows {
         let active = robot.active_parameter_set_id.as_deref() == Some(row.id.as_str());
         let validations = by_set.remove(&row.id).unwrap_or_default();
-        out.push(summary_out(row, active, quality_summary(&row.doc_json)?, validations, None)?);
+        let summary = summaries.remove(row.id.as_str()).unwrap_or((Value::Null, Vec::new()));
+        out.push(summary_out(row, active, summary, validations, None)?);
     }
     Ok((page.headers(total, out.len()), Json(out)))
 }

@@ -124,7 +124,19 @@ pub async fn parameter_set(
     let set: ParameterSetFile = stored(&row.doc_json, "parameter set")?;
     let latest = records::validations_of_set(&state.pool, &set_id).await?;
     let validation = latest.first().map(validation_doc).transpose()?;
-    Ok(html(report::parameter_set_report(&set, validation.as_ref())))
+    let robot = records::robot(&state.pool, &row.robot_id).await?;
+    let sessions: Vec<String> = stored(&row.sessions_json, "parameter set sessions")?;
+    let robot_name = robot.map_or_else(|| row.robot_id.clone(), |r| r.name);
+    let source = report::ReportSource {
+        set: format!("Parameter set {}, version {}", row.id, row.version),
+        made: Some(row.created_at.clone()),
+        input: Some(if sessions.is_empty() {
+            format!("a file imported for robot {robot_name}")
+        } else {
+            format!("sessions {} of robot {robot_name}", sessions.join(", "))
+        }),
+    };
+    Ok(html(report::parameter_set_report(&set, validation.as_ref(), &source)))
 }
 
 /// A diagnosis's report.
@@ -191,6 +203,12 @@ pub async fn history(
             p95_mm: e.validation.as_ref().and_then(|v| v.p95_mm),
             max_mm: e.validation.as_ref().and_then(|v| v.max_mm),
             nominal_mean_mm: e.validation.as_ref().and_then(|v| v.nominal_mean_mm),
+            in_sample_mean_mm: e.in_sample.as_ref().and_then(|v| v.mean_mm),
+            in_sample_sessions: e
+                .in_sample
+                .as_ref()
+                .map(|v| v.sessions.iter().filter(|s| e.fit_sessions.contains(s)).cloned().collect())
+                .unwrap_or_default(),
             verdict: e.diagnosis.as_ref().map(|d| d.verdict.clone()),
         })
         .collect();

@@ -102,6 +102,13 @@ pub struct IdentificationResult {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct ValidationJobSummary {
     pub measurements: usize,
+    /// Whether the figures are held out: none of the validated sessions was used to fit the set
+    /// (absent in results stored before this was recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out: Option<bool>,
+    /// The same in words: what the set was fitted on, and whether that includes these sessions.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out_statement: Option<String>,
     #[serde(flatten)]
     pub calibrated: ErrorFigures,
     pub nominal: ErrorFigures,

@@ -47,6 +47,8 @@ pub enum Inputs {
     Validation {
         job: ValidationJob,
         set_json: String,
+        /// The sessions the store lists for the set (what it was fitted on).
+        set_sessions: Vec<String>,
         cell: CellFile,
         indices: StoredIndices,
         session_names: Vec<String>,
@@ -172,9 +174,11 @@ pub async fn load(pool: &SqlitePool, kind: JobKind, robot_id: &str, request_json
                 stored.file.artefact = cells::calibration_artefact(pool, &robot.id).await?;
             }
             let session_names = sessions.iter().map(|s| s.name.clone()).collect();
+            let set_sessions = self::stored(&set.sessions_json, "parameter-set sessions")?;
             Ok(Inputs::Validation {
                 job,
                 set_json: set.doc_json,
+                set_sessions,
                 cell: stored.file,
                 indices: stored.indices,
                 session_names,
@@ -274,6 +278,18 @@ fn stored_quality(doc: &mut ParameterSetDoc, indices: &StoredIndices) {
             }
         }
     }
+    if let Some(items) = q.get_mut("fit_measurements").and_then(Value::as_array_mut) {
+        for item in items {
+            let session = item["session"].as_str().unwrap_or("").to_string();
+            if let Some(ix) = item.get_mut("indices").and_then(Value::as_array_mut) {
+                for i in ix.iter_mut() {
+                    if let Some(k) = i.as_u64() {
+                        *i = json!(indices.stored(&session, k as usize));
+                    }
+                }
+            }
+        }
+    }
 }
 
 /// A diagnosis's failure: its options as 422, the starting model's fit as an identification's.
@@ -322,24 +338,33 @@ pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64, &'static str) + Sync)) ->
                 activate: request.activate,
             })
         }
-        Inputs::Validation { job, set_json, cell, indices, session_names } => {
+        Inputs::Validation { job, set_json, set_sessions, cell, indices, session_names } => {
             let doc = ParameterSetDoc::from_json(&set_json)
                 .map_err(|e| JobError::Internal(format!("stored parameter set: {e}")))?;
             let cell_si = cell.to_cell().map_err(|e| JobError::domain(e, "stored cell"))?;
             progress(0.1, "validating");
-            let mut report = crate::validate::report::validate(
+            // What the set was fitted on, in stored indices; the cell's indices are mapped to them
+            // below, before the report counts the fitted measurements.
+            let fit = crate::domain::validation::fit_data(&doc, &set_sessions);
+            let mut report = crate::validate::report::validate_fitted(
                 &doc.set,
                 &cell_si,
                 &session_names,
                 crate::validate::report::Reference::Measured,
+                Some(&fit),
             )
             .map_err(|e| JobError::Invalid { detail: e.to_string(), field: Some("sessions".into()) })?;
+            // Measured on the cell's indices, before they are mapped to the stored ones.
+            let uncertainty = crate::domain::validity::HeldOutUncertainty::of_report(&doc, &cell_si, &report)
+                .map_err(|e| JobError::Internal(format!("stored parameter set: {e}")))?;
             for r in &mut report.residuals {
                 r.index = indices.stored(&r.session, r.index);
             }
-            let full = crate::domain::validation::report_to_json(&report, job.request.residuals);
+            let full = crate::domain::validation::report_to_json_with(&report, uncertainty, job.request.residuals);
             let summary = ValidationJobSummary {
                 measurements: report.calibrated.position.n,
+                held_out: Some(report.held_out()),
+                held_out_statement: Some(crate::domain::validation::held_out_statement(&report)),
                 calibrated: ErrorFigures::of(&report.calibrated.position),
                 nominal: ErrorFigures::of(&report.nominal.position),
             };

@@ -75,6 +75,11 @@ impl Compensator {
         Self::with_options(set, IkOptions::default())
     }
 
+    /// Each joint's limits, rad.
+    pub fn limits(&self) -> &[[f64; 2]] {
+        &self.limits
+    }
+
     pub fn with_options(set: &ParameterSet, opts: IkOptions) -> Self {
         let calibrated = set.chain();
         let nominal = set.nominal_chain();

@@ -23,7 +23,7 @@ pub mod validation;
 
 pub use diagnosis::diagnosis_report;
 pub use history::{HistoryPoint, history_report};
-pub use parameters::parameter_set_report;
+pub use parameters::{ReportSource, parameter_set_report};
 pub use studies::{crossval_report, study_report};
 pub use validation::{ValidationDoc, validation_report};
 

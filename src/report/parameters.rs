@@ -165,9 +165,42 @@ pub fn parameter_sections(set: &ParameterSetFile) -> String {
     s
 }
 
-/// The identification's report page, with the set's latest validation when given.
-pub fn parameter_set_report(set: &ParameterSetFile, validation: Option<&ValidationDoc>) -> String {
-    let mut body = parameter_sections(set);
+/// Where an identification report's set comes from: the one line of the page the front ends
+/// write differently (the service names its stored set, the command line its files).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ReportSource {
+    /// The set: `parameter set <id>, version <n>` or `parameter-set file <path>`.
+    pub set: String,
+    /// When it was made (RFC 3339).
+    pub made: Option<String>,
+    /// What it was made from: the sessions and the robot, or the cell file.
+    pub input: Option<String>,
+}
+
+impl ReportSource {
+    /// The line, marked `class="meta source"` (the pages of the two front ends differ in it only).
+    pub fn html(&self) -> String {
+        let mut s = format!("<p class=\"meta source\">{}", esc(&self.set));
+        if let Some(m) = &self.made {
+            s.push_str(&format!("; made {}", esc(m)));
+        }
+        if let Some(i) = &self.input {
+            s.push_str(&format!(" from {}", esc(i)));
+        }
+        s.push_str(".</p>\n");
+        s
+    }
+}
+
+/// The identification's report page, with the set's latest validation when given, headed by
+/// where the set comes from.
+pub fn parameter_set_report(
+    set: &ParameterSetFile,
+    validation: Option<&ValidationDoc>,
+    source: &ReportSource,
+) -> String {
+    let mut body = source.html();
+    body.push_str(&parameter_sections(set));
     match validation {
         Some(v) => {
             body.push_str("<h2>Latest validation</h2>");

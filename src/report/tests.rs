@@ -47,10 +47,11 @@ fn the_validation_report_draws_every_plot_and_tells_the_reports_numbers() {
     let html = validation_report(&doc);
     let elapsed = t.elapsed();
     self_contained(&html);
-    // Histogram, CDF, Q–Q, the per-axis grid, |e| against both distances, the projections.
+    // Histogram, the calibrated and the nominal CDF (each on its own scale), Q–Q, the per-axis
+    // grid, |e| against both distances (calibrated and nominal apart), the projections.
     assert!(sim.cell.artefact.is_some());
-    assert_eq!(count(&html, "<svg"), 7);
-    assert_eq!(doc.plot_count(), 7);
+    assert_eq!(count(&html, "<svg"), 10);
+    assert_eq!(doc.plot_count(), 10);
     // The projections' points: one circle (fill) and one outline per validation pose per view,
     // beside the other plots' circles.
     let n = report.residuals.len();
@@ -70,6 +71,8 @@ fn the_validation_report_draws_every_plot_and_tells_the_reports_numbers() {
     // The regressions' R² and the Shapiro–Wilk p of each axis.
     let r2 = report.calibrated.vs_base_distance.unwrap().r2;
     assert!(html.contains(&format!("calibrated R² = {r2:.3}")), "R² {r2}");
+    assert!(html.contains("|e| of the calibrated model against the distance to the base"));
+    assert!(html.contains("|e| of the nominal model against the distance to the base"));
     let px = report.calibrated.per_axis[0].shapiro.unwrap().p_value;
     assert!(html.contains(&html::p_value(px)));
     // Rendering is fast (a debug build; a release build is several times faster).
@@ -115,7 +118,7 @@ fn the_identification_report_tabulates_each_parameter_with_its_error_bar() {
         json!({"kappa_si": 812.5, "kappa_scaled": 40.2, "observability_si": {"O1": 0.0123}, "n_measurements": 30}),
     );
     let file = doc.to_file();
-    let html = parameter_set_report(&file, None);
+    let html = parameter_set_report(&file, None, &crate::report::ReportSource::default());
     self_contained(&html);
     // Two units with uncertainties (mm, deg): two error-bar plots.
     assert_eq!(count(&html, "<svg"), 2);
@@ -134,8 +137,8 @@ fn the_identification_report_tabulates_each_parameter_with_its_error_bar() {
 
     // With its validation: the validation's plots follow.
     let v = ValidationDoc::from_value(&report_to_json(&validation(&sim), true)).unwrap();
-    let html = parameter_set_report(&file, Some(&v));
-    assert_eq!(count(&html, "<svg"), 2 + 7);
+    let html = parameter_set_report(&file, Some(&v), &crate::report::ReportSource::default());
+    assert_eq!(count(&html, "<svg"), 2 + 10);
 }
 
 fn diagnosis_json() -> serde_json::Value {

@@ -118,6 +118,11 @@ pub struct ValidationDoc {
     pub residuals: Option<Vec<Residual>>,
     #[serde(default)]
     pub balls_mm: Option<[[f64; 3]; 3]>,
+    /// Held out or in-sample, in words (absent in reports stored before it was recorded).
+    #[serde(default)]
+    pub held_out_statement: Option<String>,
+    #[serde(default)]
+    pub held_out: Option<bool>,
 }
 
 impl ValidationDoc {
@@ -129,9 +134,11 @@ impl ValidationDoc {
     /// The number of plots [`validation_sections`] draws for this document.
     pub fn plot_count(&self) -> usize {
         let Some(res) = self.residuals.as_ref().filter(|r| !r.is_empty()) else { return 0 };
-        let mut n = 4; // histogram, CDF, Q–Q, per-axis grid
-        n += usize::from(self.calibrated.vs_base_distance.is_some());
-        n += usize::from(
+        // Histogram, the CDFs of the calibrated and the nominal model (each on its own scale),
+        // Q–Q, per-axis grid; |e| against each distance, calibrated and nominal apart.
+        let mut n = 5;
+        n += 2 * usize::from(self.calibrated.vs_base_distance.is_some());
+        n += 2 * usize::from(
             self.calibrated.vs_zone_distance.is_some() && res.iter().all(|r| r.distance_to_zone_mm.is_some()),
         );
         n += usize::from(res.iter().all(|r| r.position_mm.is_some()));
@@ -186,6 +193,11 @@ fn fit_cell(f: &Option<Fit>) -> [String; 4] {
     }
 }
 
+fn capitalised(s: &str) -> String {
+    let mut c = s.chars();
+    c.next().map_or_else(String::new, |f| f.to_uppercase().collect::<String>() + c.as_str())
+}
+
 /// The validation's sections (tables and plots), for a page of its own or inside the
 /// identification's report.
 pub fn validation_sections(v: &ValidationDoc) -> String {
@@ -198,6 +210,11 @@ pub fn validation_sections(v: &ValidationDoc) -> String {
         v.calibrated.n,
         if v.reference == "truth" { "true position (virtual cell)" } else { "measured position" }
     ));
+    match (v.held_out, &v.held_out_statement) {
+        (Some(true), Some(why)) => s.push_str(&format!("<p class=\"meta\">{}.</p>", esc(&capitalised(why)))),
+        (Some(false), Some(why)) => s.push_str(&format!("<p class=\"warn\">{}.</p>", esc(&capitalised(why)))),
+        _ => {}
+    }
     if v.purposes.iter().any(|p| p == "identification") {
         s.push_str(
             "<p class=\"warn\">Some sessions were used for the identification: their figures score the fit, \
@@ -298,11 +315,15 @@ pub fn validation_sections(v: &ValidationDoc) -> String {
     let cal: Vec<f64> = res.iter().map(|r| r.error_norm_mm).collect();
     let nom: Vec<f64> = res.iter().map(|r| r.nominal_error_norm_mm).collect();
     s.push_str("<h2>Distribution of the position errors</h2>");
-    let [hist, cdf, qq] = plot::distribution_svgs("|e|", "mm", &cal, Some(("nominal", &nom)));
+    // Each model on its own scale: the nominal model's errors are a hundred times the calibrated
+    // one's, and on one axis the calibrated curve would be a flat line at zero.
+    let [hist, cdf, qq] = plot::distribution_svgs("|e|", "mm", &cal, None);
+    let [_, nominal_cdf, _] = plot::distribution_svgs("|e| of the nominal model", "mm", &nom, None);
     s.push_str(&figure(&hist, "Calibrated |e| with the normal of the same mean and σ (cf. Fig. 5.17)."));
+    s.push_str(&figure(&cdf, "Empirical CDF of the calibrated |e| (solid) with its fitted normal (dashed)."));
     s.push_str(&figure(
-        &cdf,
-        "Empirical CDF of |e|: calibrated (dark, solid) with its fitted normal (dashed), nominal (light, dashed).",
+        &nominal_cdf,
+        "Empirical CDF of the nominal model's |e| on the same poses, on its own scale (with its fitted normal).",
     ));
     s.push_str(&figure(&qq, "Normal Q–Q plot of the calibrated |e|: points on the line are normal."));
     let axes: [Vec<f64>; 3] = std::array::from_fn(|k| res.iter().map(|r| r.error_mm[k]).collect());
@@ -319,48 +340,39 @@ pub fn validation_sections(v: &ValidationDoc) -> String {
     s.push_str("<h2>Error against distance</h2>");
     let line = |f: &Option<Fit>| f.as_ref().map(|f| (f.slope_mm_per_mm, f.intercept_mm));
     let r2 = |f: &Option<Fit>| f.as_ref().map_or("—".into(), |f| fixed(f.r2, 3));
+    // One panel per model, each on its own |e| scale (the nominal errors would flatten the
+    // calibrated ones against zero).
+    let mut against = |what: &str, x_desc: &str, d: &[f64], fits: (&Option<Fit>, &Option<Fit>), fig: &str| {
+        for (model, errors, fit) in [("calibrated", &cal, fits.0), ("nominal", &nom, fits.1)] {
+            let points: Vec<(f64, f64)> = d.iter().zip(errors.iter()).map(|(x, e)| (*x, *e)).collect();
+            let svg = plot::scatter_fit_svg(
+                &format!("|e| of the {model} model against the distance to {what}"),
+                x_desc,
+                "|e| (mm)",
+                &[ScatterSeries { label: model, points: &points, line: line(fit) }],
+            );
+            s.push_str(&figure(&svg, &format!("Least-squares line: {model} R² = {} (cf. Fig. {fig}).", r2(fit))));
+        }
+    };
     if v.calibrated.vs_base_distance.is_some() {
-        let c: Vec<(f64, f64)> = res.iter().map(|r| (r.distance_to_base_mm, r.error_norm_mm)).collect();
-        let n: Vec<(f64, f64)> = res.iter().map(|r| (r.distance_to_base_mm, r.nominal_error_norm_mm)).collect();
-        let svg = plot::scatter_fit_svg(
-            "|e| against the distance to the base",
+        let d: Vec<f64> = res.iter().map(|r| r.distance_to_base_mm).collect();
+        against(
+            "the base",
             "distance to the base origin (mm)",
-            "|e| (mm)",
-            &[
-                ScatterSeries { label: "calibrated", points: &c, line: line(&v.calibrated.vs_base_distance) },
-                ScatterSeries { label: "nominal", points: &n, line: line(&v.nominal.vs_base_distance) },
-            ],
+            &d,
+            (&v.calibrated.vs_base_distance, &v.nominal.vs_base_distance),
+            "5.15",
         );
-        s.push_str(&figure(
-            &svg,
-            &format!(
-                "Least-squares lines: calibrated R² = {}, nominal R² = {} (cf. Fig. 5.15).",
-                r2(&v.calibrated.vs_base_distance),
-                r2(&v.nominal.vs_base_distance)
-            ),
-        ));
     }
     let zone: Option<Vec<f64>> = res.iter().map(|r| r.distance_to_zone_mm).collect();
     if let (Some(zone), Some(_)) = (&zone, &v.calibrated.vs_zone_distance) {
-        let c: Vec<(f64, f64)> = zone.iter().zip(res).map(|(d, r)| (*d, r.error_norm_mm)).collect();
-        let n: Vec<(f64, f64)> = zone.iter().zip(res).map(|(d, r)| (*d, r.nominal_error_norm_mm)).collect();
-        let svg = plot::scatter_fit_svg(
-            "|e| against the distance to the calibration zone",
+        against(
+            "the calibration zone",
             "distance to the balls' centroid (mm)",
-            "|e| (mm)",
-            &[
-                ScatterSeries { label: "calibrated", points: &c, line: line(&v.calibrated.vs_zone_distance) },
-                ScatterSeries { label: "nominal", points: &n, line: line(&v.nominal.vs_zone_distance) },
-            ],
+            zone,
+            (&v.calibrated.vs_zone_distance, &v.nominal.vs_zone_distance),
+            "5.16",
         );
-        s.push_str(&figure(
-            &svg,
-            &format!(
-                "Least-squares lines: calibrated R² = {}, nominal R² = {} (cf. Fig. 5.16).",
-                r2(&v.calibrated.vs_zone_distance),
-                r2(&v.nominal.vs_zone_distance)
-            ),
-        ));
     }
     let positions: Option<Vec<[f64; 3]>> = res.iter().map(|r| r.position_mm).collect();
     if let Some(p) = positions {

@@ -19,7 +19,13 @@
 //!
 //! Any session of the cell can be validated on: scoring a set on its own identification data is
 //! legitimate (the identification residual), but it is not a validation. The report lists each
-//! session's purpose so a front end can flag it.
+//! session's purpose so a front end can flag it, and — given what the set was fitted on
+//! ([`FitData`], from its document) — which sessions and measurements the set has already seen:
+//! a validation is **held out** ([`ValidationReport::held_out`]) only when none of its sessions
+//! was fitted on and at least one is a validation session. A set accepted from a diagnosis that
+//! pooled the validation sessions is fitted on them, so validating it on them again is in-sample.
+
+use std::collections::BTreeMap;
 
 use nalgebra::Vector3;
 
@@ -128,6 +134,53 @@ impl Region {
     }
 }
 
+/// What a parameter set was fitted on, as its document records it: the sessions and, when
+/// recorded, each session's measurement indices (a DETMAX subset fits only some).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FitData {
+    /// Whether the set records its fit data at all (a table typed in or imported from elsewhere
+    /// does not: nothing is known to be in-sample, which the report says).
+    pub recorded: bool,
+    /// The sessions fitted on, by name.
+    pub sessions: Vec<String>,
+    /// Per fitted session, the indices of the measurements the fit used; a session missing here
+    /// counts as fitted on whole.
+    pub measurements: BTreeMap<String, Vec<usize>>,
+}
+
+impl FitData {
+    /// Nothing recorded.
+    pub fn unknown() -> FitData {
+        FitData::default()
+    }
+
+    /// Fitted on these sessions (every measurement of each).
+    pub fn of_sessions<S: AsRef<str>>(sessions: &[S]) -> FitData {
+        FitData {
+            recorded: true,
+            sessions: sessions.iter().map(|s| s.as_ref().to_string()).collect(),
+            measurements: BTreeMap::new(),
+        }
+    }
+
+    /// Whether the set was fitted on (some of) this session's measurements.
+    pub fn has_session(&self, name: &str) -> bool {
+        self.sessions.iter().any(|s| s == name)
+    }
+
+    /// Whether the fit used measurement `index` of session `name`.
+    pub fn has_measurement(&self, name: &str, index: usize) -> bool {
+        self.has_session(name) && self.measurements.get(name).is_none_or(|ix| ix.binary_search(&index).is_ok())
+    }
+}
+
+/// The rule of a held-out validation, in one place (the service's compensation gate states the
+/// same in SQL, `db::records::latest_held_out_validation`): none of the validated sessions was
+/// fitted on, and at least one of them is a validation session.
+pub fn is_held_out(sessions: &[String], purposes: &[Purpose], fit_sessions: &[String]) -> bool {
+    !sessions.iter().any(|s| fit_sessions.contains(s)) && purposes.contains(&Purpose::Validation)
+}
+
 /// The validation of one parameter set on selected sessions.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ValidationReport {
@@ -145,9 +198,11 @@ pub struct ValidationReport {
     pub per_session: Vec<SessionErrors>,
     /// One per measurement, sessions in selection order, measurements in file order.
     pub residuals: Vec<Residual>,
-    /// The region the validation-purpose (held-out) sessions' measurements cover: where this
-    /// validation shows the model to hold. `None` without such a session.
+    /// The region the held-out sessions' measurements cover (validation sessions the set was not
+    /// fitted on): where this validation shows the model to hold. `None` without such a session.
     pub region: Option<Region>,
+    /// What the set was fitted on, when the caller said ([`validate_fitted`]); `None`: not said.
+    pub fit: Option<FitData>,
     /// The artefact's ball centres in {W}, m (the calibration zone), when the cell has one.
     pub balls: Option<[Vector3<f64>; 3]>,
 }
@@ -192,12 +247,25 @@ pub fn validation_sessions(cell: &Cell) -> Vec<String> {
     cell.sessions_for(Purpose::Validation).map(|s| s.name.clone()).collect()
 }
 
-/// Validate `set` on the named sessions of `cell` against `reference`.
+/// Validate `set` on the named sessions of `cell` against `reference`, not saying what the set was
+/// fitted on (every validation session counts as held out).
 pub fn validate(
     set: &ParameterSet,
     cell: &Cell,
     sessions: &[String],
     reference: Reference<'_>,
+) -> Result<ValidationReport, ValidateError> {
+    validate_fitted(set, cell, sessions, reference, None)
+}
+
+/// [`validate`], knowing what the set was fitted on: the report marks the sessions it has seen,
+/// and its validated region leaves them out.
+pub fn validate_fitted(
+    set: &ParameterSet,
+    cell: &Cell,
+    sessions: &[String],
+    reference: Reference<'_>,
+    fit: Option<&FitData>,
 ) -> Result<ValidationReport, ValidateError> {
     if sessions.is_empty() {
         return Err(ValidateError::NoSession);
@@ -269,10 +337,13 @@ pub fn validate(
             };
             let error = reference_position - cal.t;
             let nominal_error = reference_position - nom.t;
-            if !(error.iter().chain(nominal_error.iter()).all(|v| v.is_finite())) {
+            // Finite components can still overflow a norm (a reading at 1e160 mm): both the
+            // vectors and their lengths must be numbers the statistics can hold.
+            let lengths = [error.norm(), nominal_error.norm(), (reference_position - base_origin).norm()];
+            if !(error.iter().chain(nominal_error.iter()).chain(&lengths).all(|v| v.is_finite())) {
                 return Err(ValidateError::NotFinite { session: session.name.clone(), index });
             }
-            if session.purpose == Purpose::Validation {
+            if session.purpose == Purpose::Validation && !fit.is_some_and(|f| f.has_session(&session.name)) {
                 held_out.push((&m.q[..], reference_position));
             }
             residuals.push(Residual {
@@ -293,33 +364,55 @@ pub fn validate(
     }
     let calibrated = |r: &Residual| (r.error, r.orientation_error);
     let nominal = |r: &Residual| (r.nominal_error, r.nominal_orientation_error);
-    let per_session = selected
-        .iter()
-        .filter_map(|s| {
-            let mine: Vec<Residual> = residuals.iter().filter(|r| r.session == s.name).cloned().collect();
-            (!mine.is_empty()).then(|| SessionErrors {
+    let mut per_session = Vec::new();
+    for s in &selected {
+        let mine: Vec<Residual> = residuals.iter().filter(|r| r.session == s.name).cloned().collect();
+        if !mine.is_empty() {
+            per_session.push(SessionErrors {
                 session: s.name.clone(),
                 purpose: s.purpose,
-                calibrated: model_errors(&mine, calibrated),
-                nominal: model_errors(&mine, nominal),
-            })
-        })
-        .collect();
+                calibrated: model_errors(&mine, calibrated)?,
+                nominal: model_errors(&mine, nominal)?,
+            });
+        }
+    }
     Ok(ValidationReport {
         sessions: selected.iter().map(|s| s.name.clone()).collect(),
         purposes: selected.iter().map(|s| s.purpose).collect(),
         against_truth: matches!(reference, Reference::Truth(_)),
-        calibrated: model_errors(&residuals, calibrated),
-        nominal: model_errors(&residuals, nominal),
+        calibrated: model_errors(&residuals, calibrated)?,
+        nominal: model_errors(&residuals, nominal)?,
         per_session,
         residuals,
         region: Region::of(held_out),
         balls: cell.artefact.as_ref().map(|a| *a.triangle.centres()),
+        fit: fit.cloned(),
     })
 }
 
+impl ValidationReport {
+    /// Whether this validation is held out ([`is_held_out`]): with no fit data given, whether it
+    /// holds a validation session.
+    pub fn held_out(&self) -> bool {
+        let fitted = self.fit.as_ref().map_or(&[][..], |f| &f.sessions[..]);
+        is_held_out(&self.sessions, &self.purposes, fitted)
+    }
+
+    /// The validated sessions the set was fitted on, in selection order.
+    pub fn in_sample_sessions(&self) -> Vec<String> {
+        let Some(f) = &self.fit else { return Vec::new() };
+        self.sessions.iter().filter(|s| f.has_session(s)).cloned().collect()
+    }
+
+    /// How many of the validated measurements of `session` the fit used.
+    pub fn fitted_measurements(&self, session: &str) -> usize {
+        let Some(f) = &self.fit else { return 0 };
+        self.residuals.iter().filter(|r| r.session == session && f.has_measurement(session, r.index)).count()
+    }
+}
+
 /// The logged state: readings, gravity torques, approach directions, temperature.
-fn joint_state(
+pub fn joint_state(
     gravity: &GravityModel,
     q: &[f64],
     approach: Option<&[i8]>,
@@ -340,31 +433,42 @@ fn joint_state(
 }
 
 /// Statistics of one model's errors; `pick` selects its error vector and orientation error.
-fn model_errors(residuals: &[Residual], pick: impl Fn(&Residual) -> (Vector3<f64>, Option<f64>)) -> ModelErrors {
+fn model_errors(
+    residuals: &[Residual],
+    pick: impl Fn(&Residual) -> (Vector3<f64>, Option<f64>),
+) -> Result<ModelErrors, ValidateError> {
     let errors: Vec<Vector3<f64>> = residuals.iter().map(|r| pick(r).0).collect();
     let norms: Vec<f64> = errors.iter().map(|e| e.norm()).collect();
     let angles: Vec<f64> = residuals.iter().filter_map(|r| pick(r).1).collect();
     let base: Vec<f64> = residuals.iter().map(|r| r.distance_to_base).collect();
     let zone: Option<Vec<f64>> = residuals.iter().map(|r| r.distance_to_zone).collect();
-    let axis = |k: usize| {
+    // The measurement whose error the statistics cannot hold (validate() refuses non-finite
+    // errors first, so this names one only if a sum overflows), for the error.
+    let culprit = || {
+        residuals.iter().zip(&norms).max_by(|a, b| a.1.total_cmp(b.1)).map_or(ValidateError::NoMeasurement, |(r, _)| {
+            ValidateError::NotFinite { session: r.session.clone(), index: r.index }
+        })
+    };
+    let stats = |v: &[f64]| ErrorStats::of(v).filter(|s| s.mean.is_finite() && s.rms.is_finite() && s.std.is_finite());
+    let axis = |k: usize| -> Result<AxisStats, ValidateError> {
         let v: Vec<f64> = errors.iter().map(|e| e[k]).collect();
-        let s = ErrorStats::of(&v).expect("validate() checked every error is finite and there is one");
-        AxisStats {
+        let s = stats(&v).ok_or_else(culprit)?;
+        Ok(AxisStats {
             mean: s.mean,
             std: s.std,
             min: v.iter().copied().fold(f64::INFINITY, f64::min),
             max: s.max,
             shapiro: shapiro_wilk(&v).ok(),
-        }
+        })
     };
-    ModelErrors {
-        position: ErrorStats::of(&norms).expect("validate() checked every error is finite and there is one"),
+    Ok(ModelErrors {
+        position: stats(&norms).ok_or_else(culprit)?,
         orientation: ErrorStats::of(&angles),
-        per_axis: [axis(0), axis(1), axis(2)],
+        per_axis: [axis(0)?, axis(1)?, axis(2)?],
         shapiro: shapiro_wilk(&norms).ok(),
         vs_base_distance: linear_fit(&base, &norms),
         vs_zone_distance: zone.and_then(|z| linear_fit(&z, &norms)),
-    }
+    })
 }
 
 /// The calibrated and nominal chains for a session's measurements: the set's own tool parameters

@@ -6,8 +6,26 @@
 
 use super::{ExportSource, exact};
 use crate::domain::ParameterSetDoc;
+use crate::domain::rounding::{SIGNIFICANT, significant};
 use crate::kinematics::params::{JointTerm, Param};
-use crate::units::{DEG, MM};
+use crate::units::{DEG, MM, OUT_DEG, OUT_MM, round_to};
+
+/// Output step of a compliance, deg/(N·m): at the largest holding torque of the robots robocal
+/// models (~1000 N·m) a step moves a joint by 1e-6°, the resolution of every printed angle.
+pub const OUT_COMPLIANCE: f64 = 1e-9;
+
+/// A table value at its column's resolution (mm 0.1 µm, deg 1e-6°, deg/(N·m) 1e-9), printed in
+/// its shortest form.
+fn value_text(v: f64, step: f64) -> String {
+    exact(round_to(v, step))
+}
+
+/// A standard deviation at its column's resolution; one below it keeps one significant digit
+/// (written as 4e-6), so an estimated σ never reads as zero.
+fn std_text(v: f64, step: f64) -> String {
+    let r = round_to(v, step);
+    if r == 0.0 && v != 0.0 { format!("{:.0e}", v) } else { exact(r) }
+}
 
 /// The value columns, in order (each followed, after them all, by its `_std_` column).
 pub const COLUMNS: [&str; 12] = [
@@ -33,6 +51,9 @@ fn joint_params(j: usize) -> [Param; 6] {
 /// Column unit per SI unit of the parameters of a joint row, then of a pose row.
 const JOINT_SCALE: [f64; 6] = [DEG, MM, DEG, MM, DEG, DEG];
 const POSE_SCALE: [f64; 6] = [MM, MM, MM, DEG, DEG, DEG];
+/// Output step of each joint-row and pose-row column (file units).
+const JOINT_STEP: [f64; 6] = [OUT_DEG, OUT_MM, OUT_DEG, OUT_MM, OUT_DEG, OUT_COMPLIANCE];
+const POSE_STEP: [f64; 6] = [OUT_MM, OUT_MM, OUT_MM, OUT_DEG, OUT_DEG, OUT_DEG];
 
 /// The CSV text: `#` header lines, the column line, then base, joint1 … jointN, tool.
 pub fn write(doc: &ParameterSetDoc, source: &ExportSource) -> String {
@@ -68,11 +89,12 @@ pub fn write(doc: &ParameterSetDoc, source: &ExportSource) -> String {
         );
         if !in_table {
             let k = p.unit().to_si();
+            let sig = |v: f64| exact(significant(v, SIGNIFICANT));
             out.push_str(&format!(
                 "# not in the table: {p} = {} {}{}\n",
-                exact(set.values[i] / k),
+                sig(set.values[i] / k),
                 p.unit().as_str(),
-                doc.std[i].map(|s| format!(" (std {})", exact(s / k))).unwrap_or_default()
+                doc.std[i].map(|s| format!(" (std {})", sig(s / k))).unwrap_or_default()
             ));
         }
     }
@@ -81,15 +103,23 @@ pub fn write(doc: &ParameterSetDoc, source: &ExportSource) -> String {
     header.extend(value_cols.iter().map(|c| std_column(c)));
     out.push_str(&header.join(","));
     out.push('\n');
-    let cell = |p: Param, scale: f64| -> (String, String) {
+    let cell = |p: Param, scale: f64, step: f64| -> (String, String) {
         match set.layout.index_of(p) {
-            Some(i) => (exact(set.values[i] / scale), doc.std[i].map(|s| exact(s / scale)).unwrap_or_default()),
+            Some(i) => (
+                value_text(set.values[i] / scale, step),
+                doc.std[i].map(|s| std_text(s / scale, step)).unwrap_or_default(),
+            ),
             None => (String::new(), String::new()),
         }
     };
     let mut row = |label: String, params: [Option<Param>; 12], scales: [f64; 12]| {
-        let (values, stds): (Vec<String>, Vec<String>) =
-            params.iter().zip(scales).map(|(p, s)| p.map(|p| cell(p, s)).unwrap_or_default()).unzip();
+        let steps: [f64; 12] = std::array::from_fn(|k| if k < 6 { JOINT_STEP[k] } else { POSE_STEP[k - 6] });
+        let (values, stds): (Vec<String>, Vec<String>) = params
+            .iter()
+            .zip(scales)
+            .zip(steps)
+            .map(|((p, s), st)| p.map(|p| cell(p, s, st)).unwrap_or_default())
+            .unzip();
         out.push_str(&format!("{label},{},{}\n", values.join(","), stds.join(",")));
     };
     let pose_row = |block: fn(usize) -> Param| -> [Option<Param>; 12] {
@@ -170,19 +200,42 @@ mod tests {
                 ("d_mm", format!("d{}", j + 1)),
                 ("compliance_deg_per_nm", format!("c{}", j + 1)),
             ] {
-                assert_eq!(value(&row, c).unwrap(), entry(&name).value, "{row} {c}");
+                let step = if c.ends_with("_mm") {
+                    OUT_MM
+                } else if c.ends_with("_deg") {
+                    OUT_DEG
+                } else {
+                    OUT_COMPLIANCE
+                };
+                assert!((value(&row, c).unwrap() - entry(&name).value).abs() <= 0.5 * step * (1.0 + 1e-9), "{row} {c}");
             }
             assert_eq!(value(&row, "beta_deg").is_some(), j == 2, "{row}");
             assert!(value(&row, "x_mm").is_none());
         }
-        assert_eq!(value("joint3", "beta_deg").unwrap(), entry("beta2").value);
+        assert!((value("joint3", "beta_deg").unwrap() - entry("beta2").value).abs() <= 0.5 * OUT_DEG);
         assert!((value("joint3", "a_std_mm").unwrap() - 4e-3).abs() < 1e-18);
+        // Rounded as README promises: no value longer than its resolution (the issue saw
+        // -253.83500000000004 here).
+        for r in &rows[1..] {
+            for (h, v) in header.iter().zip(r).skip(1).filter(|(_, v)| !v.is_empty() && !v.contains('e')) {
+                let decimals = v.split('.').nth(1).map_or(0, str::len);
+                let most = if h.ends_with("_mm") {
+                    4
+                } else if h.ends_with("_deg") {
+                    6
+                } else {
+                    9
+                };
+                assert!(decimals <= most, "{h} = {v}");
+            }
+        }
         assert!(value("joint3", "d_std_mm").is_none());
         for (c, k) in
             [("x_mm", "x"), ("y_mm", "y"), ("z_mm", "z"), ("rot_a_deg", "a"), ("rot_b_deg", "b"), ("rot_c_deg", "c")]
         {
-            assert_eq!(value("base", c).unwrap(), entry(&format!("base_{k}")).value, "{c}");
-            assert_eq!(value("tool", c).unwrap(), entry(&format!("tool_{k}")).value, "{c}");
+            let step = if c.ends_with("_mm") { OUT_MM } else { OUT_DEG };
+            assert!((value("base", c).unwrap() - entry(&format!("base_{k}")).value).abs() <= 0.5 * step, "{c}");
+            assert!((value("tool", c).unwrap() - entry(&format!("tool_{k}")).value).abs() <= 0.5 * step, "{c}");
         }
         // By hand: Table 5.1's a2 is 270.146 mm; the IRB 120's alpha1 is -90 deg (Table 3.1).
         assert!((value("joint3", "a_mm").unwrap() - 270.146).abs() < 1e-12);

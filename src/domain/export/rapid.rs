@@ -8,10 +8,19 @@
 //! Numbers are the compensation answer's, printed in their shortest form: positions to 0.1 µm,
 //! quaternions to 1e-9 and joints to 1e-6 deg (the answer's output resolution), so the module's
 //! values are the answer's values.
+//!
+//! The robtargets need a tool and a work object: the module declares both (`PERS tooldata
+//! t_<set>`: the tool's declared TCP and payload, as the fake poses were computed with;
+//! `PERS wobjdata w_<set>_<name>`: the work object the fake poses are in — {W} placed by the
+//! set's nominal base, or the request's work object; none for wobj0). The text is ASCII
+//! throughout (controllers read ISO-8859-1): comments are transliterated.
 
 use super::ExportSource;
 use crate::domain::CompensationResult;
 use crate::domain::pose::FrameOut;
+use crate::kinematics::Tool;
+use crate::kinematics::frame::{Frame, quaternion_from_rot};
+use crate::units::{MM, OUT_MM, OUT_UNIT, round_to};
 
 /// RAPID's longest identifier.
 pub const MAX_IDENTIFIER: usize = 32;
@@ -41,6 +50,11 @@ pub struct RapidHeader<'a> {
     pub frame: &'a FrameOut,
     /// Which tool the targets are for.
     pub tool: &'a str,
+    /// That tool's declared TCP and payload (the fake poses' tool): declared as `tooldata`.
+    pub tooldata: Option<&'a Tool>,
+    /// The work object the fake poses are in (its name and frame in the base frame): declared as
+    /// `wobjdata`; `None`: wobj0.
+    pub work_object: Option<&'a (String, Frame)>,
 }
 
 /// Whether `s` is a valid RAPID identifier: a letter, then letters, digits and underscores, at
@@ -79,9 +93,53 @@ fn list(v: &[f64]) -> String {
     v.iter().map(|x| num(*x)).collect::<Vec<_>>().join(",")
 }
 
-/// Text safe in a `!` comment line (one line).
+/// Text in ASCII (a controller reads ISO-8859-1): the symbols robocal's messages use spelled out,
+/// anything else `?`.
+pub fn ascii(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            c if c.is_ascii() => out.push(c),
+            '\u{2013}' | '\u{2014}' | '\u{2212}' => out.push('-'),
+            '\u{b0}' => out.push_str(" deg"),
+            '\u{d7}' => out.push('x'),
+            '\u{b7}' => out.push('*'),
+            '\u{2026}' => out.push_str("..."),
+            '\u{2018}' | '\u{2019}' => out.push('\''),
+            '\u{201c}' | '\u{201d}' => out.push('"'),
+            '\u{2264}' => out.push_str("<="),
+            '\u{2265}' => out.push_str(">="),
+            '\u{b1}' => out.push_str("+/-"),
+            '\u{b5}' | '\u{3bc}' => out.push('u'),
+            '\u{b2}' => out.push_str("^2"),
+            '\u{b3}' => out.push_str("^3"),
+            '\u{2192}' => out.push_str("->"),
+            '\u{221a}' => out.push_str("sqrt"),
+            '\u{3b1}' => out.push_str("alpha"),
+            '\u{3b2}' => out.push_str("beta"),
+            '\u{3b8}' => out.push_str("theta"),
+            '\u{3c3}' => out.push_str("sigma"),
+            '\u{3c4}' => out.push_str("tau"),
+            '\u{3ba}' => out.push_str("kappa"),
+            '\u{2032}' => out.push('\''),
+            '\u{2033}' => out.push_str("''"),
+            '\u{e9}' => out.push('e'),
+            _ => out.push('?'),
+        }
+    }
+    out
+}
+
+/// Text safe in a `!` comment line (one line, ASCII).
 fn comment(s: &str) -> String {
-    s.replace(['\n', '\r'], " ")
+    ascii(&s.replace(['\n', '\r'], " "))
+}
+
+/// `[[x,y,z],[q1,q2,q3,q4]]` of a frame (mm, quaternion), at the answer's output resolution.
+fn pose(f: &Frame) -> String {
+    let t: Vec<f64> = [f.t.x, f.t.y, f.t.z].iter().map(|v| round_to(v / MM, OUT_MM)).collect();
+    let q: Vec<f64> = quaternion_from_rot(&f.r).iter().map(|v| round_to(*v, OUT_UNIT)).collect();
+    format!("[[{}],[{}]]", list(&t), list(&q))
 }
 
 /// Wrap a long comment over lines of about 100 characters, each starting with `    ! `.
@@ -119,6 +177,48 @@ pub fn write(header: &RapidHeader, results: &[CompensationResult]) -> RapidModul
         "p_<target>: robtarget, the fake pose with its confdata (MoveJ/MoveL); j_<target>: jointtarget, the \
          compensated joints (MoveAbsJ). Positions mm, orientation quaternion [q1 = w, q2, q3, q4], joints deg.",
     );
+    // The tool and the work object the robtargets are programmed with.
+    let tool = identifier("t_", Some(header.source.short.as_str()), 0, &mut taken);
+    let wobj = header
+        .work_object
+        .map(|(name, _)| identifier("w_", Some(&format!("{}_{name}", header.source.short)), 0, &mut taken));
+    comment_lines(
+        &mut out,
+        &format!(
+            "Program the robtargets with tool {} and work object {}, e.g.",
+            if header.tooldata.is_some() { tool.as_str() } else { "(the tool named above)" },
+            wobj.as_deref().unwrap_or("wobj0"),
+        ),
+    );
+    out.push_str(&format!(
+        "    !   MoveL p_<target>, v100, fine, {}{};\n",
+        if header.tooldata.is_some() { tool.as_str() } else { "tool0" },
+        wobj.as_deref().map(|w| format!("\\WObj:={w}")).unwrap_or_default()
+    ));
+    let mut prelude = String::new();
+    if let Some(t) = header.tooldata {
+        let tcp = Frame::from_xyzabc(&t.tcp);
+        let com: Vec<f64> = [t.com.x, t.com.y, t.com.z].iter().map(|v| round_to(v / MM, OUT_MM)).collect();
+        // A load of zero mass is refused by the controller: tool0's own load is 0.001 kg.
+        let mass = if t.mass > 0.0 { t.mass } else { 0.001 };
+        comment_lines(&mut prelude, "the tool: its declared TCP (the fake poses' tool) and payload");
+        prelude.push_str(&format!(
+            "    PERS tooldata {tool}:=[TRUE,{},[{},[{}],[1,0,0,0],0,0,0]];\n",
+            pose(&tcp),
+            num(mass),
+            list(&com)
+        ));
+    }
+    if let (Some((name, frame)), Some(w)) = (header.work_object, &wobj) {
+        comment_lines(
+            &mut prelude,
+            &format!(
+                "the work object the fake poses are in ({}), its user frame in the robot's base frame",
+                if name == "W" { "{W}: the measurement frame placed by the set's nominal base" } else { name }
+            ),
+        );
+        prelude.push_str(&format!("    PERS wobjdata {w}:=[FALSE,TRUE,\"\",{},[[0,0,0],[1,0,0,0]]];\n", pose(frame)));
+    }
     let mut failed = Vec::new();
     let mut decls = String::new();
     for (i, r) in results.iter().enumerate() {
@@ -171,6 +271,7 @@ pub fn write(header: &RapidHeader, results: &[CompensationResult]) -> RapidModul
             comment_lines(&mut out, &format!("  {label}: {}", f.error));
         }
     }
+    out.push_str(&prelude);
     out.push_str(&decls);
     out.push_str("ENDMODULE\n");
     RapidModule { text: out, failed }
@@ -220,7 +321,68 @@ mod tests {
     }
 
     fn header<'a>(source: &'a ExportSource, frame: &'a FrameOut) -> RapidHeader<'a> {
-        RapidHeader { robot: "irb120", source, date: "2026-11-24T12:00:00Z", frame, tool: "the set's own" }
+        RapidHeader {
+            robot: "irb120",
+            source,
+            date: "2026-11-24T12:00:00Z",
+            frame,
+            tool: "the set's own",
+            tooldata: None,
+            work_object: None,
+        }
+    }
+
+    /// The module declares the tooldata and wobjdata its robtargets are programmed with — the
+    /// tool's declared TCP and load, the work object the fake poses are in ({W} placed by the
+    /// set's nominal base) — and is ASCII throughout, whatever the messages held.
+    #[test]
+    fn it_declares_its_tool_and_work_object_in_ascii() {
+        let set = irb120_table_5_1(trical_tool());
+        let comp = Compensator::new(&set);
+        let frames = TargetFrames::new(&comp, None, None).unwrap();
+        let (name, wobj) = frames.work_object.clone().unwrap();
+        assert_eq!(name, "W");
+        let targets: Vec<TargetSpec> = from_json(
+            r#"[{"id": "a", "joints_deg": [10, 20, -10, 0, 45, 0]},
+                {"id": "far", "position_mm": [2000, 0, 300], "rotation_deg": [0, 90, 0], "cfx": 0}]"#,
+        )
+        .unwrap();
+        let mut results = compensate_targets(&comp, 6, &frames, &crate::domain::validity::Guard::none(), &targets);
+        results[1].error = Some("joint 3 at 170.000° is 5.000° beyond [−110, 70]° – σ µm".into());
+        let source = ExportSource::stored("set-1", 4);
+        let module = write(
+            &RapidHeader {
+                tooldata: Some(&set.tool),
+                work_object: frames.work_object.as_ref(),
+                ..header(&source, &frames.out)
+            },
+            &results,
+        );
+        let text = &module.text;
+        assert!(text.is_ascii(), "{text}");
+        assert!(text.contains("170.000 deg") && text.contains("-110") && text.contains("sigma um"), "{text}");
+        let pers: Vec<&str> = text.lines().map(str::trim).filter(|l| l.starts_with("PERS ")).collect();
+        assert_eq!(pers.len(), 2, "{text}");
+        // PERS tooldata t_v4:=[TRUE,[[40,0,130],[1,0,0,0]],[1.7,[30,0,64],[1,0,0,0],0,0,0]];
+        let tool = pers[0].strip_prefix("PERS tooldata t_v4:=[TRUE,").unwrap().strip_suffix("];").unwrap();
+        assert_eq!(tool, "[[40,0,130],[1,0,0,0]],[1.7,[30,0,64],[1,0,0,0],0,0,0]");
+        // PERS wobjdata w_v4_W:=[FALSE,TRUE,"",[[x,y,z],[q]],[[0,0,0],[1,0,0,0]]]; uframe = (T_0^W)⁻¹.
+        let w = pers[1].strip_prefix("PERS wobjdata w_v4_W:=[FALSE,TRUE,\"\",").unwrap();
+        let uframe = groups(&w[..w.find("]],").unwrap() + 2]);
+        let inv = set.nominal_chain().base().inverse();
+        assert_eq!(wobj, inv);
+        for k in 0..3 {
+            assert!((uframe[0][k] - inv.t[k] / crate::units::MM).abs() <= 0.5e-4, "{uframe:?}");
+        }
+        let q = quaternion_from_rot(&inv.r);
+        for k in 0..4 {
+            assert!((uframe[1][k] - q[k]).abs() <= 0.5e-9, "{uframe:?}");
+        }
+        // How to program them, in the header.
+        assert!(text.contains("    !   MoveL p_<target>, v100, fine, t_v4\\WObj:=w_v4_W;\n"), "{text}");
+        // In the base frame: wobj0, nothing declared for it.
+        let frames = TargetFrames::new(&comp, Some(crate::domain::pose::FrameKind::Base), None).unwrap();
+        assert!(frames.work_object.is_none());
     }
 
     /// A batch compensated by `compensate_targets`, written as RAPID and parsed back: each
