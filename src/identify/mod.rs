@@ -844,6 +844,12 @@ pub fn select_detmax(
 /// kept (see [`IdentifyOptions::identify_payload`]).
 pub const PAYLOAD_SIGNIFICANCE: f64 = 3.0;
 
+/// The global index of the payload's mass, when the problem has one.
+fn payload_mass(problem: &Problem) -> Option<usize> {
+    let i = problem.layout.index_of(Param::ToolMass)?;
+    problem.params.iter().position(|p| *p == GlobalParam::Robot(i))
+}
+
 /// Identify a cell's robot.
 pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, IdentifyError> {
     let Prepared { problem, x0, mut free, mut status, base, fixed, payload_unknown } = prepare(cell, opts)?;
@@ -864,10 +870,26 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
         let mut j = Mat::<f64>::zeros(problem.n_rows, all.len());
         let mut r = vec![0.0; problem.n_rows];
         problem.linearise(&fit.x, &all, &mut j, &mut r);
-        let (again, again_status) = identifiability::select(&problem, &j, &fixed);
+        let (again, mut again_status) = identifiability::select(&problem, &j, &fixed);
         if again != free && !again.is_empty() {
-            (free, status) = (again, again_status);
-            fit = solver::solve(&problem, &free, &fit.x, &opts.solver)?;
+            let mass = payload_unknown.then(|| payload_mass(&problem)).flatten().filter(|g| again.contains(g));
+            match solver::solve(&problem, &again, &fit.x, &opts.solver) {
+                Ok(f) => (fit, free, status) = (f, again, again_status),
+                // An unknown payload whose fit crawls (a valley with the compliances) is not
+                // determined by these data: the fit without it stands, and says so.
+                Err(e @ SolveError::IterationLimit { .. }) if mass.is_some() => {
+                    let g = mass.expect("checked");
+                    let without: Vec<usize> = again.iter().copied().filter(|&c| c != g).collect();
+                    if without != free {
+                        fit = solver::solve(&problem, &without, &fit.x, &opts.solver)?;
+                    }
+                    again_status[g] = Status::Fixed(format!(
+                        "payload not determined by these data (the fit with it does not settle: {e}): held at the declared 0 kg"
+                    ));
+                    (free, status) = (without, again_status);
+                }
+                Err(e) => return Err(e.into()),
+            }
         }
     }
     let rows: Vec<(usize, usize)> = problem.obs.iter().map(|o| (o.row, o.rows)).collect();
@@ -876,11 +898,7 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
     // as products when the arm's own weight barely loads a joint), the fit crawls along it and
     // every fold lands elsewhere. It is then held at the declared 0 kg and reported as such.
     if payload_unknown {
-        let mass = problem
-            .layout
-            .index_of(Param::ToolMass)
-            .and_then(|i| problem.params.iter().position(|p| *p == GlobalParam::Robot(i)));
-        if let Some((g, c)) = mass.and_then(|g| free.iter().position(|&f| f == g).map(|c| (g, c))) {
+        if let Some((g, c)) = payload_mass(&problem).and_then(|g| free.iter().position(|&f| f == g).map(|c| (g, c))) {
             let q = Quality::of(&fit, problem.obs.len(), &rows);
             let (m, sd) = (fit.x[g], q.std[c]);
             if !(m > PAYLOAD_SIGNIFICANCE * sd) {
