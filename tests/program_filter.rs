@@ -326,3 +326,81 @@ fn a_pose_without_joints_before_it_is_named() {
     let text = String::from_utf8(out.files[0].bytes.clone()).unwrap();
     assert!(text.contains("movel(p[0.6, -0.2, 0.4, 0, 3.14, 0], a=1)  # robocal: NOT COMPENSATED:"), "{text}");
 }
+
+/// The command line: the example module filtered to a file (exit 0), the report's lines, the same
+/// bytes as the library; a failing target exits 1 with the file written; a malformed program exits 2
+/// naming the line.
+#[test]
+fn the_command_line_filters_and_exits_by_the_outcome() {
+    let bin = env!("CARGO_BIN_EXE_robocal");
+    let root = env!("CARGO_MANIFEST_DIR");
+    let dir = std::env::temp_dir().join(format!("robocal-filter-cli-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let params = format!("{root}/examples/irb120_table_5_1.json");
+    let run = |args: &[&str]| std::process::Command::new(bin).args(args).current_dir(&dir).output().unwrap();
+    let out = run(&[
+        "filter",
+        &format!("{root}/examples/programs/weld.mod"),
+        "--params",
+        &params,
+        "--out",
+        "w.mod",
+        "--report",
+        "r.csv",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("7 targets, 6 compensated, 1 joint targets kept, 0 not compensated"), "{stdout}");
+    let written = std::fs::read(dir.join("w.mod")).unwrap();
+    let set = robocal::domain::ParameterSetDoc::from_json(&std::fs::read_to_string(&params).unwrap()).unwrap().set;
+    let comp = Compensator::new(&set);
+    let cal =
+        Calibration { set: &set, compensator: &comp, envelope: None, allow_outside_envelope: false, covariance: None };
+    let files = vec![robocal::domain::program::ProgramFile {
+        name: "weld.mod".into(),
+        bytes: std::fs::read(format!("{root}/examples/programs/weld.mod")).unwrap(),
+    }];
+    let lib = filter(&cal, &files, &FilterOptions::default()).unwrap();
+    assert_eq!(written, lib.files[0].bytes);
+    let csv = std::fs::read_to_string(dir.join("r.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 8, "{csv}");
+    assert!(csv.lines().nth(3).unwrap().starts_with("weld.mod,seam{1},8,pose,compensated,"), "{csv}");
+    // To standard output: the program's bytes only.
+    let out = run(&["filter", &format!("{root}/examples/programs/weld.mod"), "--params", &params]);
+    assert_eq!(out.status.code(), Some(0));
+    assert_eq!(out.stdout, lib.files[0].bytes);
+    // A target out of reach: exit 1, the file written and marked.
+    let far = String::from_utf8_lossy(&files[0].bytes).replace("[[170.00,20.00,120.00]", "[[1700.00,20.00,120.00]");
+    std::fs::write(dir.join("far.mod"), far).unwrap();
+    let out = run(&["filter", "far.mod", "--params", &params, "--out", "far_filtered.mod"]);
+    assert_eq!(out.status.code(), Some(1), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("1 of 7 targets not compensated"));
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains("line 21 MoveL (inline): target out of reach"),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    assert!(
+        std::fs::read_to_string(dir.join("far_filtered.mod"))
+            .unwrap()
+            .contains("! robocal: NOT COMPENSATED: target out of reach")
+    );
+    // A malformed program: exit 2, the line named.
+    let bad = String::from_utf8_lossy(&files[0].bytes)
+        .replace("[0,0,0.996195,-0.087156],[-1,0,-2,0]", "[0,0,0.996195,-0.087156],[-1,0,-2]");
+    std::fs::write(dir.join("bad.mod"), bad).unwrap();
+    let out = run(&["filter", "bad.mod", "--params", &params, "--out", "x.mod"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("bad.mod line 7: robtarget approach: expected"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // KRL needs its numbered frames: without them, exit 1 naming them.
+    let out = run(&["filter", &format!("{root}/examples/programs/weld.src"), "--params", &params, "--out", "krl/"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("tool '1' is not declared in the program and was not given"));
+    assert!(dir.join("krl/weld.src").exists() && dir.join("krl/weld.dat").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -28,8 +28,8 @@ use super::extract::{Authorized, COMPENSATE};
 use super::robots::find as find_robot;
 use super::{ApiError, AppState};
 use crate::domain::program::{
-    AngleOrder, Calibration, FilterError, FilterOptions, GivenFrames, JointTargets, Language, ProgramFile,
-    TargetReport, TargetStatus, filter,
+    AngleOrder, Calibration, FilterError, FilterOptions, JointTargets, Language, ProgramFile, TargetReport,
+    TargetStatus, filter,
 };
 use crate::domain::validity::{Guard, ValidityOut};
 use crate::units::DEG;
@@ -77,6 +77,12 @@ pub struct FilterQuery {
     /// (URScript; KRL without S and T).
     pub seed_joints_deg: Option<String>,
 }
+
+/// A program file's bytes (`application/octet-stream`).
+#[derive(Debug, ToSchema)]
+#[schema(value_type = String, format = Binary)]
+#[allow(dead_code)]
+pub struct ProgramBytes(pub Vec<u8>);
 
 /// Several program files as `multipart/form-data`: one file part each, named by its filename.
 #[derive(Debug, ToSchema)]
@@ -157,9 +163,10 @@ fn options(pairs: &[(String, String)]) -> Result<(FilterQuery, FilterOptions), A
             other => return Err(ApiError::invalid(other, "unknown parameter")),
         }
     }
-    let count = |m: &GivenFrames| m.tools.len() + m.bases.len();
-    if count(&opts.frames) > 256 {
-        return Err(ApiError::invalid("tool", "at most 256 frames"));
+    for key in ["tool", "base", "utool", "uframe"] {
+        if pairs.iter().filter(|(k, _)| k == key).count() > 64 {
+            return Err(ApiError::invalid(key, "at most 64 of them"));
+        }
     }
     Ok((q, opts))
 }
@@ -274,7 +281,7 @@ fn wants_json(headers: &HeaderMap) -> bool {
     params(("robot_id" = String, Path, description = "Robot id"), FilterQuery),
     request_body(description = "The program file (RAPID .mod/.prg, KRL .src or .dat, Fanuc .ls, URScript), or several files as multipart/form-data (a KRL .src with its .dat)",
         content(
-            (Vec<u8> = "application/octet-stream"),
+            (ProgramBytes = "application/octet-stream"),
             (String = "text/plain"),
             (ProgramUpload = "multipart/form-data"))),
     responses(
@@ -284,7 +291,7 @@ fn wants_json(headers: &HeaderMap) -> bool {
                 ("X-Kept-Targets" = i64, description = "Joint targets left as written (joint_targets=keep)"),
                 ("X-Failed-Targets" = i64, description = "Targets not compensated: left as written and marked")),
             content(
-                (Vec<u8> = "application/octet-stream"),
+                (ProgramBytes = "application/octet-stream"),
                 (FilterOut = "application/json"))),
         (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
         (status = 409, description = "No parameter set named and none active; the set has no passing held-out validation (unless allow_unvalidated)", body = super::Problem, content_type = "application/problem+json"),

@@ -509,7 +509,7 @@ fn parse_pair(files: &[ProgramFile], pair: &Pair, parsed: &mut Parsed) -> Result
                 if i + 2 >= b || !r.toks[i + 1].is(b'=') || !r.toks[i + 2].is(b'{') {
                     continue;
                 }
-                let index = lex::latin1(&r.bytes[r.toks[k + 2].start..r.toks[i - 1].end]);
+                let index = lex::latin1(&r.bytes[r.toks[k + 1].end..r.toks[i].start]);
                 let name = format!("{}[{}]", lex::latin1(r.toks[k].text(r.bytes)), index.replace(' ', ""));
                 let mut j = i + 2;
                 let agg = r.agg(&mut j, b)?;
@@ -663,9 +663,16 @@ fn parse_pair(files: &[ProgramFile], pair: &Pair, parsed: &mut Parsed) -> Result
                                 while i < b && !r.toks[i].is(b']') {
                                     i += 1;
                                 }
+                                if i >= b {
+                                    return Err(ProgramError::new(
+                                        r.file,
+                                        line,
+                                        format!("{name}: a '[' is not closed"),
+                                    ));
+                                }
                                 name = format!(
                                     "{name}[{}]",
-                                    lex::latin1(&r.bytes[r.toks[open].end..r.toks[i.min(b - 1)].start])
+                                    lex::latin1(&r.bytes[r.toks[open].end..r.toks[i].start])
                                         .replace(' ', "")
                                         .to_ascii_lowercase()
                                 );

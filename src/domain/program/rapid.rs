@@ -72,6 +72,7 @@ enum Item {
     },
     Word {
         text: String,
+        span: (usize, usize),
     },
     List {
         items: Vec<Item>,
@@ -87,8 +88,9 @@ enum Item {
 impl Item {
     fn span(&self) -> Option<(usize, usize)> {
         match self {
-            Item::Num { span, .. } | Item::List { span, .. } | Item::Other { span } => Some(*span),
-            Item::Word { .. } => None,
+            Item::Num { span, .. } | Item::List { span, .. } | Item::Other { span } | Item::Word { span, .. } => {
+                Some(*span)
+            }
         }
     }
 }
@@ -178,7 +180,7 @@ impl<'a> Reader<'a> {
             return Ok(Item::Num { span: (start, end), value });
         }
         if part.len() == 1 && part[0].kind == Tok::Ident {
-            return Ok(Item::Word { text: self.text(first).to_ascii_lowercase() });
+            return Ok(Item::Word { text: self.text(first).to_ascii_lowercase(), span: (start, end) });
         }
         Ok(Item::Other { span: (start, end) })
     }
@@ -207,7 +209,7 @@ fn list(item: &Item) -> Option<&[Item]> {
 }
 
 fn word(item: &Item) -> Option<&str> {
-    if let Item::Word { text } = item { Some(text) } else { None }
+    if let Item::Word { text, .. } = item { Some(text) } else { None }
 }
 
 /// `[[x,y,z],[q1,q2,q3,q4]]` → a frame (mm, quaternion normalised).
@@ -555,7 +557,8 @@ fn elements(
     out: &mut Vec<(String, Item)>,
 ) -> Result<(), ProgramError> {
     let Item::List { items, line, .. } = value else {
-        return Err(ProgramError::new(r.file, 0, format!("{name}: an array's value must be a list")));
+        let line = value.span().map_or(1, |s| Lines::new(r.bytes).line_of(s.0));
+        return Err(ProgramError::new(r.file, line, format!("{name}: an array's value must be a list")));
     };
     let leaf = |it: &Item| {
         list(it).is_some_and(|l| {
@@ -586,7 +589,7 @@ fn robtarget(r: &Reader, fi: usize, name: &str, item: &Item) -> Result<Target, P
     let (span, line) = match item {
         Item::List { span, line, .. } => (*span, *line),
         other => {
-            let line = other.span().map_or(0, |s| Lines::new(r.bytes).line_of(s.0));
+            let line = other.span().map_or(1, |s| Lines::new(r.bytes).line_of(s.0));
             return Err(ProgramError::new(r.file, line, format!("robtarget {name}: expected {ROBTARGET_SHAPE}")));
         }
     };
@@ -660,7 +663,10 @@ fn robtarget(r: &Reader, fi: usize, name: &str, item: &Item) -> Result<Target, P
 fn jointtarget(r: &Reader, fi: usize, name: &str, item: &Item) -> Result<Target, ProgramError> {
     let (span, line) = match item {
         Item::List { span, line, .. } => (*span, *line),
-        _ => return Err(ProgramError::new(r.file, 0, format!("jointtarget {name}: expected [[j1,…,j6],[e1,…,e6]]"))),
+        other => {
+            let line = other.span().map_or(1, |s| Lines::new(r.bytes).line_of(s.0));
+            return Err(ProgramError::new(r.file, line, format!("jointtarget {name}: expected [[j1,…,j6],[e1,…,e6]]")));
+        }
     };
     let shape_err = || ProgramError::new(r.file, line, format!("jointtarget {name}: expected [[j1,…,j6],[e1,…,e6]]"));
     let items = list(item).filter(|l| l.len() == 2).ok_or_else(shape_err)?;
