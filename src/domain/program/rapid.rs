@@ -481,6 +481,9 @@ fn declaration(
         return Err(r.err(k, format!("{ty} {name}: expected ':=' after the name")));
     }
     let mut v = k + 2;
+    if !toks.get(v).is_some_and(|t| t.is(b'[')) {
+        return Ok(()); // a computed value (CRobT(…), another constant): not a literal target
+    }
     let value = r.item(&mut v)?;
     if v != b {
         return Err(r.err(v, format!("{ty} {name}: unexpected '{}' after the value", r.text(v))));
@@ -832,6 +835,7 @@ mod tests {
                 [[4,5,6],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]]];\n\
             CONST jointtarget home:=[[0,0,0,0,30,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n\
             VAR robtarget p9:=[[1,2,3],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n\
+            VAR robtarget here:=CRobT(\\Tool:=gun\\WObj:=table);\n\
             PROC main()\n\
               MoveAbsJ home\\NoEOffs, v1000, fine, tool0;\n\
               MoveL p1, v100, z10, gun\\WObj:=table;\n\
@@ -858,7 +862,7 @@ mod tests {
         assert!(t[4].tool.as_ref().unwrap_err().contains("no motion"));
         assert_eq!(t[3].joints.as_ref().unwrap()[4], 30.0 * DEG);
         assert_eq!(t[3].tool.clone().unwrap(), Tool::flange());
-        assert_eq!(t[5].line, 13);
+        assert_eq!(t[5].line, 14);
     }
 
     #[test]
