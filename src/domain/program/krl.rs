@@ -447,6 +447,12 @@ fn is_data_list(bytes: &[u8]) -> bool {
         .is_some_and(|l| l.to_ascii_uppercase().starts_with("DEFDAT"))
 }
 
+/// An error in a value of the `.dat`, with the name of what is declared (`XP2: component Y: …`).
+fn named(mut e: ProgramError, name: &str) -> ProgramError {
+    e.message = format!("{name}: {}", e.message);
+    e
+}
+
 fn parse_pair(files: &[ProgramFile], pair: &Pair, parsed: &mut Parsed) -> Result<(), ProgramError> {
     // The .dat: its declarations by lower-case name, in order.
     let mut decls: Vec<(String, DatDecl)> = Vec::new();
@@ -485,7 +491,7 @@ fn parse_pair(files: &[ProgramFile], pair: &Pair, parsed: &mut Parsed) -> Result
                 if !(i < b && r.toks[i].is(b'{')) {
                     return Err(ProgramError::new(r.file, r.toks[k].line, format!("{name}: expected '{{' after '='")));
                 }
-                let agg = r.agg(&mut i, b)?;
+                let agg = r.agg(&mut i, b).map_err(|e| named(e, &name))?;
                 if i != b {
                     return Err(ProgramError::new(
                         r.file,
@@ -512,7 +518,7 @@ fn parse_pair(files: &[ProgramFile], pair: &Pair, parsed: &mut Parsed) -> Result
                 let index = lex::latin1(&r.bytes[r.toks[k + 1].end..r.toks[i].start]);
                 let name = format!("{}[{}]", lex::latin1(r.toks[k].text(r.bytes)), index.replace(' ', ""));
                 let mut j = i + 2;
-                let agg = r.agg(&mut j, b)?;
+                let agg = r.agg(&mut j, b).map_err(|e| named(e, &name))?;
                 if type_ != "fdat" {
                     decls.push((name, DatDecl { type_, agg }));
                 }
@@ -835,6 +841,7 @@ mod tests {
         match read(&pair("DEF WELD( )\r\nEND\r\n", &bad), &FilterOptions::default()) {
             Err(FilterError::Program(e)) => {
                 assert_eq!((e.file.as_str(), e.line), ("weld.dat", 5));
+                assert_eq!(e.message, "XP2: component Y: '2 Z' is not one value (a ',' missing?)");
             }
             other => panic!("{other:?}"),
         }
