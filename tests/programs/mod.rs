@@ -633,7 +633,10 @@ pub fn urscript(seed: u64, n: usize) -> Sample {
                 && c[2].abs() > 45.0 * DEG
                 && c[2].abs() < 150.0 * DEG
                 && c[1] < -20.0 * DEG
-                && c[1] > -160.0 * DEG;
+                && c[1] > -160.0 * DEG
+                // The walk stays inside the ±360° of the base and wrist joints (a long program's
+                // unbounded walk would leave them: targets no controller reaches).
+                && [0, 3, 5].iter().all(|&j| c[j].abs() < 300.0 * DEG);
             if ok
                 && conditioning(&set, &tcps[tcp], &c) > 0.12
                 && conditioning(&set, &tcps[1 - tcp], &c) > 0.12

@@ -127,12 +127,14 @@ impl Dialect for Fanuc {
             };
             let end = section(&f.bytes, b"/END").filter(|e| *e > start).unwrap_or(f.bytes.len());
             let mut c = Cursor { file: &f.name, bytes: &f.bytes[..end], at: start + 4, lines: &lines };
+            // The positions of this file by name → line (a name defined twice is refused).
+            let mut seen = std::collections::HashMap::new();
             loop {
                 c.skip_ws();
                 if c.at >= end {
                     break;
                 }
-                position(&mut c, fi, &mut parsed)?;
+                position(&mut c, fi, &mut parsed, &mut seen)?;
             }
             if section(&f.bytes, b"/END").is_none() {
                 return Err(ProgramError::new(
@@ -221,7 +223,12 @@ fn section(bytes: &[u8], tag: &[u8]) -> Option<usize> {
 }
 
 /// One `P[n…]{ … };` at the cursor.
-fn position(c: &mut Cursor, fi: usize, parsed: &mut Parsed) -> Result<(), ProgramError> {
+fn position(
+    c: &mut Cursor,
+    fi: usize,
+    parsed: &mut Parsed,
+    seen: &mut std::collections::HashMap<String, usize>,
+) -> Result<(), ProgramError> {
     c.skip_ws();
     let begin = c.at;
     let line = c.lines.line_of(begin);
@@ -276,12 +283,8 @@ fn position(c: &mut Cursor, fi: usize, parsed: &mut Parsed) -> Result<(), Progra
     let Some((fields, gline)) = gp1 else {
         return Err(ProgramError::new(c.file, line, format!("{name}: no GP1 group")));
     };
-    if let Some(other) = parsed.targets.iter().find(|t| t.file == fi && t.name == name) {
-        return Err(ProgramError::new(
-            c.file,
-            line,
-            format!("{name} is defined twice (lines {} and {line})", other.line),
-        ));
+    if let Some(first) = seen.insert(name.clone(), line) {
+        return Err(ProgramError::new(c.file, line, format!("{name} is defined twice (lines {first} and {line})")));
     }
     let get = |k: &str| fields.iter().find(|(n, _)| n == k).map(|(_, f)| f);
     let int = |k: &str| match get(k) {
@@ -485,6 +488,15 @@ mod tests {
         let files = vec![ProgramFile { name: "weld.ls".into(), bytes: bad.into_bytes() }];
         match read(&files, &FilterOptions::default()) {
             Err(FilterError::Program(e)) => assert!(e.line == 10 && e.message.contains("'X'"), "{e}"),
+            other => panic!("{other:?}"),
+        }
+        // A position number used twice: P[2:"home"] (line 18) renumbered as P[1] (line 9).
+        let bad = LS.replace("P[2:\"home\"]", "P[1:\"home\"]");
+        let files = vec![ProgramFile { name: "weld.ls".into(), bytes: bad.into_bytes() }];
+        match read(&files, &FilterOptions::default()) {
+            Err(FilterError::Program(e)) => {
+                assert_eq!((e.line, e.message.as_str()), (18, "P[1] is defined twice (lines 9 and 18)"), "{e}")
+            }
             other => panic!("{other:?}"),
         }
     }
