@@ -94,6 +94,9 @@ call "$API/v1/audit-events?robot_id=$ROBOT" | jq -c '[.[] | {action, reason}]'
 
 echo "== compensated targets with the active set"
 call "$API/v1/robots/$ROBOT/compensate" -H "$J" -d @examples/targets.json | jq -c '.results[0] | {id, joints_deg, residual_mm}'
+echo "== a robot program filtered with the active set: the module back with the counts in headers; with Accept: application/json, the report"
+call "$API/v1/robots/$ROBOT/programs/filter?name=weld.mod" -H 'Content-Type: application/octet-stream' --data-binary @examples/programs/weld.mod -D "$tmp/filter.h" -o "$tmp/weld.mod" && grep -i '^x-.*-targets' "$tmp/filter.h"
+call "$API/v1/robots/$ROBOT/programs/filter?name=weld.mod" -H 'Content-Type: application/octet-stream' -H 'Accept: application/json' --data-binary @examples/programs/weld.mod | jq -c '{compensated, kept, failed, seam1: .targets[2] | {name, line, correction_mm, uncertainty_mm, error}}'
 echo "== exports (the DH table, URDF, a RAPID module of compensated targets), the history for dashboards, drift"
 call "$API/v1/parameter-sets/$SET/export?format=csv-dh" > "$tmp/set.csv" && grep -E '^(row|joint3),' "$tmp/set.csv"
 call "$API/v1/parameter-sets/$SET/export?format=urdf" > "$tmp/set.urdf" && grep -c '<joint ' "$tmp/set.urdf"

@@ -12,7 +12,10 @@ fn main() -> std::process::ExitCode {
     let cli = robocal::cli::Cli::parse();
     match robocal::cli::run(cli) {
         Ok(text) => {
-            print(&text);
+            // Empty: the command wrote its output itself (`filter` writes the program's bytes).
+            if !text.is_empty() {
+                print(&text);
+            }
             std::process::ExitCode::SUCCESS
         }
         Err(e) => {

@@ -5,6 +5,7 @@ mod calibrate;
 mod data;
 mod experiments;
 mod export;
+mod filter;
 mod kinematics;
 mod plan;
 mod progress;
@@ -25,6 +26,7 @@ pub use calibrate::{DiagnoseArgs, IdentifyArgs, ValidateArgs};
 pub use data::{ImportCommand, SimulateArgs, ThreeReflectorArgs, Ur10IpaArgs};
 pub use experiments::{BenchDiagnosisArgs, CrossvalArgs, StudyArgs};
 pub use export::{DriftArgs, ExportArgs};
+pub use filter::FilterArgs;
 pub use kinematics::{CompensateArgs, FkArgs, IkArgs, ModelArgs, NominalArgs, ToolArgs};
 pub use service::{DemoArgs, OpenapiArgs, ServeArgs, TokenCommand};
 
@@ -52,6 +54,9 @@ pub enum Command {
     /// Export a parameter set: json, csv-dh (the modified-DH table), urdf (geometry only), or
     /// rapid (an ABB RAPID module of compensated targets, with --targets).
     Export(ExportArgs),
+    /// Filter a robot program (RAPID, KRL, Fanuc TP, URScript): every target replaced by its
+    /// compensated value, every other byte kept; a report with one line per target.
+    Filter(FilterArgs),
     /// The drift between two parameter sets of one robot: per parameter both identify, the change
     /// against the combined uncertainty (JSON).
     Drift(DriftArgs),
@@ -134,6 +139,7 @@ pub fn run(cli: Cli) -> Result<String, CliError> {
         Command::Nominal(a) => kinematics::nominal(a),
         Command::Export(a) => export::export(a),
         Command::Drift(a) => export::drift(a),
+        Command::Filter(a) => filter::filter(a),
         Command::Import(ImportCommand::Ur10Ipa(a)) => data::import_ur10(a),
         Command::Import(ImportCommand::ThreeReflector(a)) => data::import_three(a),
         Command::Simulate(a) => data::simulate(a),

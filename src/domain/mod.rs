@@ -14,6 +14,7 @@ pub mod measurement_csv;
 pub mod origin;
 pub mod param_set;
 pub mod pose;
+pub mod program;
 pub mod robot;
 pub mod rounding;
 pub mod truth;

@@ -118,31 +118,39 @@ impl PoseOut {
     /// nearest to `rotation_deg`; the quaternion of the sign nearest to `quaternion`. A target
     /// given as [0, 180, 0] comes back as [0.23, 180.14, 0.01], not [−179.77, −0.14, −179.99].
     pub fn like(f: &Frame, rotation_deg: Option<[f64; 3]>, quaternion: Option<[f64; 4]>) -> Self {
-        let [a, b, c] = zyx_from_rot(&f.r).map(|v| v / DEG);
         let rotation = match rotation_deg {
-            None => [a, b, c],
-            Some(hint) => {
-                let near = |v: f64, h: f64| v + 360.0 * ((h - v) / 360.0).round();
-                let pick =
-                    |e: [f64; 3]| -> [f64; 3] { [near(e[0], hint[0]), near(e[1], hint[1]), near(e[2], hint[2])] };
-                let cost = |e: &[f64; 3]| e.iter().zip(&hint).map(|(v, h)| (v - h) * (v - h)).sum::<f64>();
-                let first = pick([a, b, c]);
-                let second = pick([a + 180.0, 180.0 - b, c + 180.0]);
-                if cost(&second) < cost(&first) { second } else { first }
-            }
+            None => zyx_from_rot(&f.r).map(|v| v / DEG),
+            Some(hint) => zyx_deg_near(&f.r, hint),
         };
-        let mut q = quaternion_from_rot(&f.r);
-        if let Some(h) = quaternion
-            && q.iter().zip(&h).map(|(a, b)| a * b).sum::<f64>() < 0.0
-        {
-            q = q.map(|v| -v);
-        }
+        let q = match quaternion {
+            None => quaternion_from_rot(&f.r),
+            Some(h) => quaternion_near(&f.r, h),
+        };
         PoseOut {
             position_mm: round_all([f.t.x / MM, f.t.y / MM, f.t.z / MM], OUT_MM),
             rotation_deg: round_all(rotation, OUT_DEG),
             quaternion: round_all(q, OUT_UNIT),
         }
     }
+}
+
+/// The ZY'X'' angles (deg) of `r` nearest `hint` (deg): of the two equivalent families, (a, b, c)
+/// and (a + 180°, 180° − b, c + 180°), and their whole turns, the one closest to the hint. A
+/// program's pose written back keeps the family and turns it was written in.
+pub fn zyx_deg_near(r: &nalgebra::Matrix3<f64>, hint: [f64; 3]) -> [f64; 3] {
+    let [a, b, c] = zyx_from_rot(r).map(|v| v / DEG);
+    let near = |v: f64, h: f64| v + 360.0 * ((h - v) / 360.0).round();
+    let pick = |e: [f64; 3]| -> [f64; 3] { [near(e[0], hint[0]), near(e[1], hint[1]), near(e[2], hint[2])] };
+    let cost = |e: &[f64; 3]| e.iter().zip(&hint).map(|(v, h)| (v - h) * (v - h)).sum::<f64>();
+    let first = pick([a, b, c]);
+    let second = pick([a + 180.0, 180.0 - b, c + 180.0]);
+    if cost(&second) < cost(&first) { second } else { first }
+}
+
+/// The unit quaternion (w, x, y, z) of `r` with the sign nearest `hint`.
+pub fn quaternion_near(r: &nalgebra::Matrix3<f64>, hint: [f64; 4]) -> [f64; 4] {
+    let q = quaternion_from_rot(r);
+    if q.iter().zip(&hint).map(|(a, b)| a * b).sum::<f64>() < 0.0 { q.map(|v| -v) } else { q }
 }
 
 /// One compensation target: a pose with how to choose the solution, or a nominal joint target.
@@ -599,12 +607,12 @@ pub fn compensate_target(
 }
 
 /// A target's uncertainty parts and their combination (mm, when every part is known).
-type TargetUncertainty = Option<(UncertaintyOut, Option<f64>)>;
+pub type TargetUncertainty = Option<(UncertaintyOut, Option<f64>)>;
 
 /// The envelope check and the predicted uncertainty of a solved target: `Err(why)` when its
 /// joints lie outside the envelope and that was not allowed; otherwise its uncertainty by part
 /// and the notes (outside as asked; the distance to the measured region).
-fn guard_target(
+pub fn guard_target(
     comp: &Compensator,
     guard: &Guard,
     c: &Compensated,

@@ -17,7 +17,7 @@ use crate::app::cache::CompiledSet;
 use crate::domain::pose::{FrameKind, FrameOut, TargetFrames, WorkObjectSpec, compensate_target, compensate_targets};
 use crate::domain::validity::{Envelope, EnvelopeFile, Guard, HeldOutUncertainty, ValidationCheck, ValidityOut};
 use crate::domain::{CompensationResult, TargetSpec, ToolSpec};
-use crate::kinematics::{Compensator, Param, ParameterSet, Tool};
+use crate::kinematics::Compensator;
 
 /// A batch of targets to compensate.
 #[derive(Debug, Deserialize, ToSchema)]
@@ -70,19 +70,6 @@ pub struct CompensationOut {
     pub results: Vec<CompensationResult>,
     /// Targets that could not be compensated.
     pub failed: usize,
-}
-
-/// The set with another tool: its TCP (nominal and calibrated) and payload.
-pub fn with_tool(set: &ParameterSet, tool: Tool) -> ParameterSet {
-    let mut s = set.clone();
-    for k in 0..6 {
-        if let Some(i) = s.layout.index_of(Param::Tool(k)) {
-            s.values[i] = tool.tcp[k];
-            s.nominal[i] = tool.tcp[k];
-        }
-    }
-    s.tool = tool;
-    s
 }
 
 /// The set's latest held-out validation (on validation sessions it was not fitted on), refused
@@ -265,7 +252,7 @@ pub(super) async fn run_batch(
     let Checked { envelope, held_out, .. } = checked;
     let custom = match tool {
         None => None,
-        Some(t) => Some(with_tool(&compiled.set, t.to_tool().map_err(|e| ApiError::domain(e, "tool"))?)),
+        Some(t) => Some(compiled.set.with_tool(t.to_tool().map_err(|e| ApiError::domain(e, "tool"))?)),
     };
     let frames = TargetFrames::new(&compiled.compensator, frame, work_object).map_err(|e| ApiError::domain(e, ""))?;
     let out = frames.out.clone();

@@ -19,6 +19,7 @@ pub mod ops;
 pub mod paging;
 pub mod parameter_sets;
 pub mod plans;
+pub mod programs;
 pub mod reports;
 pub mod robots;
 pub mod sessions;
@@ -120,6 +121,7 @@ fn api_router() -> OpenApiRouter<AppState> {
         .routes(routes!(diagnoses::get))
         .routes(routes!(diagnoses::accept))
         .routes(routes!(compensation::compensate))
+        .routes(routes!(programs::filter_program))
         .routes(routes!(jobs::list))
         .routes(routes!(jobs::get))
         .routes(routes!(jobs::cancel))

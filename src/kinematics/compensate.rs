@@ -9,7 +9,7 @@ use super::chain::{Chain, JointState};
 use super::frame::Frame;
 use super::gravity::GravityModel;
 use super::ik_analytic::{AnalyticIk, Branch, Confdata, IkError};
-use super::ik_numeric::{self, IkOptions};
+use super::ik_numeric::{self, IkOptions, IkSolution};
 use super::model::MAX_JOINTS;
 use super::param_set::ParameterSet;
 
@@ -167,6 +167,26 @@ impl Compensator {
             branch,
             confdata: self.nominal_ik.as_ref().map(|ik| ik.confdata(sol.joints())),
         })
+    }
+
+    /// The starting joints the solver would use for `target` ({W}) on `branch`: the closed-form
+    /// solution refined towards the calibrated model (see `branch_seed`), principal values. A
+    /// caller that wants other whole turns of some axes (KUKA's turn bits, Fanuc's turn numbers)
+    /// shifts them and solves with [`Seed::Joints`].
+    pub fn seed_on_branch(&self, target: &Frame, branch: Branch) -> Result<[f64; 6], IkError> {
+        self.branch_seed(target, branch)
+    }
+
+    /// The controller's (nominal model's) joints for `target` ({W}) nearest `seed`: what a
+    /// controller that picks the solution closest to the current joints commands (Universal
+    /// Robots), for robots with or without a closed form.
+    pub fn nominal_ik(&self, target: &Frame, seed: &[f64]) -> Result<IkSolution, IkError> {
+        ik_numeric::solve(&self.nominal, &self.gravity, target, seed, &self.opts)
+    }
+
+    /// The nominal model's configuration data of joints `q`, when the robot has a closed form.
+    pub fn nominal_confdata(&self, q: &[f64]) -> Option<Confdata> {
+        self.nominal_ik.as_ref().map(|ik| ik.confdata(q))
     }
 
     /// Compensate a nominal joint target: the desired pose is where the *nominal* model puts the

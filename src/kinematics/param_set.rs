@@ -62,6 +62,21 @@ impl ParameterSet {
         }
     }
 
+    /// The same set with another tool: its TCP becomes the tool parameters' value and nominal
+    /// (a tool the identification did not see is taken as declared), and its payload drives the
+    /// gravity torques.
+    pub fn with_tool(&self, tool: Tool) -> ParameterSet {
+        let mut s = self.clone();
+        for k in 0..6 {
+            if let Some(i) = s.layout.index_of(Param::Tool(k)) {
+                s.values[i] = tool.tcp[k];
+                s.nominal[i] = tool.tcp[k];
+            }
+        }
+        s.tool = tool;
+        s
+    }
+
     /// The chain at the current values.
     pub fn chain(&self) -> Chain {
         Chain::new(&self.model, &self.layout, &self.values)
