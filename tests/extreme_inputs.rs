@@ -190,6 +190,10 @@ fn names_the_place(e: &JobError) {
         ),
         JobError::Numerical { detail, .. } => assert!(!detail.is_empty()),
         JobError::Internal(why) => panic!("an internal error: {why}"),
+        // Storage faults are the disk's, not the input's: none happens on these runs.
+        JobError::Storage(_) | JobError::Busy | JobError::NotStored(_) => {
+            panic!("a storage fault on an input test: {e:?}")
+        }
     }
 }
 

@@ -60,7 +60,14 @@ fn controller_joints(set: &ParameterSet, t: &ReadTarget) -> Vec<f64> {
 /// Filter a sample, check the failures and the diff; the filtered program with both readings.
 fn filtered(sample: &Sample, set: &ParameterSet, joints: JointTargets) -> (Filtered, Vec<ReadTarget>, Vec<ReadTarget>) {
     let comp = Compensator::new(set);
-    let cal = Calibration { set, compensator: &comp, envelope: None, allow_outside_envelope: false, covariance: None, held_out: None };
+    let cal = Calibration {
+        set,
+        compensator: &comp,
+        envelope: None,
+        allow_outside_envelope: false,
+        covariance: None,
+        held_out: None,
+    };
     let opts = FilterOptions {
         language: None,
         joint_targets: joints,
@@ -313,8 +320,14 @@ fn urscript_programs_filter_with_a_round_trip_and_only_target_lines_changed() {
 fn a_pose_without_joints_before_it_is_named() {
     let set = ur10_set();
     let comp = Compensator::new(&set);
-    let cal =
-        Calibration { set: &set, compensator: &comp, envelope: None, allow_outside_envelope: false, covariance: None, held_out: None };
+    let cal = Calibration {
+        set: &set,
+        compensator: &comp,
+        envelope: None,
+        allow_outside_envelope: false,
+        covariance: None,
+        held_out: None,
+    };
     let files = vec![robocal::domain::program::ProgramFile {
         name: "p.script".into(),
         bytes: b"def p():\n  set_tcp(p[0, 0, 0.1, 0, 0, 0])\n  movel(p[0.6, -0.2, 0.4, 0, 3.14, 0], a=1)\nend\n"
@@ -355,8 +368,14 @@ fn the_command_line_filters_and_exits_by_the_outcome() {
     let written = std::fs::read(dir.join("w.mod")).unwrap();
     let set = robocal::domain::ParameterSetDoc::from_json(&std::fs::read_to_string(&params).unwrap()).unwrap().set;
     let comp = Compensator::new(&set);
-    let cal =
-        Calibration { set: &set, compensator: &comp, envelope: None, allow_outside_envelope: false, covariance: None, held_out: None };
+    let cal = Calibration {
+        set: &set,
+        compensator: &comp,
+        envelope: None,
+        allow_outside_envelope: false,
+        covariance: None,
+        held_out: None,
+    };
     let files = vec![robocal::domain::program::ProgramFile {
         name: "weld.mod".into(),
         bytes: std::fs::read(format!("{root}/examples/programs/weld.mod")).unwrap(),

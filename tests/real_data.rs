@@ -42,7 +42,7 @@ fn twin(poses: usize, seed: u64) -> (TrackerRun, Cell) {
     (run, cell)
 }
 
-fn import(joints: &PathBuf, files: &[PathBuf]) -> Cell {
+fn import(joints: &std::path::Path, files: &[PathBuf]) -> Cell {
     three_reflector::import(joints, files, irb120(), Purpose::Identification).unwrap().cell
 }
 

@@ -437,12 +437,12 @@ fn score(
     let fail = |e: String| failed(case, seed, t0, e);
     // The calibration the engineer has: the model without the withheld effect, identified on
     // the identification sessions.
-    let id = match identify(&cell, &IdentifyOptions { model, ..IdentifyOptions::default() }) {
+    let id = match identify(cell, &IdentifyOptions { model, ..IdentifyOptions::default() }) {
         Ok(id) => id,
         Err(e) => return fail(format!("identification: {e}")),
     };
     let identified: Vec<bool> = id.status.iter().map(|s| s == "identified").collect();
-    let input = Input { cell: &cell, set: &id.set, identified: Some(identified), fixed: Vec::new() };
+    let input = Input { cell, set: &id.set, identified: Some(identified), fixed: Vec::new() };
     let o = DiagnoseOptions { seed, ..opts.clone() };
     let d = match diagnose(&input, &o) {
         Ok(d) => d,
@@ -450,7 +450,7 @@ fn score(
     };
     let v = &d.verdict;
     let first = v.effects.first().map(|e| e.candidate.clone());
-    let withheld_kinds = withheld_kinds(&effects);
+    let withheld_kinds = withheld_kinds(effects);
     let wrong_name = v.status == Status::Named && first.as_ref().is_some_and(|c| !withheld_kinds.contains(&c.kind));
     let correct = match &case.expect {
         Expect::Named { kind, joint, from, quarters } => {
@@ -471,7 +471,7 @@ fn score(
     let heldout_mean = d.decomposition.heldout.mean;
     let floor_mean = d.decomposition.floor.mean;
     let final_mean = d.shrink.last().map_or(heldout_mean, |s| s.stats.mean);
-    let oracle_mean = oracle_terms(&effects).and_then(|t| heldout_with(&input, &o, &t).ok()).map(|s| s.mean);
+    let oracle_mean = oracle_terms(effects).and_then(|t| heldout_with(&input, &o, &t).ok()).map(|s| s.mean);
     let closure_ratio = oracle_mean.and_then(|om| {
         let oracle = heldout_mean - om;
         (oracle > 0.0).then(|| (heldout_mean - final_mean) / oracle)

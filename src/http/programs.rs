@@ -328,7 +328,8 @@ pub async fn filter_program(
     if compiled.row.robot_id != robot.id {
         return Err(ApiError::invalid("parameter_set_id", "the set belongs to another robot"));
     }
-    let Checked { validation, envelope, held_out } = checks(&state, &compiled, q.allow_unvalidated.unwrap_or(false)).await?;
+    let Checked { validation, envelope, held_out } =
+        checks(&state, &compiled, q.allow_unvalidated.unwrap_or(false)).await?;
     let allow_outside = q.allow_outside_envelope.unwrap_or(false);
     let max = state.config.max_batch;
     let set = compiled.clone();

@@ -897,20 +897,21 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
     // PAYLOAD_SIGNIFICANCE of its own σ is one direction with the compliances (c5·m, c3·m… act
     // as products when the arm's own weight barely loads a joint), the fit crawls along it and
     // every fold lands elsewhere. It is then held at the declared 0 kg and reported as such.
-    if payload_unknown {
-        if let Some((g, c)) = payload_mass(&problem).and_then(|g| free.iter().position(|&f| f == g).map(|c| (g, c))) {
-            let q = Quality::of(&fit, problem.obs.len(), &rows);
-            let (m, sd) = (fit.x[g], q.std[c]);
-            if !(m > PAYLOAD_SIGNIFICANCE * sd) {
-                free.remove(c);
-                status[g] = Status::Fixed(format!(
-                    "payload not determined by these data ({:.3} ± {:.3} kg, below {PAYLOAD_SIGNIFICANCE} σ): held at the declared 0 kg",
-                    m, sd
-                ));
-                let mut x = fit.x.clone();
-                x[g] = x0[g];
-                fit = solver::solve(&problem, &free, &x, &opts.solver)?;
-            }
+    if payload_unknown
+        && let Some((g, c)) = payload_mass(&problem).and_then(|g| free.iter().position(|&f| f == g).map(|c| (g, c)))
+    {
+        let q = Quality::of(&fit, problem.obs.len(), &rows);
+        let (m, sd) = (fit.x[g], q.std[c]);
+        let determined = m > PAYLOAD_SIGNIFICANCE * sd; // false for a NaN σ too
+        if !determined {
+            free.remove(c);
+            status[g] = Status::Fixed(format!(
+                "payload not determined by these data ({:.3} ± {:.3} kg, below {PAYLOAD_SIGNIFICANCE} σ): held at the declared 0 kg",
+                m, sd
+            ));
+            let mut x = fit.x.clone();
+            x[g] = x0[g];
+            fit = solver::solve(&problem, &free, &x, &opts.solver)?;
         }
     }
     let mut quality = Quality::of(&fit, problem.obs.len(), &rows);

@@ -238,7 +238,7 @@ pub fn solve(problem: &Problem, free: &[usize], x0: &[f64], opts: &SolverOptions
 /// standard deviation √(σ̂²·(A⁻¹)_cc), largest first, at most four.
 fn moving_parameters(problem: &Problem, free: &[usize], a: &Mat<f64>, y: &[f64], sigma2: f64) -> Vec<(String, f64)> {
     let m = free.len();
-    if m == 0 || !(sigma2 > 0.0) || y.iter().any(|v| !v.is_finite()) {
+    if m == 0 || sigma2.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) || y.iter().any(|v| !v.is_finite()) {
         return Vec::new();
     }
     let Ok(llt) = a.llt(faer::Side::Lower) else { return Vec::new() };

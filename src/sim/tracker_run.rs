@@ -158,7 +158,7 @@ pub fn tracker_run(opts: &TrackerRunOptions) -> Result<TrackerRun, TrackerRunErr
     // Poses: uniform within the limits, kept where the flange is above the base's plane, the
     // wrist is not stretched out at a singularity, and the plate faces the tracker.
     let mut poses: Vec<[f64; MAX_JOINTS]> = Vec::with_capacity(opts.poses);
-    let base = truth.set.chain().base().clone();
+    let base = *truth.set.chain().base();
     let tries = opts.poses * 400;
     for _ in 0..tries {
         if poses.len() == opts.poses {

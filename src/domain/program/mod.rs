@@ -700,7 +700,7 @@ struct Setup {
 
 /// How one target ended.
 enum Outcome {
-    Solved { solution: Solution, sigma: TargetUncertainty, notes: Vec<String>, correction: (f64, f64) },
+    Solved { solution: Solution, sigma: Box<TargetUncertainty>, notes: Vec<String>, correction: (f64, f64) },
     Kept,
     Failed(String),
 }
@@ -1027,7 +1027,7 @@ fn solve_target(
     };
     Outcome::Solved {
         solution: Solution { pose, joints: c.joints().to_vec(), confdata: c.confdata },
-        sigma,
+        sigma: Box::new(sigma),
         notes,
         correction,
     }
