@@ -589,8 +589,9 @@ mod tests {
         match solve(&p, &free, &x0, &opts) {
             Err(SolveError::IterationLimit { iterations: 1, step_m, moving, .. }) => {
                 assert!(step_m > 1e-6);
-                // The rotation started 0.1 rad off is what still moves, by many σ.
-                assert!(moving[0].0.starts_with("base_") && moving[0].1 > 10.0, "{moving:?}");
+                // The rotation started 0.1 rad off is what still moves: by more than its σ, a
+                // thousand times the converged threshold (`sigma_tol` 1e-3).
+                assert!(moving[0].0.starts_with("base_") && moving[0].1 > 1.0, "{moving:?}");
             }
             other => panic!("{other:?}"),
         }

@@ -7,7 +7,7 @@
 
 use super::html::{esc, figure, fixed, mm, opt, p_value, page, sig, table};
 use super::plot::{self, Panel, Segment};
-use crate::domain::diagnosis::{CandidateRef, DiagnosisOut};
+use crate::domain::diagnosis::{CandidateOut, CandidateRef, DiagnosisOut};
 
 /// The decomposition, mm: (label, segments) rows of the stacked bar.
 ///
@@ -32,12 +32,15 @@ pub fn decomposition_rows(d: &DiagnosisOut) -> Vec<(String, Vec<Segment>)> {
         let cal = c.figures.mean_mm;
         let mut segments = vec![seg("held-out, starting model", cal.min(start), 3)];
         if cal > start {
-            segments.push(seg("extrapolation gap", cal - start, 1));
+            segments.push(seg("extrapolation gap", cal - start, plot::HATCHED));
         }
         rows.push(("calibrated, as given".to_string(), segments));
     }
     rows
 }
+
+/// Candidates of each round shown before the fold.
+const CANDIDATES_SHOWN: usize = 8;
 
 fn candidate_name(c: &CandidateRef) -> String {
     esc(&c.label)
@@ -60,16 +63,29 @@ pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
     s.push_str("<h2>Verdict</h2>");
     s.push_str(&format!("<p><strong>{}</strong>: {}</p>", esc(&v.status), esc(&v.summary)));
     if !v.effects.is_empty() {
+        // The shrink table holds the start, then one model per accepted effect in the order
+        // they were named: effect k is shrink[k] → shrink[k + 1] (only for a named verdict).
+        let steps = v.status == "named" && d.shrink.len() == v.effects.len() + 1;
         let rows: Vec<Vec<String>> = v
             .effects
             .iter()
-            .map(|e| {
+            .enumerate()
+            .map(|(k, e)| {
+                let (before_after, closed) = if steps {
+                    let (a, b) = (&d.shrink[k], &d.shrink[k + 1]);
+                    (
+                        format!("{} → {}", mm(a.mean_mm), mm(b.mean_mm)),
+                        b.gap_closure.map_or("—".into(), |g| format!("{} %", fixed(100.0 * g, 0))),
+                    )
+                } else {
+                    ("—".into(), "—".into())
+                };
                 vec![
                     esc(&e.which.label),
                     format!("{} {}", opt(e.estimate, 4), esc(&e.unit)),
-                    e.std.map_or("—".into(), |x| format!("{} {}", fixed(x, 4), esc(&e.unit))),
-                    mm(e.gain_mean_mm),
-                    mm(e.gain_rms_mm),
+                    e.std.map_or("—".into(), |x| format!("{} {}", sig(x), esc(&e.unit))),
+                    before_after,
+                    closed,
                     e.confirm_p.map_or("—".into(), p_value),
                     fixed(e.screen_log10_p, 1),
                     fixed(e.separability, 3),
@@ -77,8 +93,8 @@ pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
             })
             .collect();
         s.push_str(&table(
-            "Named effects",
-            &["effect", "estimate", "σ", "gain mean (mm)", "gain RMS (mm)", "confirm p", "log10 p (Holm)", "ρ"],
+            "Named effects: estimate ± σ, held-out mean before → after (the model refitted on the folds), gap closed",
+            &["effect", "estimate", "σ", "held-out mean (mm)", "gap closed", "confirm p", "log10 p (Holm)", "ρ"],
             &rows,
             &[false, true, true, true, true, true, true, true],
         ));
@@ -137,44 +153,69 @@ pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
     ));
 
     s.push_str("<h2>Candidates</h2>");
-    let rows: Vec<Vec<String>> = d
-        .candidates
-        .iter()
-        .map(|c| {
-            let h = c.heldout.as_ref();
-            vec![
-                c.round.to_string(),
-                candidate_name(&c.which),
-                fixed(c.statistic, 1),
-                fixed(c.dof, 0),
-                fixed(c.log10_p_holm, 1),
-                if c.significant { "yes".into() } else { "no".into() },
-                fixed(c.separability, 3),
-                fixed(c.bic_gain, 1),
-                h.map_or("—".into(), |h| mm(h.gain_mean_mm)),
-                h.and_then(|h| h.p).map_or("—".into(), p_value),
-                h.map_or("—".into(), |h| if h.confirmed { "confirmed".into() } else { "not confirmed".into() }),
-            ]
-        })
-        .collect();
+    // The top CANDIDATES_SHOWN of each round by Holm-corrected p, and every one the held-out
+    // check evaluated; the full list folded below.
+    let mut shown: Vec<&CandidateOut> = Vec::new();
+    let rounds = d.candidates.iter().map(|c| c.round).max().unwrap_or(0);
+    for r in 1..=rounds {
+        let mut of: Vec<&CandidateOut> = d.candidates.iter().filter(|c| c.round == r).collect();
+        of.sort_by(|a, b| a.log10_p_holm.total_cmp(&b.log10_p_holm));
+        for (i, c) in of.into_iter().enumerate() {
+            if i < CANDIDATES_SHOWN || c.heldout.is_some() {
+                shown.push(c);
+            }
+        }
+    }
+    let candidate_row = |c: &CandidateOut| -> Vec<String> {
+        let h = c.heldout.as_ref();
+        vec![
+            c.round.to_string(),
+            candidate_name(&c.which),
+            fixed(c.statistic, 1),
+            fixed(c.dof, 0),
+            fixed(c.log10_p_holm, 1),
+            if c.significant { "yes".into() } else { "no".into() },
+            fixed(c.separability, 3),
+            fixed(c.bic_gain, 1),
+            h.map_or("—".into(), |h| mm(h.gain_mean_mm)),
+            h.and_then(|h| h.p).map_or("—".into(), p_value),
+            h.map_or("—".into(), |h| if h.confirmed { "confirmed".into() } else { "not confirmed".into() }),
+        ]
+    };
+    let header = [
+        "round",
+        "candidate",
+        "S",
+        "dof",
+        "log10 p (Holm)",
+        "significant",
+        "ρ",
+        "BIC gain",
+        "held-out gain (mm)",
+        "p",
+        "held-out",
+    ];
+    let right = [true, false, true, true, true, false, true, true, true, true, false];
+    let rows: Vec<Vec<String>> = shown.iter().map(|c| candidate_row(c)).collect();
     s.push_str(&table(
-        "Screened candidates per round: score statistic, Holm-corrected p, separability ρ, and the held-out check",
-        &[
-            "round",
-            "candidate",
-            "S",
-            "dof",
-            "log10 p (Holm)",
-            "significant",
-            "ρ",
-            "BIC gain",
-            "held-out gain (mm)",
-            "p",
-            "held-out",
-        ],
+        &format!(
+            "Screened candidates: the {CANDIDATES_SHOWN} most significant of each round and every one checked on held-out \
+             poses ({} of {}); score statistic, Holm-corrected p, separability ρ, and the held-out check",
+            shown.len(),
+            d.candidates.len()
+        ),
+        &header,
         &rows,
-        &[true, false, true, true, true, false, true, true, true, true, false],
+        &right,
     ));
+    if shown.len() < d.candidates.len() {
+        let all: Vec<Vec<String>> = d.candidates.iter().map(candidate_row).collect();
+        s.push_str(&format!(
+            "<details><summary>All {} screened candidates</summary>{}</details>",
+            d.candidates.len(),
+            table("Every screened candidate, in screening order", &header, &all, &right)
+        ));
+    }
     if !d.unavailable.is_empty() {
         let rows: Vec<Vec<String>> = d.unavailable.iter().map(|u| vec![esc(&u.name), esc(&u.reason)]).collect();
         s.push_str(&table("Candidates these data cannot test", &["candidate", "why"], &rows, &[false, false]));
@@ -185,11 +226,16 @@ pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
     let panels: Vec<Panel> = w
         .against
         .iter()
-        .filter(|a| a.profile.len() >= 2)
+        // A variable that does not vary over the tested poses (τ1 of a vertical first axis: no
+        // gravity torque) has no profile to draw.
+        .filter(|a| {
+            let (lo, hi) =
+                a.profile.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), b| (l.min(b.at), h.max(b.at)));
+            a.profile.len() >= 2 && hi - lo > 1e-6
+        })
         .map(|a| Panel {
             title: format!(
-                "{}: r = {}, p = {}",
-                a.variable,
+                "r = {}, p = {}",
                 a.r.map_or("—".into(), |r| fixed(r, 2)),
                 a.p_value.map_or("—".into(), p_value)
             ),

@@ -694,18 +694,31 @@ fn integer_ticks(values: &[f64], lo: f64, hi: f64) -> Vec<f64> {
 pub struct Segment {
     pub label: String,
     pub length: f64,
-    /// 0 darkest … 3 lightest.
+    /// 0 darkest … 3 lightest; [`HATCHED`]: white with vertical hatching (a fifth kind that
+    /// stays apart from the four greys in grey-scale print).
     pub shade: usize,
 }
 
 const SHADES: [RGBColor; 4] =
     [RGBColor(40, 48, 64), RGBColor(110, 122, 145), RGBColor(175, 186, 205), RGBColor(228, 232, 240)];
 
+/// The hatched shade of a [`Segment`].
+pub const HATCHED: usize = 4;
+
 /// Horizontal stacked bars, one per row (top to bottom), each segment labelled with its length;
 /// the legend lists every segment label once.
 pub fn stacked_bars_svg(title: &str, x_desc: &str, rows: &[(String, Vec<Segment>)]) -> String {
     let n = rows.len();
-    svg(WIDTH, (110 + 60 * n) as u32, |area| {
+    // The legend gets a band of its own below the bars (about 20 px a label), so that it hides
+    // neither a bar nor the length written at a bar's end.
+    let mut labels: Vec<&str> = Vec::new();
+    for s in rows.iter().flat_map(|r| &r.1) {
+        if !labels.contains(&s.label.as_str()) {
+            labels.push(&s.label);
+        }
+    }
+    let band = (20.0 * labels.len() as f64 + 16.0) / 60.0;
+    svg(WIDTH, (110.0 + 60.0 * (n as f64 + band)) as u32, |area| {
         let total = rows.iter().map(|(_, s)| s.iter().map(|x| x.length.max(0.0)).sum::<f64>()).fold(0.0, f64::max);
         let x1 = if total > 0.0 { total * 1.12 } else { 1.0 };
         let mut chart = ChartBuilder::on(area)
@@ -713,7 +726,7 @@ pub fn stacked_bars_svg(title: &str, x_desc: &str, rows: &[(String, Vec<Segment>
             .margin(8)
             .x_label_area_size(42)
             .y_label_area_size(170)
-            .build_cartesian_2d(0.0..x1, -0.5..(n as f64 - 0.5))?;
+            .build_cartesian_2d(0.0..x1, (-0.5 - band)..(n as f64 - 0.5))?;
         let label_of = |y: &f64| {
             let k = y.round();
             if (y - k).abs() < 1e-6 && k >= 0.0 && (k as usize) < n {
@@ -728,7 +741,7 @@ pub fn stacked_bars_svg(title: &str, x_desc: &str, rows: &[(String, Vec<Segment>
             .configure_mesh()
             .x_desc(x_desc)
             .x_label_formatter(&fx)
-            .y_labels(n.max(1))
+            .y_labels(n + band.ceil() as usize + 1)
             .y_label_formatter(&label_of)
             .disable_y_mesh()
             .light_line_style(GRID)
@@ -741,15 +754,33 @@ pub fn stacked_bars_svg(title: &str, x_desc: &str, rows: &[(String, Vec<Segment>
             let mut x = 0.0;
             for s in segments {
                 let len = s.length.max(0.0);
-                let fill = SHADES[s.shade.min(3)];
+                let hatched = s.shade == HATCHED;
+                let fill = if hatched { WHITE } else { SHADES[s.shade.min(3)] };
                 let anno = chart.draw_series([
                     Rectangle::new([(x, y - 0.3), (x + len, y + 0.3)], fill.filled()),
                     Rectangle::new([(x, y - 0.3), (x + len, y + 0.3)], BLACK.stroke_width(1)),
                 ])?;
                 if !seen.contains(&s.label) {
                     seen.push(s.label.clone());
-                    anno.label(s.label.clone())
-                        .legend(move |(a, b)| Rectangle::new([(a, b - 5), (a + 14, b + 5)], fill.filled()));
+                    if hatched {
+                        anno.label(s.label.clone()).legend(move |(a, b)| {
+                            EmptyElement::at((a, b))
+                                + Rectangle::new([(0, -5), (14, 5)], BLACK.stroke_width(1))
+                                + PathElement::new(vec![(4, -5), (4, 5)], BLACK.stroke_width(1))
+                                + PathElement::new(vec![(10, -5), (10, 5)], BLACK.stroke_width(1))
+                        });
+                    } else {
+                        anno.label(s.label.clone())
+                            .legend(move |(a, b)| Rectangle::new([(a, b - 5), (a + 14, b + 5)], fill.filled()));
+                    }
+                }
+                if hatched && len > 0.0 {
+                    let step = x1 / 80.0;
+                    let k = (len / step).floor() as usize;
+                    chart.draw_series((1..=k).map(|i| {
+                        let at = x + i as f64 * step;
+                        PathElement::new(vec![(at, y - 0.3), (at, y + 0.3)], BLACK.stroke_width(1))
+                    }))?;
                 }
                 x += len;
             }
@@ -759,7 +790,7 @@ pub fn stacked_bars_svg(title: &str, x_desc: &str, rows: &[(String, Vec<Segment>
                 (FONT, 13).into_font(),
             )))?;
         }
-        legend(&mut chart, SeriesLabelPosition::UpperRight)?;
+        legend(&mut chart, SeriesLabelPosition::LowerRight)?;
         Ok(())
     })
 }

@@ -151,7 +151,8 @@ fn diagnosis_json() -> serde_json::Value {
             "extrapolation_gap_mm": 0.05, "unmodelled_gap_mm": 0.1
         },
         "where": {"n": 40, "per_axis": {"x": {"mean_mm": 0.0, "std_mm": 0.1}, "y": {"mean_mm": 0.0, "std_mm": 0.1}, "z": {"mean_mm": 0.0, "std_mm": 0.1}},
-            "against": [{"variable": "q2", "unit": "deg", "r": 0.5, "profile": [{"at": -30.0, "mean_mm": 0.1, "n": 10}, {"at": 0.0, "mean_mm": 0.2, "n": 10}]}],
+            "against": [{"variable": "q2", "unit": "deg", "r": 0.5, "profile": [{"at": -30.0, "mean_mm": 0.1, "n": 10}, {"at": 0.0, "mean_mm": 0.2, "n": 10}]},
+                {"variable": "tau1", "unit": "N·m", "r": null, "profile": [{"at": 0.0, "mean_mm": 0.1, "n": 10}, {"at": 0.0, "mean_mm": 0.2, "n": 10}]}],
             "voxels": {"size_mm": 100.0, "tested": 4, "above_floor": []}},
         "candidates": [],
         "shrink": [
@@ -173,9 +174,21 @@ fn the_diagnosis_decomposes_the_held_out_error() {
     assert!((held[0] - 0.05).abs() < 1e-12 && (held[1] - 0.03).abs() < 1e-12 && (held[2] - 0.07).abs() < 1e-12);
     let cal: f64 = rows[1].1.iter().map(|s| s.length).sum();
     assert!((cal - 0.2).abs() < 1e-12);
+    // Every label of the bars has a shade of its own (the extrapolation gap was the explained
+    // part's colour).
+    let mut shades: Vec<(String, usize)> = Vec::new();
+    for s in rows.iter().flat_map(|r| &r.1) {
+        if !shades.iter().any(|(l, _)| *l == s.label) {
+            assert!(!shades.iter().any(|(_, k)| *k == s.shade), "{} shares a shade: {shades:?}", s.label);
+            shades.push((s.label.clone(), s.shade));
+        }
+    }
+    assert_eq!(shades.len(), 5);
     let html = diagnosis_report(&d);
     self_contained(&html);
     // The decomposition bar and the residual profiles.
     assert_eq!(count(&html, "<svg"), 2);
     assert!(html.contains("<td class=\"n\">70.0 %</td>"), "gap closure");
+    // A variable that does not vary (τ1 of a vertical first axis) gets no panel.
+    assert!(html.contains("q2 (deg)") && !html.contains("tau1 (N·m)"));
 }
