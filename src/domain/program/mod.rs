@@ -341,8 +341,9 @@ pub struct TargetReport {
     /// The compensated joints, deg.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub joints_deg: Option<Vec<f64>>,
-    /// Predicted standard uncertainty of the TCP position at the compensated joints, mm (the set's
-    /// parameter covariance; absent when it records none).
+    /// The predicted standard uncertainty of the TCP position at the compensated joints, mm, as
+    /// `compensate` gives it: √(covariance² + unexplained² + extrapolation²). Absent when a part is
+    /// unknown (no held-out validation given, no recorded region).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncertainty_mm: Option<f64>,
     /// Why it was not compensated.
