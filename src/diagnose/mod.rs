@@ -851,6 +851,14 @@ fn verdict(s: &search::Search, d: &Decomposition) -> Verdict {
                 ),
                 None => "a smooth function of the configuration predicts the residual; no candidate does".into(),
             };
+            // Candidates these data cannot test are named here too: the cause may be one of them.
+            let missing: Vec<String> =
+                s.unavailable.iter().map(|u| format!("{} ({})", u.kind.name(), u.reason)).collect();
+            let what = if missing.is_empty() {
+                what
+            } else {
+                format!("{what}; not testable on these data: {}", missing.join("; "))
+            };
             (Status::UnknownEffect, what, None, None, Vec::new(), None, Vec::new())
         }
     };
