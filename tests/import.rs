@@ -458,7 +458,11 @@ fn reflector_positions_come_back_from_forward_kinematics() {
             (s.purpose, s.instrument, s.identify_tcp),
             (Purpose::Identification, Instrument::LaserTracker, true)
         );
-        assert_eq!(s.tool, Tool { tcp: [0.0; 6], mass: 0.0, com: Vector3::zeros() });
+        // No payload given: 0 kg (unknown), the centre of mass at the reflectors' centroid in
+        // the flange frame, found by the registration (exact data: to the nanometre).
+        assert_eq!((s.tool.tcp, s.tool.mass), ([0.0; 6], 0.0));
+        let centroid = REFLECTORS.iter().map(|r| Vector3::from(*r)).sum::<Vector3<f64>>() / 3.0;
+        assert!((s.tool.com - centroid).norm() < 1e-9, "{:?} against {centroid:?}", s.tool.com);
         assert_eq!(s.measurements.len(), POSES_DEG.len());
         for (i, m) in s.measurements.iter().enumerate() {
             let Observation::Position(p) = m.observation else { panic!("expected a position") };
