@@ -14,6 +14,7 @@ use super::extract::{Authorized, COMPENSATE, JsonBody};
 use super::robots::find as find_robot;
 use super::{ApiError, AppState};
 use crate::app::cache::CompiledSet;
+use crate::db::records::RobotRow;
 use crate::domain::pose::{FrameKind, FrameOut, TargetFrames, WorkObjectSpec, compensate_target, compensate_targets};
 use crate::domain::validity::{Envelope, EnvelopeFile, Guard, HeldOutUncertainty, ValidationCheck, ValidityOut};
 use crate::domain::{CompensationResult, TargetSpec, ToolSpec};
@@ -70,6 +71,31 @@ pub struct CompensationOut {
     pub results: Vec<CompensationResult>,
     /// Targets that could not be compensated.
     pub failed: usize,
+}
+
+/// The parameter set a robot's request works with: the one it names, or the robot's active one
+/// (409 when there is neither); 422 naming `parameter_set_id` when it is unknown or another
+/// robot's.
+pub(super) async fn robot_set(
+    state: &AppState,
+    robot: &RobotRow,
+    named: Option<&str>,
+) -> Result<Arc<CompiledSet>, ApiError> {
+    let Some(set_id) = named.or(robot.active_parameter_set_id.as_deref()) else {
+        return Err(ApiError::conflict(format!(
+            "robot '{}' has no active parameter set: activate one or name parameter_set_id",
+            robot.name
+        )));
+    };
+    let compiled = state
+        .caches
+        .parameter_set(&state.pool, set_id)
+        .await?
+        .ok_or_else(|| ApiError::invalid("parameter_set_id", format!("no parameter set '{set_id}'")))?;
+    if compiled.row.robot_id != robot.id {
+        return Err(ApiError::invalid("parameter_set_id", "the set belongs to another robot"));
+    }
+    Ok(compiled)
 }
 
 /// The set's latest held-out validation (on validation sessions it was not fitted on), refused
@@ -153,24 +179,7 @@ pub async fn compensate(
 ) -> Result<Json<CompensationOut>, ApiError> {
     let robot = find_robot(&state, &robot_id).await?;
     check_batch(&state, &body.targets)?;
-    let set_id = match (&body.parameter_set_id, &robot.active_parameter_set_id) {
-        (Some(id), _) => id.clone(),
-        (None, Some(id)) => id.clone(),
-        (None, None) => {
-            return Err(ApiError::conflict(format!(
-                "robot '{}' has no active parameter set: activate one or name parameter_set_id",
-                robot.name
-            )));
-        }
-    };
-    let compiled = state
-        .caches
-        .parameter_set(&state.pool, &set_id)
-        .await?
-        .ok_or_else(|| ApiError::invalid("parameter_set_id", format!("no parameter set '{set_id}'")))?;
-    if compiled.row.robot_id != robot.id {
-        return Err(ApiError::invalid("parameter_set_id", "the set belongs to another robot"));
-    }
+    let compiled = robot_set(&state, &robot, body.parameter_set_id.as_deref()).await?;
     crate::domain::pose::check_targets(&body.targets, &compiled.set.model).map_err(|e| ApiError::domain(e, ""))?;
     let mut checked = checks(&state, &compiled, body.allow_unvalidated).await?;
     let validation = checked.validation.take();

@@ -23,7 +23,7 @@ use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
-use super::compensation::{Checked, checks};
+use super::compensation::{Checked, checks, robot_set};
 use super::extract::{Authorized, COMPENSATE};
 use super::robots::find as find_robot;
 use super::{ApiError, AppState};
@@ -310,24 +310,7 @@ pub async fn filter_program(
     let robot = find_robot(&state, &robot_id).await?;
     let (q, opts) = options(&pairs)?;
     let files = program_files(&headers, &body, q.name.as_deref())?;
-    let set_id = match (&q.parameter_set_id, &robot.active_parameter_set_id) {
-        (Some(id), _) => id.clone(),
-        (None, Some(id)) => id.clone(),
-        (None, None) => {
-            return Err(ApiError::conflict(format!(
-                "robot '{}' has no active parameter set: activate one or name parameter_set_id",
-                robot.name
-            )));
-        }
-    };
-    let compiled = state
-        .caches
-        .parameter_set(&state.pool, &set_id)
-        .await?
-        .ok_or_else(|| ApiError::invalid("parameter_set_id", format!("no parameter set '{set_id}'")))?;
-    if compiled.row.robot_id != robot.id {
-        return Err(ApiError::invalid("parameter_set_id", "the set belongs to another robot"));
-    }
+    let compiled = robot_set(&state, &robot, q.parameter_set_id.as_deref()).await?;
     let Checked { validation, envelope, held_out } =
         checks(&state, &compiled, q.allow_unvalidated.unwrap_or(false)).await?;
     let allow_outside = q.allow_outside_envelope.unwrap_or(false);
