@@ -323,4 +323,7 @@ fn the_issues_values_are_refused_naming_the_field() {
     // The validation job on such a stored reading (a database written before the door was
     // closed) ends with an error naming the measurement, not a panic.
     run_all(&mutated(&Field::Position { index: 3, axis: 0 }, 1e160), true);
+    // A robot stored as a custom table under the preset's name (one length re-measured) against a
+    // set identified on the preset: the diagnosis starts from the set, or refuses naming it.
+    run_all(&mutated(&Field::Robot { joint: 2, field: 3 }, 0.5), true);
 }

@@ -297,6 +297,10 @@ pub enum IdentifyError {
     Registration(#[from] RegistrationError),
     #[error("{0}")]
     Option(String),
+    #[error(
+        "the start parameter set is for robot '{set}' ({set_dof} joints), not for the cell's robot '{cell}' ({cell_dof} joints)"
+    )]
+    StartRobot { set: String, set_dof: usize, cell: String, cell_dof: usize },
     #[error("{rows} residual rows cannot determine {params} parameters")]
     Underdetermined { rows: usize, params: usize },
     #[error("rank-deficient fit: these data do not separate {combination}")]
@@ -448,11 +452,17 @@ pub fn prepare(cell: &Cell, opts: &IdentifyOptions) -> Result<Prepared, Identify
         for (t, b) in problem.tools.iter().enumerate() {
             from_start[t] = b.tool == start.tool;
         }
-        if start.model.dof() != dof || start.model.preset != cell.model.preset {
-            return Err(IdentifyError::Option(format!(
-                "the start parameter set is for robot '{}', the cell's robot is '{}'",
-                start.model.name, cell.model.name
-            )));
+        // As validation decides: a set starts a fit of the same joint count, unless both robots
+        // are built-in presets and differ (a custom table may be a preset re-measured; the set's
+        // values are absolute, so they start its fit as well).
+        let presets_differ = matches!((start.model.preset, cell.model.preset), (Some(a), Some(b)) if a != b);
+        if start.model.dof() != dof || presets_differ {
+            return Err(IdentifyError::StartRobot {
+                set: start.model.name.clone(),
+                set_dof: start.model.dof(),
+                cell: cell.model.name.clone(),
+                cell_dof: dof,
+            });
         }
         for (g, gp) in problem.params.iter().enumerate() {
             let v = match *gp {

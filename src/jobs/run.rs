@@ -246,6 +246,7 @@ pub fn identify_error(e: IdentifyError) -> JobError {
         IdentifyError::Outliers { .. } => {
             JobError::Numerical { kind: "outliers", title: "Outlier measurements", detail }
         }
+        IdentifyError::StartRobot { .. } => JobError::Invalid { detail, field: Some("parameter_set_id".into()) },
         IdentifyError::Problem(_) | IdentifyError::Option(_) => JobError::Invalid { detail, field: None },
     }
 }
