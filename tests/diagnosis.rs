@@ -150,6 +150,27 @@ fn compensation_with_an_accepted_effect_lands_on_the_virtual_robot() {
     let accepted = d.accepted.as_ref().expect("an accepted model").set.clone();
     assert!(accepted.value(Param::Joint(2, JointTerm::Cyclic { harmonic: 2, cosine: false })).is_some());
 
+    // The evidence plot's figures against the simulated truth, Δθ3 = 0.01°·sin(2·q3): the
+    // effect's term follows the truth up to the constant the joint offset takes, the held-out
+    // residual before it shows the part the geometry could not absorb, and after it is flat.
+    let out = robocal::domain::diagnosis::diagnosis_out(&d);
+    let ev = out.evidence.iter().find(|e| e.joint == 3).expect("evidence for the cyclic term on joint 3");
+    // A periodic term's residual is folded onto one period: x is the phase 2·q3 mod 360°.
+    assert_eq!(ev.variable, "phase of 2 cycles per turn of q3");
+    let explained = ev.explained_share.unwrap();
+    assert!(explained > 0.3, "share of the residual angle removed: {explained}");
+    assert!(ev.bins.len() >= 10 && ev.n >= 50, "{} bins, {} poses", ev.bins.len(), ev.n);
+    let truth: Vec<f64> = ev.bins.iter().map(|b| 0.01 * b.at.to_radians().sin()).collect();
+    let offset = ev.bins.iter().zip(&truth).map(|(b, t)| b.predicted_deg - t).sum::<f64>() / truth.len() as f64;
+    let rms = |f: &dyn Fn(usize) -> f64| {
+        (ev.bins.iter().enumerate().map(|(i, _)| f(i).powi(2)).sum::<f64>() / ev.bins.len() as f64).sqrt()
+    };
+    let pred_vs_truth = rms(&|i| ev.bins[i].predicted_deg - offset - truth[i]);
+    let before = rms(&|i| ev.bins[i].before_deg);
+    let after = rms(&|i| ev.bins[i].after_deg);
+    assert!(pred_vs_truth < 0.0015, "prediction − truth: {pred_vs_truth:.5}° RMS over the bins");
+    assert!(before > 0.002 && after < before / 3.0, "binned residual angle RMS before {before:.5}°, after {after:.5}°");
+
     // Targets: where the true robot's TCP is at the validation poses (TriCal tool).
     let tool = cell.sessions[0].tool.clone();
     let robot = sim.truth.robot(&tool);

@@ -19,7 +19,8 @@ use std::str::FromStr;
 use std::time::{Duration, SystemTime};
 
 pub use health::StorageHealth;
-use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
+pub use sqlx::sqlite::SqliteSynchronous;
+use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions};
 pub use sqlx::{Sqlite, SqlitePool, Transaction};
 
 /// The migrations of `migrations/`, embedded at compile time and applied at start-up.
@@ -36,12 +37,19 @@ pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations");
 /// depth" — each write that drew it a 500, long after the disk had space again. Such a connection
 /// is closed instead (the pool opens a fresh one when needed).
 pub async fn connect(path: &Path) -> Result<SqlitePool, sqlx::Error> {
+    connect_with(path, SqliteSynchronous::Full).await
+}
+
+/// [`connect`] with another `synchronous` setting. The service always uses `Full` (an answered
+/// 201 survives a power cut); `Normal` exists for the benchmark that measures what that costs
+/// (`benches/upload.rs`) and for scratch databases whose loss at a power cut does not matter.
+pub async fn connect_with(path: &Path, synchronous: SqliteSynchronous) -> Result<SqlitePool, sqlx::Error> {
     // Switching a new database to WAL needs an exclusive lock that SQLite's busy timeout does not
     // wait for, so a process opening the file while another creates it can get "database is
     // locked" at once: retry that for as long as the busy timeout would have waited.
     let deadline = tokio::time::Instant::now() + BUSY_TIMEOUT;
     loop {
-        match open_and_migrate(path).await {
+        match open_and_migrate(path, synchronous).await {
             Err(e) if is_busy(&e) && tokio::time::Instant::now() < deadline => {
                 tokio::time::sleep(Duration::from_millis(25)).await;
             }
@@ -52,12 +60,12 @@ pub async fn connect(path: &Path) -> Result<SqlitePool, sqlx::Error> {
 
 const BUSY_TIMEOUT: Duration = Duration::from_secs(10);
 
-async fn open_and_migrate(path: &Path) -> Result<SqlitePool, sqlx::Error> {
+async fn open_and_migrate(path: &Path, synchronous: SqliteSynchronous) -> Result<SqlitePool, sqlx::Error> {
     let opts = SqliteConnectOptions::new()
         .filename(path)
         .create_if_missing(true)
         .journal_mode(SqliteJournalMode::Wal)
-        .synchronous(SqliteSynchronous::Full)
+        .synchronous(synchronous)
         .foreign_keys(true)
         .busy_timeout(BUSY_TIMEOUT);
     let pool = SqlitePoolOptions::new()

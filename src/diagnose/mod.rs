@@ -34,6 +34,8 @@ use nalgebra::Vector3;
 use crate::cell::order::{self, ApproachSource};
 use crate::cell::{Cell, Purpose};
 use crate::identify::{Anchor, Identification, IdentifyError, IdentifyOptions, ModelOptions, NoiseModel, identify};
+use crate::kinematics::chain::basis_at;
+use crate::kinematics::params::MapEdge;
 use crate::kinematics::{JointTerm, Param, ParamLayout, ParameterSet, Unit};
 use crate::validate::report::{Reference, validate};
 use crate::validate::stats::ErrorStats;
@@ -242,17 +244,280 @@ pub struct Diagnosis {
     pub parallel_rows: usize,
     /// The starting and the final model carried to other sessions.
     pub transfer: Vec<Transfer>,
+    /// The evidence of each accepted joint effect, in acceptance order.
+    pub evidence: Vec<Evidence>,
+}
+
+/// The evidence for one accepted joint effect, as a plot can show it: the held-out residual of
+/// the model before the effect, turned into the joint-angle error at the effect's joint that
+/// explains it best (e = r·s / |s|², s = ∂p/∂θ_j at the pose), against the effect's own variable
+/// (the joint's reading, its approach direction, its torque, the coupled joint's reading), beside
+/// what the accepted effect predicts there and the held-out residual after it — binned.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Evidence {
+    /// The effect's label ([`Candidate::label`]).
+    pub effect: String,
+    /// The joint whose angle it corrects (0-based).
+    pub joint: usize,
+    /// What the x axis is.
+    pub variable: EvidenceVariable,
+    pub bins: Vec<EvidenceBin>,
+    /// 1 − Σ after² / Σ before² over the poses' residual angles: the share of the held-out
+    /// residual at this joint that the model with the effect removes. The term alone need not
+    /// match the residual before it: the model before absorbs what its own parameters can of
+    /// the effect (a joint offset, a link length), and the model after refits those too.
+    pub explained: Option<f64>,
+    /// The poses used.
+    pub n: usize,
+}
+
+/// The x axis of an [`Evidence`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum EvidenceVariable {
+    /// A joint's reading, rad.
+    Reading(usize),
+    /// A joint's approach direction (−1, 0, +1).
+    Approach(usize),
+    /// A joint's holding torque, N·m.
+    Torque(usize),
+    /// The phase of a periodic term of a joint, (f·q_j) mod 2π, rad, for f cycles per
+    /// revolution: the residual folded onto one period, as a periodic error is shown.
+    Phase(usize, f64),
+}
+
+/// One bin of an [`Evidence`]: angles in rad.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EvidenceBin {
+    /// The bin's centre on the x axis (rad, a direction, N·m).
+    pub at: f64,
+    pub n: usize,
+    /// Mean and standard error of the before-residual angle.
+    pub before: f64,
+    pub before_sem: f64,
+    /// Mean of what the effect predicts.
+    pub predicted: f64,
+    /// Mean of the after-residual angle (the effect included).
+    pub after: f64,
+}
+
+/// Evidence bins along a continuous variable: at most this many, each with at least 5 poses.
+const EVIDENCE_BINS: usize = 24;
+
+/// The evidence of each accepted joint effect (see [`Evidence`]); effects on no joint angle
+/// (β, base, tool, payload, temperature) have none.
+fn evidence(s: &search::Search, figures: &[&cv::Heldout]) -> Vec<Evidence> {
+    let mut out = Vec::new();
+    for (k, c) in s.accepted.iter().enumerate() {
+        let (Some(before_stage), Some(after_stage), Some(before), Some(after)) =
+            (s.stages.get(k), s.stages.get(k + 1), figures.get(k), figures.get(k + 1))
+        else {
+            continue;
+        };
+        let Some(j) = c.joint else { continue };
+        let variable = match c.kind {
+            Kind::Backlash => EvidenceVariable::Approach(j),
+            Kind::Compliance | Kind::ComplianceCubic => EvidenceVariable::Torque(j),
+            Kind::Cyclic => match c.quarters {
+                Some(q) => EvidenceVariable::Phase(j, q as f64 / 4.0),
+                None => EvidenceVariable::Reading(j),
+            },
+            Kind::JointMap => EvidenceVariable::Reading(j),
+            Kind::Coupling => match c.from {
+                Some(f) => EvidenceVariable::Reading(f),
+                None => continue,
+            },
+            _ => continue,
+        };
+        // The effect's terms and their values in the model that accepted it; table edges as the
+        // chain takes them (the first and last knot of a table hold their value beyond it).
+        let terms: Vec<(JointTerm, f64)> = c
+            .params
+            .iter()
+            .filter_map(|p| match *p {
+                Param::Joint(pj, t) if pj == j => after_stage.set.value(*p).map(|v| (t, v)),
+                _ => None,
+            })
+            .collect();
+        if terms.is_empty() {
+            continue;
+        }
+        let knots: Vec<i16> = terms
+            .iter()
+            .filter_map(|(t, _)| if let JointTerm::Map { knot, .. } = t { Some(*knot) } else { None })
+            .collect();
+        let (lo, hi) = (knots.iter().min().copied(), knots.iter().max().copied());
+        let predict = |st: &crate::kinematics::JointState| -> f64 {
+            terms
+                .iter()
+                .map(|(t, v)| {
+                    let edge = match t {
+                        JointTerm::Map { knot, .. } => MapEdge { first: Some(*knot) == lo, last: Some(*knot) == hi },
+                        _ => MapEdge::default(),
+                    };
+                    v * basis_at(*t, j, st, edge)
+                })
+                .sum()
+        };
+        // ∂p/∂θ_j per observation, unweighted.
+        let cols = before_stage.columns(&[Param::Theta(j)]);
+        let pr = &after_stage.problem;
+        let sens: Vec<Option<Vector3<f64>>> = before_stage
+            .problem
+            .obs
+            .iter()
+            .map(|o| {
+                let w = &o.weight;
+                (w[0] > 0.0 && w[1] > 0.0 && w[2] > 0.0).then(|| {
+                    Vector3::new(cols[(o.row, 0)] / w[0], cols[(o.row + 1, 0)] / w[1], cols[(o.row + 2, 0)] / w[2])
+                })
+            })
+            .collect();
+        let mut norms: Vec<f64> = sens.iter().flatten().map(|v| v.norm()).collect();
+        norms.sort_by(f64::total_cmp);
+        let Some(&median) = norms.get(norms.len() / 2) else { continue };
+        let angle = |i: usize, e: &Vector3<f64>| -> Option<f64> {
+            let sv = sens.get(i).copied().flatten()?;
+            let n2 = sv.norm_squared();
+            (n2.sqrt() >= 0.2 * median && n2 > 0.0).then(|| e.dot(&sv) / n2)
+        };
+        let after_of: std::collections::HashMap<usize, Vector3<f64>> = after.errors.iter().copied().collect();
+        // (x, before angle, predicted, after angle) per tested observation.
+        let mut pts: Vec<EvidencePoint> = Vec::new();
+        for (i, e) in &before.errors {
+            let (Some(o), Some(ea)) = (pr.obs.get(*i), after_of.get(i)) else { continue };
+            let (Some(b), Some(a)) = (angle(*i, e), angle(*i, ea)) else { continue };
+            let x = match variable {
+                EvidenceVariable::Reading(v) => o.state.q[v],
+                EvidenceVariable::Approach(v) => o.state.approach[v],
+                EvidenceVariable::Torque(v) => o.state.tau[v],
+                EvidenceVariable::Phase(v, f) => (f * o.state.q[v]).rem_euclid(std::f64::consts::TAU),
+            };
+            let p = predict(&o.state);
+            if [x, b, a, p].iter().all(|v| v.is_finite()) {
+                pts.push((x, b, p, a));
+            }
+        }
+        if pts.len() < 10 {
+            continue;
+        }
+        let sb: f64 = pts.iter().map(|p| p.1 * p.1).sum();
+        let sa: f64 = pts.iter().map(|p| p.3 * p.3).sum();
+        let explained = (sb > 0.0).then(|| 1.0 - sa / sb);
+        out.push(Evidence {
+            effect: c.label(),
+            joint: j,
+            variable,
+            bins: evidence_bins(&mut pts, matches!(variable, EvidenceVariable::Approach(_))),
+            explained,
+            n: pts.len(),
+        });
+    }
+    out
+}
+
+/// One pose of an evidence plot: (x, before angle, predicted angle, after angle).
+type EvidencePoint = (f64, f64, f64, f64);
+
+/// Bins of (x, before, predicted, after): one per distinct value of a discrete variable, else up
+/// to [`EVIDENCE_BINS`] of equal counts (at least 5 poses each).
+fn evidence_bins(pts: &mut [EvidencePoint], discrete: bool) -> Vec<EvidenceBin> {
+    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let groups: Vec<&[EvidencePoint]> = if discrete {
+        pts.chunk_by(|a, b| a.0 == b.0).collect()
+    } else {
+        let nb = (pts.len() / 5).clamp(1, EVIDENCE_BINS);
+        let size = pts.len().div_ceil(nb);
+        pts.chunks(size).collect()
+    };
+    groups
+        .into_iter()
+        .map(|g| {
+            let n = g.len() as f64;
+            let mean = |f: &dyn Fn(&EvidencePoint) -> f64| g.iter().map(f).sum::<f64>() / n;
+            let before = mean(&|p| p.1);
+            let var = if g.len() > 1 { g.iter().map(|p| (p.1 - before).powi(2)).sum::<f64>() / (n - 1.0) } else { 0.0 };
+            EvidenceBin {
+                at: mean(&|p| p.0),
+                n: g.len(),
+                before,
+                before_sem: (var / n).sqrt(),
+                predicted: mean(&|p| p.2),
+                after: mean(&|p| p.3),
+            }
+        })
+        .collect()
 }
 
 /// A model carried to another session, base and tools refitted there.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Transfer {
     pub session: String,
-    /// `start` or `final`.
+    /// `start`, `start + <effect> + …` (the intermediate models of the search) or `final`.
     pub model: String,
     pub errors: Result<ErrorStats, String>,
     /// κ of the column-scaled Jacobian of the base-and-tools refit.
     pub kappa_scaled: Option<f64>,
+    /// The same errors split by whether the pose lies inside the joint ranges the model was
+    /// identified on (every joint within the identification sessions' [min, max]): a term of the
+    /// model (a table, a harmonic, a compliance) is only known where its joint was measured, and a
+    /// transfer session outside those ranges tests extrapolation. `None` when the refit failed.
+    pub range: Option<RangeSplit>,
+}
+
+/// A transfer's errors inside and outside the identification's joint ranges.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RangeSplit {
+    /// Per joint, the identification sessions' [min, max], rad.
+    pub joints: Vec<[f64; 2]>,
+    /// Poses inside every range / all poses.
+    pub inside_share: f64,
+    pub inside: Option<ErrorStats>,
+    pub outside: Option<ErrorStats>,
+    /// Per joint, the share of the transfer's poses outside that joint's range.
+    pub outside_share_per_joint: Vec<f64>,
+}
+
+/// The identification sessions' joint ranges, rad (`None` without a measurement).
+fn joint_ranges(cell: &Cell, sessions: &[String]) -> Option<Vec<[f64; 2]>> {
+    let dof = cell.model.dof();
+    let mut r = vec![[f64::INFINITY, f64::NEG_INFINITY]; dof];
+    let mut any = false;
+    for s in sessions.iter().filter_map(|n| cell.session(n)) {
+        for m in &s.measurements {
+            any = true;
+            for (j, q) in m.q.iter().take(dof).enumerate() {
+                r[j] = [r[j][0].min(*q), r[j][1].max(*q)];
+            }
+        }
+    }
+    any.then_some(r)
+}
+
+/// A transfer's residuals split by the identification's joint ranges.
+fn range_split(cell: &Cell, ranges: &[[f64; 2]], residuals: &[crate::validate::report::Residual]) -> RangeSplit {
+    let dof = ranges.len();
+    let mut inside = Vec::new();
+    let mut outside = Vec::new();
+    let mut per_joint = vec![0usize; dof];
+    for r in residuals {
+        let Some(m) = cell.session(&r.session).and_then(|s| s.measurements.get(r.index)) else { continue };
+        let mut ok = true;
+        for (j, q) in m.q.iter().take(dof).enumerate() {
+            if *q < ranges[j][0] || *q > ranges[j][1] {
+                per_joint[j] += 1;
+                ok = false;
+            }
+        }
+        if ok { inside.push(r.error.norm()) } else { outside.push(r.error.norm()) }
+    }
+    let n = (inside.len() + outside.len()).max(1) as f64;
+    RangeSplit {
+        joints: ranges.to_vec(),
+        inside_share: inside.len() as f64 / n,
+        inside: ErrorStats::of(&inside),
+        outside: ErrorStats::of(&outside),
+        outside_share_per_joint: per_joint.iter().map(|&c| c as f64 / n).collect(),
+    }
 }
 
 /// The starting model's identification options: the set's structure and values.
@@ -428,6 +693,7 @@ pub fn diagnose_with_progress(
         floor: fl,
     };
 
+    let evidence = evidence(&s, &figures);
     // Shrink.
     let mut shrink = Vec::new();
     for (k, b) in figures.iter().enumerate() {
@@ -461,18 +727,27 @@ pub fn diagnose_with_progress(
         if backlash_screened || derived.refused().next().is_some() { derived.notes() } else { Vec::new() };
     // Transfer of the starting and the final model.
     let mut transfer = Vec::new();
+    let ranges = joint_ranges(&work, &identification);
     for t in &opts.transfer {
         if cell.session(t).is_none() {
             return Err(DiagnoseError::Option(format!("transfer: no session named '{t}' in the cell")));
         }
         let start_model = start_options(input, opts, Vec::new());
-        let mut models = vec![("start", start_model.model.clone(), input.set.clone())];
+        let mut models = vec![("start".to_string(), start_model.model.clone(), input.set.clone())];
+        // Every intermediate model too (the start with the first k effects, as fitted in the
+        // search): which terms carry to another session and which do not. Reported, never used to
+        // choose the model (that would select on the session being tested).
+        for k in 1..=s.accepted.len() {
+            let st = &s.stages[k];
+            let labels: Vec<String> = s.accepted[..k].iter().map(|c| c.label()).collect();
+            models.push((format!("start + {}", labels.join(" + ")), st.options.model.clone(), st.set.clone()));
+        }
         if !s.accepted.is_empty() {
             let fin = accepted
                 .as_ref()
                 .map(|id| id.set.clone())
                 .unwrap_or_else(|| s.stages.last().expect("a stage").set.clone());
-            models.push(("final", model.model.clone(), fin));
+            models.push(("final".to_string(), model.model.clone(), fin));
         }
         for (name, m, set) in models {
             let mut o = IdentifyOptions {
@@ -487,14 +762,18 @@ pub fn diagnose_with_progress(
             o.selection.sessions = vec![t.clone()];
             let r = identify(&work, &o).map_err(|e| e.to_string()).and_then(|id| {
                 let k = id.quality.kappa_scaled;
-                validate(&id.set, &work, std::slice::from_ref(t), Reference::Measured)
-                    .map_err(|e| e.to_string())
-                    .map(|r| (r.calibrated.position, k))
+                validate(&id.set, &work, std::slice::from_ref(t), Reference::Measured).map_err(|e| e.to_string()).map(
+                    |r| {
+                        let split = ranges.as_deref().map(|g| range_split(&work, g, &r.residuals));
+                        (r.calibrated.position, k, split)
+                    },
+                )
             });
             transfer.push(Transfer {
                 session: t.clone(),
-                model: name.into(),
+                model: name,
                 kappa_scaled: r.as_ref().ok().map(|x| x.1),
+                range: r.as_ref().ok().and_then(|x| x.2.clone()),
                 errors: r.map(|x| x.0),
             });
         }
@@ -520,6 +799,7 @@ pub fn diagnose_with_progress(
         dof: cell.model.dof(),
         parallel_rows: ParamLayout::full(&cell.model).parallel_rows().len(),
         transfer,
+        evidence,
     })
 }
 
@@ -929,5 +1209,29 @@ fn verdict(s: &search::Search, d: &Decomposition) -> Verdict {
         absorbed_by: Vec::new(),
         experiment: None,
         remaining: (status != Status::None).then_some((status, summary)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::evidence_bins;
+
+    /// Bins by hand: a discrete variable gets one bin per value (mean, standard error of the
+    /// mean); a continuous one equal-count bins in order of x.
+    #[test]
+    fn evidence_bins_by_hand() {
+        // (x, before, predicted, after)
+        let mut pts =
+            vec![(1.0, 2.0, 1.0, 0.5), (-1.0, -1.0, -1.0, 0.0), (1.0, 4.0, 1.0, 1.5), (-1.0, -3.0, -1.0, -1.0)];
+        let b = evidence_bins(&mut pts, true);
+        assert_eq!(b.len(), 2);
+        assert_eq!((b[0].at, b[0].n, b[0].before, b[0].predicted, b[0].after), (-1.0, 2, -2.0, -1.0, -0.5));
+        // before −1, −3: s = √2, s.e.m. = √2/√2 = 1.
+        assert!((b[0].before_sem - 1.0).abs() < 1e-15);
+        assert_eq!((b[1].at, b[1].before, b[1].after), (1.0, 3.0, 1.0));
+        // 12 points, continuous: 12/5 → 2 bins of 6, x = 0…11.
+        let mut pts: Vec<_> = (0..12).rev().map(|i| (i as f64, 2.0 * i as f64, 0.0, 0.0)).collect();
+        let b = evidence_bins(&mut pts, false);
+        assert_eq!(b.iter().map(|b| (b.n, b.at, b.before)).collect::<Vec<_>>(), vec![(6, 2.5, 5.0), (6, 8.5, 17.0)]);
     }
 }

@@ -15,7 +15,7 @@ use crate::diagnose::search::Decision;
 use crate::diagnose::{DiagnoseOptions, Diagnosis, Effect, Input, SearchOptions, Status};
 use crate::identify::{Anchor, NoiseModel};
 use crate::kinematics::{Param, Unit};
-use crate::units::{DEG, MM, UM};
+use crate::units::{DEG, MM, OUT_DEG, UM, round_to};
 use crate::validate::stats::ErrorStats;
 
 fn five() -> usize {
@@ -239,17 +239,82 @@ pub struct DiagnosisOut {
     pub sessions: SessionsOut,
     /// The starting and the final model carried to other sessions (base and tools refitted).
     pub transfer: Vec<TransferOut>,
+    /// The evidence of each named joint effect: the held-out residual before it, as the
+    /// joint-angle error at its joint, against its own variable, beside what it predicts and the
+    /// residual after it (binned). Absent in a diagnosis stored before this field.
+    #[serde(default)]
+    pub evidence: Vec<EvidenceOut>,
     pub notes: Vec<String>,
+}
+
+/// The evidence for one named joint effect (see [`DiagnosisOut::evidence`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct EvidenceOut {
+    /// The effect's label, as in `verdict.effects`.
+    pub effect: String,
+    /// The joint whose angle it corrects, 1-based.
+    pub joint: usize,
+    /// The x axis: `q<j>` (joint reading), `approach<j>` (its approach direction, −1/0/+1),
+    /// `tau<j>` (its holding torque), 1-based, or for a periodic term `phase of <f> cycles per turn
+    /// of q<j>` ((f·q_j) mod 360°: the residual folded onto one period).
+    pub variable: String,
+    /// Unit of the x axis: `deg`, `direction` or `N·m`.
+    pub unit: String,
+    /// 1 − Σ after² / Σ before² over the poses' residual angles at this joint: the share of the
+    /// held-out residual there that the model with the effect removes.
+    pub explained_share: Option<f64>,
+    /// Poses used: tested poses where joint j moves the TCP by at least a fifth of the median.
+    pub n: usize,
+    pub bins: Vec<EvidenceBinOut>,
+}
+
+/// One bin of an evidence plot: angles at the effect's joint, deg.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct EvidenceBinOut {
+    /// The bin's centre on the x axis (the variable's unit).
+    pub at: f64,
+    pub n: usize,
+    /// Mean of the held-out residual before the effect, as the joint angle that explains it best.
+    pub before_deg: f64,
+    /// Its standard error.
+    pub before_sem_deg: f64,
+    /// Mean of the effect's own term (its parameters times their basis). It need not match the
+    /// residual before: the model before took what its parameters could of the effect.
+    pub predicted_deg: f64,
+    /// Mean of the held-out residual after the effect.
+    pub after_deg: f64,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct TransferOut {
     pub session: String,
-    /// `start` or `final`.
+    /// `start`, `start + <effect> + …` (an intermediate model of the search, with the first
+    /// effects accepted) or `final` (every accepted effect, fitted on the pooled data).
     pub model: String,
     pub errors: Option<StatsOut>,
     pub error: Option<String>,
     pub kappa_scaled: Option<f64>,
+    /// The errors split by whether the pose lies inside the joint ranges the model was identified
+    /// on: outside them a table, harmonic or compliance term is extrapolated, and the transfer
+    /// figure tests that extrapolation, not the model where it was measured. Absent when the
+    /// refit failed (or from a diagnosis stored before this field).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint_range: Option<JointRangeSplitOut>,
+}
+
+/// A transfer's errors inside and outside the identification sessions' joint ranges.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct JointRangeSplitOut {
+    /// Per joint, the identification sessions' [min, max], deg.
+    pub identified_range_deg: Vec<[f64; 2]>,
+    /// Share of the transfer session's poses with every joint inside its range (0–1).
+    pub inside_share: f64,
+    /// Per joint, the share of the poses outside that joint's range (0–1).
+    pub outside_share_per_joint: Vec<f64>,
+    /// Errors of the poses inside every range (absent: none is).
+    pub inside: Option<StatsOut>,
+    /// Errors of the poses outside at least one range (absent: none is).
+    pub outside: Option<StatsOut>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
@@ -794,9 +859,52 @@ pub fn diagnosis_out(d: &Diagnosis) -> DiagnosisOut {
                 errors: t.errors.as_ref().ok().map(stats),
                 error: t.errors.as_ref().err().cloned(),
                 kappa_scaled: t.kappa_scaled,
+                joint_range: t.range.as_ref().map(|r| JointRangeSplitOut {
+                    identified_range_deg: r
+                        .joints
+                        .iter()
+                        .map(|[a, b]| [round_to(a / DEG, OUT_DEG), round_to(b / DEG, OUT_DEG)])
+                        .collect(),
+                    inside_share: round_to(r.inside_share, 1e-4),
+                    outside_share_per_joint: r.outside_share_per_joint.iter().map(|v| round_to(*v, 1e-4)).collect(),
+                    inside: r.inside.as_ref().map(stats),
+                    outside: r.outside.as_ref().map(stats),
+                }),
             })
             .collect(),
+        evidence: d.evidence.iter().map(evidence_out).collect(),
         notes,
+    }
+}
+
+fn evidence_out(e: &crate::diagnose::Evidence) -> EvidenceOut {
+    use crate::diagnose::EvidenceVariable as V;
+    let (variable, unit, x_scale) = match e.variable {
+        V::Reading(j) => (format!("q{}", j + 1), "deg", 1.0 / DEG),
+        V::Approach(j) => (format!("approach{}", j + 1), "direction", 1.0),
+        V::Torque(j) => (format!("tau{}", j + 1), "N·m", 1.0),
+        V::Phase(j, f) => (format!("phase of {f} cycles per turn of q{}", j + 1), "deg", 1.0 / DEG),
+    };
+    let deg = |v: f64| round_to(v / DEG, OUT_DEG);
+    EvidenceOut {
+        effect: e.effect.clone(),
+        joint: e.joint + 1,
+        variable,
+        unit: unit.into(),
+        explained_share: e.explained.map(|s| round_to(s, 1e-4)),
+        n: e.n,
+        bins: e
+            .bins
+            .iter()
+            .map(|b| EvidenceBinOut {
+                at: round_to(b.at * x_scale, 1e-4),
+                n: b.n,
+                before_deg: deg(b.before),
+                before_sem_deg: deg(b.before_sem),
+                predicted_deg: deg(b.predicted),
+                after_deg: deg(b.after),
+            })
+            .collect(),
     }
 }
 

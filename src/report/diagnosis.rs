@@ -7,7 +7,7 @@
 
 use super::html::{esc, figure, fixed, mm, opt, p_value, page, sig, table};
 use super::plot::{self, Panel, Segment};
-use crate::domain::diagnosis::{CandidateOut, CandidateRef, DiagnosisOut};
+use crate::domain::diagnosis::{CandidateOut, CandidateRef, DiagnosisOut, EvidenceOut, StatsOut};
 
 /// The decomposition, mm: (label, segments) rows of the stacked bar.
 ///
@@ -300,6 +300,23 @@ pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
         ));
     }
 
+    if !d.evidence.is_empty() {
+        s.push_str("<h2>The evidence for each named effect</h2>");
+        s.push_str(
+            "<p>Per tested pose, the held-out residual of the model before the effect, turned into \
+             the joint-angle error at the effect's joint that explains it best (r·s/|s|², s the \
+             TCP's motion per radian of that joint), binned along the effect's own variable: \
+             mean ± 2 standard errors; beside it the effect's own term, and the held-out residual \
+             after the effect. The term need not match the residual before it: the model before \
+             took what its own parameters could of the effect (a joint offset, a link length), and \
+             the model after refits those too. The caption gives the share of the residual at the \
+             joint that the model with the effect removes (1 − Σ after² / Σ before², per pose).</p>\n",
+        );
+        for e in &d.evidence {
+            s.push_str(&evidence_figure(e));
+        }
+    }
+
     s.push_str("<h2>How far the error shrinks</h2>");
     let rows: Vec<Vec<String>> = d
         .shrink
@@ -327,11 +344,17 @@ pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
             .transfer
             .iter()
             .map(|t| {
+                let r = t.joint_range.as_ref();
+                let part =
+                    |p: Option<&StatsOut>| p.map_or("—".into(), |e| format!("{} (n {})", mm(e.figures.mean_mm), e.n));
                 vec![
                     esc(&t.session),
                     esc(&t.model),
                     t.errors.as_ref().map_or("—".into(), |e| mm(e.figures.mean_mm)),
                     t.errors.as_ref().map_or("—".into(), |e| mm(e.figures.p95_mm)),
+                    r.map_or("—".into(), |r| format!("{:.0} %", 100.0 * r.inside_share)),
+                    part(r.and_then(|r| r.inside.as_ref())),
+                    part(r.and_then(|r| r.outside.as_ref())),
                     t.kappa_scaled.map_or("—".into(), sig),
                     esc(t.error.as_deref().unwrap_or("")),
                 ]
@@ -339,10 +362,25 @@ pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
             .collect();
         s.push_str(&table(
             "Transfer to other sessions (base and tools refitted)",
-            &["session", "model", "mean (mm)", "p95 (mm)", "κ scaled", "refused"],
+            &[
+                "session",
+                "model",
+                "mean (mm)",
+                "p95 (mm)",
+                "inside the identified joint ranges",
+                "mean inside (mm)",
+                "mean outside (mm)",
+                "κ scaled",
+                "refused",
+            ],
             &rows,
-            &[false, false, true, true, true, false],
+            &[false, false, true, true, true, true, true, true, false],
         ));
+        s.push_str(
+            "<p>A pose is inside when every joint lies within the range the identification sessions \
+             measured; outside, the model's joint terms (tables, harmonics, compliance) are \
+             extrapolated, and its error there tests that extrapolation.</p>\n",
+        );
     }
     if !d.notes.is_empty() {
         s.push_str("<h3>Notes</h3><ul>");
@@ -357,4 +395,47 @@ pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
 /// The diagnosis report page.
 pub fn diagnosis_report(d: &DiagnosisOut) -> String {
     page("Diagnosis report", &diagnosis_sections(d))
+}
+
+/// One named effect's evidence: the binned residual angle before it (± 2 s.e.), its prediction
+/// and the residual after it, in mdeg against its variable.
+fn evidence_figure(e: &EvidenceOut) -> String {
+    let md = |v: f64| v * 1000.0;
+    let curves = [
+        plot::Curve {
+            label: "held-out residual before (± 2 s.e.)".into(),
+            points: e
+                .bins
+                .iter()
+                .map(|b| {
+                    let (m, w) = (md(b.before_deg), 2.0 * md(b.before_sem_deg));
+                    (b.at, [m - w, m - w, m, m + w, m + w])
+                })
+                .collect(),
+            pooled: None,
+        },
+        plot::Curve {
+            label: "the effect's term".into(),
+            points: e.bins.iter().map(|b| (b.at, [md(b.predicted_deg); 5])).collect(),
+            pooled: None,
+        },
+        plot::Curve {
+            label: "held-out residual after".into(),
+            points: e.bins.iter().map(|b| (b.at, [md(b.after_deg); 5])).collect(),
+            pooled: None,
+        },
+    ];
+    let x_desc = match e.unit.as_str() {
+        "direction" => format!("{} (approach direction of joint {})", e.variable, e.joint),
+        u => format!("{} ({u})", e.variable),
+    };
+    let title = format!("{}: joint {} angle error", e.effect, e.joint);
+    let slope = match e.explained_share {
+        Some(x) => format!("{:.0} % of the residual at joint {} removed, {} poses", 100.0 * x, e.joint, e.n),
+        None => format!("{} poses", e.n),
+    };
+    figure(
+        &plot::learning_curve_svg(&title, &x_desc, &format!("angle at joint {} (mdeg)", e.joint), &curves),
+        &format!("{}: {}", e.effect, slope),
+    )
 }
