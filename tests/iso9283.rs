@@ -166,6 +166,13 @@ fn characteristics_are_invariant_under_a_rigid_motion() {
         // The orientation deviation is a rotation vector in the base axes: it turns with g too.
         close((g.r * p.ap_abc.unwrap() - q.ap_abc.unwrap()).norm(), 0.0, 1e-12, "AP_abc turns with the frame");
     }
+    // Two cycles: RP is half the distance between the visits (l_1 = l_2, S_l = 0), and no
+    // sampling uncertainty can be claimed.
+    let two: Vec<Visit> = visits.iter().filter(|v| v.cycle <= 2).cloned().collect();
+    let r = pose_characteristics(&two).unwrap();
+    let half = (visits[0].attained.t - visits[2].attained.t).norm() / 2.0; // P1, cycles 1 and 2
+    close(r[0].rp_l.unwrap(), half, 1e-15, "RP of two cycles");
+    assert!(r[0].s_l.unwrap() < 1e-15 && r[0].rp_sampling_u.is_none(), "{:?}", r[0]);
     let one: Vec<Visit> = visits.into_iter().filter(|v| v.cycle == 1).collect();
     let r = pose_characteristics(&one).unwrap();
     assert!(r.iter().all(|p| p.n == 1 && p.rp_l.is_none() && p.rp_abc.is_none() && p.rp_sampling_u.is_none()));
@@ -239,4 +246,70 @@ fn ur10_series_d_table() {
     close(nominal.summary.ap_p_mean_mm, 0.721, 0.03, "nominal AP mean");
     close(cal.summary.ap_p_mean_mm, 0.497, 0.03, "calibrated AP mean");
     eprintln!("series D ISO table in {:.1} s", started.elapsed().as_secs_f64());
+}
+
+fn robocal(args: &[&str], dir: &std::path::Path) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_robocal")).args(args).current_dir(dir).output().unwrap()
+}
+
+/// The command line: the pose file from the goals, an evaluation as JSON whose figures are the
+/// library's, and refusals that name the argument or the file line (exit status 2).
+#[test]
+fn the_command_line_evaluates_and_refuses_bad_input() {
+    let dir = std::env::temp_dir().join(format!("robocal-iso9283-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let d = series("D");
+    let d = d.to_str().unwrap();
+    let out = robocal(&["import", "ur10-ipa", "--series", &format!("{d}:validation"), "--out", "d.json"], &dir);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = robocal(&["iso9283", "poses-ur10", d, "--out", "poses.csv"], &dir);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let poses = std::fs::read_to_string(dir.join("poses.csv")).unwrap();
+    assert_eq!(poses.lines().count(), 633);
+    assert!(poses.starts_with("index,pose_id,cycle,approach\n0,D001,1,\n1,D002,1,"), "{}", &poses[..80]);
+
+    let args = ["iso9283", "evaluate", "d.json", "--session", "series-D", "--poses", "poses.csv"];
+    let out = robocal(&[&args[..], &["--json", "--pairs", "D001:D002", "--html", "iso.html"]].concat(), &dir);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8(out.stdout).unwrap();
+    let json: serde_json::Value = serde_json::from_str(text.trim_end().trim_end_matches("wrote iso.html")).unwrap();
+    let d001 = &json["nominal"]["poses"][0];
+    assert_eq!((d001["pose"].as_str(), d001["cycles"].as_u64()), (Some("D001"), Some(5)));
+    close(d001["rp_l_mm"].as_f64().unwrap(), 0.089543, 1e-6, "RP D001 (CLI)");
+    close(json["nominal"]["distances"][0]["rd_mm"].as_f64().unwrap(), 0.075721, 1e-6, "RD (CLI)");
+    assert!(json["calibrated"].is_null());
+    let html = std::fs::read_to_string(dir.join("iso.html")).unwrap();
+    assert!(html.contains("<td>D001</td>") && html.contains("not implemented"), "the page lists poses and clauses");
+
+    let refused = |extra: &[&str], want: &str, file: Option<&str>| {
+        if let Some(f) = file {
+            std::fs::write(dir.join("bad.csv"), f).unwrap();
+        }
+        let mut a: Vec<&str> = vec!["iso9283", "evaluate", "d.json"];
+        if !extra.contains(&"--session") {
+            a.extend(["--session", "series-D"]);
+        }
+        if !extra.contains(&"--poses") {
+            a.extend(["--poses", "poses.csv"]);
+        }
+        let out = robocal(&[&a[..], extra].concat(), &dir);
+        let err = String::from_utf8_lossy(&out.stderr).to_string();
+        assert_eq!(out.status.code(), Some(2), "{extra:?}: {err}");
+        assert!(err.contains(want), "{extra:?}: {err}");
+    };
+    refused(&["--session", "series-X"], "--session: no session named 'series-X'", None);
+    refused(&["--pairs", "D001"], "--pairs: 'D001' is not FROM:TO", None);
+    refused(&["--pairs", "D001:D999"], "--pairs: no pose 'D999'", None);
+    refused(&["--kappa-limit", "0"], "--kappa-limit", None);
+    refused(
+        &["--poses", "bad.csv"],
+        "poses.line 3.cycle: '-1' is not a positive integer",
+        Some("index,pose_id,cycle,approach\n0,A,1\n1,A,-1\n"),
+    );
+    refused(
+        &["--poses", "bad.csv"],
+        "measurement 700 is not in session 'series-D' (632 measurements)",
+        Some("index,pose_id,cycle,approach\n700,A,1\n"),
+    );
+    std::fs::remove_dir_all(&dir).ok();
 }

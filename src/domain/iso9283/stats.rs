@@ -42,7 +42,9 @@
 //! - The sample size limits RP much more: the standard error of S from n normal samples is about
 //!   S/√(2(n−1)) (50 % at n = 3, 13 % at the standard's n = 30) and that of l̄ is S_l/√n, so
 //!   u(RP) ≈ S_l·√(1/n + 9/(2(n−1))) (`rp_sampling_u`; normal theory, an approximation since l is
-//!   not normal). For RD likewise 3·S_D/√(2(n−1)).
+//!   not normal). For RD likewise 3·S_D/√(2(n−1)). With two cycles l_1 = l_2 and S_l = 0 by
+//!   construction: RP is then half the distance between the two visits, and no sampling
+//!   uncertainty is given (`None`).
 
 use std::collections::BTreeMap;
 
@@ -271,7 +273,9 @@ fn one_pose(pose: String, vs: &[&Visit]) -> PoseResult {
     } else {
         None
     };
-    let rp_sampling_u = s_l.map(|s| s * (1.0 / nf + 9.0 / (2.0 * (nf - 1.0))).sqrt());
+    // Two cycles: l_1 = l_2 (half the distance between the visits), so S_l = 0 by construction and
+    // says nothing of the spread: no sampling uncertainty can be given.
+    let rp_sampling_u = s_l.filter(|_| n >= 3).map(|s| s * (1.0 / nf + 9.0 / (2.0 * (nf - 1.0))).sqrt());
     let rp_instrument_floor = if n >= 2 {
         sigmas.as_ref().map(|s| {
             let rms = (s.iter().map(|s| s.position * s.position).sum::<f64>() / nf).sqrt();
