@@ -195,14 +195,14 @@ fn check(visits: &[Visit]) -> Result<(), IsoError> {
         if !finite(&v.attained) || !finite(&v.commanded) {
             return Err(IsoError::NotFinite { index: i, pose: v.pose.clone(), reason: "a pose is not finite".into() });
         }
-        if let Some(s) = v.sigma {
-            if !(s.position.is_finite() && s.position >= 0.0 && s.rotation.is_none_or(|r| r.is_finite() && r >= 0.0)) {
-                return Err(IsoError::NotFinite {
-                    index: i,
-                    pose: v.pose.clone(),
-                    reason: "sigma must be finite and ≥ 0".into(),
-                });
-            }
+        if let Some(s) = v.sigma
+            && !(s.position.is_finite() && s.position >= 0.0 && s.rotation.is_none_or(|r| r.is_finite() && r >= 0.0))
+        {
+            return Err(IsoError::NotFinite {
+                index: i,
+                pose: v.pose.clone(),
+                reason: "sigma must be finite and ≥ 0".into(),
+            });
         }
         if !seen.insert((v.pose.as_str(), v.cycle)) {
             return Err(IsoError::DuplicateCycle { pose: v.pose.clone(), cycle: v.cycle });
