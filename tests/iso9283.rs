@@ -311,5 +311,67 @@ fn the_command_line_evaluates_and_refuses_bad_input() {
         "measurement 700 is not in session 'series-D' (632 measurements)",
         Some("index,pose_id,cycle,approach\n700,A,1\n"),
     );
+    // The plan's refusals, and a plan written as a file.
+    for (args, want) in [
+        (vec!["--robot", "ur10", "--lang", "krl"], "--lang: 'krl' is not rapid or urscript"),
+        (vec!["--robot", "ur10", "--grid", "1"], "--grid: must be between 2 and 40"),
+        (vec!["--robot", "ur10", "--cycles", "0"], "--cycles: must be at least 1"),
+        (vec!["--robot", "ur10", "--seed-joints-deg", "0,0"], "--seed-joints-deg: expected 6"),
+    ] {
+        let out = robocal(&[&["iso9283", "plan"][..], &args].concat(), &dir);
+        let err = String::from_utf8_lossy(&out.stderr).to_string();
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+    let out = robocal(&["iso9283", "plan", "--robot", "irb120", "--lang", "urscript", "--out", "iso.script"], &dir);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let script = std::fs::read_to_string(dir.join("iso.script")).unwrap();
+    assert!(script.starts_with("def iso9283():") && script.contains("while i < 30:"), "{script}");
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The test-cube plan: every cube point and P1–P5 reached by the nominal model's joints (FK round
+/// trip ≤ 1 nm), within the joint limits, on the centre's wrist sign; the programs read back by
+/// the program filter's own parsers (`domain::program::read`) give P1–P5 to the written precision
+/// (0.1 µm in RAPID, 0.1 µm in URScript) in the standard's order.
+#[test]
+fn the_cube_plan_is_reachable_and_its_programs_read_back() {
+    use robocal::domain::iso9283::plan::{PlanLanguage, iso_points, plan_cube, write_program};
+    use robocal::domain::program::{FilterOptions, ProgramFile, read};
+    use robocal::kinematics::model::{irb120, ur10};
+    use robocal::kinematics::{ParameterSet, Tool};
+    for (model, seed_deg) in
+        [(ur10(), [0.0, -90.0, 90.0, -90.0, -90.0, 0.0]), (irb120(), [0.0, 0.0, 0.0, 0.0, 45.0, 0.0])]
+    {
+        let set = ParameterSet::nominal(model, Tool::flange(), [0.0; 6]);
+        let seed: Vec<f64> = seed_deg.iter().map(|v| v * DEG).collect();
+        let down = rot_zyx(0.0, 0.0, 180.0 * DEG);
+        let plan = plan_cube(&set, down, &seed, 4).unwrap();
+        assert!(plan.edge > 0.2, "{}: edge {}", set.model.name, plan.edge);
+        assert_eq!(plan.cube.len(), 9);
+        let chain = set.chain();
+        let fk = |q: &[f64]| chain.fk(&robocal::kinematics::JointState::new(q));
+        for (p, q) in &plan.cube {
+            let f = fk(q);
+            assert!((f.t - p).norm() < 1e-9 && (f.r - down).norm() < 1e-9, "{}: {p:?}", set.model.name);
+            assert!(q.iter().enumerate().all(|(j, v)| set.model.within_limits(j, *v)));
+            assert!(q[4] * plan.cube[0].1[4] > 0.0, "one wrist branch");
+        }
+        let points = iso_points(&plan.centre, plan.edge);
+        for ((f, q), p) in plan.poses.iter().zip(&points) {
+            assert!((f.t - p).norm() < 1e-15);
+            assert!((fk(q).t - p).norm() < 1e-9);
+        }
+        for (lang, name) in [(PlanLanguage::Rapid, "iso.mod"), (PlanLanguage::Urscript, "iso.script")] {
+            let text = write_program(&plan, &set, lang, 30);
+            let files = [ProgramFile { name: name.into(), bytes: text.into_bytes() }];
+            let (_, targets) = read(&files, &FilterOptions::default()).unwrap();
+            let poses: Vec<&Frame> = targets.iter().filter_map(|t| t.pose.as_ref()).collect();
+            assert_eq!(poses.len(), 5, "{name}: {targets:?}");
+            for (got, (want, _)) in poses.iter().zip(&plan.poses) {
+                assert!((got.t - want.t).norm() < 2e-7, "{name}: {:?} vs {:?}", got.t, want.t);
+                assert!((got.r - want.r).norm() < 1e-8, "{name}");
+            }
+        }
+    }
 }

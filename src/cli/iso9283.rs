@@ -20,6 +20,34 @@ pub enum Iso9283Command {
     /// Write the pose-assignment file of a UR10 data-set series (Series_D: the ISO cubes) from its
     /// goal columns: same goal = same pose, consecutive visits = cycles.
     PosesUr10(PosesUr10Args),
+    /// Plan the ISO test cube for a robot (the largest cube the nominal IK reaches at its centre
+    /// and 8 corners on one branch) and write a program visiting P1–P5 in the standard's order.
+    Plan(PlanArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct PlanArgs {
+    /// The robot: a preset (irb120, ur10) or a robot JSON file.
+    #[arg(long)]
+    pub robot: String,
+    /// The flange orientation of every pose, ZY'X'' deg in the base frame (default: z down).
+    #[arg(long, allow_hyphen_values = true, default_value = "0,0,180")]
+    pub orientation_deg: String,
+    /// The joints the IK starts from, deg (default per preset; required for a robot file).
+    #[arg(long, allow_hyphen_values = true)]
+    pub seed_joints_deg: Option<String>,
+    /// The program's language: rapid or urscript.
+    #[arg(long, default_value = "rapid")]
+    pub lang: String,
+    /// Cycles (the standard asks for 30).
+    #[arg(long, default_value_t = 30)]
+    pub cycles: u32,
+    /// Centres searched: grid × grid in the x–z half-plane in front of the robot.
+    #[arg(long, default_value_t = 6)]
+    pub grid: usize,
+    /// Write the program here instead of standard output (the plan goes to standard error).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -79,7 +107,47 @@ pub(super) fn run(c: Iso9283Command) -> Result<String, CliError> {
             let goals = read_series_goals(&a.series).map_err(CliError::msg)?;
             write_or_return(&a.out, write_assignments(&assign_poses(&goals)).trim_end().to_string())
         }
+        Iso9283Command::Plan(a) => plan(a),
     }
+}
+
+fn plan(a: PlanArgs) -> Result<String, CliError> {
+    use crate::domain::iso9283::plan::{PlanLanguage, plan_cube, write_program};
+    use crate::kinematics::frame::rot_zyx;
+    use crate::kinematics::{ParameterSet, Preset, Tool};
+    use crate::units::{DEG, MM};
+    let model = super::robot_model("--robot", &a.robot)?;
+    let language = PlanLanguage::parse(&a.lang)
+        .ok_or_else(|| CliError::arg("--lang", format!("'{}' is not rapid or urscript", a.lang)))?;
+    if a.cycles == 0 {
+        return Err(CliError::arg("--cycles", "must be at least 1"));
+    }
+    if !(2..=40).contains(&a.grid) {
+        return Err(CliError::arg("--grid", "must be between 2 and 40"));
+    }
+    let o = super::three("--orientation-deg", &a.orientation_deg)?;
+    let seed: Vec<f64> = match (&a.seed_joints_deg, model.preset) {
+        (Some(s), _) => super::numbers("--seed-joints-deg", s, Some(model.dof()))?.iter().map(|v| v * DEG).collect(),
+        (None, Some(Preset::Ur10)) => [0.0, -90.0, 90.0, -90.0, -90.0, 0.0].iter().map(|v| v * DEG).collect(),
+        (None, Some(Preset::Irb120)) => [0.0, 0.0, 0.0, 0.0, 45.0, 0.0].iter().map(|v| v * DEG).collect(),
+        (None, None) => return Err(CliError::arg("--seed-joints-deg", "needed for a robot file (no preset default)")),
+    };
+    let set = ParameterSet::nominal(model, Tool::flange(), [0.0; 6]);
+    let p = plan_cube(&set, rot_zyx(o[0] * DEG, o[1] * DEG, o[2] * DEG), &seed, a.grid)
+        .map_err(|e| CliError::msg(e.to_string()))?;
+    eprintln!(
+        "cube: centre {:.3}, {:.3}, {:.3} mm, edge {:.3} mm; P1..P5 (mm): {}",
+        p.centre.x / MM,
+        p.centre.y / MM,
+        p.centre.z / MM,
+        p.edge / MM,
+        p.poses
+            .iter()
+            .map(|(f, _)| format!("({:.3}, {:.3}, {:.3})", f.t.x / MM, f.t.y / MM, f.t.z / MM))
+            .collect::<Vec<_>>()
+            .join(" ")
+    );
+    write_or_return(&a.out, write_program(&p, &set, language, a.cycles).trim_end().to_string())
 }
 
 fn pairs(text: &Option<String>) -> Result<Vec<(String, String)>, CliError> {

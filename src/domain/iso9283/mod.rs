@@ -17,6 +17,7 @@
 //! a label or empty. Measurements not listed are not evaluated.
 
 pub mod evaluate;
+pub mod plan;
 pub mod stats;
 pub mod ur10;
 
