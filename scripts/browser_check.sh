@@ -69,6 +69,14 @@ echo "== the CLI's study (virtual cell) and crossval (UR10) reports, opened as f
 "$BIN" crossval "$tmp/ur10.json" --session series-C --folds 3 --sizes 50,100,200 --draws 4 --transfer series-B \
   --report "$tmp/crossval.html" >/dev/null
 
+echo "== the CLI's ISO 9283 report (UR10 series D, nominal and calibrated on series C)"
+"$BIN" import ur10-ipa --series ../shared/datasets/ur10-ipa/Series_C:identification \
+  --series ../shared/datasets/ur10-ipa/Series_D:validation --out "$tmp/ur10_iso.json" >/dev/null
+"$BIN" identify "$tmp/ur10_iso.json" --sessions series-C --out "$tmp/ur10_iso_params.json" >/dev/null
+"$BIN" iso9283 poses-ur10 ../shared/datasets/ur10-ipa/Series_D --out "$tmp/d_poses.csv" >/dev/null
+"$BIN" iso9283 evaluate "$tmp/ur10_iso.json" --session series-D --poses "$tmp/d_poses.csv" \
+  --params "$tmp/ur10_iso_params.json" --pairs D001:D002,D001:D004 --html "$tmp/iso9283.html" >/dev/null
+
 # name | URL | plots expected (<svg> elements)
 checks=(
   "validation|$API/v1/validations/$VALIDATION/report|10"
@@ -82,6 +90,7 @@ checks=(
   "history|$API/v1/robots/$ROBOT/history/report|1"
   "study|file://$tmp/study.html|3"
   "crossval|file://$tmp/crossval.html|1"
+  "iso9283|file://$tmp/iso9283.html|0"
 )
 chrome=(chromium --headless --no-sandbox --disable-gpu --disable-background-networking --hide-scrollbars
   --no-first-run --disable-extensions --user-data-dir="$tmp/chrome")

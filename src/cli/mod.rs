@@ -6,6 +6,7 @@ mod data;
 mod experiments;
 mod export;
 mod filter;
+mod iso9283;
 mod kinematics;
 mod plan;
 mod progress;
@@ -27,6 +28,7 @@ pub use data::{ImportCommand, SimulateArgs, ThreeReflectorArgs, Ur10IpaArgs};
 pub use experiments::{BenchDiagnosisArgs, CrossvalArgs, StudyArgs};
 pub use export::{DriftArgs, ExportArgs};
 pub use filter::FilterArgs;
+pub use iso9283::Iso9283Command;
 pub use kinematics::{CompensateArgs, FkArgs, IkArgs, ModelArgs, NominalArgs, ToolArgs};
 pub use service::{DemoArgs, OpenapiArgs, ServeArgs, TokenCommand};
 
@@ -97,6 +99,10 @@ pub enum Command {
     /// The whole loop on the virtual cell through the HTTP API: plan, measure, identify, validate,
     /// compensate; prints the before/after table.
     Demo(DemoArgs),
+    /// ISO 9283 pose characteristics (AP, RP, vAP, AD, RD) of a measured session, nominal and
+    /// calibrated (predicted); pose-assignment files.
+    #[command(subcommand)]
+    Iso9283(Iso9283Command),
 }
 
 /// A command-line failure: the argument (or file and field) and the reason — input refused, exit
@@ -155,6 +161,7 @@ pub fn run(cli: Cli) -> Result<String, CliError> {
         Command::Token(t) => service::token(t),
         Command::Openapi(a) => write_or_return(&a.out, crate::http::openapi_json().trim_end().to_string()),
         Command::Demo(a) => service::demo(a),
+        Command::Iso9283(c) => iso9283::run(c),
     }
 }
 

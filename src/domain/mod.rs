@@ -9,6 +9,7 @@ pub mod drift;
 pub mod export;
 pub mod history;
 pub mod identification;
+pub mod iso9283;
 pub mod limits;
 pub mod measurement_csv;
 pub mod origin;

@@ -16,6 +16,7 @@
 pub mod diagnosis;
 pub mod history;
 pub mod html;
+pub mod iso9283;
 pub mod parameters;
 pub mod plot;
 pub mod studies;
