@@ -77,16 +77,17 @@ echo "== the CLI's ISO 9283 report (UR10 series D, nominal and calibrated on ser
 "$BIN" iso9283 evaluate "$tmp/ur10_iso.json" --session series-D --poses "$tmp/d_poses.csv" \
   --params "$tmp/ur10_iso_params.json" --pairs D001:D002,D001:D004 --html "$tmp/iso9283.html" >/dev/null
 
-# name | URL | plots expected (<svg> elements)
+# name | URL | plots expected (<svg> elements; a diagnosis: two, and one evidence plot per named
+# joint effect)
 checks=(
   "validation|$API/v1/validations/$VALIDATION/report|10"
   "identification|$API/v1/parameter-sets/$SET/report|$(($(call "$API/v1/parameter-sets/$SET/export" \
     | jq '[.parameters[] | select(.std != null and .nominal != null) | .unit] | unique | length') + 10))"
-  "diagnosis|$API/v1/diagnoses/$DIAGNOSIS/report|2"
+  "diagnosis|$API/v1/diagnoses/$DIAGNOSIS/report|$(($(call "$API/v1/diagnoses/$DIAGNOSIS" | jq '.report.evidence | length') + 2))"
   "ur10-validation|$API/v1/validations/$UR10_VALIDATION/report|8"
   "ur10-identification|$API/v1/parameter-sets/$UR10_SET/report|$(($(call "$API/v1/parameter-sets/$UR10_SET/export" \
     | jq '[.parameters[] | select(.std != null and .nominal != null) | .unit] | unique | length') + 8))"
-  "ur10-diagnosis|$API/v1/diagnoses/$UR10_DIAGNOSIS/report|2"
+  "ur10-diagnosis|$API/v1/diagnoses/$UR10_DIAGNOSIS/report|$(($(call "$API/v1/diagnoses/$UR10_DIAGNOSIS" | jq '.report.evidence | length') + 2))"
   "history|$API/v1/robots/$ROBOT/history/report|1"
   "study|file://$tmp/study.html|3"
   "crossval|file://$tmp/crossval.html|1"
