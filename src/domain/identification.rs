@@ -268,6 +268,9 @@ pub fn identification_doc(id: &Identification, sessions: &[String], selection: O
         "kappa_scaled": q.kappa_scaled,
         "observability_si": {"O1": q.observability.o1, "O2": q.observability.o2, "O3": q.observability.o3, "O4": q.observability.o4, "O5": q.observability.o5},
         "sigma_mm": q.sigma / MM,
+        // How each std was computed: "classic" σ̂²(JᵀJ)⁻¹, or its larger with the cluster-robust
+        // (by pose) one where the data hold enough poses.
+        "std_method": if q.robust { "max(classic, cluster-robust by pose)" } else { "classic" },
         "rms_residual_mm": q.rms_residual / MM,
         "singular_values_si": q.singular_values,
         "free": id.free_names,

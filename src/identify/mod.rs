@@ -910,7 +910,10 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
     if payload_unknown
         && let Some((g, c)) = payload_mass(&problem).and_then(|g| free.iter().position(|&f| f == g).map(|c| (g, c)))
     {
-        let q = Quality::of(&fit, problem.obs.len(), &rows);
+        let mut q = Quality::of(&fit, problem.obs.len(), &rows);
+        let (pose_of_obs, n_poses) =
+            crate::cell::poses::group_poses(problem.obs.iter().map(|o| &o.state.q[..cell.model.dof()]));
+        q.make_robust(&fit, &rows, &pose_of_obs, n_poses);
         let (m, sd) = (fit.x[g], q.std[c]);
         let determined = m > PAYLOAD_SIGNIFICANCE * sd; // false for a NaN σ too
         if !determined {
@@ -925,6 +928,11 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
         }
     }
     let mut quality = Quality::of(&fit, problem.obs.len(), &rows);
+    // Standard deviations that hold when the readings of one stop share an error (several
+    // reflectors, a turn no term explains): the larger of the classic and the cluster-robust σ.
+    let (pose_of_obs, n_poses) =
+        crate::cell::poses::group_poses(problem.obs.iter().map(|o| &o.state.q[..cell.model.dof()]));
+    quality.make_robust(&fit, &rows, &pose_of_obs, n_poses);
     if opts.noise.is_some() {
         // Weighted rows: the RMS of the measurement residuals in metres, from the rows divided
         // by their weights (and the robust weights, which the fit's residual carries too).
