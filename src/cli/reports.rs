@@ -174,6 +174,8 @@ pub struct HeldOutFigures {
     pub n: usize,
     #[serde(flatten)]
     pub position: ErrorFigures,
+    /// Standard error of `mean_mm`, the measurements grouped by pose.
+    pub mean_se_mm: Option<f64>,
     pub orientation: Option<OrientationFigures>,
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub per_session: Vec<SessionFigures>,
@@ -211,7 +213,17 @@ pub struct KfoldFigures {
     pub model: String,
     pub parameters_identified: usize,
     pub pooled: Option<HeldOutFigures>,
+    /// The pooled mean's change from the model above on the same held-out measurements.
+    pub vs_previous: Option<PairedChange>,
     pub per_fold: Vec<Outcome>,
+}
+
+/// A change of the held-out mean between two models on the same measurements, with its standard
+/// error grouped by pose.
+#[derive(Clone, Debug, Serialize)]
+pub struct PairedChange {
+    pub change_mm: f64,
+    pub se_mm: f64,
 }
 
 /// One identification size of the few-poses scheme, one model.
@@ -292,6 +304,7 @@ impl HeldOutFigures {
         HeldOutFigures {
             n: h.position.n,
             position: ErrorFigures::of(&h.position),
+            mean_se_mm: h.mean_se.map(|v| v / MM),
             orientation: orientation_figures(&h.orientation),
             per_session: if several { h.per_session.iter().map(SessionFigures::of).collect() } else { Vec::new() },
         }
@@ -393,6 +406,7 @@ impl CrossvalReport {
                     model: f.variant.clone(),
                     parameters_identified: f.identified,
                     pooled: f.pooled.as_ref().map(|h| HeldOutFigures::of(h, several)),
+                    vs_previous: f.vs_previous.map(|(c, se)| PairedChange { change_mm: c / MM, se_mm: se / MM }),
                     per_fold: f.per_fold.iter().map(|r| Outcome::of(r, several)).collect(),
                 })
                 .collect(),
@@ -432,17 +446,27 @@ impl CrossvalReport {
                 self.folds
             ));
             text.push_str(&format!(
-                "{:<24} {:>6} {:>7} {:>7} {:>7} {:>7} {:>7}\n",
-                "model", "params", "mean", "median", "p95", "max", "ori"
+                "{:<24} {:>6} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>17}\n",
+                "model", "params", "mean", "median", "p95", "max", "ori", "s.e.", "vs above ± s.e."
             ));
             for f in &self.kfold {
                 let r = match (&f.pooled, f.per_fold.iter().find_map(Outcome::refused)) {
-                    (Some(h), _) => h.cells(),
+                    (Some(h), _) => format!(
+                        "{} {} {}",
+                        h.cells(),
+                        h.mean_se_mm.map_or("      —".into(), |v| format!("{v:7.4}")),
+                        f.vs_previous
+                            .as_ref()
+                            .map_or(format!("{:>17}", "—"), |c| format!("{:>+9.4} ± {:<6.4}", c.change_mm, c.se_mm))
+                    ),
                     (None, Some(e)) => format!("refused: {e}"),
                     (None, None) => "—".into(),
                 };
                 text.push_str(&format!("{:<24} {:>6} {}\n", f.model, f.parameters_identified, r));
             }
+            text.push_str(
+                "(s.e.: of the mean, the measurements grouped by pose; vs above: the change of the mean from the model in the row above on the same held-out measurements)\n",
+            );
             if self.poses.is_some() {
                 text.push_str(&format!(
                     "\n{}-fold cross-validation per session: the held-out poses' errors of each (mm; orientation mrad)\n",

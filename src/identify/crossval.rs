@@ -97,6 +97,10 @@ pub struct HeldOut {
     pub position: ErrorStats,
     /// Orientation error, rad, when the test set observed full poses.
     pub orientation: Option<ErrorStats>,
+    /// Standard error of `position.mean`, m, with the measurements grouped by pose (the readings of
+    /// one stop share its error): √(G/(G−1)·Σ_g (S_g − n_g·mean)²)/N over the G poses, S_g the sum
+    /// of pose g's errors. `None` with fewer than two poses.
+    pub mean_se: Option<f64>,
     /// The same per session (reflector) that has test measurements, in the options' order.
     pub per_session: Vec<SessionHeldOut>,
 }
@@ -129,8 +133,52 @@ impl HeldOut {
                 })
             })
             .collect();
-        Some(HeldOut { position: ErrorStats::of(&position)?, orientation: ErrorStats::of(&orientation), per_session })
+        Some(HeldOut {
+            position: ErrorStats::of(&position)?,
+            orientation: ErrorStats::of(&orientation),
+            mean_se: clustered_mean_se(errors.iter().map(|e| (e.pose, e.position))),
+            per_session,
+        })
     }
+}
+
+/// Standard error of the mean of `values` given as (cluster, value), the clusters (poses) being
+/// independent and the values within one not: √(G/(G−1)·Σ_g (S_g − n_g·mean)²)/N.
+fn clustered_mean_se(values: impl Iterator<Item = (usize, f64)>) -> Option<f64> {
+    // Ordered by pose: the sum, and so the figure, does not depend on the order of the folds' threads.
+    let mut sums: std::collections::BTreeMap<usize, (f64, usize)> = Default::default();
+    let (mut total, mut n) = (0.0, 0usize);
+    for (g, v) in values {
+        let e = sums.entry(g).or_default();
+        e.0 += v;
+        e.1 += 1;
+        total += v;
+        n += 1;
+    }
+    let g = sums.len();
+    if g < 2 {
+        return None;
+    }
+    let mean = total / n as f64;
+    let ss: f64 = sums.values().map(|&(sum, k)| (sum - k as f64 * mean).powi(2)).sum();
+    Some((g as f64 / (g as f64 - 1.0) * ss).sqrt() / n as f64)
+}
+
+/// The change of the pooled mean position error from `a` to `b` on the same test measurements
+/// (b − a, m), with its standard error grouped by pose; `None` unless both scored exactly the same
+/// measurements.
+fn paired_change(a: &[Scored], b: &[Scored]) -> Option<(f64, f64)> {
+    let key = |e: &Scored| (e.session, e.index);
+    let mut a: Vec<&Scored> = a.iter().collect();
+    let mut b: Vec<&Scored> = b.iter().collect();
+    a.sort_by_key(|e| key(e));
+    b.sort_by_key(|e| key(e));
+    if a.len() != b.len() || a.is_empty() || a.iter().zip(&b).any(|(x, y)| key(x) != key(y)) {
+        return None;
+    }
+    let d: Vec<(usize, f64)> = a.iter().zip(&b).map(|(x, y)| (x.pose, y.position - x.position)).collect();
+    let change = d.iter().map(|x| x.1).sum::<f64>() / d.len() as f64;
+    Some((change, clustered_mean_se(d.into_iter())?))
 }
 
 /// One test measurement's errors.
@@ -138,6 +186,9 @@ impl HeldOut {
 struct Scored {
     /// Index into the split sessions.
     session: usize,
+    /// Index of the measurement in its session, and its pose (index into the split's poses).
+    index: usize,
+    pose: usize,
     position: f64,
     orientation: Option<f64>,
 }
@@ -152,6 +203,10 @@ pub struct FoldsResult {
     pub per_fold: Vec<Result<HeldOut, String>>,
     /// Parameters identified in the first fold (the others agree unless the data are marginal).
     pub identified: usize,
+    /// The change of the pooled mean position error from the variant before this one (the row
+    /// above) on the same held-out measurements, m, and its standard error grouped by pose:
+    /// whether the model's addition helps, beyond the noise of the test set.
+    pub vs_previous: Option<(f64, f64)>,
 }
 
 /// One identification size of the few-poses scheme, one variant.
@@ -247,6 +302,20 @@ struct Split<'a> {
 }
 
 impl Split<'_> {
+    /// Per session, per measurement: its pose.
+    fn poses_by_measurement(&self) -> Vec<Vec<usize>> {
+        let mut out: Vec<Vec<usize>> = self.sessions.iter().map(|s| vec![usize::MAX; s.measurements.len()]).collect();
+        for (p, its) in self.members.iter().enumerate() {
+            for &it in its {
+                let (s, i) = self.items[it];
+                out[s][i] = p;
+            }
+        }
+        out
+    }
+}
+
+impl Split<'_> {
     /// The items of `poses`, as one index list per session (sorted).
     fn indices(&self, poses: &[usize]) -> Vec<(&Session, Vec<usize>)> {
         let mut per: Vec<Vec<usize>> = vec![Vec::new(); self.sessions.len()];
@@ -289,21 +358,29 @@ impl Split<'_> {
     ) -> Result<FoldErrors, String> {
         let train = self.indices(train);
         let id_cell = subsets_cell(cell, &train);
+        let test_idx = self.indices(test);
+        let poses = self.poses_by_measurement();
         let mut o = options.clone();
         o.selection.sessions = id_cell.sessions.iter().map(|s| s.name.clone()).collect();
         o.selection.subset.clear();
         let id = identify(&id_cell, &o).map_err(|e| e.to_string())?;
-        let mut test_cell = subsets_cell(cell, &self.indices(test));
+        let mut test_cell = subsets_cell(cell, &test_idx);
         with_identified_tools(&mut test_cell, &id);
         let names: Vec<String> = test_cell.sessions.iter().map(|s| s.name.clone()).collect();
         let r = validate(&id.set, &test_cell, &names, Reference::Measured).map_err(|e| e.to_string())?;
         let scored = r
             .residuals
             .iter()
-            .map(|x| Scored {
-                session: self.names.iter().position(|n| *n == x.session).expect("a split session"),
-                position: x.error.norm(),
-                orientation: x.orientation_error,
+            .map(|x| {
+                let session = self.names.iter().position(|n| *n == x.session).expect("a split session");
+                let index = test_idx[session].1[x.index];
+                Scored {
+                    session,
+                    index,
+                    pose: poses[session][index],
+                    position: x.error.norm(),
+                    orientation: x.orientation_error,
+                }
             })
             .collect();
         Ok(FoldErrors { scored, identified: id.free_names.len(), kappa_scaled: id.quality.kappa_scaled })
@@ -482,6 +559,7 @@ pub fn crossval_with_progress(
             tick();
             r
         });
+        let mut previous: Option<Vec<Scored>> = None;
         for (v, variant) in variants.iter().enumerate() {
             let mine: Vec<&Result<FoldErrors, String>> =
                 jobs.iter().zip(&results).filter(|((jv, _), _)| *jv == v).map(|(_, r)| r).collect();
@@ -500,7 +578,17 @@ pub fn crossval_with_progress(
                 None
             };
             let identified = mine.first().and_then(|r| r.as_ref().ok()).map_or(0, |r| r.identified);
-            folds.push(FoldsResult { variant: variant.name.clone(), pooled, per_fold, identified });
+            let all: Option<Vec<Scored>> = mine
+                .iter()
+                .map(|r| r.as_ref().ok().map(|e| e.scored.clone()))
+                .collect::<Option<Vec<_>>>()
+                .map(|v| v.concat());
+            let vs_previous = match (&previous, &all) {
+                (Some(a), Some(b)) => paired_change(a, b),
+                _ => None,
+            };
+            previous = all;
+            folds.push(FoldsResult { variant: variant.name.clone(), pooled, per_fold, identified, vs_previous });
         }
     }
 
@@ -589,4 +677,46 @@ pub fn crossval_with_progress(
         sizes,
         transfer,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scored(session: usize, index: usize, pose: usize, position: f64) -> Scored {
+        Scored { session, index, pose, position, orientation: None }
+    }
+
+    /// The clustered standard error by hand: three poses holding (1, 3), (2) and (6, 6, 6).
+    /// mean = 24/6 = 4; S_g − n_g·mean = 4 − 8, 2 − 4, 18 − 12 → −4, −2, 6; Σ² = 56;
+    /// se = √(3/2 · 56)/6 = √84/6.
+    #[test]
+    fn clustered_mean_se_by_hand() {
+        let v = [(0, 1.0), (0, 3.0), (1, 2.0), (2, 6.0), (2, 6.0), (2, 6.0)];
+        let se = clustered_mean_se(v.into_iter()).unwrap();
+        assert!((se - 84f64.sqrt() / 6.0).abs() < 1e-15, "{se}");
+        // One value per pose: the ordinary s/√n, since G/(G−1)·Σ(x−m)²/n² = Σ(x−m)²/(n(n−1)).
+        let w = [(0, 1.0), (1, 2.0), (2, 4.0), (3, 7.0)];
+        let m = 3.5;
+        let s2 = w.iter().map(|x| (x.1 - m) * (x.1 - m)).sum::<f64>() / 3.0;
+        let se1 = clustered_mean_se(w.into_iter()).unwrap();
+        assert!((se1 - (s2 / 4.0).sqrt()).abs() < 1e-15, "{se1}");
+        assert!(clustered_mean_se([(5, 1.0), (5, 2.0)].into_iter()).is_none(), "one pose");
+    }
+
+    /// The paired change matches measurements by (session, index) whatever their order, is the
+    /// difference of the two means, and refuses different test sets.
+    #[test]
+    fn paired_change_matches_by_measurement() {
+        let a = [scored(0, 0, 0, 1.0), scored(0, 1, 1, 2.0), scored(1, 0, 0, 3.0), scored(1, 1, 1, 5.0)];
+        let b = [scored(1, 1, 1, 4.0), scored(0, 0, 0, 0.5), scored(1, 0, 0, 2.0), scored(0, 1, 1, 2.5)];
+        let (c, se) = paired_change(&a, &b).unwrap();
+        // Differences: pose 0: −0.5, −1.0; pose 1: +0.5, −1.0 → mean −0.5; S_g − n_g·mean: −0.5, 0.5.
+        assert!((c + 0.5).abs() < 1e-15);
+        assert!((se - (2.0f64 * 0.5).sqrt() / 4.0).abs() < 1e-15, "{se}");
+        assert!(paired_change(&a, &b[..3]).is_none());
+        let mut c2 = b;
+        c2[0].index = 7;
+        assert!(paired_change(&a, &c2).is_none());
+    }
 }
