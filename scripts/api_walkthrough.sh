@@ -97,6 +97,12 @@ call "$API/v1/robots/$ROBOT/compensate" -H "$J" -d @examples/targets.json | jq -
 echo "== a robot program filtered with the active set: the module back with the counts in headers; with Accept: application/json, the report"
 call "$API/v1/robots/$ROBOT/programs/filter?name=weld.mod" -H 'Content-Type: application/octet-stream' --data-binary @examples/programs/weld.mod -D "$tmp/filter.h" -o "$tmp/weld.mod" && grep -i '^x-.*-targets' "$tmp/filter.h"
 call "$API/v1/robots/$ROBOT/programs/filter?name=weld.mod" -H 'Content-Type: application/octet-stream' -H 'Accept: application/json' --data-binary @examples/programs/weld.mod | jq -c '{compensated, kept, failed, seam1: .targets[2] | {name, line, correction_mm, uncertainty_mm, error}}'
+echo "== ISO 9283 (job): AP per pose of a tracker session's first 20 readings, nominal and with the active set (predicted)"
+BODY=$(jq -nc '{session: "tracker-n1", poses: [range(20) | {index: ., pose_id: "P\(. + 1)"}], pairs: [{from: "P1", to: "P2"}]}')
+JOB=$(call "$API/v1/robots/$ROBOT/iso9283" -H "$J" -d "$BODY" | jq -r .id)
+ISO=$(wait_job "$JOB" | jq -r .result.evaluation_id)
+call "$API/v1/iso9283/$ISO" | jq -c '.report | {nominal_ap_mm: .nominal.summary.ap_p_mean_mm, calibrated_ap_mm: .calibrated.summary.ap_p_mean_mm}'
+call "$API/v1/iso9283/$ISO/report" -o "$tmp/iso9283.html" && grep -o '<title>[^<]*' "$tmp/iso9283.html"
 echo "== exports (the DH table, URDF, a RAPID module of compensated targets), the history for dashboards, drift"
 call "$API/v1/parameter-sets/$SET/export?format=csv-dh" > "$tmp/set.csv" && grep -E '^(row|joint3),' "$tmp/set.csv"
 call "$API/v1/parameter-sets/$SET/export?format=urdf" > "$tmp/set.urdf" && grep -c '<joint ' "$tmp/set.urdf"

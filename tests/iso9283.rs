@@ -313,10 +313,14 @@ fn the_command_line_evaluates_and_refuses_bad_input() {
     );
     // The plan's refusals, and a plan written as a file.
     for (args, want) in [
-        (vec!["--robot", "ur10", "--lang", "krl"], "--lang: 'krl' is not rapid or urscript"),
+        (vec!["--robot", "ur10", "--lang", "kuka"], "--lang: 'kuka' is not rapid, krl, fanuc or urscript"),
         (vec!["--robot", "ur10", "--grid", "1"], "--grid: must be between 2 and 40"),
-        (vec!["--robot", "ur10", "--cycles", "0"], "--cycles: must be at least 1"),
+        (vec!["--robot", "ur10", "--cycles", "0"], "--cycles: must be between 1 and 1000"),
         (vec!["--robot", "ur10", "--seed-joints-deg", "0,0"], "--seed-joints-deg: expected 6"),
+        (vec!["--robot", "irb120", "--lang", "krl"], "--out: KRL is two files"),
+        (vec!["--robot", "irb120", "--lang", "krl", "--out", "iso.dat"], "--out: a KRL program is written as NAME.src"),
+        (vec!["--robot", "irb120", "--out", "1st.mod"], "--out: '1st' cannot name the program"),
+        (vec!["--robot", "ur10", "--lang", "fanuc"], "--lang: fanuc needs the configuration"),
     ] {
         let out = robocal(&[&["iso9283", "plan"][..], &args].concat(), &dir);
         let err = String::from_utf8_lossy(&out.stderr).to_string();
@@ -326,34 +330,48 @@ fn the_command_line_evaluates_and_refuses_bad_input() {
     let out = robocal(&["iso9283", "plan", "--robot", "irb120", "--lang", "urscript", "--out", "iso.script"], &dir);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let script = std::fs::read_to_string(dir.join("iso.script")).unwrap();
-    assert!(script.starts_with("def iso9283():") && script.contains("while i < 30:"), "{script}");
+    assert!(script.starts_with("def iso():") && script.matches("  # cycle ").count() == 30, "{script}");
+    // KRL: --out NAME.src writes the pair, named after the file.
+    let out =
+        robocal(&["iso9283", "plan", "--robot", "irb120", "--lang", "krl", "--cycles", "2", "--out", "cube.src"], &dir);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(String::from_utf8_lossy(&out.stdout).trim(), "wrote cube.src\nwrote cube.dat");
+    let src = std::fs::read_to_string(dir.join("cube.src")).unwrap();
+    let dat = std::fs::read_to_string(dir.join("cube.dat")).unwrap();
+    assert!(src.contains("DEF CUBE( )") && src.matches("LIN XP").count() == 9, "{src}");
+    assert!(dat.contains("DEFDAT  CUBE") && dat.matches("DECL E6POS XP").count() == 5, "{dat}");
     std::fs::remove_dir_all(&dir).ok();
 }
 
 /// The test-cube plan: every cube point and P1–P5 reached by the nominal model's joints (FK round
-/// trip ≤ 1 nm), within the joint limits, on the centre's wrist sign; the programs read back by
-/// the program filter's own parsers (`domain::program::read`) give P1–P5 to the written precision
-/// (0.1 µm in RAPID, 0.1 µm in URScript) in the standard's order.
+/// trip ≤ 1 nm), within the joint limits, on the centre's wrist sign. The programs in the four
+/// languages, read back by the program filter's own parsers (`domain::program::read` and
+/// `motion_order`), give P1–P5 within 1 µm and 1e-6° and visit them P1 → P5, `cycles` times; KRL's
+/// S/T and Fanuc's CONFIG read back are the planned joints' branch and turns, and the filter itself
+/// (on a calibration equal to the nominal model) solves every target back to the planned joints.
 #[test]
 fn the_cube_plan_is_reachable_and_its_programs_read_back() {
-    use robocal::domain::iso9283::plan::{PlanLanguage, iso_points, plan_cube, write_program};
-    use robocal::domain::program::{FilterOptions, ProgramFile, read};
+    use robocal::domain::iso9283::plan::{PlanLanguage, WriteError, iso_points, plan_cube, write_program};
+    use robocal::domain::program::{Calibration, FilterOptions, TargetStatus, filter, motion_order, read};
+    use robocal::kinematics::frame::rotation_angle;
     use robocal::kinematics::model::{irb120, ur10};
-    use robocal::kinematics::{ParameterSet, Tool};
+    use robocal::kinematics::{AnalyticIk, Compensator, ParameterSet, Tool};
+    let cycles = 4;
     for (model, seed_deg) in
         [(ur10(), [0.0, -90.0, 90.0, -90.0, -90.0, 0.0]), (irb120(), [0.0, 0.0, 0.0, 0.0, 45.0, 0.0])]
     {
         let set = ParameterSet::nominal(model, Tool::flange(), [0.0; 6]);
+        let robot = set.model.name.clone();
         let seed: Vec<f64> = seed_deg.iter().map(|v| v * DEG).collect();
         let down = rot_zyx(0.0, 0.0, 180.0 * DEG);
         let plan = plan_cube(&set, down, &seed, 4).unwrap();
-        assert!(plan.edge > 0.2, "{}: edge {}", set.model.name, plan.edge);
+        assert!(plan.edge > 0.2, "{robot}: edge {}", plan.edge);
         assert_eq!(plan.cube.len(), 9);
         let chain = set.chain();
         let fk = |q: &[f64]| chain.fk(&robocal::kinematics::JointState::new(q));
         for (p, q) in &plan.cube {
             let f = fk(q);
-            assert!((f.t - p).norm() < 1e-9 && (f.r - down).norm() < 1e-9, "{}: {p:?}", set.model.name);
+            assert!((f.t - p).norm() < 1e-9 && (f.r - down).norm() < 1e-9, "{robot}: {p:?}");
             assert!(q.iter().enumerate().all(|(j, v)| set.model.within_limits(j, *v)));
             assert!(q[4] * plan.cube[0].1[4] > 0.0, "one wrist branch");
         }
@@ -362,15 +380,95 @@ fn the_cube_plan_is_reachable_and_its_programs_read_back() {
             assert!((f.t - p).norm() < 1e-15);
             assert!((fk(q).t - p).norm() < 1e-9);
         }
-        for (lang, name) in [(PlanLanguage::Rapid, "iso.mod"), (PlanLanguage::Urscript, "iso.script")] {
-            let text = write_program(&plan, &set, lang, 30);
-            let files = [ProgramFile { name: name.into(), bytes: text.into_bytes() }];
+        let ik = AnalyticIk::new(&set.model, chain.base(), chain.tool()).ok();
+        let comp = Compensator::new(&set);
+        let cal = Calibration {
+            set: &set,
+            compensator: &comp,
+            envelope: None,
+            allow_outside_envelope: false,
+            covariance: None,
+            held_out: None,
+        };
+        for lang in PlanLanguage::ALL {
+            let what = format!("{robot} {lang:?}");
+            let name = if lang == PlanLanguage::Urscript { "iso9283" } else { "ISO9283" };
+            let files = match write_program(&plan, &set, lang, cycles, name) {
+                Err(WriteError::NoConfiguration(..))
+                    if ik.is_none() && matches!(lang, PlanLanguage::Krl | PlanLanguage::Fanuc) =>
+                {
+                    continue; // the UR10 has no closed form to label S/T or CONFIG with
+                }
+                other => other.unwrap(),
+            };
+            let want_names: Vec<String> = match lang {
+                PlanLanguage::Krl => vec!["ISO9283.src".into(), "ISO9283.dat".into()],
+                _ => vec![format!("{name}.{}", lang.extension())],
+            };
+            assert_eq!(files.iter().map(|f| f.name.clone()).collect::<Vec<_>>(), want_names, "{what}");
             let (_, targets) = read(&files, &FilterOptions::default()).unwrap();
-            let poses: Vec<&Frame> = targets.iter().filter_map(|t| t.pose.as_ref()).collect();
-            assert_eq!(poses.len(), 5, "{name}: {targets:?}");
-            for (got, (want, _)) in poses.iter().zip(&plan.poses) {
-                assert!((got.t - want.t).norm() < 2e-7, "{name}: {:?} vs {:?}", got.t, want.t);
-                assert!((got.r - want.r).norm() < 1e-8, "{name}");
+            assert_eq!(targets.len(), 5, "{what}: {targets:?}");
+            // Each target is the planned pose it is nearest to; all five, each once.
+            let mut which = Vec::new();
+            for t in &targets {
+                let got = t.pose.as_ref().expect("a pose target");
+                let k = (0..5)
+                    .min_by(|&a, &b| (got.t - plan.poses[a].0.t).norm().total_cmp(&(got.t - plan.poses[b].0.t).norm()))
+                    .unwrap();
+                let want = &plan.poses[k].0;
+                assert!((got.t - want.t).norm() < 1e-6, "{what} P{}: {:?} vs {:?}", k + 1, got.t, want.t);
+                let angle = rotation_angle(&(got.r * want.r.transpose()));
+                assert!(angle < 1e-6 * DEG, "{what} P{}: {} deg", k + 1, angle / DEG);
+                assert_eq!(t.base.clone().unwrap(), Frame::identity(), "{what}: the base frame");
+                which.push(k);
+            }
+            let mut sorted = which.clone();
+            sorted.sort_unstable();
+            assert_eq!(sorted, vec![0, 1, 2, 3, 4], "{what}");
+            // The motions: P1 → P5, `cycles` times.
+            let order: Vec<usize> = motion_order(&files, None).unwrap().iter().map(|&i| which[i] + 1).collect();
+            let want: Vec<usize> = (0..cycles).flat_map(|_| 1..=5).collect();
+            assert_eq!(order, want, "{what}");
+            // KRL and Fanuc: the configuration read back is the planned joints' branch, and each
+            // planned joint lies in the turn range read back.
+            if matches!(lang, PlanLanguage::Krl | PlanLanguage::Fanuc) {
+                let ik = ik.as_ref().unwrap();
+                for (t, &k) in targets.iter().zip(&which) {
+                    let q = &plan.poses[k].1;
+                    assert_eq!(t.branch, Some(ik.classify(q)), "{what} P{}", k + 1);
+                    let ranged = t.ranges.iter().flatten().count();
+                    assert_eq!(ranged, if lang == PlanLanguage::Krl { 6 } else { 3 }, "{what}");
+                    for (j, r) in t.ranges.iter().enumerate() {
+                        if let Some((lo, hi)) = r {
+                            assert!(
+                                q[j] >= *lo && q[j] < *hi,
+                                "{what} P{} axis {}: {} not in [{lo}, {hi})",
+                                k + 1,
+                                j + 1,
+                                q[j]
+                            );
+                        }
+                    }
+                }
+            }
+            // The filter's own branch logic: on a calibration equal to the nominal model every target
+            // solves back to the planned joints (same branch, same turns). RAPID's confdata labels a
+            // branch only where the robot has a closed form; URScript starts from P1's joints.
+            if lang == PlanLanguage::Rapid && ik.is_none() {
+                continue;
+            }
+            let opts = FilterOptions {
+                seed_joints: (lang == PlanLanguage::Urscript).then(|| plan.poses[0].1.clone()),
+                ..FilterOptions::default()
+            };
+            let out = filter(&cal, &files, &opts).unwrap();
+            assert_eq!(out.report.len(), 5, "{what}");
+            for (r, &k) in out.report.iter().zip(&which) {
+                assert_eq!(r.status, TargetStatus::Compensated, "{what}: {r:?}");
+                let q = r.joints_deg.as_ref().unwrap();
+                for (j, (a, b)) in q.iter().zip(&plan.poses[k].1).enumerate() {
+                    assert!((a - b / DEG).abs() < 1e-4, "{what} P{} axis {}: {a} vs {}", k + 1, j + 1, b / DEG);
+                }
             }
         }
     }

@@ -184,6 +184,28 @@ fn the_readme_service_block_is_an_excerpt_of_the_walkthrough() {
     }
 }
 
+/// The README's ISO 9283 service example is an excerpt of the walkthrough too (so it runs as
+/// written when the walkthrough runs).
+#[test]
+fn the_readme_iso9283_block_is_an_excerpt_of_the_walkthrough() {
+    let text = readme();
+    let block = bash_blocks(&text)
+        .into_iter()
+        .find(|(_, lines)| lines.iter().any(|l| l.contains("/v1/robots/$ROBOT/iso9283")))
+        .expect("the ISO 9283 service block");
+    let script = std::fs::read_to_string(Path::new(ROOT).join("scripts/api_walkthrough.sh")).unwrap();
+    let script: Vec<&str> = script.lines().map(str::trim_start).collect();
+    let mut at = 0;
+    for (i, line) in block.1.iter().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
+        match script[at..].iter().position(|s| s == line) {
+            Some(k) => at += k + 1,
+            None => {
+                panic!("README.md line {}: not a line of scripts/api_walkthrough.sh (in order): {line}", block.0 + i)
+            }
+        }
+    }
+}
+
 fn free_port() -> u16 {
     TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }

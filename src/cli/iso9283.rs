@@ -4,13 +4,14 @@
 use std::path::PathBuf;
 
 use clap::{Args, Subcommand};
-use serde::Serialize;
 
 use super::{CliError, load_cell, read, write_or_return, write_report};
 use crate::domain::ParameterSetDoc;
-use crate::domain::iso9283::evaluate::{EvaluateError, evaluate_session};
+use crate::domain::iso9283::evaluate::EvaluateError;
 use crate::domain::iso9283::ur10::{assign_poses, read_series_goals};
-use crate::domain::iso9283::{IsoReport, PoseRow, parse_assignments, report, write_assignments};
+use crate::domain::iso9283::{
+    Evaluation, EvaluationError, PoseRow, evaluate as evaluate_cell, parse_assignments, write_assignments,
+};
 
 #[derive(Subcommand, Debug)]
 pub enum Iso9283Command {
@@ -36,16 +37,18 @@ pub struct PlanArgs {
     /// The joints the IK starts from, deg (default per preset; required for a robot file).
     #[arg(long, allow_hyphen_values = true)]
     pub seed_joints_deg: Option<String>,
-    /// The program's language: rapid or urscript.
+    /// The program's language: rapid, krl, fanuc or urscript. KRL writes two files: --out NAME.src
+    /// writes NAME.src and NAME.dat beside it (required: the pair cannot go to standard output).
     #[arg(long, default_value = "rapid")]
     pub lang: String,
-    /// Cycles (the standard asks for 30).
+    /// Cycles (the standard asks for 30; at most 1000): every cycle is written out.
     #[arg(long, default_value_t = 30)]
     pub cycles: u32,
     /// Centres searched: grid × grid in the x–z half-plane in front of the robot.
     #[arg(long, default_value_t = 6)]
     pub grid: usize,
-    /// Write the program here instead of standard output (the plan goes to standard error).
+    /// Write the program here instead of standard output (the plan goes to standard error). The
+    /// file's stem names the program (MODULE, DEF/DEFDAT, /PROG, def); ISO9283 on standard output.
     #[arg(long)]
     pub out: Option<PathBuf>,
 }
@@ -70,7 +73,7 @@ pub struct EvaluateArgs {
     pub pairs: Option<String>,
     /// κ limit of the base-and-tool registration (its parameters are nuisance: only the errors it
     /// leaves are reported, and κ is printed beside them).
-    #[arg(long, default_value_t = 1e4)]
+    #[arg(long, default_value_t = crate::domain::iso9283::KAPPA_LIMIT)]
     pub kappa_limit: f64,
     /// Print JSON (mm, deg) instead of the table.
     #[arg(long)]
@@ -92,14 +95,6 @@ pub struct PosesUr10Args {
     pub out: Option<PathBuf>,
 }
 
-/// What `evaluate --json` prints.
-#[derive(Serialize, Debug)]
-pub struct Evaluation {
-    pub session: String,
-    pub nominal: IsoReport,
-    pub calibrated: Option<IsoReport>,
-}
-
 pub(super) fn run(c: Iso9283Command) -> Result<String, CliError> {
     match c {
         Iso9283Command::Evaluate(a) => evaluate(a),
@@ -112,19 +107,50 @@ pub(super) fn run(c: Iso9283Command) -> Result<String, CliError> {
 }
 
 fn plan(a: PlanArgs) -> Result<String, CliError> {
-    use crate::domain::iso9283::plan::{PlanLanguage, plan_cube, write_program};
+    use crate::domain::iso9283::plan::{
+        MAX_CYCLES, PlanLanguage, check_language, plan_cube, valid_program_name, write_program,
+    };
     use crate::kinematics::frame::rot_zyx;
     use crate::kinematics::{ParameterSet, Preset, Tool};
     use crate::units::{DEG, MM};
     let model = super::robot_model("--robot", &a.robot)?;
     let language = PlanLanguage::parse(&a.lang)
-        .ok_or_else(|| CliError::arg("--lang", format!("'{}' is not rapid or urscript", a.lang)))?;
-    if a.cycles == 0 {
-        return Err(CliError::arg("--cycles", "must be at least 1"));
+        .ok_or_else(|| CliError::arg("--lang", format!("'{}' is not rapid, krl, fanuc or urscript", a.lang)))?;
+    if !(1..=MAX_CYCLES).contains(&a.cycles) {
+        return Err(CliError::arg("--cycles", format!("must be between 1 and {MAX_CYCLES}")));
     }
     if !(2..=40).contains(&a.grid) {
         return Err(CliError::arg("--grid", "must be between 2 and 40"));
     }
+    // The program's name is the file's: KRL's DEF and DEFDAT and Fanuc's /PROG must match the
+    // file names on the controller.
+    let name = match &a.out {
+        None if language == PlanLanguage::Krl => {
+            return Err(CliError::arg(
+                "--out",
+                "KRL is two files, NAME.src and NAME.dat, named after the program: give --out NAME.src",
+            ));
+        }
+        None => "ISO9283".to_string(),
+        Some(path) => {
+            let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+            if language == PlanLanguage::Krl && !ext.eq_ignore_ascii_case("src") {
+                return Err(CliError::arg("--out", "a KRL program is written as NAME.src (and NAME.dat beside it)"));
+            }
+            let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("");
+            if !valid_program_name(stem) {
+                return Err(CliError::arg(
+                    "--out",
+                    format!(
+                        "'{stem}' cannot name the program (the file's name is the program's): a letter, then letters, \
+                         digits or '_', at most 24 characters"
+                    ),
+                ));
+            }
+            stem.to_string()
+        }
+    };
+    let name = if language == PlanLanguage::Urscript { name.to_ascii_lowercase() } else { name.to_ascii_uppercase() };
     let o = super::three("--orientation-deg", &a.orientation_deg)?;
     let seed: Vec<f64> = match (&a.seed_joints_deg, model.preset) {
         (Some(s), _) => super::numbers("--seed-joints-deg", s, Some(model.dof()))?.iter().map(|v| v * DEG).collect(),
@@ -133,8 +159,10 @@ fn plan(a: PlanArgs) -> Result<String, CliError> {
         (None, None) => return Err(CliError::arg("--seed-joints-deg", "needed for a robot file (no preset default)")),
     };
     let set = ParameterSet::nominal(model, Tool::flange(), [0.0; 6]);
+    check_language(&set, language).map_err(|e| CliError::arg("--lang", e))?;
     let p = plan_cube(&set, rot_zyx(o[0] * DEG, o[1] * DEG, o[2] * DEG), &seed, a.grid)
         .map_err(|e| CliError::msg(e.to_string()))?;
+    let files = write_program(&p, &set, language, a.cycles, &name).map_err(|e| CliError::arg("--lang", e))?;
     eprintln!(
         "cube: centre {:.3}, {:.3}, {:.3} mm, edge {:.3} mm; P1..P5 (mm): {}",
         p.centre.x / MM,
@@ -147,7 +175,23 @@ fn plan(a: PlanArgs) -> Result<String, CliError> {
             .collect::<Vec<_>>()
             .join(" ")
     );
-    write_or_return(&a.out, write_program(&p, &set, language, a.cycles).trim_end().to_string())
+    let text = |f: &crate::domain::program::ProgramFile| String::from_utf8_lossy(&f.bytes).trim_end().to_string();
+    match &a.out {
+        None => Ok(text(&files[0])),
+        Some(path) => {
+            let mut wrote = Vec::new();
+            for f in &files {
+                // The first file where asked; the others (KRL's .dat) beside it, same stem.
+                let target = if wrote.is_empty() {
+                    path.clone()
+                } else {
+                    path.with_extension(f.name.rsplit_once('.').map_or("", |(_, e)| e))
+                };
+                wrote.push(write_or_return(&Some(target), text(f) + "\n")?);
+            }
+            Ok(wrote.join("\n"))
+        }
+    }
 }
 
 fn pairs(text: &Option<String>) -> Result<Vec<(String, String)>, CliError> {
@@ -182,21 +226,16 @@ fn evaluate(a: EvaluateArgs) -> Result<String, CliError> {
         None => None,
         Some(p) => Some(ParameterSetDoc::from_json(&read(p)?).map_err(|e| CliError::file(p, e))?.set),
     };
-    let one = |set, model: &str| -> Result<IsoReport, CliError> {
-        let e = evaluate_session(&cell, &a.session, set, &assignments, a.kappa_limit).map_err(|e| match e {
-            EvaluateError::UnknownSession(_) => CliError::arg("--session", e),
-            EvaluateError::UnknownMeasurement { .. } | EvaluateError::NotMeasured { .. } => {
+    let evaluation =
+        evaluate_cell(&cell, &a.session, set.as_ref(), &assignments, &pairs, a.kappa_limit).map_err(|e| match e {
+            EvaluationError::Session(EvaluateError::UnknownSession(_)) => CliError::arg("--session", e),
+            EvaluationError::Session(EvaluateError::UnknownMeasurement { .. } | EvaluateError::NotMeasured { .. }) => {
                 CliError::msg(format!("{}: {e}", a.poses.display()))
             }
-            EvaluateError::Registration(_) => CliError::msg(e.to_string()),
+            EvaluationError::Session(EvaluateError::Registration(_)) | EvaluationError::Statistics { .. } => {
+                CliError::msg(e.to_string())
+            }
         })?;
-        report(model, &e.visits, &pairs, Some(&e.registration)).map_err(|e| CliError::msg(format!("{model}: {e}")))
-    };
-    let evaluation = Evaluation {
-        session: a.session.clone(),
-        nominal: one(None, "nominal")?,
-        calibrated: set.as_ref().map(|s| one(Some(s), "calibrated (predicted)")).transpose()?,
-    };
     let mut tail = String::new();
     if let Some(path) = &a.html {
         write_report(

@@ -310,6 +310,19 @@ pub async fn session_references(db: &mut sqlx::SqliteConnection, s: &SessionRow)
     .fetch_all(&mut *db)
     .await?;
     out.extend(jobs.iter().map(|(id, kind, state)| format!("{kind} job {id} ({state})")));
+    // ISO 9283 evaluations of it, and evaluation jobs queued or running on it (their request
+    // names one session, by id).
+    let evaluations = super::iso9283::of_session(&mut *db, &s.id).await?;
+    out.extend(evaluations.iter().map(|e| format!("ISO 9283 evaluation {e}")));
+    let iso_jobs: Vec<(String, String)> = sqlx::query_as(
+        "SELECT id, state FROM jobs WHERE robot_id = ?1 AND kind = 'iso9283' AND state IN ('queued', 'running') \
+         AND json_extract(request_json, '$.session') = ?2 ORDER BY created_at",
+    )
+    .bind(&s.robot_id)
+    .bind(&s.id)
+    .fetch_all(&mut *db)
+    .await?;
+    out.extend(iso_jobs.iter().map(|(id, state)| format!("iso9283 job {id} ({state})")));
     Ok(out)
 }
 

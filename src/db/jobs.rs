@@ -13,7 +13,7 @@ use sqlx::sqlite::SqliteExecutor;
 use super::{now, time_text};
 
 /// What a job does; stored (and served) as `pose_plan`, `identification`, `validation`,
-/// `diagnosis`.
+/// `diagnosis`, `iso9283`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, sqlx::Type, Serialize, Deserialize)]
 #[sqlx(rename_all = "snake_case")]
 #[serde(rename_all = "snake_case")]
@@ -22,6 +22,8 @@ pub enum JobKind {
     Identification,
     Validation,
     Diagnosis,
+    /// ISO 9283 pose characteristics of a session (migration 0007).
+    Iso9283,
 }
 
 impl JobKind {
@@ -31,6 +33,7 @@ impl JobKind {
             JobKind::Identification => "identification",
             JobKind::Validation => "validation",
             JobKind::Diagnosis => "diagnosis",
+            JobKind::Iso9283 => "iso9283",
         }
     }
 }

@@ -21,7 +21,7 @@ use crate::jobs::{JobContext, JobError};
 #[derive(Debug, Serialize, Deserialize, ToSchema)]
 pub struct JobOut {
     pub id: String,
-    /// `pose_plan`, `identification`, `validation` or `diagnosis`.
+    /// `pose_plan`, `identification`, `validation`, `diagnosis` or `iso9283`.
     #[schema(value_type = String)]
     pub kind: JobKind,
     pub robot_id: String,
@@ -39,7 +39,8 @@ pub struct JobOut {
     /// The request as stored (sessions resolved to ids).
     #[schema(value_type = Object)]
     pub request: Value,
-    /// Where the result lives (`parameter_set_id`, `validation_id`, `pose_plan_id`, `diagnosis_id`) and a summary.
+    /// Where the result lives (`parameter_set_id`, `validation_id`, `pose_plan_id`, `diagnosis_id`,
+    /// `evaluation_id`) and a summary.
     pub result: Option<JobResult>,
     /// Why it failed (rank deficiency, κ above the limit, divergence, …).
     pub error: Option<Problem>,

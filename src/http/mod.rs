@@ -12,6 +12,7 @@ pub mod extract;
 pub mod guard;
 pub mod history;
 pub mod identifications;
+pub mod iso9283;
 pub mod jobs;
 pub mod measurements;
 pub mod metrics;
@@ -77,6 +78,7 @@ compensate, read, admin (admin implies all); a server bound to loopback accepts 
         (name = "validations", description = "Validation statistics (job)"),
         (name = "diagnoses", description = "Sim-to-real diagnosis of a parameter set (job): where it misses, which unmodelled effect, how far the error shrinks; accepting a named effect"),
         (name = "compensation", description = "Compensated (fake-target) joint targets"),
+        (name = "iso9283", description = "ISO 9283 pose characteristics of a measured session (job): AP, RP, vAP, AD, RD, nominal and calibrated (predicted)"),
         (name = "jobs", description = "Background jobs"),
         (name = "tokens", description = "Bearer tokens (admin)"),
         (name = "audit", description = "Corrections of stored data (exclusions, deletions, archiving): who, when, why"),
@@ -122,6 +124,9 @@ fn api_router() -> OpenApiRouter<AppState> {
         .routes(routes!(diagnoses::accept))
         .routes(routes!(compensation::compensate))
         .routes(routes!(programs::filter_program))
+        .routes(routes!(iso9283::create))
+        .routes(routes!(iso9283::get))
+        .routes(routes!(iso9283::report))
         .routes(routes!(jobs::list))
         .routes(routes!(jobs::get))
         .routes(routes!(jobs::cancel))

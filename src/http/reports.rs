@@ -39,7 +39,7 @@ pub fn accepts_html(headers: &HeaderMap) -> bool {
     })
 }
 
-fn not_acceptable() -> Response {
+pub(super) fn not_acceptable() -> Response {
     let problem = Problem {
         type_: "urn:robocal:problem:not-acceptable".into(),
         title: "Not acceptable".into(),
@@ -52,7 +52,7 @@ fn not_acceptable() -> Response {
     (StatusCode::NOT_ACCEPTABLE, [(header::CONTENT_TYPE, HeaderValue::from_static(PROBLEM_JSON))], body).into_response()
 }
 
-fn html(page: String) -> Response {
+pub(super) fn html(page: String) -> Response {
     (
         StatusCode::OK,
         [

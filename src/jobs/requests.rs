@@ -139,3 +139,28 @@ pub struct DiagnosisJob {
     #[serde(flatten)]
     pub request: DiagnoseSpec,
 }
+
+/// An ISO 9283 evaluation of a session: AP, RP, vAP, AD and RD of the nominal model and, with a
+/// parameter set, the calibrated model's predicted ones (as `robocal iso9283 evaluate`). Stored
+/// as sent, with the session and the set resolved to ids at submission.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Iso9283Request {
+    /// The session measured at the test poses (id or name) of the robot: a laser-tracker or other
+    /// position or pose session, not a ball session.
+    pub session: String,
+    /// Which pose (and cycle, approach) each evaluated measurement is; measurements not listed are
+    /// not evaluated. The cell format has no pose id, so the assignment comes with the request,
+    /// as the pose-assignment file comes with the cell on the command line.
+    #[schema(min_items = 1, max_items = 100000)]
+    pub poses: Vec<crate::domain::iso9283::PoseAssignment>,
+    /// Pose pairs for distance accuracy and repeatability (AD, RD).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    #[schema(max_items = 1000)]
+    pub pairs: Vec<crate::domain::iso9283::PosePair>,
+    /// The parameter set of the calibrated figures (a set of this robot). Default: the robot's
+    /// active set; the nominal figures only when it has none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(pattern = "^[0-9a-fA-F]{8}-[0-9a-fA-F]{4}-[0-9a-fA-F]{4}-[0-9a-fA-F]{4}-[0-9a-fA-F]{12}$")]
+    pub parameter_set_id: Option<String>,
+}

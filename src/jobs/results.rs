@@ -134,6 +134,21 @@ pub struct DiagnosisResult {
     pub effects: Vec<String>,
 }
 
+/// An ISO 9283 evaluation job's result: where the evaluation is stored and its summaries.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct Iso9283Result {
+    /// `GET /v1/iso9283/{evaluation_id}` (JSON) and `…/report` (HTML).
+    pub evaluation_id: String,
+    /// The session evaluated, by name.
+    pub session: String,
+    /// The set of the calibrated figures; absent: nominal only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub parameter_set_id: Option<String>,
+    pub nominal: crate::domain::iso9283::Summary,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibrated: Option<crate::domain::iso9283::Summary>,
+}
+
 /// A finished job's result, by its kind.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(untagged)]
@@ -142,6 +157,7 @@ pub enum JobResult {
     Identification(IdentificationResult),
     Validation(ValidationResult),
     Diagnosis(DiagnosisResult),
+    Iso9283(Iso9283Result),
 }
 
 impl JobResult {
@@ -152,6 +168,7 @@ impl JobResult {
             JobKind::Identification => JobResult::Identification(serde_json::from_str(json)?),
             JobKind::Validation => JobResult::Validation(serde_json::from_str(json)?),
             JobKind::Diagnosis => JobResult::Diagnosis(serde_json::from_str(json)?),
+            JobKind::Iso9283 => JobResult::Iso9283(serde_json::from_str(json)?),
         })
     }
 }

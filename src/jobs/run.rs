@@ -6,9 +6,11 @@ use serde_json::{Value, json};
 use sqlx::SqlitePool;
 
 use super::JobError;
-use super::requests::{DiagnosisJob, IdentificationRequest, PosePlanRequest, SelectSpec, ValidationJob};
+use super::requests::{
+    DiagnosisJob, IdentificationRequest, Iso9283Request, PosePlanRequest, SelectSpec, ValidationJob,
+};
 use super::results::{
-    DiagnosisResult, IdentificationResult, IdentificationSummary, JobResult, PlanNest, PlannedBallPose,
+    DiagnosisResult, IdentificationResult, IdentificationSummary, Iso9283Result, JobResult, PlanNest, PlannedBallPose,
     PlannedTrackerPose, PosePlan, PosePlanResult, ValidationJobSummary, ValidationResult,
 };
 use crate::app::cells::{self, StoredIndices};
@@ -60,6 +62,14 @@ pub enum Inputs {
         indices: StoredIndices,
         sessions: DiagnosisSessions,
     },
+    Iso9283 {
+        request: Iso9283Request,
+        /// The session's name in the cell.
+        session: String,
+        set_json: Option<String>,
+        cell: CellFile,
+        indices: StoredIndices,
+    },
 }
 
 /// What a job computed.
@@ -88,6 +98,12 @@ pub enum Output {
         status: String,
         summary: String,
         effects: Vec<String>,
+    },
+    Iso9283 {
+        session_id: String,
+        session: String,
+        parameter_set_id: Option<String>,
+        evaluation: Box<crate::domain::iso9283::Evaluation>,
     },
 }
 
@@ -198,7 +214,80 @@ pub async fn load(pool: &SqlitePool, kind: JobKind, robot_id: &str, request_json
             let stored = cells::stored_cell(pool, &robot, &all, false).await?;
             Ok(Inputs::Diagnosis { job, set_json: set.doc_json, cell: stored.file, indices: stored.indices, sessions })
         }
+        JobKind::Iso9283 => {
+            let request: Iso9283Request = stored(request_json, "ISO 9283 request")?;
+            let session = records::session_of_robot(pool, &robot.id, &request.session).await?.ok_or_else(|| {
+                JobError::invalid("session", format!("this robot has no session '{}'", request.session))
+            })?;
+            let set_json = match &request.parameter_set_id {
+                None => None,
+                Some(id) => Some(
+                    records::parameter_set(pool, id)
+                        .await?
+                        .ok_or_else(|| JobError::Internal(format!("parameter set {id} missing")))?
+                        .doc_json,
+                ),
+            };
+            let stored = cells::stored_cell(pool, &robot, std::slice::from_ref(&session), false).await?;
+            Ok(Inputs::Iso9283 { request, session: session.name, set_json, cell: stored.file, indices: stored.indices })
+        }
     }
+}
+
+/// An ISO 9283 evaluation: the request's assignments (stored indices) mapped to the cell's, then
+/// the call `robocal iso9283 evaluate` makes. Errors name the request's field.
+fn iso9283(
+    request: Iso9283Request,
+    session: String,
+    set_json: Option<String>,
+    cell: CellFile,
+    indices: StoredIndices,
+    progress: &(dyn Fn(f64, &'static str) + Sync),
+) -> Result<Output, JobError> {
+    use crate::domain::iso9283::evaluate::EvaluateError;
+    use crate::domain::iso9283::{EvaluationError, assignments_of, evaluate, pairs_of};
+    let mut assignments = assignments_of(&request.poses).map_err(JobError::field)?;
+    let pairs = pairs_of(&request.pairs, &assignments).map_err(JobError::field)?;
+    for (i, a) in assignments.iter_mut().enumerate() {
+        a.index = indices.cell(&session, a.index).ok_or_else(|| {
+            JobError::invalid(format!("poses[{i}].index"), format!("measurement {} is excluded", a.index))
+        })?;
+    }
+    let set = set_json
+        .map(|j| ParameterSetDoc::from_json(&j).map(|d| d.set))
+        .transpose()
+        .map_err(|e| JobError::Internal(format!("stored parameter set: {e}")))?;
+    let cell_si = cell.to_cell().map_err(|e| JobError::domain(e, "stored cell"))?;
+    progress(0.1, "registering base and tool");
+    let row_of = |index: usize| assignments.iter().position(|a| a.index == index).unwrap_or(0);
+    let evaluation =
+        evaluate(&cell_si, &session, set.as_ref(), &assignments, &pairs, crate::domain::iso9283::KAPPA_LIMIT).map_err(
+            |e| {
+                let detail = e.to_string();
+                match e {
+                    EvaluationError::Session(EvaluateError::UnknownMeasurement { row, .. }) => {
+                        JobError::invalid(format!("poses[{row}].index"), detail)
+                    }
+                    EvaluationError::Session(EvaluateError::NotMeasured { index, .. }) => {
+                        JobError::invalid(format!("poses[{}].index", row_of(index)), detail)
+                    }
+                    EvaluationError::Session(EvaluateError::UnknownSession(_)) => JobError::invalid("session", detail),
+                    EvaluationError::Session(EvaluateError::Registration(_)) => JobError::Numerical {
+                        kind: "registration",
+                        title: "The base and tool could not be registered",
+                        detail,
+                    },
+                    EvaluationError::Statistics { .. } => JobError::Invalid { detail, field: Some("poses".into()) },
+                }
+            },
+        )?;
+    progress(0.95, "storing");
+    Ok(Output::Iso9283 {
+        session_id: request.session,
+        session,
+        parameter_set_id: request.parameter_set_id,
+        evaluation: Box::new(evaluation),
+    })
 }
 
 /// Identification options from a request (checked as `robocal identify` checks its flags); an
@@ -412,6 +501,9 @@ pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64, &'static str) + Sync)) ->
                 effects: out.verdict.effects.iter().map(|e| e.which.label.clone()).collect(),
             })
         }
+        Inputs::Iso9283 { request, session, set_json, cell, indices } => {
+            iso9283(request, session, set_json, cell, indices, progress)
+        }
     }
 }
 
@@ -615,6 +707,26 @@ pub async fn store(
                 status,
                 summary,
                 effects,
+            }))
+        }
+        Output::Iso9283 { session_id, session, parameter_set_id, evaluation } => {
+            let row = crate::db::iso9283::Iso9283Row {
+                id: crate::db::new_id(),
+                robot_id: robot_id.to_string(),
+                session_id,
+                parameter_set_id: parameter_set_id.clone(),
+                request_json: request_json.to_string(),
+                report_json: serde_json::to_string(&evaluation).expect("an evaluation serialises"),
+                job_id: Some(job_id.to_string()),
+                created_at: crate::db::now(),
+            };
+            crate::db::iso9283::insert(&mut *tx, &row).await?;
+            Ok(JobResult::Iso9283(Iso9283Result {
+                evaluation_id: row.id,
+                session,
+                parameter_set_id,
+                nominal: evaluation.nominal.summary.clone(),
+                calibrated: evaluation.calibrated.as_ref().map(|c| c.summary.clone()),
             }))
         }
     }

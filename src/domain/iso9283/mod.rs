@@ -21,11 +21,14 @@ pub mod plan;
 pub mod stats;
 pub mod ur10;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
 
-use self::evaluate::{Assignment, Registration};
+use self::evaluate::{Assignment, EvaluateError, Registration, evaluate_session};
 use self::stats::{DistanceResult, IsoError, PoseResult, Visit, distance_characteristics, pose_characteristics};
 use super::DomainError;
+use crate::cell::Cell;
+use crate::kinematics::ParameterSet;
 use crate::units::{DEG, MM};
 
 /// The header of the pose-assignment file.
@@ -88,7 +91,7 @@ pub fn write_assignments(a: &[Assignment]) -> String {
 }
 
 /// One pose's characteristics, mm and degrees.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PoseRow {
     pub pose: String,
     pub cycles: usize,
@@ -114,7 +117,7 @@ pub struct PoseRow {
 }
 
 /// One pair's distance characteristics, mm.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DistanceRow {
     pub from: String,
     pub to: String,
@@ -130,7 +133,7 @@ pub struct DistanceRow {
 }
 
 /// A summary over the poses (what a one-line table shows).
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct Summary {
     pub poses: usize,
     pub visits: usize,
@@ -145,7 +148,7 @@ pub struct Summary {
 }
 
 /// The ISO 9283 report of one model on one session.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct IsoReport {
     /// `nominal` or `calibrated (predicted)`.
     pub model: String,
@@ -157,7 +160,7 @@ pub struct IsoReport {
 }
 
 /// How base and tool were registered, mm and degrees.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RegistrationRow {
     pub base_xyz_mm: [f64; 3],
     pub base_abc_deg: [f64; 3],
@@ -225,6 +228,181 @@ impl From<&DistanceResult> for DistanceRow {
             rd_sampling_u_mm: d.rd_sampling_u.map(|v| v / MM),
         }
     }
+}
+
+/// An evaluation of a session: the nominal model's figures and, with a calibrated set, its
+/// predicted ones. What `robocal iso9283 evaluate --json` prints and the service stores.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Evaluation {
+    pub session: String,
+    pub nominal: IsoReport,
+    pub calibrated: Option<IsoReport>,
+}
+
+/// Why an evaluation was not made.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EvaluationError {
+    /// The session, a measurement, or the registration.
+    #[error(transparent)]
+    Session(#[from] EvaluateError),
+    /// The statistics refused the visits (a pose visited twice in one cycle, a pair without a
+    /// common cycle, a value that is not finite).
+    #[error("{model}: {error}")]
+    Statistics { model: String, error: IsoError },
+}
+
+/// The evaluation of `session` of `cell`: the nominal model, and `set`'s predicted figures when
+/// given; `pairs` for AD and RD; `kappa_limit` of the base-and-tool registration. The one call
+/// `robocal iso9283 evaluate` and the service's job make.
+pub fn evaluate(
+    cell: &Cell,
+    session: &str,
+    set: Option<&ParameterSet>,
+    assignments: &[Assignment],
+    pairs: &[(String, String)],
+    kappa_limit: f64,
+) -> Result<Evaluation, EvaluationError> {
+    let one = |set: Option<&ParameterSet>, model: &str| -> Result<IsoReport, EvaluationError> {
+        let e = evaluate_session(cell, session, set, assignments, kappa_limit)?;
+        report(model, &e.visits, pairs, Some(&e.registration))
+            .map_err(|error| EvaluationError::Statistics { model: model.to_string(), error })
+    };
+    Ok(Evaluation {
+        session: session.to_string(),
+        nominal: one(None, "nominal")?,
+        calibrated: set.map(|s| one(Some(s), "calibrated (predicted)")).transpose()?,
+    })
+}
+
+/// The pattern of a pose id and of an approach label on the wire: 1–64 letters, digits or
+/// `_ . : + -`.
+pub const POSE_ID_PATTERN: &str = r"^[A-Za-z0-9_.:+-]{1,64}$";
+/// The most pose assignments (measurements evaluated) one request holds.
+pub const MAX_ASSIGNMENTS: usize = 100_000;
+/// The κ limit of the base-and-tool registration the service uses (`robocal iso9283 evaluate
+/// --kappa-limit`'s default).
+pub const KAPPA_LIMIT: f64 = 1e4;
+/// The most pose pairs (AD, RD) one request holds.
+pub const MAX_PAIRS: usize = 1000;
+
+fn pose_id_ok(s: &str) -> bool {
+    (1..=64).contains(&s.len()) && s.bytes().all(|b| b.is_ascii_alphanumeric() || b"_.:+-".contains(&b))
+}
+
+/// Which pose a measurement is, as the service takes it: one row of the pose-assignment file.
+/// (The stored measurement has no pose id, as the cell file has none: the assignment travels with
+/// the request, exactly as the file travels beside the cell for the command line.)
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PoseAssignment {
+    /// 0-based index of the measurement in the session (the index the API lists measurements by;
+    /// at most 2³¹−1).
+    #[schema(maximum = 2147483647)]
+    pub index: usize,
+    /// The pose (P1 … P5, or any id): 1–64 letters, digits or `_ . : + -`.
+    #[schema(pattern = r"^[A-Za-z0-9_.:+-]{1,64}$", min_length = 1, max_length = 64)]
+    pub pose_id: String,
+    /// The cycle (1-based); absent: the count of this pose's visits so far, in the order listed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(minimum = 1, maximum = 1000000)]
+    pub cycle: Option<u32>,
+    /// The direction the pose was approached from (a label, e.g. `+x`), for vAP.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(pattern = r"^[A-Za-z0-9_.:+-]{1,64}$", min_length = 1, max_length = 64)]
+    pub approach: Option<String>,
+}
+
+/// A pose pair for distance accuracy and repeatability (AD, RD).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PosePair {
+    #[schema(pattern = r"^[A-Za-z0-9_.:+-]{1,64}$", min_length = 1, max_length = 64)]
+    pub from: String,
+    #[schema(pattern = r"^[A-Za-z0-9_.:+-]{1,64}$", min_length = 1, max_length = 64)]
+    pub to: String,
+}
+
+/// The assignments of a request (`poses`), checked: every pose id and approach label of the
+/// pattern, each measurement listed once, each (pose, cycle) once; cycles counted where absent, as
+/// the file's. Errors name `poses[i].field`.
+pub fn assignments_of(rows: &[PoseAssignment]) -> Result<Vec<Assignment>, DomainError> {
+    if rows.is_empty() {
+        return Err(DomainError::new("poses", "assign at least one measurement to a pose"));
+    }
+    if rows.len() > MAX_ASSIGNMENTS {
+        return Err(DomainError::new("poses", format!("at most {MAX_ASSIGNMENTS} assignments, got {}", rows.len())));
+    }
+    let mut index_row = std::collections::HashMap::new();
+    let mut visit_row = std::collections::HashMap::new();
+    let mut visits: std::collections::HashMap<&str, u32> = std::collections::HashMap::new();
+    let mut out = Vec::with_capacity(rows.len());
+    for (i, r) in rows.iter().enumerate() {
+        let at = |field: &str| format!("poses[{i}].{field}");
+        if r.index > i32::MAX as usize {
+            return Err(DomainError::new(at("index"), "at most 2³¹−1"));
+        }
+        if !pose_id_ok(&r.pose_id) {
+            return Err(DomainError::new(at("pose_id"), "1–64 letters, digits or '_ . : + -'"));
+        }
+        if let Some(a) = &r.approach
+            && !pose_id_ok(a)
+        {
+            return Err(DomainError::new(at("approach"), "1–64 letters, digits or '_ . : + -'"));
+        }
+        if let Some(first) = index_row.insert(r.index, i) {
+            return Err(DomainError::new(
+                at("index"),
+                format!("measurement {} is assigned twice (poses[{first}] and poses[{i}])", r.index),
+            ));
+        }
+        let count = visits.entry(r.pose_id.as_str()).or_insert(0);
+        *count += 1;
+        let cycle = match r.cycle {
+            None => *count,
+            Some(c) if !(1..=1_000_000).contains(&c) => {
+                return Err(DomainError::new(at("cycle"), "cycles count from 1 to 1000000"));
+            }
+            Some(c) => c,
+        };
+        if let Some(first) = visit_row.insert((r.pose_id.as_str(), cycle), i) {
+            return Err(DomainError::new(
+                at("cycle"),
+                format!("pose '{}' is visited twice in cycle {cycle} (poses[{first}] and poses[{i}])", r.pose_id),
+            ));
+        }
+        out.push(Assignment { index: r.index, pose: r.pose_id.clone(), cycle, approach: r.approach.clone() });
+    }
+    Ok(out)
+}
+
+/// The pairs of a request, checked against the assignments: two different poses, each assigned.
+/// Errors name `pairs[i].from` or `pairs[i].to`.
+pub fn pairs_of(pairs: &[PosePair], assignments: &[Assignment]) -> Result<Vec<(String, String)>, DomainError> {
+    if pairs.len() > MAX_PAIRS {
+        return Err(DomainError::new("pairs", format!("at most {MAX_PAIRS} pairs, got {}", pairs.len())));
+    }
+    let assigned: std::collections::HashSet<&str> = assignments.iter().map(|a| a.pose.as_str()).collect();
+    pairs
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            for (field, id) in [("from", &p.from), ("to", &p.to)] {
+                if !pose_id_ok(id) {
+                    return Err(DomainError::new(format!("pairs[{i}].{field}"), "1–64 letters, digits or '_ . : + -'"));
+                }
+                if !assigned.contains(id.as_str()) {
+                    return Err(DomainError::new(
+                        format!("pairs[{i}].{field}"),
+                        format!("no measurement is assigned to pose '{id}'"),
+                    ));
+                }
+            }
+            if p.from == p.to {
+                return Err(DomainError::new(format!("pairs[{i}].to"), "a pair needs two different poses"));
+            }
+            Ok((p.from.clone(), p.to.clone()))
+        })
+        .collect()
 }
 
 /// The report of `visits` (one model), with the distance characteristics of `pairs`.

@@ -14,10 +14,12 @@
 //!   P1 is the centre; P2 … P5 lie on that plane's diagonals at 10 % of the diagonal's length from
 //!   the corners: P2 near (xmin, ymin, zmax), P3 near (xmax, ymax, zmax), P4 near (xmax, ymax,
 //!   zmin), P5 near (xmin, ymin, zmin).
-//! - **The programs**: RAPID and URScript, Cartesian targets of the flange (tool0 / the UR's
-//!   flange) in the base frame, in mm and quaternions (RAPID, with confdata from the joint
-//!   quadrants; cfx from the closed form where the robot has one) or m and rotation vectors
-//!   (URScript). KRL and Fanuc TP are not written.
+//! - **The programs** ([`write_program`]): RAPID, KRL (`.src` + `.dat`), Fanuc TP (`.ls`) and
+//!   URScript, Cartesian targets of the flange in the base frame: mm and quaternions (RAPID, with
+//!   confdata from the joint quadrants; cfx from the closed form where the robot has one), mm and
+//!   A, B, C deg ZY'X'' with S and T (KRL), mm and W, P, R deg with CONFIG (Fanuc), m and rotation
+//!   vectors (URScript). Every cycle is written out. KRL and Fanuc need the closed form to label
+//!   the branch (S/T, CONFIG) and are refused for a robot without one.
 //! - **Not checked**: collisions. The envelope is the IK's reach within the joint limits; the
 //!   plan knows no floor, table, fixture or the robot's own links. Look at the cube before running
 //!   it (a cube reaching below the base plane is common for a floor-mounted arm: give another
@@ -25,8 +27,9 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::kinematics::frame::{quaternion_from_rot, rotation_vector};
-use crate::kinematics::ik_analytic::quadrant;
+use crate::domain::program::ProgramFile;
+use crate::kinematics::frame::{quaternion_from_rot, rotation_vector, zyx_from_rot};
+use crate::kinematics::ik_analytic::{Branch, quadrant};
 use crate::kinematics::ik_numeric::solve;
 use crate::kinematics::{AnalyticIk, Frame, IkOptions, ParameterSet};
 
@@ -178,21 +181,114 @@ pub fn plan_cube(
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PlanLanguage {
     Rapid,
+    Krl,
+    Fanuc,
     Urscript,
 }
 
 impl PlanLanguage {
+    pub const ALL: [PlanLanguage; 4] =
+        [PlanLanguage::Rapid, PlanLanguage::Krl, PlanLanguage::Fanuc, PlanLanguage::Urscript];
+
     pub fn parse(s: &str) -> Option<PlanLanguage> {
         match s.to_ascii_lowercase().as_str() {
             "rapid" => Some(PlanLanguage::Rapid),
+            "krl" => Some(PlanLanguage::Krl),
+            "fanuc" => Some(PlanLanguage::Fanuc),
             "urscript" => Some(PlanLanguage::Urscript),
             _ => None,
         }
     }
+
+    /// The extension of the program's (first) file: `mod`, `src` (KRL also writes the `.dat`),
+    /// `ls`, `script`.
+    pub fn extension(self) -> &'static str {
+        match self {
+            PlanLanguage::Rapid => "mod",
+            PlanLanguage::Krl => "src",
+            PlanLanguage::Fanuc => "ls",
+            PlanLanguage::Urscript => "script",
+        }
+    }
 }
 
-/// The program visiting P1 … P5 for `cycles` cycles.
-pub fn write_program(plan: &CubePlan, set: &ParameterSet, language: PlanLanguage, cycles: u32) -> String {
+/// The most cycles a plan writes: the standard asks for 30; every cycle is written out (see
+/// [`write_program`]), so this bounds the program's length (5 motions and 5 waits a cycle).
+pub const MAX_CYCLES: u32 = 1000;
+
+/// Whether `name` can name the program on every controller: a letter, then letters, digits or
+/// `_`, at most 24 characters (KRL's and Fanuc's limits are the tightest).
+pub fn valid_program_name(name: &str) -> bool {
+    let b = name.as_bytes();
+    !b.is_empty()
+        && b.len() <= 24
+        && b[0].is_ascii_alphabetic()
+        && b.iter().all(|c| c.is_ascii_alphanumeric() || *c == b'_')
+}
+
+/// Why a program is not written.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum WriteError {
+    #[error("'{0}' cannot name a program: a letter, then letters, digits or '_', at most 24 characters")]
+    Name(String),
+    #[error("cycles must be between 1 and {MAX_CYCLES}, not {0}")]
+    Cycles(u32),
+    /// KRL's S/T and Fanuc's CONFIG label the branches of a spherical-wrist arm (the closed form
+    /// of `kinematics::ik_analytic`); a robot without it has no such label to write.
+    #[error(
+        "{0} needs the configuration (KRL S and T, Fanuc CONFIG) of the planned joints, and this robot has no \
+         closed-form IK to label it ({1}): write rapid or urscript"
+    )]
+    NoConfiguration(&'static str, String),
+}
+
+/// Whether `language` can be written for `set`'s robot (KRL and Fanuc need the closed form): a
+/// check to make before planning.
+pub fn check_language(set: &ParameterSet, language: PlanLanguage) -> Result<(), WriteError> {
+    let name = match language {
+        PlanLanguage::Krl => "krl",
+        PlanLanguage::Fanuc => "fanuc",
+        PlanLanguage::Rapid | PlanLanguage::Urscript => return Ok(()),
+    };
+    AnalyticIk::new(&set.model, set.chain().base(), set.chain().tool())
+        .map(|_| ())
+        .map_err(|e| WriteError::NoConfiguration(name, e.to_string()))
+}
+
+/// The branch labels of the planned poses, from the nominal model's closed form.
+fn branches(plan: &CubePlan, set: &ParameterSet, language: &'static str) -> Result<Vec<Branch>, WriteError> {
+    let ik = AnalyticIk::new(&set.model, set.chain().base(), set.chain().tool())
+        .map_err(|e| WriteError::NoConfiguration(language, e.to_string()))?;
+    Ok(plan.poses.iter().map(|(_, q)| ik.classify(q)).collect())
+}
+
+/// Fanuc's turn number of a joint: n with q in [−180° + n·360°, 180° + n·360°).
+fn fanuc_turn(q: f64) -> i64 {
+    ((q + std::f64::consts::PI) / std::f64::consts::TAU).floor() as i64
+}
+
+/// The program visiting P1 … P5 for `cycles` cycles, named `name`, as its files (KRL: the `.src`
+/// then the `.dat`). Every cycle is written out, P1 → P5 with a 3 s wait at each pose for the
+/// reading, so the motions are the standard's cycle order as a program reader sees them (and
+/// Fanuc TP needs no register for a loop counter). The flange (RAPID `tool0`, KRL `$TOOL =
+/// $NULLFRAME`, Fanuc `UT : 0`, URScript `set_tcp(p[0,0,0,0,0,0])`) in the robot's base frame
+/// (`wobj0`, `$BASE = $NULLFRAME`, `UF : 0`); the first motion is a joint move onto P1, the others
+/// linear. Numbers: positions to 0.1 µm (URScript 0.1 µm in metres), angles to 1e-7°
+/// (quaternions and rotation vectors to 1e-9), finer than a controller's 32-bit REAL keeps; KRL
+/// S and T and Fanuc CONFIG are the planned joints' (the closed form's branch labels).
+pub fn write_program(
+    plan: &CubePlan,
+    set: &ParameterSet,
+    language: PlanLanguage,
+    cycles: u32,
+    name: &str,
+) -> Result<Vec<ProgramFile>, WriteError> {
+    if !valid_program_name(name) {
+        return Err(WriteError::Name(name.to_string()));
+    }
+    if !(1..=MAX_CYCLES).contains(&cycles) {
+        return Err(WriteError::Cycles(cycles));
+    }
     let head = format!(
         "ISO 9283 test cube: centre {:.3}, {:.3}, {:.3} mm, edge {:.3} mm; P1 centre, P2-P5 at 10 % of the diagonal from the corners",
         plan.centre.x * 1e3,
@@ -200,19 +296,23 @@ pub fn write_program(plan: &CubePlan, set: &ParameterSet, language: PlanLanguage
         plan.centre.z * 1e3,
         plan.edge * 1e3
     );
-    match language {
+    let file = |ext: &str, text: String| ProgramFile { name: format!("{name}.{ext}"), bytes: text.into_bytes() };
+    let mm = |f: &Frame| [f.t.x * 1e3, f.t.y * 1e3, f.t.z * 1e3];
+    let abc = |f: &Frame| zyx_from_rot(&f.r).map(|v| v.to_degrees());
+    Ok(match language {
         PlanLanguage::Rapid => {
             let ik = AnalyticIk::new(&set.model, set.chain().base(), set.chain().tool()).ok();
-            let mut s = format!("MODULE ISO9283\n  ! {head}\n");
+            let mut s = format!("MODULE {name}\n  ! {head}\n");
             for (k, (f, q)) in plan.poses.iter().enumerate() {
                 let qt = quaternion_from_rot(&f.r);
                 let cfx = ik.as_ref().map_or(0, |ik| ik.confdata(q).cfx.cfx());
+                let p = mm(f);
                 s.push_str(&format!(
                     "  CONST robtarget P{}:=[[{:.4},{:.4},{:.4}],[{:.9},{:.9},{:.9},{:.9}],[{},{},{},{}],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];\n",
                     k + 1,
-                    f.t.x * 1e3,
-                    f.t.y * 1e3,
-                    f.t.z * 1e3,
+                    p[0],
+                    p[1],
+                    p[2],
                     qt[0],
                     qt[1],
                     qt[2],
@@ -223,15 +323,101 @@ pub fn write_program(plan: &CubePlan, set: &ParameterSet, language: PlanLanguage
                     cfx
                 ));
             }
-            s.push_str(&format!("  PROC main()\n    FOR i FROM 1 TO {cycles} DO\n"));
-            for k in 1..=5 {
-                s.push_str(&format!("      MoveL P{k}, v500, fine, tool0;\n      WaitTime 3;\n"));
+            s.push_str("  PROC main()\n");
+            for c in 1..=cycles {
+                s.push_str(&format!("    ! cycle {c}\n"));
+                for k in 1..=5 {
+                    let mv = if c == 1 && k == 1 { "MoveJ" } else { "MoveL" };
+                    s.push_str(&format!("    {mv} P{k}, v500, fine, tool0;\n    WaitTime 3;\n"));
+                }
             }
-            s.push_str("    ENDFOR\n  ENDPROC\nENDMODULE\n");
-            s
+            s.push_str("  ENDPROC\nENDMODULE\n");
+            vec![file("mod", s)]
+        }
+        PlanLanguage::Krl => {
+            let b = branches(plan, set, "krl")?;
+            let mut src = format!(
+                "&ACCESS RVP\n&REL 1\nDEF {name}( )\n; {head}\n; The flange ($TOOL = $NULLFRAME) in the robot's base frame ($BASE = $NULLFRAME, $ROBROOT the world); the points are in {name}.dat\nBAS (#INITMOV,0 )\nBAS (#VEL_PTP,20 )\n$TOOL = $NULLFRAME\n$BASE = $NULLFRAME\n$VEL.CP = 0.5\n"
+            );
+            for c in 1..=cycles {
+                src.push_str(&format!("; cycle {c}\n"));
+                for k in 1..=5 {
+                    let mv = if c == 1 && k == 1 { "PTP" } else { "LIN" };
+                    src.push_str(&format!("{mv} XP{k}\nWAIT SEC 3\n"));
+                }
+            }
+            src.push_str("END\n");
+            let mut dat = format!(
+                "&ACCESS RVP\n&REL 1\nDEFDAT  {name}\n; {head}\n; X, Y, Z mm and A, B, C deg (ZY'X'') of the flange in the robot's base frame; S and T of the planned joints\n"
+            );
+            for (k, ((f, q), br)) in plan.poses.iter().zip(&b).enumerate() {
+                let p = mm(f);
+                let a = abc(f);
+                let s = u32::from(br.shoulder_back())
+                    | u32::from(br.elbow_behind()) << 1
+                    | u32::from(br.wrist_negative()) << 2;
+                let t = q.iter().take(6).enumerate().fold(0u32, |t, (j, v)| if *v < 0.0 { t | 1 << j } else { t });
+                dat.push_str(&format!(
+                    "DECL E6POS XP{}={{X {:.4},Y {:.4},Z {:.4},A {:.7},B {:.7},C {:.7},S {s},T {t},E1 0.0,E2 0.0,E3 0.0,E4 0.0,E5 0.0,E6 0.0}}\n",
+                    k + 1,
+                    p[0],
+                    p[1],
+                    p[2],
+                    a[0],
+                    a[1],
+                    a[2]
+                ));
+            }
+            dat.push_str("ENDDAT\n");
+            vec![file("src", src), file("dat", dat)]
+        }
+        PlanLanguage::Fanuc => {
+            let b = branches(plan, set, "fanuc")?;
+            let mut mn: Vec<String> = vec!["  UFRAME_NUM=0 ;".into(), "  UTOOL_NUM=0 ;".into()];
+            for c in 1..=cycles {
+                mn.push(format!("  !ISO 9283 cycle {c} ;"));
+                for k in 1..=5 {
+                    mn.push(if c == 1 && k == 1 {
+                        format!("J P[{k}] 20% FINE    ;")
+                    } else {
+                        format!("L P[{k}] 500mm/sec FINE    ;")
+                    });
+                    mn.push("  WAIT   3.00(sec) ;".into());
+                }
+            }
+            let mut s = format!(
+                "/PROG  {name}\n/ATTR\nOWNER\t\t= MNEDITOR;\nCOMMENT\t\t= \"ISO 9283 cube\";\nPROG_SIZE\t= 0;\nFILE_NAME\t= ;\nVERSION\t\t= 0;\nLINE_COUNT\t= {};\nMEMORY_SIZE\t= 0;\nPROTECT\t\t= READ_WRITE;\nTCD:  STACK_SIZE\t= 0,\n      TASK_PRIORITY\t= 50,\n      TIME_SLICE\t= 0,\n      BUSY_LAMP_OFF\t= 0,\n      ABORT_REQUEST\t= 0,\n      PAUSE_REQUEST\t= 0;\nDEFAULT_GROUP\t= 1,*,*,*,*;\nCONTROL_CODE\t= 00000000 00000000;\n/MN\n",
+                mn.len()
+            );
+            for (i, l) in mn.iter().enumerate() {
+                s.push_str(&format!("{:>4}:{l}\n", i + 1));
+            }
+            s.push_str("/POS\n");
+            for (k, ((f, q), br)) in plan.poses.iter().zip(&b).enumerate() {
+                let p = mm(f);
+                let a = abc(f);
+                s.push_str(&format!(
+                    "P[{}]{{\n   GP1:\n\tUF : 0, UT : 0,\t\tCONFIG : '{} {} {}, {}, {}, {}',\n\tX = {:>12.4}  mm,\tY = {:>12.4}  mm,\tZ = {:>12.4}  mm,\n\tW = {:>12.7} deg,\tP = {:>12.7} deg,\tR = {:>12.7} deg\n}};\n",
+                    k + 1,
+                    if br.wrist_negative() { 'F' } else { 'N' },
+                    if br.elbow_behind() { 'D' } else { 'U' },
+                    if br.shoulder_back() { 'B' } else { 'T' },
+                    fanuc_turn(q[3]),
+                    fanuc_turn(q[4]),
+                    fanuc_turn(q[5]),
+                    p[0],
+                    p[1],
+                    p[2],
+                    a[2],
+                    a[1],
+                    a[0]
+                ));
+            }
+            s.push_str("/END\n");
+            vec![file("ls", s)]
         }
         PlanLanguage::Urscript => {
-            let mut s = format!("def iso9283():\n  # {head}\n");
+            let mut s = format!("def {name}():\n  # {head}\n  set_tcp(p[0, 0, 0, 0, 0, 0])\n");
             for (k, (f, _)) in plan.poses.iter().enumerate() {
                 let v = rotation_vector(&f.r);
                 s.push_str(&format!(
@@ -245,14 +431,21 @@ pub fn write_program(plan: &CubePlan, set: &ParameterSet, language: PlanLanguage
                     v.z
                 ));
             }
-            s.push_str(&format!("  i = 0\n  while i < {cycles}:\n"));
-            for k in 1..=5 {
-                s.push_str(&format!("    movel(P{k}, a=0.5, v=0.25)\n    sleep(3.0)\n"));
+            for c in 1..=cycles {
+                s.push_str(&format!("  # cycle {c}\n"));
+                for k in 1..=5 {
+                    let mv = if c == 1 && k == 1 {
+                        "movej(P1, a=0.5, v=0.5)".to_string()
+                    } else {
+                        format!("movel(P{k}, a=0.5, v=0.25)")
+                    };
+                    s.push_str(&format!("  {mv}\n  sleep(3.0)\n"));
+                }
             }
-            s.push_str("    i = i + 1\n  end\nend\n");
-            s
+            s.push_str("end\n");
+            vec![file("script", s)]
         }
-    }
+    })
 }
 
 #[cfg(test)]

@@ -143,6 +143,9 @@ impl Dialect for Fanuc {
                     "the program has no /END line",
                 ));
             }
+            if let Some(mn) = section(&f.bytes, b"/MN").filter(|m| *m < start) {
+                motion_order(&f.bytes[mn + 3..start], fi, &mut parsed);
+            }
         }
         Ok(parsed)
     }
@@ -200,6 +203,55 @@ impl Dialect for Fanuc {
             _ => unreachable!("Fanuc targets carry a Fanuc style"),
         }
     }
+}
+
+/// The positions the `/MN` motions use, in their order (`J P[1] …`, `L P[2] …`, `C P[3] : P[4] …`,
+/// `A P[5] …`; position registers `PR[n]` and comments are not positions): the program's
+/// [`Parsed::sequence`]. Only what a reader of the program needs (Fanuc positions carry their
+/// configuration, so the filter's seeds do not depend on it); a position no `/POS` entry defines
+/// is skipped.
+fn motion_order(mn: &[u8], fi: usize, parsed: &mut Parsed) {
+    let text = lex::latin1(mn);
+    let index: std::collections::HashMap<&str, usize> =
+        parsed.targets.iter().enumerate().filter(|(_, t)| t.file == fi).map(|(i, t)| (t.name.as_str(), i)).collect();
+    let mut order = Vec::new();
+    // A circular motion's end point is on the next line, numbered with spaces (`    :  P[4] …`).
+    let mut circle_end = false;
+    for line in text.lines() {
+        // `  12:L P[3] 500mm/sec FINE ;`: the line number, then the instruction.
+        let Some((number, body)) = line.split_once(':') else { continue };
+        let number = number.trim();
+        let b = body.as_bytes();
+        let from = if number.is_empty() && std::mem::take(&mut circle_end) {
+            0
+        } else if !number.is_empty()
+            && number.bytes().all(|c| c.is_ascii_digit())
+            && b.len() > 2
+            && matches!(b[0].to_ascii_uppercase(), b'J' | b'L' | b'C' | b'A')
+            && b[1].is_ascii_whitespace()
+        {
+            circle_end = b[0].eq_ignore_ascii_case(&b'C');
+            1
+        } else {
+            circle_end = false;
+            continue;
+        };
+        let mut at = from;
+        while let Some(p) = body[at..].find("P[") {
+            let k = at + p;
+            at = k + 2;
+            if k > 0 && (b[k - 1].is_ascii_alphanumeric() || b[k - 1] == b'_') {
+                continue; // PR[n], a register
+            }
+            let digits: String = body[k + 2..].chars().take_while(char::is_ascii_digit).collect();
+            if let Ok(n) = digits.parse::<u64>()
+                && let Some(&i) = index.get(format!("P[{n}]").as_str())
+            {
+                order.push(i);
+            }
+        }
+    }
+    parsed.sequence.extend(order);
 }
 
 /// The offset of a line starting with `tag` (`/POS`, `/END`).
@@ -473,6 +525,19 @@ mod tests {
         assert!(t[0].tool.as_ref().unwrap_err().contains("'2'"));
         assert_eq!(t[1].joints.as_ref().unwrap()[4], -45.0 * DEG);
         assert_eq!(t[1].tool.clone().unwrap(), Tool::flange());
+    }
+
+    #[test]
+    fn the_motions_give_the_order_of_the_positions() {
+        use crate::domain::program::motion_order;
+        let mn = "/MN\n   1:J P[2:\"home\"] 100% FINE    ;\n   2:  !P[1] X = 5 mm ;\n   3:L P[1] 500mm/sec CNT100 Offset,PR[2]    ;\n   4:C P[1]    \n    :  P[2] 100mm/sec FINE    ;\n   5:  CALL SUB_P[1] ;\n   6:J P[7] 100% FINE ;\n/POS\n";
+        let ls =
+            LS.replace("/MN\n   1:  UFRAME_NUM=1 ;\n   2:J P[1] 100% FINE    ;\n   3:  !P[1] X = 5 mm ;\n/POS\n", mn);
+        assert_ne!(ls, LS);
+        let files = vec![ProgramFile { name: "weld.ls".into(), bytes: ls.into_bytes() }];
+        // P[2] is target 1, P[1] target 0; the circle's end point is on its continuation line; the
+        // comment, the register, the call and the undefined P[7] are not motions to positions.
+        assert_eq!(motion_order(&files, None).unwrap(), vec![1, 0, 0, 1]);
     }
 
     #[test]

@@ -720,6 +720,14 @@ pub fn filter(cal: &Calibration, files: &[ProgramFile], opts: &FilterOptions) ->
     filter_parsed(cal, files, opts, lang, d, &parsed)
 }
 
+/// The targets in the order the program's motions use them, repeats included (indices into
+/// [`read`]'s targets): what a reader checks a program's motion order with. Targets no motion
+/// uses are not listed.
+pub fn motion_order(files: &[ProgramFile], language: Option<Language>) -> Result<Vec<usize>, FilterError> {
+    let lang = detect(files, language)?;
+    Ok(dialect(lang).parse(files)?.sequence)
+}
+
 /// How many targets a program holds (its parse only): for a caller's bound before the work.
 pub fn count_targets(files: &[ProgramFile], language: Option<Language>) -> Result<usize, FilterError> {
     let lang = detect(files, language)?;
