@@ -68,11 +68,13 @@ free_port() {
   python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1]); s.close()'
 }
 
+# Whether the cluster answers: asked over its port (`pg_ctl status` only checks that the pid in
+# postmaster.pid exists, which a killed, unreaped server still does).
 running() {
   local bin
   [ -f "$DIR/port" ] && [ -d "$DIR/data" ] || return 1
   bin=$(pg_bindir) || return 1
-  as_owner "$bin/pg_ctl" status -D "$DIR/data" >/dev/null 2>&1
+  "$bin/pg_isready" -q -h 127.0.0.1 -p "$(cat "$DIR/port")" -t 5
 }
 
 url() {
@@ -88,6 +90,7 @@ start() {
   bin=$(pg_bindir) || { install_postgres; bin=$(pg_bindir) || die "no initdb/pg_ctl after installing postgresql"; }
   ensure_owner
   # A directory left by a cluster that died (or a half-made one): start afresh.
+  [ -d "$DIR/data" ] && { as_owner "$bin/pg_ctl" stop -D "$DIR/data" -m immediate >/dev/null 2>&1 || true; }
   rm -rf "$DIR"
   mkdir -p "$DIR"
   chmod 700 "$DIR"
