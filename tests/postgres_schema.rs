@@ -70,6 +70,12 @@ struct Table {
 
 type Schema = BTreeMap<String, Table>;
 
+/// A row of SQLite's `pragma_foreign_key_list`: (id, seq, parent, from, to, on_update, on_delete).
+type SqliteForeignKeyRow = (i64, i64, String, String, Option<String>, String, String);
+
+/// A foreign key read from `pg_constraint`: (parent, columns, parent columns, on update, on delete).
+type PgForeignKeyRow = (String, Vec<String>, Vec<String>, String, String);
+
 fn sqlite_type(table: &str, column: &str, declared: &str) -> Result<Ty, String> {
     match declared.to_ascii_uppercase().as_str() {
         "INTEGER" if BOOLEAN_FLAGS.contains(&(table, column)) => Ok(Ty::Boolean),
@@ -158,8 +164,8 @@ async fn describe_sqlite(conn: &mut SqliteConnection) -> Schema {
             t.indexes.insert(Index { name: (origin == "c").then_some(name), columns, unique, partial });
         }
 
-        // (id, seq, parent, from, to, on_update, on_delete), one row per column of each key.
-        let fks: Vec<(i64, i64, String, String, Option<String>, String, String)> = sqlx::query_as(
+        // One row per column of each key.
+        let fks: Vec<SqliteForeignKeyRow> = sqlx::query_as(
             "SELECT id, seq, \"table\", \"from\", \"to\", on_update, on_delete FROM pragma_foreign_key_list(?1) ORDER BY id, seq",
         )
         .bind(&table)
@@ -244,7 +250,7 @@ async fn describe_postgres(conn: &mut PgConnection) -> Schema {
             })
             .collect();
 
-        let fks: Vec<(String, Vec<String>, Vec<String>, String, String)> = sqlx::query_as(
+        let fks: Vec<PgForeignKeyRow> = sqlx::query_as(
             "SELECT p.relname::text, \
                     ARRAY(SELECT a.attname::text FROM unnest(c.conkey) WITH ORDINALITY AS k(attnum, ord) \
                           JOIN pg_attribute a ON a.attrelid = c.conrelid AND a.attnum = k.attnum ORDER BY k.ord), \
