@@ -24,8 +24,12 @@ pub use sqlx::sqlite::SqliteSynchronous;
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions};
 pub use sqlx::{Sqlite, SqlitePool, Transaction};
 
-/// The migrations of `migrations/`, embedded at compile time and applied at start-up.
-pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations");
+/// The SQLite migrations (`migrations/sqlite/`), embedded at compile time and applied at start-up.
+pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations/sqlite");
+
+/// The PostgreSQL migrations (`migrations/postgres/`): the same schema in PostgreSQL's dialect,
+/// step for step (`tests/postgres_schema.rs` compares the two). Not used by the store yet.
+pub static POSTGRES_MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations/postgres");
 
 /// Open (creating it if missing) and migrate the database at `path`: WAL, `synchronous = FULL`,
 /// foreign keys on, a busy timeout so concurrent writers wait instead of failing.
