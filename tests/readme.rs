@@ -162,15 +162,14 @@ fn every_readme_command_runs_as_written() {
     run_cli_commands(true);
 }
 
-/// The service block of the README is an excerpt of the walkthrough script: each of its lines is
-/// a line of the script, in the script's order.
-#[test]
-fn the_readme_service_block_is_an_excerpt_of_the_walkthrough() {
+/// The README's bash block containing `marker` (`what` names it in the failure) is an excerpt of
+/// the walkthrough script: each of its lines is a line of the script, in the script's order.
+fn assert_excerpt_of_walkthrough(marker: &str, what: &str) {
     let text = readme();
     let block = bash_blocks(&text)
         .into_iter()
-        .find(|(_, lines)| lines.iter().any(|l| l.contains("wait_job()")))
-        .expect("the service block");
+        .find(|(_, lines)| lines.iter().any(|l| l.contains(marker)))
+        .unwrap_or_else(|| panic!("the {what}"));
     let script = std::fs::read_to_string(Path::new(ROOT).join("scripts/api_walkthrough.sh")).unwrap();
     let script: Vec<&str> = script.lines().map(str::trim_start).collect();
     let mut at = 0;
@@ -184,26 +183,17 @@ fn the_readme_service_block_is_an_excerpt_of_the_walkthrough() {
     }
 }
 
+/// The service block of the README is an excerpt of the walkthrough script.
+#[test]
+fn the_readme_service_block_is_an_excerpt_of_the_walkthrough() {
+    assert_excerpt_of_walkthrough("wait_job()", "service block");
+}
+
 /// The README's ISO 9283 service example is an excerpt of the walkthrough too (so it runs as
 /// written when the walkthrough runs).
 #[test]
 fn the_readme_iso9283_block_is_an_excerpt_of_the_walkthrough() {
-    let text = readme();
-    let block = bash_blocks(&text)
-        .into_iter()
-        .find(|(_, lines)| lines.iter().any(|l| l.contains("/v1/robots/$ROBOT/iso9283")))
-        .expect("the ISO 9283 service block");
-    let script = std::fs::read_to_string(Path::new(ROOT).join("scripts/api_walkthrough.sh")).unwrap();
-    let script: Vec<&str> = script.lines().map(str::trim_start).collect();
-    let mut at = 0;
-    for (i, line) in block.1.iter().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
-        match script[at..].iter().position(|s| s == line) {
-            Some(k) => at += k + 1,
-            None => {
-                panic!("README.md line {}: not a line of scripts/api_walkthrough.sh (in order): {line}", block.0 + i)
-            }
-        }
-    }
+    assert_excerpt_of_walkthrough("/v1/robots/$ROBOT/iso9283", "ISO 9283 service block");
 }
 
 fn free_port() -> u16 {

@@ -903,6 +903,11 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
         }
     }
     let rows: Vec<(usize, usize)> = problem.obs.iter().map(|o| (o.row, o.rows)).collect();
+    // The pose of each measurement, for standard deviations that hold when the readings of one
+    // stop share an error (several reflectors, a turn no term explains): the larger of the classic
+    // and the cluster-robust σ ([`Quality::make_robust`]).
+    let (pose_of_obs, n_poses) =
+        crate::cell::poses::group_poses(problem.obs.iter().map(|o| &o.state.q[..cell.model.dof()]));
     // An unknown payload is kept only when the data determine it: a mass below
     // PAYLOAD_SIGNIFICANCE of its own σ is one direction with the compliances (c5·m, c3·m… act
     // as products when the arm's own weight barely loads a joint), the fit crawls along it and
@@ -911,8 +916,6 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
         && let Some((g, c)) = payload_mass(&problem).and_then(|g| free.iter().position(|&f| f == g).map(|c| (g, c)))
     {
         let mut q = Quality::of(&fit, problem.obs.len(), &rows);
-        let (pose_of_obs, n_poses) =
-            crate::cell::poses::group_poses(problem.obs.iter().map(|o| &o.state.q[..cell.model.dof()]));
         q.make_robust(&fit, &rows, &pose_of_obs, n_poses);
         let (m, sd) = (fit.x[g], q.std[c]);
         let determined = m > PAYLOAD_SIGNIFICANCE * sd; // false for a NaN σ too
@@ -928,10 +931,6 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
         }
     }
     let mut quality = Quality::of(&fit, problem.obs.len(), &rows);
-    // Standard deviations that hold when the readings of one stop share an error (several
-    // reflectors, a turn no term explains): the larger of the classic and the cluster-robust σ.
-    let (pose_of_obs, n_poses) =
-        crate::cell::poses::group_poses(problem.obs.iter().map(|o| &o.state.q[..cell.model.dof()]));
     quality.make_robust(&fit, &rows, &pose_of_obs, n_poses);
     if opts.noise.is_some() {
         // Weighted rows: the RMS of the measurement residuals in metres, from the rows divided
