@@ -1,0 +1,417 @@
+//! The fit (§4.2.1) from a prepared problem: identifiability judged again at the solution, an
+//! unknown payload kept only when determined, the fitness and conditioning checks, and the
+//! parameter set with its uncertainties.
+
+use faer::Mat;
+
+use super::noise::NoiseModel;
+use super::prepare::{Prepared, prepare, row_sigmas};
+use super::problem::{GlobalParam, Problem};
+use super::solver::{self, Fit, SolveError};
+use super::{IdentifyError, IdentifyOptions, Quality, Status, Worst, identifiability};
+use crate::cell::Cell;
+use crate::kinematics::{Param, ParameterSet, Tool};
+
+/// An identified tool (beyond the parameter set's own).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ToolResult {
+    pub sessions: Vec<String>,
+    pub tool: Tool,
+    /// Standard deviation of each TCP component when identified (SI).
+    pub std: [Option<f64>; 6],
+    pub status: [String; 6],
+}
+
+/// The result of an identification.
+#[derive(Clone, Debug)]
+pub struct Identification {
+    /// The calibrated parameter set; its tool is the first tool of the problem.
+    pub set: ParameterSet,
+    /// Per layout parameter of `set`: standard deviation (SI) when identified.
+    pub std: Vec<Option<f64>>,
+    /// Per layout parameter: identified, or fixed and why.
+    pub status: Vec<Status>,
+    /// Every tool of the problem (the first is `set.tool`).
+    pub tools: Vec<ToolResult>,
+    pub quality: Quality,
+    /// Names of the free parameters, in the covariance's order.
+    pub free_names: Vec<String>,
+    pub iterations: usize,
+    /// Observations down-weighted by the robust loss: (session, index, weight).
+    pub downweighted: Vec<(String, usize, f64)>,
+    /// The measurements with the largest residuals against their expected noise, largest first
+    /// (at most [`WORST_REPORTED`]).
+    pub worst: Vec<Worst>,
+    pub problem: Problem,
+    pub free: Vec<usize>,
+    pub x: Vec<f64>,
+}
+
+/// An unknown payload's identified mass must exceed this many of its standard deviations to be
+/// kept (see [`IdentifyOptions::identify_payload`]).
+pub const PAYLOAD_SIGNIFICANCE: f64 = 3.0;
+
+/// The global index of the payload's mass, when the problem has one.
+fn payload_mass(problem: &Problem) -> Option<usize> {
+    let i = problem.layout.index_of(Param::ToolMass)?;
+    problem.params.iter().position(|p| *p == GlobalParam::Robot(i))
+}
+
+/// Identify a cell's robot.
+pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, IdentifyError> {
+    let Prepared { problem, x0, mut free, mut status, base, fixed, payload_unknown } = prepare(cell, opts)?;
+    if problem.n_obs_rows + problem.priors.len() <= free.len() {
+        return Err(IdentifyError::Underdetermined { rows: problem.n_obs_rows, params: free.len() });
+    }
+
+    let mut fit = solver::solve(&problem, &free, &x0, &opts.solver)?;
+    // Identifiability is judged at the start. An unknown TCP (no guess: the flange) may end far
+    // from where the registration started it, and which of its components is one gauge with d6
+    // and θ6 depends on where it lies (a point on the flange's y axis moves along x when θ6
+    // turns): judge again at the solution, and refit from there when the choice changed. A TCP
+    // with a guess stays judged at its guess (the UR10 probe: θ6 has no effect there). An
+    // unknown payload acts through the compliances, which are zero at the start: its mass has
+    // no effect there and is judged at the solution too.
+    if payload_unknown || problem.tools.iter().any(|b| b.identify_tcp && b.tool.tcp[..3] == [0.0; 3]) {
+        let all: Vec<usize> = (0..problem.n_params()).collect();
+        let mut j = Mat::<f64>::zeros(problem.n_rows, all.len());
+        let mut r = vec![0.0; problem.n_rows];
+        problem.linearise(&fit.x, &all, &mut j, &mut r);
+        let (again, mut again_status) = identifiability::select(&problem, &j, &fixed);
+        if again != free && !again.is_empty() {
+            let mass = payload_unknown.then(|| payload_mass(&problem)).flatten().filter(|g| again.contains(g));
+            match solver::solve(&problem, &again, &fit.x, &opts.solver) {
+                Ok(f) => (fit, free, status) = (f, again, again_status),
+                // An unknown payload whose fit crawls (a valley with the compliances) is not
+                // determined by these data: the fit without it stands, and says so.
+                Err(e @ SolveError::IterationLimit { .. }) if mass.is_some() => {
+                    let g = mass.expect("checked");
+                    let without: Vec<usize> = again.iter().copied().filter(|&c| c != g).collect();
+                    if without != free {
+                        fit = solver::solve(&problem, &without, &fit.x, &opts.solver)?;
+                    }
+                    again_status[g] = Status::Fixed(format!(
+                        "payload not determined by these data (the fit with it does not settle: {e}): held at the declared 0 kg"
+                    ));
+                    (free, status) = (without, again_status);
+                }
+                Err(e) => return Err(e.into()),
+            }
+        }
+    }
+    let rows: Vec<(usize, usize)> = problem.obs.iter().map(|o| (o.row, o.rows)).collect();
+    // The pose of each measurement, for standard deviations that hold when the readings of one
+    // stop share an error (several reflectors, a turn no term explains): the larger of the classic
+    // and the cluster-robust σ ([`Quality::make_robust`]).
+    let (pose_of_obs, n_poses) =
+        crate::cell::poses::group_poses(problem.obs.iter().map(|o| &o.state.q[..cell.model.dof()]));
+    // An unknown payload is kept only when the data determine it: a mass below
+    // PAYLOAD_SIGNIFICANCE of its own σ is one direction with the compliances (c5·m, c3·m… act
+    // as products when the arm's own weight barely loads a joint), the fit crawls along it and
+    // every fold lands elsewhere. It is then held at the declared 0 kg and reported as such.
+    if payload_unknown
+        && let Some((g, c)) = payload_mass(&problem).and_then(|g| free.iter().position(|&f| f == g).map(|c| (g, c)))
+    {
+        let mut q = Quality::of(&fit, problem.obs.len(), &rows);
+        q.make_robust(&fit, &rows, &pose_of_obs, n_poses);
+        let (m, sd) = (fit.x[g], q.std[c]);
+        let determined = m > PAYLOAD_SIGNIFICANCE * sd; // false for a NaN σ too
+        if !determined {
+            free.remove(c);
+            status[g] = Status::Fixed(format!(
+                "payload not determined by these data ({:.3} ± {:.3} kg, below {PAYLOAD_SIGNIFICANCE} σ): held at the declared 0 kg",
+                m, sd
+            ));
+            let mut x = fit.x.clone();
+            x[g] = x0[g];
+            fit = solver::solve(&problem, &free, &x, &opts.solver)?;
+        }
+    }
+    let mut quality = Quality::of(&fit, problem.obs.len(), &rows);
+    quality.make_robust(&fit, &rows, &pose_of_obs, n_poses);
+    if opts.noise.is_some() {
+        // Weighted rows: the RMS of the measurement residuals in metres, from the rows divided
+        // by their weights (and the robust weights, which the fit's residual carries too).
+        quality.weighted = true;
+        let sum: f64 = problem
+            .obs
+            .iter()
+            .zip(&fit.weights)
+            .map(|(o, hw)| {
+                let hw = hw.sqrt();
+                (0..o.rows)
+                    .map(|k| {
+                        let w = o.weight[k] * hw;
+                        (fit.residual[o.row + k] / w).powi(2)
+                    })
+                    .sum::<f64>()
+            })
+            .sum();
+        quality.rms_residual = (sum / problem.obs.len().max(1) as f64).sqrt();
+    }
+    // Does the model describe the data? The residual against the noise the instrument predicts.
+    let noise = opts.noise.clone().unwrap_or_default();
+    let fitness = Fitness::of(&problem, cell, &noise, &fit, opts.outlier_factor);
+    quality.expected_rms = fitness.expected_rms;
+    quality.residual_ratio = fitness.ratio;
+    if fitness.ratio > opts.residual_ratio_limit {
+        return Err(IdentifyError::Misfit {
+            rms: fitness.rms,
+            expected: fitness.expected_rms,
+            ratio: fitness.ratio,
+            limit: opts.residual_ratio_limit,
+            worst: fitness.worst.clone(),
+        });
+    }
+    if !fitness.outliers.is_empty() {
+        return Err(IdentifyError::Outliers { outliers: fitness.outliers, factor: opts.outlier_factor });
+    }
+
+    let combination = || {
+        quality
+            .weakest
+            .iter()
+            .take(4)
+            .map(|(c, w)| format!("{:+.2}·{}", w, problem.name(free[*c])))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    let smin = quality.singular_values.last().copied().unwrap_or(0.0);
+    if quality.kappa_scaled > 1e10 || smin == 0.0 {
+        return Err(IdentifyError::RankDeficient { combination: combination() });
+    }
+    if quality.kappa_scaled > opts.kappa_limit {
+        return Err(IdentifyError::IllConditioned {
+            kappa: quality.kappa_scaled,
+            limit: opts.kappa_limit,
+            combination: combination(),
+        });
+    }
+
+    // The parameter set of the first tool, and every tool's result.
+    let mut std_g = vec![None; problem.n_params()];
+    for (c, &g) in free.iter().enumerate() {
+        std_g[g] = Some(quality.std[c]);
+    }
+    let label = |g: usize| status[g].label();
+    let tools: Vec<ToolResult> = problem
+        .tools
+        .iter()
+        .enumerate()
+        .map(|(t, b)| {
+            let off =
+                problem.params.iter().position(|p| *p == GlobalParam::Tool { tool: t, k: 0 }).expect("tool block");
+            let mut tool = b.tool.clone();
+            tool.tcp.copy_from_slice(&fit.x[off..off + 6]);
+            ToolResult {
+                sessions: b.sessions.clone(),
+                tool,
+                std: std::array::from_fn(|k| std_g[off + k]),
+                status: std::array::from_fn(|k| label(off + k)),
+            }
+        })
+        .collect();
+    let mut set = ParameterSet::nominal(cell.model.clone(), problem.tools[0].tool.clone(), base);
+    set.layout = problem.layout.clone();
+    set.nominal = problem.layout.nominal_values(&cell.model, &problem.tools[0].tool, &base);
+    set.values = problem.layout_values(&fit.x, 0);
+    let mut std = vec![None; set.layout.len()];
+    let mut st = vec![Status::Fixed(String::new()); set.layout.len()];
+    for (g, p) in problem.params.iter().enumerate() {
+        let i = match *p {
+            GlobalParam::Robot(i) => Some(i),
+            GlobalParam::Tool { tool: 0, k } => set.layout.index_of(Param::Tool(k)),
+            _ => None,
+        };
+        if let Some(i) = i {
+            std[i] = std_g[g];
+            st[i] = status[g].clone();
+        }
+    }
+    let downweighted = problem
+        .obs
+        .iter()
+        .zip(&fit.weights)
+        .filter(|(_, w)| **w < 1.0)
+        .map(|(o, w)| (problem.session_names[o.session].clone(), o.index, *w))
+        .collect();
+    Ok(Identification {
+        worst: fitness.worst,
+        set,
+        std,
+        status: st,
+        tools,
+        free_names: free.iter().map(|&g| problem.name(g)).collect(),
+        iterations: fit.iterations,
+        downweighted,
+        quality,
+        x: fit.x,
+        problem,
+        free,
+    })
+}
+
+/// Measurements listed in [`Identification::worst`].
+pub const WORST_REPORTED: usize = 5;
+
+/// The residual of a fit against the noise the instrument model predicts.
+struct Fitness {
+    /// RMS over the measurements (outliers left out) of |residual|, m.
+    rms: f64,
+    /// RMS of the noise the instrument predicts for the same measurements, m: √(mean Σ σ²).
+    expected_rms: f64,
+    /// rms / expected_rms.
+    ratio: f64,
+    /// The largest residuals in units of their σ.
+    worst: Vec<Worst>,
+    /// Gross outliers the robust loss did not down-weight.
+    outliers: Vec<Worst>,
+}
+
+impl Fitness {
+    /// Null hypothesis: every residual row is the instrument's noise, e/σ ~ N(0, 1). The statistic
+    /// is ρ = √(Σ e² / Σ σ²) over the measurements; a right model gives ρ ≈ 1, and the fit is
+    /// refused above [`IdentifyOptions::residual_ratio_limit`] (see [`RESIDUAL_RATIO_LIMIT`] for
+    /// why it is a large factor, not a χ² test: real robots leave unmodelled effects far above
+    /// a tracker's noise). Outliers: each row's variance is its σ² plus τ², the spread the model
+    /// leaves beyond the instrument (from the medians); per measurement z = RMS of e/√(σ² + τ²)
+    /// over its rows. One whose z exceeds [`OUTLIER_FACTOR`] times the median z (and 10) is an
+    /// outlier, unless the Huber loss down-weighted it. (Without τ, where the model's misses
+    /// dominate, a reading with a small σ would look like an outlier for an ordinary residual.) Outliers are left out of ρ, so that one bad line reads as an outlier,
+    /// not as a model that does not fit.
+    fn of(problem: &Problem, cell: &Cell, noise: &NoiseModel, fit: &Fit, outlier_factor: f64) -> Fitness {
+        let sigmas = row_sigmas(problem, cell, noise);
+        let chains = problem.chains(&fit.x);
+        let rw = problem.rotation_weight;
+        // Per measurement: Σ e², Σ σ², z.
+        // Per measurement: its residual rows e (m; rotation rows as rotation_weight·angle) and
+        // their σ (m).
+        let rows: Vec<(Vec<f64>, Vec<f64>)> = problem
+            .obs
+            .iter()
+            .zip(&sigmas)
+            .map(|(o, s)| {
+                let (d, rot) = problem.error(o, &chains[o.tool].fk(&o.state));
+                let (mut e, mut sd) = (d.as_slice().to_vec(), s[..3].to_vec());
+                if let Some(w) = rot {
+                    e.extend(w.iter().map(|v| rw * v));
+                    sd.extend(s[3..].iter().map(|v| rw * v));
+                }
+                (e, sd)
+            })
+            .collect();
+        let sq = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>();
+        // The spread the model leaves beyond the instrument, τ² per row: from the medians, so that
+        // outliers do not set it (the median of χ²₃/3 is 0.79).
+        let median = |mut v: Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v.get(v.len() / 2).copied().unwrap_or(0.0)
+        };
+        let tau2 = (median(rows.iter().map(|(e, _)| sq(e) / e.len() as f64).collect()) / 0.79
+            - median(rows.iter().map(|(_, s)| sq(s) / s.len() as f64).collect()))
+        .max(0.0);
+        // z: the RMS over a measurement's rows of e/√(σ² + τ²), ~0.9 for a typical measurement.
+        let per: Vec<(f64, f64, f64)> = rows
+            .iter()
+            .map(|(e, s)| {
+                let z = e.iter().zip(s).map(|(e, s)| e * e / (s * s + tau2)).sum::<f64>() / e.len() as f64;
+                (sq(e), sq(s), z.sqrt())
+            })
+            .collect();
+        let typical = median(per.iter().map(|p| p.2).collect()).max(1e-300);
+        let threshold = outlier_factor * typical.max(1.0);
+        let worst_of = |i: usize| {
+            let o = &problem.obs[i];
+            Worst {
+                session: problem.session_names[o.session].clone(),
+                index: o.index,
+                residual: per[i].0.sqrt(),
+                ratio: per[i].2 / typical,
+            }
+        };
+        let mut order: Vec<usize> = (0..per.len()).collect();
+        order.sort_by(|&a, &b| per[b].2.total_cmp(&per[a].2));
+        let is_outlier = |i: usize| per[i].2 > threshold;
+        let (mut ee, mut ss, mut n) = (0.0, 0.0, 0usize);
+        for (i, p) in per.iter().enumerate() {
+            if !is_outlier(i) {
+                ee += p.0;
+                ss += p.1;
+                n += 1;
+            }
+        }
+        let n = n.max(1) as f64;
+        let (rms, expected_rms) = ((ee / n).sqrt(), (ss / n).sqrt());
+        Fitness {
+            rms,
+            expected_rms,
+            ratio: if expected_rms > 0.0 { rms / expected_rms } else { f64::INFINITY },
+            worst: order.iter().take(WORST_REPORTED).map(|&i| worst_of(i)).collect(),
+            outliers: order.iter().copied().filter(|&i| is_outlier(i) && fit.weights[i] >= 1.0).map(worst_of).collect(),
+        }
+    }
+}
+
+impl Identification {
+    /// The weighted Jacobian of the free parameters and the weighted residual at the solution
+    /// (measurement rows, then prior rows), as the solver saw them.
+    pub fn linearised(&self) -> (Mat<f64>, Vec<f64>) {
+        let mut j = Mat::<f64>::zeros(self.problem.n_rows, self.free.len());
+        let mut r = vec![0.0; self.problem.n_rows];
+        self.problem.linearise(&self.x, &self.free, &mut j, &mut r);
+        (j, r)
+    }
+
+    /// The model's TCP prediction and its standard uncertainty from the parameter covariance, for
+    /// each measurement of `session` (any session of the cell, e.g. a validation one measured with
+    /// another, declared tool): (position in {W}, √trace(J·Cov·Jᵀ)) in m. Only the robot's free
+    /// parameters carry uncertainty for a tool that was not identified.
+    pub fn predict(&self, session: &crate::cell::Session) -> Vec<(nalgebra::Vector3<f64>, f64)> {
+        use crate::kinematics::{JointState, Rows};
+        let tool_tcp = if session.tool == self.set.tool { self.set.pose_of(Param::Tool) } else { session.tool.tcp };
+        let chain = self.set.chain().with_base_tool(self.set.pose_of(Param::Base), tool_tcp);
+        let gravity = self.set.gravity_for(&session.tool);
+        let same_tool = session.tool == self.set.tool;
+        // Layout column of each free parameter (robot parameters, and tool 0's when it is this tool).
+        let cols: Vec<Option<usize>> = self
+            .free
+            .iter()
+            .map(|&g| match self.problem.params[g] {
+                GlobalParam::Robot(i) => Some(i),
+                GlobalParam::Tool { tool: 0, k } if same_tool => self.set.layout.index_of(Param::Tool(k)),
+                _ => None,
+            })
+            .collect();
+        let m = self.set.layout.len();
+        let mut buf = vec![0.0; 3 * m];
+        session
+            .measurements
+            .iter()
+            .map(|meas| {
+                let tau = gravity.torques(&meas.q);
+                let mut s = JointState::with_torques(&meas.q, &tau[..self.set.dof()]);
+                if let Some(a) = &meas.approach {
+                    for (j, &v) in a.iter().enumerate() {
+                        s.approach[j] = v as f64;
+                    }
+                }
+                if let Some(t) = meas.temperature_c {
+                    s.temperature_c = t;
+                }
+                let f = chain.jacobian_into(&s, &self.set.layout, Rows::Position, &mut buf, 3);
+                let cov = &self.quality.covariance;
+                let mut var = 0.0;
+                for r in 0..3 {
+                    for (a, ca) in cols.iter().enumerate() {
+                        let Some(ca) = ca else { continue };
+                        for (b, cb) in cols.iter().enumerate() {
+                            let Some(cb) = cb else { continue };
+                            var += buf[ca * 3 + r] * cov[(a, b)] * buf[cb * 3 + r];
+                        }
+                    }
+                }
+                (f.t, var.max(0.0).sqrt())
+            })
+            .collect()
+    }
+}

@@ -1,0 +1,383 @@
+//! A problem ready to solve: the layout, the base, the starting point, the fixed parameters and
+//! the identifiable set.
+
+use std::collections::HashMap;
+
+use faer::Mat;
+
+use super::base::{Registration, estimate_base_of, register_base_and_tcps};
+use super::noise::NoiseModel;
+use super::problem::{GlobalParam, Prior, Problem, tool_blocks};
+use super::{Anchor, IdentifyError, IdentifyOptions, Status, identifiability, map_knots};
+use crate::cell::Cell;
+use crate::kinematics::{JointTerm, Param, ParamLayout};
+
+/// A problem ready to solve: its starting point, free parameters and every parameter's status.
+pub struct Prepared {
+    pub problem: Problem,
+    pub x0: Vec<f64>,
+    pub free: Vec<usize>,
+    pub status: Vec<Status>,
+    /// T_0^W the fit starts from (the cell's guess, or a registration).
+    pub base: [f64; 6],
+    /// Parameters fixed by the options and the sessions (global index → reason), before
+    /// identifiability.
+    pub fixed: HashMap<usize, String>,
+    /// The payload is unknown (every tool declares 0 kg) and identified as `tool_mass`.
+    pub payload_unknown: bool,
+}
+
+/// Build the problem, the starting point and the identifiable set: the layout, the base, the
+/// weighted problem, the start values, the fixed parameters, the unknown TCPs' start, the
+/// identifiable set, the anchors — each step below, in that order.
+pub fn prepare(cell: &Cell, opts: &IdentifyOptions) -> Result<Prepared, IdentifyError> {
+    let (layout, payload_unknown) = layout_of(cell, opts)?;
+    let picks = opts.selection.picks(cell)?;
+    let (base, registration) = starting_base(cell, &picks)?;
+    let mut problem = Problem::new(cell, layout, base, &opts.selection, opts.rotation_weight)?;
+    if let Some(noise) = &opts.noise {
+        noise.check().map_err(IdentifyError::Option)?;
+        weight_by_instrument(&mut problem, cell, noise);
+    }
+    let (mut x0, from_start) = start_values(&problem, cell, opts)?;
+    let fixed = fixed_parameters(&problem, opts)?;
+    if let Some(r) = &registration {
+        start_unknown_tcps(&problem, r, &from_start, &fixed, &mut x0);
+    }
+    let (free, status) = identifiable(&mut problem, &x0, &fixed, opts.map_smoothing)?;
+    if let Some(a) = &opts.anchor {
+        let priors = anchor_priors(&problem, &free, &x0, a, opts.noise.is_some());
+        problem.add_priors(priors);
+    }
+    Ok(Prepared { problem, x0, free, status, base, fixed, payload_unknown })
+}
+
+/// The parameter layout: the robot's full layout, the model's effect terms, the payload's mass
+/// when it is unknown ([`payload_is_unknown`], the second value), and the correction tables'
+/// knots over the chosen measurements' joint ranges.
+fn layout_of(cell: &Cell, opts: &IdentifyOptions) -> Result<(ParamLayout, bool), IdentifyError> {
+    let dof = cell.model.dof();
+    let mut layout = ParamLayout::full(&cell.model);
+    for p in &opts.model.extra {
+        if !layout.admits(*p) {
+            return Err(IdentifyError::Option(format!("{p} is not a parameter of a {dof}-joint robot")));
+        }
+    }
+    layout.extend(&opts.model.extra);
+    let payload_unknown = payload_is_unknown(cell, opts)?;
+    if payload_unknown {
+        layout.extend(&[Param::ToolMass]);
+    }
+    if !opts.model.maps.is_empty() {
+        let picks = opts.selection.picks(cell)?;
+        for &(j, step) in &opts.model.maps {
+            let qs = picks.iter().map(|&(s, i)| cell.sessions[s].measurements[i].q[j]);
+            layout.extend(&map_knots(j, step, qs));
+        }
+    }
+    Ok((layout, payload_unknown))
+}
+
+/// The base, and the TCPs to identify, from the nominal robot: registered in turn when a TCP is
+/// unknown (the registration is returned for their start values), else the cell's guess or one
+/// registration.
+fn starting_base(cell: &Cell, picks: &[(usize, usize)]) -> Result<([f64; 6], Option<Registration>), IdentifyError> {
+    let (blocks, session_tool) = tool_blocks(cell, picks);
+    let registration = if blocks.iter().any(|b| b.identify_tcp && b.tool.tcp[..3] == [0.0; 3]) {
+        Some(register_base_and_tcps(cell, picks, &blocks, &session_tool, cell.base_guess)?)
+    } else {
+        None
+    };
+    let base = match (cell.base_guess, &registration) {
+        (Some(b), _) => b,
+        (None, Some(r)) => r.base,
+        (None, None) => estimate_base_of(cell, picks)?.0,
+    };
+    Ok((base, registration))
+}
+
+/// The starting point: the nominal values, or the start parameter set's (its base excepted) for
+/// the robot and for the tool blocks whose tool is its tool (the second value, per block).
+fn start_values(
+    problem: &Problem,
+    cell: &Cell,
+    opts: &IdentifyOptions,
+) -> Result<(Vec<f64>, Vec<bool>), IdentifyError> {
+    let mut x0 = problem.nominal.clone();
+    // Tool blocks whose TCP the start parameter set gives.
+    let mut from_start = vec![false; problem.tools.len()];
+    let Some(start) = &opts.start else { return Ok((x0, from_start)) };
+    for (t, b) in problem.tools.iter().enumerate() {
+        from_start[t] = b.tool == start.tool;
+    }
+    // As validation decides: a set starts a fit of the same joint count, unless both robots
+    // are built-in presets and differ (a custom table may be a preset re-measured; the set's
+    // values are absolute, so they start its fit as well).
+    let dof = cell.model.dof();
+    let presets_differ = matches!((start.model.preset, cell.model.preset), (Some(a), Some(b)) if a != b);
+    if start.model.dof() != dof || presets_differ {
+        return Err(IdentifyError::StartRobot {
+            set: start.model.name.clone(),
+            set_dof: start.model.dof(),
+            cell: cell.model.name.clone(),
+            cell_dof: dof,
+        });
+    }
+    for (g, gp) in problem.params.iter().enumerate() {
+        let v = match *gp {
+            GlobalParam::Robot(i) => match problem.layout.params()[i] {
+                Param::Base(_) => None,
+                p => start.value(p),
+            },
+            GlobalParam::Tool { tool, k } if problem.tools[tool].tool == start.tool => start.value(Param::Tool(k)),
+            GlobalParam::Tool { .. } => None,
+        };
+        if let Some(v) = v {
+            x0[g] = v;
+        }
+    }
+    Ok((x0, from_start))
+}
+
+/// Parameters fixed by the model options, the sessions' declarations, `only` and the user
+/// (global index → reason), after checking that every free-TCP session is one of the problem's.
+fn fixed_parameters(problem: &Problem, opts: &IdentifyOptions) -> Result<HashMap<usize, String>, IdentifyError> {
+    let mut fixed = fixed_by_model(problem, opts);
+    if !opts.only.is_empty() {
+        fix_all_but_only(problem, opts, &mut fixed)?;
+    }
+    for f in &opts.fixed {
+        let g = (0..problem.n_params())
+            .find(|&g| &problem.name(g) == f)
+            .ok_or_else(|| IdentifyError::Option(format!("--fix: '{f}' is not a parameter of this problem")))?;
+        let at = if opts.start.is_some() { "at its start value" } else { "at nominal" };
+        fixed.insert(g, format!("{f}: fixed by the user ({at})"));
+    }
+    for s in &opts.free_tcp {
+        if !problem.tools.iter().any(|b| b.sessions.contains(s)) {
+            return Err(IdentifyError::Option(format!("free TCP: '{s}' is not a session of this problem")));
+        }
+    }
+    Ok(fixed)
+}
+
+/// β and compliances the model leaves out, and the TCP components a session declares (unless
+/// its TCP is freed).
+fn fixed_by_model(problem: &Problem, opts: &IdentifyOptions) -> HashMap<usize, String> {
+    let mut fixed: HashMap<usize, String> = HashMap::new();
+    for (g, gp) in problem.params.iter().enumerate() {
+        let name = problem.name(g);
+        match *gp {
+            GlobalParam::Robot(i) => match problem.layout.params()[i] {
+                p @ Param::Beta(_) if !opts.model.beta && !opts.model.extra.contains(&p) => {
+                    fixed.insert(g, format!("{name}: fixed, the model has no β (-beta)"));
+                }
+                p @ Param::Joint(_, JointTerm::Compliance)
+                    if !opts.model.compliance && !opts.model.extra.contains(&p) =>
+                {
+                    fixed.insert(g, format!("{name}: fixed, the model has no compliance (-compliance)"));
+                }
+                _ => {}
+            },
+            GlobalParam::Tool { tool, k } => {
+                let b = &problem.tools[tool];
+                let freed = b.sessions.iter().any(|s| opts.free_tcp.contains(s));
+                if !b.identify_tcp && !freed && (k < 3 || b.has_orientation) {
+                    fixed.insert(g, format!("{name}: fixed, the session declares its TCP (measured, e.g. on a CMM)"));
+                }
+            }
+        }
+    }
+    fixed
+}
+
+/// Every parameter not named by [`IdentifyOptions::only`] (a name, or the groups `base` and
+/// `tool`) is fixed at its start value; a reason already given stays.
+fn fix_all_but_only(
+    problem: &Problem,
+    opts: &IdentifyOptions,
+    fixed: &mut HashMap<usize, String>,
+) -> Result<(), IdentifyError> {
+    let mut keep = vec![false; problem.n_params()];
+    for item in &opts.only {
+        let hits: Vec<usize> = (0..problem.n_params())
+            .filter(|&g| match (item.as_str(), problem.params[g]) {
+                ("base", GlobalParam::Robot(i)) => matches!(problem.layout.params()[i], Param::Base(_)),
+                ("tool", GlobalParam::Tool { .. }) => true,
+                (name, _) => problem.name(g) == name,
+            })
+            .collect();
+        if hits.is_empty() {
+            return Err(IdentifyError::Option(format!(
+                "--only: '{item}' is neither a parameter of this problem nor a group (base, tool)"
+            )));
+        }
+        hits.into_iter().for_each(|g| keep[g] = true);
+    }
+    for (g, k) in keep.iter().enumerate() {
+        if !k {
+            let name = problem.name(g);
+            let at = if opts.start.is_some() { "its start value" } else { "nominal" };
+            fixed.entry(g).or_insert_with(|| format!("{name}: fixed at {at}, not in --only"));
+        }
+    }
+    Ok(())
+}
+
+/// Unknown TCPs start from the registration (not where the start set gives them, and not the
+/// components held fixed, which stay at nominal).
+fn start_unknown_tcps(
+    problem: &Problem,
+    registration: &Registration,
+    from_start: &[bool],
+    fixed: &HashMap<usize, String>,
+    x0: &mut [f64],
+) {
+    for (g, gp) in problem.params.iter().enumerate() {
+        if let GlobalParam::Tool { tool, k } = *gp
+            && problem.tools[tool].identify_tcp
+            && !from_start[tool]
+            && !fixed.contains_key(&g)
+        {
+            x0[g] = registration.tcps[tool][k];
+        }
+    }
+}
+
+/// Identifiability at the starting point, the correction tables' regularisation rows added to
+/// the problem first: the free parameters and every parameter's status.
+fn identifiable(
+    problem: &mut Problem,
+    x0: &[f64],
+    fixed: &HashMap<usize, String>,
+    map_smoothing: f64,
+) -> Result<(Vec<usize>, Vec<Status>), IdentifyError> {
+    let all: Vec<usize> = (0..problem.n_params()).collect();
+    let mut j0 = Mat::<f64>::zeros(problem.n_rows, all.len());
+    let mut r0 = vec![0.0; problem.n_rows];
+    problem.linearise(x0, &all, &mut j0, &mut r0);
+    let priors = map_priors(problem, &j0, map_smoothing)?;
+    if !priors.is_empty() {
+        problem.add_priors(priors);
+        j0 = Mat::<f64>::zeros(problem.n_rows, all.len());
+        r0 = vec![0.0; problem.n_rows];
+        problem.linearise(x0, &all, &mut j0, &mut r0);
+    }
+    let (free, status) = identifiability::select(problem, &j0, fixed);
+    if free.is_empty() {
+        return Err(IdentifyError::Option("no parameter is free to identify".into()));
+    }
+    Ok((free, status))
+}
+
+/// Whether the payload is unknown and identified ([`IdentifyOptions::identify_payload`]): every
+/// chosen session's tool declares 0 kg, the model has compliance and no payload term of its own
+/// (a start set's payload term is taken as the start value).
+fn payload_is_unknown(cell: &Cell, opts: &IdentifyOptions) -> Result<bool, IdentifyError> {
+    if !opts.identify_payload || opts.model.extra.contains(&Param::ToolMass) {
+        return Ok(false);
+    }
+    let compliance =
+        opts.model.compliance || opts.model.extra.iter().any(|p| matches!(p, Param::Joint(_, JointTerm::Compliance)));
+    if !compliance {
+        return Ok(false);
+    }
+    let picks = opts.selection.picks(cell)?;
+    let mut sessions: Vec<usize> = picks.iter().map(|p| p.0).collect();
+    sessions.dedup();
+    Ok(!sessions.is_empty() && sessions.iter().all(|&s| cell.sessions[s].tool.mass == 0.0))
+}
+
+/// Anchors of the free geometric parameters to their start values (see [`Anchor`]): one row
+/// (x − x₀)/σ each, in units of one measurement σ (10 µm when the problem is not weighted).
+fn anchor_priors(problem: &Problem, free: &[usize], x0: &[f64], a: &Anchor, weighted: bool) -> Vec<Prior> {
+    let unit = if weighted { 1.0 } else { 1e-5 };
+    free.iter()
+        .filter_map(|&g| {
+            let GlobalParam::Robot(i) = problem.params[g] else { return None };
+            let sigma = match problem.layout.params()[i] {
+                Param::A(_) | Param::D(_) => a.length,
+                Param::Alpha(_) | Param::Theta(_) | Param::Beta(_) => a.angle,
+                _ => return None,
+            };
+            Some(Prior { terms: vec![(g, unit / sigma)], target: unit / sigma * x0[g] })
+        })
+        .collect()
+}
+
+/// σ of every residual row of every observation ([`NoiseModel::row_sigmas`]): the measurement's
+/// own σ where it has one, the instrument model's where not; position rows m, rotation rows rad.
+pub fn row_sigmas(problem: &Problem, cell: &Cell, noise: &NoiseModel) -> Vec<[f64; 6]> {
+    problem
+        .obs
+        .iter()
+        .map(|o| {
+            let s = &cell.sessions[o.session];
+            noise.row_sigmas(s.instrument, &problem.target_position(o), s.measurements[o.index].sigma.as_ref())
+        })
+        .collect()
+}
+
+/// Weight each observation by 1/σ of its rows ([`row_sigmas`]): position rows by the position's σ,
+/// rotation rows (whose residual is rotation_weight·angle) by that of the orientation.
+pub fn weight_by_instrument(problem: &mut Problem, cell: &Cell, noise: &NoiseModel) {
+    let sigmas = row_sigmas(problem, cell, noise);
+    let rw = problem.rotation_weight;
+    let mut k = 0;
+    problem.set_weights(|_| {
+        let s = sigmas[k];
+        k += 1;
+        std::array::from_fn(|r| if r < 3 { 1.0 / s[r] } else { 1.0 / (s[r] * rw) })
+    });
+}
+
+/// The regularisation rows of every correction table (`map` terms) of the problem: per table, the
+/// second differences of consecutive knots, and one row for the table's mean. The mean row fixes
+/// the one direction the data cannot see — a constant table is the joint's zero offset — without
+/// biasing anything (the offset takes the constant). The second-difference rows weigh
+/// λ² = η·(mean squared norm of the table's columns in `j0`), so η is unit-free: η = 1 makes
+/// one unit of curvature cost what one unit of a typical knot's value explains.
+pub fn map_priors(problem: &Problem, j0: &Mat<f64>, eta: f64) -> Result<Vec<Prior>, IdentifyError> {
+    if !(eta.is_finite() && eta > 0.0) {
+        return Err(IdentifyError::Option(format!("map smoothing must be a positive number, got {eta}")));
+    }
+    // Tables: (joint, step) → knots (knot index, global parameter).
+    let mut tables: std::collections::BTreeMap<(usize, u8), Vec<(i16, usize)>> = Default::default();
+    for (g, gp) in problem.params.iter().enumerate() {
+        if let GlobalParam::Robot(i) = *gp
+            && let Param::Joint(j, JointTerm::Map { step_deg, knot }) = problem.layout.params()[i]
+        {
+            tables.entry((j, step_deg)).or_default().push((knot, g));
+        }
+    }
+    let mut priors = Vec::new();
+    for knots in tables.values_mut() {
+        knots.sort_unstable();
+        let with_norms: Vec<(i16, usize, f64)> = knots
+            .iter()
+            .map(|&(k, g)| (k, g, (0..problem.n_obs_rows).map(|r| j0[(r, g)].powi(2)).sum::<f64>()))
+            .collect();
+        priors.extend(table_priors(&with_norms, eta));
+    }
+    Ok(priors)
+}
+
+/// The regularisation rows of one table: knots as (knot index, global parameter, squared norm of
+/// its weighted column), sorted by knot. See [`map_priors`].
+pub fn table_priors(knots: &[(i16, usize, f64)], eta: f64) -> Vec<Prior> {
+    let mean = knots.iter().map(|k| k.2).sum::<f64>() / knots.len().max(1) as f64;
+    if mean <= 0.0 {
+        return Vec::new(); // a table the data never reach: identifiability fixes it
+    }
+    let lambda = (eta * mean).sqrt();
+    let mut priors = Vec::new();
+    for w in knots.windows(3) {
+        if w[1].0 == w[0].0 + 1 && w[2].0 == w[1].0 + 1 {
+            priors
+                .push(Prior { terms: vec![(w[0].1, lambda), (w[1].1, -2.0 * lambda), (w[2].1, lambda)], target: 0.0 });
+        }
+    }
+    let m = mean.sqrt() / knots.len() as f64;
+    priors.push(Prior { terms: knots.iter().map(|&(_, g, _)| (g, m)).collect(), target: 0.0 });
+    priors
+}
