@@ -465,33 +465,70 @@ impl<F: Fn()> Drop for Tick<'_, F> {
 }
 
 /// [`crossval`], calling `progress` with (fits done, fits in all) after each identification.
+/// The steps: the split's poses, the options checked against them, then each scheme in turn
+/// (k-fold, few poses, transfer) for the "before" reference and every variant.
 pub fn crossval_with_progress(
     cell: &Cell,
     opts: &CrossvalOptions,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Crossval, IdentifyError> {
-    if opts.sessions.is_empty() {
-        return Err(IdentifyError::Option("name at least one session to split".into()));
-    }
-    let mut sessions: Vec<&Session> = Vec::with_capacity(opts.sessions.len());
-    for name in &opts.sessions {
-        let s = cell
-            .session(name)
-            .ok_or_else(|| IdentifyError::Option(format!("no session named '{name}' in the cell")))?;
-        if sessions.iter().any(|t| t.name == *name) {
-            return Err(IdentifyError::Option(format!("session '{name}' is named twice")));
+    let split = Split::of(cell, &opts.sessions)?;
+    check_schemes(cell, opts, &split)?;
+    let mut variants = vec![Variant::before(&opts.before)];
+    variants.extend(opts.variants.iter().cloned());
+    // Every identification the run makes, for the progress callback.
+    let total = variants.len()
+        * (if opts.folds >= 2 { opts.folds } else { 0 }
+            + opts.sizes.len() * opts.draws
+            + if opts.transfer.is_empty() { 0 } else { 1 + opts.transfer.len() });
+    let done = AtomicUsize::new(0);
+    let tick = || progress(done.fetch_add(1, Ordering::Relaxed) + 1, total);
+    let (kfold_test, folds) =
+        if opts.folds >= 2 { kfold(cell, opts, &split, &variants, &tick) } else { Default::default() };
+    let sizes = if opts.sizes.is_empty() { Vec::new() } else { few_poses(cell, opts, &split, &variants, &tick) };
+    let transfer = if opts.transfer.is_empty() { Vec::new() } else { transfer(cell, opts, &split, &variants, &tick) };
+    Ok(Crossval {
+        sessions: split.names.clone(),
+        measurements: split.items.len(),
+        poses: split.members.len(),
+        kfold_test,
+        folds,
+        sizes,
+        transfer,
+    })
+}
+
+impl<'a> Split<'a> {
+    /// The named sessions of `cell` (each once) and their measurements grouped into poses.
+    fn of(cell: &'a Cell, names: &[String]) -> Result<Split<'a>, IdentifyError> {
+        if names.is_empty() {
+            return Err(IdentifyError::Option("name at least one session to split".into()));
         }
-        sessions.push(s);
+        let mut sessions: Vec<&Session> = Vec::with_capacity(names.len());
+        for name in names {
+            let s = cell
+                .session(name)
+                .ok_or_else(|| IdentifyError::Option(format!("no session named '{name}' in the cell")))?;
+            if sessions.iter().any(|t| t.name == *name) {
+                return Err(IdentifyError::Option(format!("session '{name}' is named twice")));
+            }
+            sessions.push(s);
+        }
+        let items: Vec<(usize, usize)> =
+            sessions.iter().enumerate().flat_map(|(s, x)| (0..x.measurements.len()).map(move |i| (s, i))).collect();
+        let (pose_of, n_poses) = group_poses(items.iter().map(|&(s, i)| sessions[s].measurements[i].q.as_slice()));
+        let mut members = vec![Vec::new(); n_poses];
+        for (it, &p) in pose_of.iter().enumerate() {
+            members[p].push(it);
+        }
+        Ok(Split { names: sessions.iter().map(|s| s.name.clone()).collect(), sessions, items, members })
     }
-    let items: Vec<(usize, usize)> =
-        sessions.iter().enumerate().flat_map(|(s, x)| (0..x.measurements.len()).map(move |i| (s, i))).collect();
-    let (pose_of, n_poses) = group_poses(items.iter().map(|&(s, i)| sessions[s].measurements[i].q.as_slice()));
-    let mut members = vec![Vec::new(); n_poses];
-    for (it, &p) in pose_of.iter().enumerate() {
-        members[p].push(it);
-    }
-    let n_meas = items.len();
-    let split = Split { names: sessions.iter().map(|s| s.name.clone()).collect(), sessions, items, members };
+}
+
+/// The schemes' options against the split: folds, draws and sizes its poses allow, transfer
+/// sessions that exist and are not split.
+fn check_schemes(cell: &Cell, opts: &CrossvalOptions, split: &Split) -> Result<(), IdentifyError> {
+    let n_poses = split.members.len();
     let what = if split.sessions.len() == 1 {
         format!("the session's {n_poses} poses")
     } else {
@@ -521,162 +558,177 @@ pub fn crossval_with_progress(
             return Err(IdentifyError::Option(format!("--transfer: '{t}' is the session identified on")));
         }
     }
-    let mut variants = vec![Variant::before(&opts.before)];
-    variants.extend(opts.variants.iter().cloned());
-    let all_poses: Vec<usize> = (0..n_poses).collect();
-    // Every identification the run makes, for the progress callback.
-    let total = variants.len()
-        * (if opts.folds >= 2 { opts.folds } else { 0 }
-            + opts.sizes.len() * opts.draws
-            + if opts.transfer.is_empty() { 0 } else { 1 + opts.transfer.len() });
-    let done = AtomicUsize::new(0);
-    let tick = || progress(done.fetch_add(1, Ordering::Relaxed) + 1, total);
+    Ok(())
+}
 
-    // k-fold cross-validation: fold f holds the shuffled poses f, f + k, f + 2k, …
-    let mut folds = Vec::new();
-    let mut kfold_test = Vec::new();
-    if opts.folds >= 2 {
-        let order = shuffled(n_poses, opts.seed);
-        let k = opts.folds;
-        let tests: Vec<Vec<usize>> = (0..k)
-            .map(|f| {
-                let mut test: Vec<usize> = order.iter().skip(f).step_by(k).copied().collect();
-                test.sort_unstable();
-                test
-            })
-            .collect();
-        kfold_test = tests
-            .iter()
-            .map(|t| {
-                split.indices(t).into_iter().flat_map(|(s, idx)| idx.into_iter().map(|i| (s.name.clone(), i))).collect()
-            })
-            .collect();
-        let jobs: Vec<(usize, usize)> = (0..variants.len()).flat_map(|v| (0..k).map(move |f| (v, f))).collect();
-        let results = par_map(&jobs, opts.threads, |&(v, f)| {
-            let test = &tests[f];
-            let train: Vec<usize> = all_poses.iter().copied().filter(|p| test.binary_search(p).is_err()).collect();
-            let r = split.fold_errors(cell, &train, test, &variants[v].options);
-            tick();
-            r
-        });
-        let mut previous: Option<Vec<Scored>> = None;
-        for (v, variant) in variants.iter().enumerate() {
-            let mine: Vec<&Result<FoldErrors, String>> =
-                jobs.iter().zip(&results).filter(|((jv, _), _)| *jv == v).map(|(_, r)| r).collect();
-            let per_fold: Vec<Result<HeldOut, String>> = mine
-                .iter()
-                .map(|r| match r {
-                    Ok(e) => HeldOut::of(&e.scored, &split.names).ok_or_else(|| "empty fold".to_string()),
-                    Err(e) => Err(e.clone()),
-                })
-                .collect();
-            let pooled = if mine.iter().all(|r| r.is_ok()) {
-                let all: Vec<Scored> =
-                    mine.iter().filter_map(|r| r.as_ref().ok()).flat_map(|e| e.scored.iter().copied()).collect();
-                HeldOut::of(&all, &split.names)
-            } else {
-                None
-            };
-            let identified = mine.first().and_then(|r| r.as_ref().ok()).map_or(0, |r| r.identified);
-            let all: Option<Vec<Scored>> = mine
-                .iter()
-                .map(|r| r.as_ref().ok().map(|e| e.scored.clone()))
-                .collect::<Option<Vec<_>>>()
-                .map(|v| v.concat());
-            let vs_previous = match (&previous, &all) {
-                (Some(a), Some(b)) => paired_change(a, b),
-                _ => None,
-            };
-            previous = all;
-            folds.push(FoldsResult { variant: variant.name.clone(), pooled, per_fold, identified, vs_previous });
-        }
-    }
-
-    // Few poses: draw d splits the poses in halves (the same split for every size and variant)
-    // and identifies on the first n of the shuffled first half.
-    let mut sizes = Vec::new();
-    if !opts.sizes.is_empty() {
-        let jobs: Vec<(usize, usize, usize)> = (0..variants.len())
-            .flat_map(|v| opts.sizes.iter().flat_map(move |&n| (0..opts.draws).map(move |d| (v, n, d))))
-            .collect();
-        let results = par_map(&jobs, opts.threads, |&(v, n, d)| {
-            let order = shuffled(n_poses, draw_seed(opts.seed, d));
-            let half = n_poses / 2;
-            let mut train: Vec<usize> = order[..n].to_vec();
-            train.sort_unstable();
-            let mut test: Vec<usize> = order[half..].to_vec();
+/// k-fold cross-validation: fold f holds the shuffled poses f, f + k, f + 2k, … Returns each
+/// fold's held-out measurements and, per variant, its pooled result.
+fn kfold(
+    cell: &Cell,
+    opts: &CrossvalOptions,
+    split: &Split,
+    variants: &[Variant],
+    tick: &(impl Fn() + Sync),
+) -> (Vec<Vec<(String, usize)>>, Vec<FoldsResult>) {
+    let n_poses = split.members.len();
+    let order = shuffled(n_poses, opts.seed);
+    let k = opts.folds;
+    let tests: Vec<Vec<usize>> = (0..k)
+        .map(|f| {
+            let mut test: Vec<usize> = order.iter().skip(f).step_by(k).copied().collect();
             test.sort_unstable();
-            let r = split.fit_and_score(cell, &train, &test, &variants[v].options).map(|r| r.0);
-            tick();
-            r
-        });
-        for (v, variant) in variants.iter().enumerate() {
-            for &n in &opts.sizes {
-                let draws = jobs
-                    .iter()
-                    .zip(&results)
-                    .filter(|((jv, jn, _), _)| *jv == v && *jn == n)
-                    .map(|(_, r)| r.clone())
-                    .collect();
-                sizes.push(SizeResult { variant: variant.name.clone(), n, draws });
-            }
+            test
+        })
+        .collect();
+    let kfold_test = tests
+        .iter()
+        .map(|t| {
+            split.indices(t).into_iter().flat_map(|(s, idx)| idx.into_iter().map(|i| (s.name.clone(), i))).collect()
+        })
+        .collect();
+    let jobs: Vec<(usize, usize)> = (0..variants.len()).flat_map(|v| (0..k).map(move |f| (v, f))).collect();
+    let results = par_map(&jobs, opts.threads, |&(v, f)| {
+        let test = &tests[f];
+        let train: Vec<usize> = (0..n_poses).filter(|p| test.binary_search(p).is_err()).collect();
+        let r = split.fold_errors(cell, &train, test, &variants[v].options);
+        tick();
+        r
+    });
+    let mut folds = Vec::new();
+    let mut previous: Option<Vec<Scored>> = None;
+    for (v, variant) in variants.iter().enumerate() {
+        let mine: Vec<&Result<FoldErrors, String>> =
+            jobs.iter().zip(&results).filter(|((jv, _), _)| *jv == v).map(|(_, r)| r).collect();
+        let (result, all) = pooled_folds(&variant.name, &mine, &split.names, previous.as_deref());
+        folds.push(result);
+        previous = all;
+    }
+    (kfold_test, folds)
+}
+
+/// One variant's k-fold result from its folds' errors, compared with the previous variant's
+/// pooled errors; also its own pooled errors (`None` when a fold failed), for the next.
+fn pooled_folds(
+    variant: &str,
+    mine: &[&Result<FoldErrors, String>],
+    names: &[String],
+    previous: Option<&[Scored]>,
+) -> (FoldsResult, Option<Vec<Scored>>) {
+    let per_fold: Vec<Result<HeldOut, String>> = mine
+        .iter()
+        .map(|r| match r {
+            Ok(e) => HeldOut::of(&e.scored, names).ok_or_else(|| "empty fold".to_string()),
+            Err(e) => Err(e.clone()),
+        })
+        .collect();
+    let pooled = if mine.iter().all(|r| r.is_ok()) {
+        let all: Vec<Scored> =
+            mine.iter().filter_map(|r| r.as_ref().ok()).flat_map(|e| e.scored.iter().copied()).collect();
+        HeldOut::of(&all, names)
+    } else {
+        None
+    };
+    let identified = mine.first().and_then(|r| r.as_ref().ok()).map_or(0, |r| r.identified);
+    let all: Option<Vec<Scored>> =
+        mine.iter().map(|r| r.as_ref().ok().map(|e| e.scored.clone())).collect::<Option<Vec<_>>>().map(|v| v.concat());
+    let vs_previous = match (previous, &all) {
+        (Some(a), Some(b)) => paired_change(a, b),
+        _ => None,
+    };
+    (FoldsResult { variant: variant.to_string(), pooled, per_fold, identified, vs_previous }, all)
+}
+
+/// Few poses: draw d splits the poses in halves (the same split for every size and variant)
+/// and identifies on the first n of the shuffled first half.
+fn few_poses(
+    cell: &Cell,
+    opts: &CrossvalOptions,
+    split: &Split,
+    variants: &[Variant],
+    tick: &(impl Fn() + Sync),
+) -> Vec<SizeResult> {
+    let n_poses = split.members.len();
+    let jobs: Vec<(usize, usize, usize)> = (0..variants.len())
+        .flat_map(|v| opts.sizes.iter().flat_map(move |&n| (0..opts.draws).map(move |d| (v, n, d))))
+        .collect();
+    let results = par_map(&jobs, opts.threads, |&(v, n, d)| {
+        let order = shuffled(n_poses, draw_seed(opts.seed, d));
+        let half = n_poses / 2;
+        let mut train: Vec<usize> = order[..n].to_vec();
+        train.sort_unstable();
+        let mut test: Vec<usize> = order[half..].to_vec();
+        test.sort_unstable();
+        let r = split.fit_and_score(cell, &train, &test, &variants[v].options).map(|r| r.0);
+        tick();
+        r
+    });
+    let mut sizes = Vec::new();
+    for (v, variant) in variants.iter().enumerate() {
+        for &n in &opts.sizes {
+            let draws = jobs
+                .iter()
+                .zip(&results)
+                .filter(|((jv, jn, _), _)| *jv == v && *jn == n)
+                .map(|(_, r)| r.clone())
+                .collect();
+            sizes.push(SizeResult { variant: variant.name.clone(), n, draws });
         }
     }
+    sizes
+}
 
-    // Transfer: identify each variant on all the split data, then refit base and tools only on
-    // each transfer session and score there.
-    let mut transfer = Vec::new();
-    if !opts.transfer.is_empty() {
-        let whole = subsets_cell(cell, &split.indices(&all_poses));
-        let fitted = par_map(&variants, opts.threads, |v| {
-            let mut o = v.options.clone();
-            o.selection.sessions = split.names.clone();
-            let r = identify(&whole, &o).map_err(|e| e.to_string());
-            tick();
-            r
-        });
-        let on = split.names.join(", ");
-        let jobs: Vec<(usize, usize)> =
-            (0..variants.len()).flat_map(|v| (0..opts.transfer.len()).map(move |t| (v, t))).collect();
-        let results = par_map(&jobs, opts.threads, |&(v, t)| {
-            let _done = Tick(&tick);
-            let id = fitted[v].as_ref().map_err(|e| format!("identification on '{on}': {e}"))?;
-            let target = cell.session(&opts.transfer[t]).expect("checked above");
-            let mut o = IdentifyOptions {
-                start: Some(id.set.clone()),
-                only: before_scope(),
-                selection: Default::default(),
-                ..variants[v].options.clone()
-            };
-            o.fixed.extend(opts.transfer_fixed.iter().cloned());
-            if let Some(k) = opts.transfer_kappa_limit {
-                o.kappa_limit = k;
-            }
-            fit_and_score_whole(cell, target, &o)
-        });
-        for (&(v, t), r) in jobs.iter().zip(results) {
+/// Transfer: identify each variant on all the split data, then refit base and tools only on
+/// each transfer session and score there.
+fn transfer(
+    cell: &Cell,
+    opts: &CrossvalOptions,
+    split: &Split,
+    variants: &[Variant],
+    tick: &(impl Fn() + Sync),
+) -> Vec<TransferResult> {
+    let all_poses: Vec<usize> = (0..split.members.len()).collect();
+    let whole = subsets_cell(cell, &split.indices(&all_poses));
+    let fitted = par_map(variants, opts.threads, |v| {
+        let mut o = v.options.clone();
+        o.selection.sessions = split.names.clone();
+        let r = identify(&whole, &o).map_err(|e| e.to_string());
+        tick();
+        r
+    });
+    let on = split.names.join(", ");
+    let jobs: Vec<(usize, usize)> =
+        (0..variants.len()).flat_map(|v| (0..opts.transfer.len()).map(move |t| (v, t))).collect();
+    let results = par_map(&jobs, opts.threads, |&(v, t)| {
+        let _done = Tick(tick);
+        let id = fitted[v].as_ref().map_err(|e| format!("identification on '{on}': {e}"))?;
+        let target = cell.session(&opts.transfer[t]).expect("checked above");
+        let mut o = IdentifyOptions {
+            start: Some(id.set.clone()),
+            only: before_scope(),
+            selection: Default::default(),
+            ..variants[v].options.clone()
+        };
+        o.fixed.extend(opts.transfer_fixed.iter().cloned());
+        if let Some(k) = opts.transfer_kappa_limit {
+            o.kappa_limit = k;
+        }
+        fit_and_score_whole(cell, target, &o)
+    });
+    jobs.iter()
+        .zip(results)
+        .map(|(&(v, t), r)| {
             let (errors, kappa_scaled) = match r {
                 Ok((h, k)) => (Ok(h), Some(k)),
                 Err(e) => (Err(e), None),
             };
-            transfer.push(TransferResult {
+            TransferResult {
                 variant: variants[v].name.clone(),
                 session: opts.transfer[t].clone(),
                 errors,
                 kappa_scaled,
-            });
-        }
-    }
-
-    Ok(Crossval {
-        sessions: split.names.clone(),
-        measurements: n_meas,
-        poses: n_poses,
-        kfold_test,
-        folds,
-        sizes,
-        transfer,
-    })
+            }
+        })
+        .collect()
 }
 
 #[cfg(test)]
