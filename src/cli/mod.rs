@@ -12,6 +12,7 @@ mod plan;
 mod progress;
 mod reports;
 mod service;
+mod study_report;
 mod validation_text;
 
 use std::fs;
