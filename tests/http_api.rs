@@ -1082,7 +1082,9 @@ async fn every_list_pages_the_same_way() {
     assert_eq!(r.headers["link"], "</v1/robots?offset=0&limit=2>; rel=\"prev\"");
     let r = app.get("/v1/robots").await;
     assert_eq!((r.body.as_array().unwrap().len(), r.headers.get("link")), (3, None), "default limit 100");
-    assert_eq!(app.get("/v1/robots?offset=5").await.body, json!([]));
+    let past = app.get("/v1/robots?offset=5").await;
+    assert_eq!(past.body, json!([]));
+    assert_eq!(past.headers["x-total-count"], "3", "a page past the end still counts the list");
 
     // Filters stay in the links.
     let aid = artefact(&app, "a").await;
@@ -1131,11 +1133,18 @@ async fn every_list_pages_the_same_way() {
         "/v1/jobs".to_string(),
         "/v1/tokens".to_string(),
         format!("/v1/sessions/{sid}/measurements"),
+        format!("/v1/robots/{rid}/activations"),
+        "/v1/audit-events".to_string(),
     ];
     for path in &lists {
         let r = app.get(&format!("{path}?offset=0&limit=1")).await;
         assert_eq!(r.status, StatusCode::OK, "{path}: {}", r.text);
-        assert!(r.headers.contains_key("x-total-count"), "{path}");
+        // The whole list's length, on the first page and on one past the end (no row carries it).
+        let all = app.get(&format!("{path}?limit=1000")).await;
+        let len = all.body.as_array().or_else(|| all.body["items"].as_array()).map(Vec::len).unwrap();
+        assert_eq!(r.headers["x-total-count"].to_str().unwrap(), len.to_string(), "{path}");
+        let past = app.get(&format!("{path}?offset=100000")).await;
+        assert_eq!(past.headers["x-total-count"].to_str().unwrap(), len.to_string(), "{path} past the end");
         for (query, field) in [
             ("limit=0", "limit"),
             ("limit=x", "limit"),

@@ -279,7 +279,7 @@ async fn data_stored_before_audited_correction_survive_it() {
     assert_eq!((s.measurements, s.excluded), (2, 0));
     let set = robocal::db::records::parameter_set(&pool, "s1").await.unwrap().unwrap();
     assert_eq!((set.version, set.archived_at), (1, None));
-    let acts = robocal::db::corrections::activations(&pool, "r1", 0, 10).await.unwrap();
+    let acts = robocal::db::corrections::activations(&pool, "r1", 0, 10).await.unwrap().items;
     assert_eq!(acts.len(), 1);
     assert_eq!((acts[0].parameter_set_id.as_str(), acts[0].activated_at.as_deref()), ("s1", None));
     let hash: Option<String> =

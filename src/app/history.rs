@@ -177,7 +177,7 @@ pub async fn history(pool: &SqlitePool, robot_id: &str, filter: &HistoryFilter) 
             }
             in_sample.get_or_insert(entry);
         }
-        let diagnosis = match records::diagnoses_of_set(pool, &row.id, 0, 1).await?.into_iter().next() {
+        let diagnosis = match records::diagnoses_of_set(pool, &row.id, 0, 1).await?.items.into_iter().next() {
             None => None,
             Some(d) => {
                 let r = json(&d.report_json, &what)?;

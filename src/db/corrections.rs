@@ -2,8 +2,10 @@
 //! timeline, parameter-set activations and archiving, and what a session or an artefact is still
 //! referenced by before it may be deleted.
 
+use sqlx::SqlitePool;
 use sqlx::sqlite::SqliteExecutor;
 
+use super::paging::{self, Page};
 use super::records::{ArtefactRow, SessionRow};
 
 /// An exclusion of one measurement: open until restored.
@@ -136,22 +138,20 @@ pub async fn insert_audit(db: impl SqliteExecutor<'_>, a: &AuditRow) -> Result<(
 /// Audit events `offset..offset + limit`, newest first, optionally of one robot and/or about one
 /// subject.
 pub async fn audit_events(
-    db: impl SqliteExecutor<'_>,
+    db: &SqlitePool,
     robot_id: Option<&str>,
     subject_id: Option<&str>,
     offset: i64,
     limit: i64,
-) -> Result<Vec<AuditRow>, sqlx::Error> {
-    sqlx::query_as(
-        "SELECT * FROM audit_events WHERE (?1 IS NULL OR robot_id = ?1) AND (?2 IS NULL OR subject_id = ?2) \
+) -> Result<Page<AuditRow>, sqlx::Error> {
+    let query = sqlx::query_as(
+        "SELECT *, COUNT(*) OVER () AS total_rows FROM audit_events \
+         WHERE (?1 IS NULL OR robot_id = ?1) AND (?2 IS NULL OR subject_id = ?2) \
          ORDER BY at DESC, id DESC LIMIT ?3 OFFSET ?4",
     )
     .bind(robot_id)
-    .bind(subject_id)
-    .bind(limit)
-    .bind(offset)
-    .fetch_all(db)
-    .await
+    .bind(subject_id);
+    paging::fetch(db, query, offset, limit, audit_count(db, robot_id, subject_id)).await
 }
 
 pub async fn audit_count(
@@ -209,20 +209,17 @@ pub async fn activate(
 
 /// A robot's activations `offset..offset + limit`, newest first (those of unknown time last).
 pub async fn activations(
-    db: impl SqliteExecutor<'_>,
+    db: &SqlitePool,
     robot_id: &str,
     offset: i64,
     limit: i64,
-) -> Result<Vec<ActivationRow>, sqlx::Error> {
-    sqlx::query_as(
-        "SELECT * FROM parameter_set_activations WHERE robot_id = ? \
+) -> Result<Page<ActivationRow>, sqlx::Error> {
+    let query = sqlx::query_as(
+        "SELECT *, COUNT(*) OVER () AS total_rows FROM parameter_set_activations WHERE robot_id = ? \
          ORDER BY COALESCE(activated_at, '') DESC, id DESC LIMIT ? OFFSET ?",
     )
-    .bind(robot_id)
-    .bind(limit)
-    .bind(offset)
-    .fetch_all(db)
-    .await
+    .bind(robot_id);
+    paging::fetch(db, query, offset, limit, activation_count(db, robot_id)).await
 }
 
 pub async fn activation_count(db: impl SqliteExecutor<'_>, robot_id: &str) -> Result<i64, sqlx::Error> {

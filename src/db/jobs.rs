@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 use sqlx::SqlitePool;
 use sqlx::sqlite::SqliteExecutor;
 
+use super::paging::{self, Page};
 use super::{now, time_text};
 
 /// What a job does; stored (and served) as `pose_plan`, `identification`, `validation`,
@@ -141,22 +142,20 @@ pub async fn get(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<JobRow>
 
 /// Jobs, newest first, optionally of one robot and/or one state.
 pub async fn list(
-    db: impl SqliteExecutor<'_>,
+    db: &SqlitePool,
     robot_id: Option<&str>,
     state: Option<JobState>,
     offset: i64,
     limit: i64,
-) -> Result<Vec<JobRow>, sqlx::Error> {
-    sqlx::query_as(
-        "SELECT * FROM jobs WHERE (?1 IS NULL OR robot_id = ?1) AND (?2 IS NULL OR state = ?2) \
+) -> Result<Page<JobRow>, sqlx::Error> {
+    let query = sqlx::query_as(
+        "SELECT *, COUNT(*) OVER () AS total_rows FROM jobs \
+         WHERE (?1 IS NULL OR robot_id = ?1) AND (?2 IS NULL OR state = ?2) \
          ORDER BY created_at DESC, id DESC LIMIT ?3 OFFSET ?4",
     )
     .bind(robot_id)
-    .bind(state)
-    .bind(limit)
-    .bind(offset)
-    .fetch_all(db)
-    .await
+    .bind(state);
+    paging::fetch(db, query, offset, limit, count(db, robot_id, state)).await
 }
 
 /// Jobs matching the filters of [`list`].

@@ -12,6 +12,7 @@ pub mod corrections;
 pub mod health;
 pub mod iso9283;
 pub mod jobs;
+pub mod paging;
 pub mod records;
 pub mod tokens;
 

@@ -1,10 +1,13 @@
 //! Robots, artefacts, sessions, measurements, parameter sets, validations, diagnoses and pose
 //! plans.
 //! Functions take any SQLite executor: the pool for single statements, `&mut *tx` inside a
-//! transaction.
+//! transaction. A list's page ([`Page`]) takes the pool: past the list's end it counts the list
+//! with a second statement.
 
+use sqlx::SqlitePool;
 use sqlx::sqlite::SqliteExecutor;
 
+use super::paging::{self, Page};
 use crate::domain::cell::{InstrumentSpec, OrderSpec, PurposeSpec};
 
 /// A robot row.
@@ -39,12 +42,10 @@ pub async fn robot(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<Robot
 }
 
 /// Robots `offset..offset + limit`, oldest first.
-pub async fn robots(db: impl SqliteExecutor<'_>, offset: i64, limit: i64) -> Result<Vec<RobotRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM robots ORDER BY created_at, id LIMIT ? OFFSET ?")
-        .bind(limit)
-        .bind(offset)
-        .fetch_all(db)
-        .await
+pub async fn robots(db: &SqlitePool, offset: i64, limit: i64) -> Result<Page<RobotRow>, sqlx::Error> {
+    let query =
+        sqlx::query_as("SELECT *, COUNT(*) OVER () AS total_rows FROM robots ORDER BY created_at, id LIMIT ? OFFSET ?");
+    paging::fetch(db, query, offset, limit, robot_count(db)).await
 }
 
 pub async fn robot_count(db: impl SqliteExecutor<'_>) -> Result<i64, sqlx::Error> {
@@ -89,12 +90,11 @@ pub async fn artefact(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<Ar
 }
 
 /// Artefacts `offset..offset + limit`, oldest first.
-pub async fn artefacts(db: impl SqliteExecutor<'_>, offset: i64, limit: i64) -> Result<Vec<ArtefactRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM artefacts ORDER BY created_at, id LIMIT ? OFFSET ?")
-        .bind(limit)
-        .bind(offset)
-        .fetch_all(db)
-        .await
+pub async fn artefacts(db: &SqlitePool, offset: i64, limit: i64) -> Result<Page<ArtefactRow>, sqlx::Error> {
+    let query = sqlx::query_as(
+        "SELECT *, COUNT(*) OVER () AS total_rows FROM artefacts ORDER BY created_at, id LIMIT ? OFFSET ?",
+    );
+    paging::fetch(db, query, offset, limit, artefact_count(db)).await
 }
 
 pub async fn artefact_count(db: impl SqliteExecutor<'_>) -> Result<i64, sqlx::Error> {
@@ -192,19 +192,17 @@ pub async fn sessions_of_robot(db: impl SqliteExecutor<'_>, robot_id: &str) -> R
 
 /// A robot's sessions `offset..offset + limit`, oldest first.
 pub async fn sessions_page(
-    db: impl SqliteExecutor<'_>,
+    db: &SqlitePool,
     robot_id: &str,
     offset: i64,
     limit: i64,
-) -> Result<Vec<SessionRow>, sqlx::Error> {
-    sqlx::query_as(sqlx::AssertSqlSafe(format!(
-        "SELECT {SESSION_COLUMNS} FROM sessions s WHERE s.robot_id = ? ORDER BY s.created_at, s.id LIMIT ? OFFSET ?"
+) -> Result<Page<SessionRow>, sqlx::Error> {
+    let query = sqlx::query_as(sqlx::AssertSqlSafe(format!(
+        "SELECT {SESSION_COLUMNS}, COUNT(*) OVER () AS total_rows FROM sessions s WHERE s.robot_id = ? \
+         ORDER BY s.created_at, s.id LIMIT ? OFFSET ?"
     )))
-    .bind(robot_id)
-    .bind(limit)
-    .bind(offset)
-    .fetch_all(db)
-    .await
+    .bind(robot_id);
+    paging::fetch(db, query, offset, limit, session_count(db, robot_id)).await
 }
 
 pub async fn session_count(db: impl SqliteExecutor<'_>, robot_id: &str) -> Result<i64, sqlx::Error> {
@@ -427,22 +425,20 @@ pub async fn parameter_set(db: impl SqliteExecutor<'_>, id: &str) -> Result<Opti
 /// A robot's parameter sets `offset..offset + limit`, newest version first; archived ones only
 /// when asked for.
 pub async fn parameter_sets_of_robot(
-    db: impl SqliteExecutor<'_>,
+    db: &SqlitePool,
     robot_id: &str,
     include_archived: bool,
     offset: i64,
     limit: i64,
-) -> Result<Vec<ParameterSetRow>, sqlx::Error> {
-    sqlx::query_as(
-        "SELECT * FROM parameter_sets WHERE robot_id = ? AND (? OR archived_at IS NULL) \
+) -> Result<Page<ParameterSetRow>, sqlx::Error> {
+    let query = sqlx::query_as(
+        "SELECT *, COUNT(*) OVER () AS total_rows FROM parameter_sets \
+         WHERE robot_id = ? AND (? OR archived_at IS NULL) \
          ORDER BY version DESC LIMIT ? OFFSET ?",
     )
     .bind(robot_id)
-    .bind(include_archived)
-    .bind(limit)
-    .bind(offset)
-    .fetch_all(db)
-    .await
+    .bind(include_archived);
+    paging::fetch(db, query, offset, limit, parameter_set_count(db, robot_id, include_archived)).await
 }
 
 pub async fn parameter_set_count(
@@ -640,19 +636,17 @@ pub async fn diagnosis(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<D
 
 /// A parameter set's diagnoses `offset..offset + limit`, newest first.
 pub async fn diagnoses_of_set(
-    db: impl SqliteExecutor<'_>,
+    db: &SqlitePool,
     set_id: &str,
     offset: i64,
     limit: i64,
-) -> Result<Vec<DiagnosisRow>, sqlx::Error> {
-    sqlx::query_as(
-        "SELECT * FROM diagnoses WHERE parameter_set_id = ? ORDER BY created_at DESC, id DESC LIMIT ? OFFSET ?",
+) -> Result<Page<DiagnosisRow>, sqlx::Error> {
+    let query = sqlx::query_as(
+        "SELECT *, COUNT(*) OVER () AS total_rows FROM diagnoses WHERE parameter_set_id = ? \
+         ORDER BY created_at DESC, id DESC LIMIT ? OFFSET ?",
     )
-    .bind(set_id)
-    .bind(limit)
-    .bind(offset)
-    .fetch_all(db)
-    .await
+    .bind(set_id);
+    paging::fetch(db, query, offset, limit, diagnosis_count(db, set_id)).await
 }
 
 pub async fn diagnosis_count(db: impl SqliteExecutor<'_>, set_id: &str) -> Result<i64, sqlx::Error> {
@@ -708,17 +702,17 @@ pub async fn pose_plan(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<P
 
 /// A robot's pose plans `offset..offset + limit`, newest first.
 pub async fn pose_plans_of_robot(
-    db: impl SqliteExecutor<'_>,
+    db: &SqlitePool,
     robot_id: &str,
     offset: i64,
     limit: i64,
-) -> Result<Vec<PosePlanRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM pose_plans WHERE robot_id = ? ORDER BY created_at DESC, id DESC LIMIT ? OFFSET ?")
-        .bind(robot_id)
-        .bind(limit)
-        .bind(offset)
-        .fetch_all(db)
-        .await
+) -> Result<Page<PosePlanRow>, sqlx::Error> {
+    let query = sqlx::query_as(
+        "SELECT *, COUNT(*) OVER () AS total_rows FROM pose_plans WHERE robot_id = ? \
+         ORDER BY created_at DESC, id DESC LIMIT ? OFFSET ?",
+    )
+    .bind(robot_id);
+    paging::fetch(db, query, offset, limit, pose_plan_count(db, robot_id)).await
 }
 
 pub async fn pose_plan_count(db: impl SqliteExecutor<'_>, robot_id: &str) -> Result<i64, sqlx::Error> {

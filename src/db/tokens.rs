@@ -2,7 +2,10 @@
 //! copy of the database does not hand out access.
 
 use sha2::{Digest, Sha256};
+use sqlx::SqlitePool;
 use sqlx::sqlite::SqliteExecutor;
+
+use super::paging::{self, Page};
 
 /// What a token may do.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -127,12 +130,10 @@ pub async fn list(db: impl SqliteExecutor<'_>) -> Result<Vec<TokenRow>, sqlx::Er
 }
 
 /// Tokens `offset..offset + limit`, oldest first.
-pub async fn page(db: impl SqliteExecutor<'_>, offset: i64, limit: i64) -> Result<Vec<TokenRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM tokens ORDER BY created_at, id LIMIT ? OFFSET ?")
-        .bind(limit)
-        .bind(offset)
-        .fetch_all(db)
-        .await
+pub async fn page(db: &SqlitePool, offset: i64, limit: i64) -> Result<Page<TokenRow>, sqlx::Error> {
+    let query =
+        sqlx::query_as("SELECT *, COUNT(*) OVER () AS total_rows FROM tokens ORDER BY created_at, id LIMIT ? OFFSET ?");
+    paging::fetch(db, query, offset, limit, count(db)).await
 }
 
 pub async fn count(db: impl SqliteExecutor<'_>) -> Result<i64, sqlx::Error> {

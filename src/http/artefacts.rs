@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::audit::{Event, ReasonQuery, reason};
+use super::error::OrConflict;
 use super::extract::{Authorized, JsonBody, MEASURE, READ};
 use super::paging::{PageQuery, Paging};
 use super::{ApiError, AppState};
@@ -96,17 +97,9 @@ pub async fn create(
         spec_json: serde_json::to_string(&spec).expect("serialises"),
         created_at: db::now(),
     };
-    records::insert_artefact(&state.pool, &row).await.map_err(|e| {
-        if db::is_unique_violation(&e) {
-            ApiError::Conflict {
-                detail: format!("an artefact named '{name}' exists"),
-                field: Some("name".into()),
-                hint: None,
-            }
-        } else {
-            e.into()
-        }
-    })?;
+    records::insert_artefact(&state.pool, &row)
+        .await
+        .or_conflict("name", || format!("an artefact named '{name}' exists"))?;
     Ok((StatusCode::CREATED, Json(artefact_out(&row)?)))
 }
 
@@ -123,10 +116,7 @@ pub async fn list(
     _auth: Authorized<READ>,
     page: Paging,
 ) -> Result<(HeaderMap, Json<Vec<ArtefactOut>>), ApiError> {
-    let total = records::artefact_count(&state.pool).await?;
-    let rows = records::artefacts(&state.pool, page.offset, page.limit).await?;
-    let out: Vec<ArtefactOut> = rows.iter().map(artefact_out).collect::<Result<_, _>>()?;
-    Ok((page.headers(total, out.len()), Json(out)))
+    page.respond(records::artefacts(&state.pool, page.offset, page.limit).await?, |r| artefact_out(&r))
 }
 
 /// Get an artefact.

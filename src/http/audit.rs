@@ -106,24 +106,19 @@ pub async fn list(
 ) -> Result<(HeaderMap, Json<Vec<AuditEventOut>>), ApiError> {
     let robot = q.robot_id.as_deref().filter(|s| !s.is_empty());
     let subject = q.subject_id.as_deref().filter(|s| !s.is_empty());
-    let total = corrections::audit_count(&state.pool, robot, subject).await?;
     let rows = corrections::audit_events(&state.pool, robot, subject, page.offset, page.limit).await?;
-    let out = rows
-        .into_iter()
-        .map(|r| {
-            let detail = serde_json::from_str(&r.detail_json)
-                .map_err(|e| ApiError::Internal(format!("audit event {}: {e}", r.id)))?;
-            Ok(AuditEventOut {
-                id: r.id,
-                at: r.at,
-                actor: r.actor,
-                action: r.action,
-                robot_id: r.robot_id,
-                subject_id: r.subject_id,
-                reason: r.reason,
-                detail,
-            })
+    page.respond(rows, |r| {
+        let detail = serde_json::from_str(&r.detail_json)
+            .map_err(|e| ApiError::Internal(format!("audit event {}: {e}", r.id)))?;
+        Ok(AuditEventOut {
+            id: r.id,
+            at: r.at,
+            actor: r.actor,
+            action: r.action,
+            robot_id: r.robot_id,
+            subject_id: r.subject_id,
+            reason: r.reason,
+            detail,
         })
-        .collect::<Result<Vec<_>, ApiError>>()?;
-    Ok((page.headers(total, out.len()), Json(out)))
+    })
 }

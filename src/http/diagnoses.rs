@@ -114,10 +114,7 @@ pub async fn list(
     page: Paging,
 ) -> Result<(HeaderMap, Json<Vec<Diagnosis>>), ApiError> {
     let set = find_set(&state, &set_id).await?;
-    let total = records::diagnosis_count(&state.pool, &set.id).await?;
-    let rows = records::diagnoses_of_set(&state.pool, &set.id, page.offset, page.limit).await?;
-    let out: Vec<Diagnosis> = rows.iter().map(diagnosis_out).collect::<Result<_, _>>()?;
-    Ok((page.headers(total, out.len()), Json(out)))
+    page.respond(records::diagnoses_of_set(&state.pool, &set.id, page.offset, page.limit).await?, |r| diagnosis_out(&r))
 }
 
 /// Get a diagnosis.

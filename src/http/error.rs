@@ -184,6 +184,24 @@ impl From<sqlx::Error> for ApiError {
     }
 }
 
+/// What a create's insert answers: a UNIQUE violation is 409 naming `field` (what the request gave
+/// that is taken) with `detail`; any other database error maps as `From<sqlx::Error>` does.
+pub trait OrConflict<T> {
+    fn or_conflict(self, field: &str, detail: impl FnOnce() -> String) -> Result<T, ApiError>;
+}
+
+impl<T> OrConflict<T> for Result<T, sqlx::Error> {
+    fn or_conflict(self, field: &str, detail: impl FnOnce() -> String) -> Result<T, ApiError> {
+        self.map_err(|e| {
+            if db::is_unique_violation(&e) {
+                ApiError::Conflict { detail: detail(), field: Some(field.into()), hint: None }
+            } else {
+                e.into()
+            }
+        })
+    }
+}
+
 impl From<AppError> for ApiError {
     fn from(e: AppError) -> Self {
         match e {
@@ -330,5 +348,26 @@ mod tests {
         assert_eq!(p.status, 422);
         assert_eq!(p.field.as_deref(), Some("measurements[2].ball"));
         assert_eq!(p.type_, "urn:robocal:problem:invalid-value");
+    }
+
+    #[tokio::test]
+    async fn a_unique_violation_is_a_conflict_naming_the_field_and_nothing_else_is() {
+        let db = sqlx::SqlitePool::connect("sqlite::memory:").await.unwrap();
+        sqlx::query("CREATE TABLE t (name TEXT UNIQUE)").execute(&db).await.unwrap();
+        let insert = || sqlx::query("INSERT INTO t (name) VALUES ('a')").execute(&db);
+        insert().await.or_conflict("name", || unreachable!("no conflict")).unwrap();
+        let e = insert().await.or_conflict("name", || "a thing named 'a' exists".into()).unwrap_err();
+        assert_eq!(
+            e,
+            ApiError::Conflict { detail: "a thing named 'a' exists".into(), field: Some("name".into()), hint: None }
+        );
+        let p = e.problem();
+        assert_eq!(
+            (p.status, p.field.as_deref(), p.type_.as_str()),
+            (409, Some("name"), "urn:robocal:problem:conflict")
+        );
+        // Another database error (no such table) is not a conflict: internal, echoing nothing.
+        let e = sqlx::query("INSERT INTO nowhere VALUES (1)").execute(&db).await.or_conflict("name", String::new);
+        assert_eq!(e.unwrap_err().problem().status, 500);
     }
 }

@@ -178,10 +178,8 @@ pub async fn list(
         })?),
     };
     let robot = q.robot_id.as_deref().filter(|s| !s.is_empty());
-    let total = db::jobs::count(&state.pool, robot, state_filter).await?;
     let rows = db::jobs::list(&state.pool, robot, state_filter, page.offset, page.limit).await?;
-    let out: Vec<JobOut> = rows.iter().map(|r| job_out_now(&state, r)).collect::<Result<_, _>>()?;
-    Ok((page.headers(total, out.len()), Json(out)))
+    page.respond(rows, |r| job_out_now(&state, &r))
 }
 
 /// Get a job.

@@ -5,6 +5,7 @@
 //! `X-Total-Count` (items in the whole list, filters applied) and `Link` with `rel="next"` and
 //! `rel="prev"` (RFC 8288) where there is such a page, the request's other parameters kept.
 
+use axum::Json;
 use axum::extract::{FromRequestParts, OriginalUri, Query};
 use axum::http::request::Parts;
 use axum::http::{HeaderMap, HeaderName, HeaderValue};
@@ -12,6 +13,7 @@ use serde::Deserialize;
 use utoipa::IntoParams;
 
 use super::error::ApiError;
+use crate::db::paging::Page;
 
 /// The paging parameters as they arrive (text, so a value that is not a number is a 422 naming
 /// it, not a bare 400).
@@ -96,6 +98,22 @@ impl<const DEFAULT: i64, const MAX: i64> Paging<DEFAULT, MAX> {
             h.insert(axum::http::header::LINK, v);
         }
         h
+    }
+
+    /// The answer to a list request: the page's rows in their wire form (`wire` maps each row),
+    /// with the paging headers.
+    pub fn respond<R, T>(
+        &self,
+        page: Page<R>,
+        wire: impl FnMut(R) -> Result<T, ApiError>,
+    ) -> Result<(HeaderMap, Json<Vec<T>>), ApiError> {
+        let out = page.items.into_iter().map(wire).collect::<Result<Vec<T>, ApiError>>()?;
+        Ok(self.answer(page.total, out))
+    }
+
+    /// The answer to a list request whose items are already in their wire form, out of `total`.
+    pub fn answer<T>(&self, total: i64, items: Vec<T>) -> (HeaderMap, Json<Vec<T>>) {
+        (self.headers(total, items.len()), Json(items))
     }
 
     fn link(&self, offset: i64) -> String {

@@ -306,8 +306,8 @@ pub async fn history(
 ) -> Result<(HeaderMap, Json<Vec<ParameterSetOut>>), ApiError> {
     let robot = find_robot(&state, &robot_id).await?;
     let archived = q.include_archived.unwrap_or(false);
-    let total = records::parameter_set_count(&state.pool, &robot.id, archived).await?;
-    let rows = records::parameter_sets_of_robot(&state.pool, &robot.id, archived, page.offset, page.limit).await?;
+    let crate::db::paging::Page { items: rows, total } =
+        records::parameter_sets_of_robot(&state.pool, &robot.id, archived, page.offset, page.limit).await?;
     // The page's validations in one query, not one per set.
     let ids: Vec<&str> = rows.iter().map(|r| r.id.as_str()).collect();
     let mut by_set: std::collections::HashMap<String, Vec<ValidationSummary>> = std::collections::HashMap::new();
@@ -325,7 +325,7 @@ pub async fn history(
         let summary = summaries.remove(row.id.as_str()).unwrap_or((Value::Null, Vec::new()));
         out.push(summary_out(row, active, summary, validations, None)?);
     }
-    Ok((page.headers(total, out.len()), Json(out)))
+    Ok(page.answer(total, out))
 }
 
 /// Import a parameter set made elsewhere (a parameter-set file) as the robot's next version.
@@ -592,9 +592,9 @@ pub async fn activations(
     page: Paging,
 ) -> Result<(HeaderMap, Json<Vec<ActivationOut>>), ApiError> {
     let robot = find_robot(&state, &robot_id).await?;
-    let total = corrections::activation_count(&state.pool, &robot.id).await?;
+    let activations = corrections::activations(&state.pool, &robot.id, page.offset, page.limit).await?;
     let mut out = Vec::new();
-    for a in corrections::activations(&state.pool, &robot.id, page.offset, page.limit).await? {
+    for a in activations.items {
         let set = find(&state, &a.parameter_set_id).await?;
         out.push(ActivationOut {
             active: robot.active_parameter_set_id.as_deref() == Some(set.id.as_str()),
@@ -606,5 +606,5 @@ pub async fn activations(
             job_id: a.job_id,
         });
     }
-    Ok((page.headers(total, out.len()), Json(out)))
+    Ok(page.answer(activations.total, out))
 }

@@ -111,13 +111,11 @@ pub async fn list(
     page: Paging,
 ) -> Result<(HeaderMap, Json<Vec<PosePlanSummary>>), ApiError> {
     let robot = find_robot(&state, &robot_id).await?;
-    let total = records::pose_plan_count(&state.pool, &robot.id).await?;
     let rows = records::pose_plans_of_robot(&state.pool, &robot.id, page.offset, page.limit).await?;
-    let mut out = Vec::with_capacity(rows.len());
-    for row in rows {
+    page.respond(rows, |row| {
         let internal = |e: serde_json::Error| ApiError::Internal(format!("pose plan {}: {e}", row.id));
         let plan: PosePlan = serde_json::from_str(&row.result_json).map_err(internal)?;
-        out.push(PosePlanSummary {
+        Ok(PosePlanSummary {
             request: serde_json::from_str(&row.request_json).map_err(internal)?,
             identification: plan.identification.len(),
             validation: plan.validation.len(),
@@ -127,9 +125,8 @@ pub async fn list(
             robot_id: row.robot_id,
             job_id: row.job_id,
             created_at: row.created_at,
-        });
-    }
-    Ok((page.headers(total, out.len()), Json(out)))
+        })
+    })
 }
 
 /// Get a pose plan.

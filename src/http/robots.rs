@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use utoipa::{IntoParams, ToSchema};
 
+use super::error::OrConflict;
 use super::extract::{Authorized, JsonBody, MEASURE, READ};
 use super::paging::{PageQuery, Paging};
 use super::{ApiError, AppState};
@@ -104,17 +105,7 @@ pub async fn create(
         active_parameter_set_id: None,
         created_at: db::now(),
     };
-    records::insert_robot(&state.pool, &row).await.map_err(|e| {
-        if db::is_unique_violation(&e) {
-            ApiError::Conflict {
-                detail: format!("a robot named '{name}' exists"),
-                field: Some("name".into()),
-                hint: None,
-            }
-        } else {
-            e.into()
-        }
-    })?;
+    records::insert_robot(&state.pool, &row).await.or_conflict("name", || format!("a robot named '{name}' exists"))?;
     Ok((StatusCode::CREATED, Json(robot_out(&row)?)))
 }
 
@@ -131,10 +122,7 @@ pub async fn list(
     _auth: Authorized<READ>,
     page: Paging,
 ) -> Result<(HeaderMap, Json<Vec<RobotOut>>), ApiError> {
-    let total = records::robot_count(&state.pool).await?;
-    let rows = records::robots(&state.pool, page.offset, page.limit).await?;
-    let out: Vec<RobotOut> = rows.iter().map(robot_out).collect::<Result<_, _>>()?;
-    Ok((page.headers(total, out.len()), Json(out)))
+    page.respond(records::robots(&state.pool, page.offset, page.limit).await?, |r| robot_out(&r))
 }
 
 /// Get a robot.

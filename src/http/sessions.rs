@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::audit::{Event, ReasonQuery, reason};
+use super::error::OrConflict;
 use super::extract::{Authorized, JsonBody, MEASURE, READ};
 use super::paging::{PageQuery, Paging};
 use super::robots::find as find_robot;
@@ -155,17 +156,9 @@ pub async fn create(
         measurements: 0,
         excluded: 0,
     };
-    records::insert_session(&state.pool, &row).await.map_err(|e| {
-        if db::is_unique_violation(&e) {
-            ApiError::Conflict {
-                detail: format!("robot '{}' has a session named '{name}'", robot.name),
-                field: Some("name".into()),
-                hint: None,
-            }
-        } else {
-            e.into()
-        }
-    })?;
+    records::insert_session(&state.pool, &row)
+        .await
+        .or_conflict("name", || format!("robot '{}' has a session named '{name}'", robot.name))?;
     Ok((StatusCode::CREATED, Json(session_out(&row)?)))
 }
 
@@ -186,10 +179,7 @@ pub async fn list(
     page: Paging,
 ) -> Result<(HeaderMap, Json<Vec<SessionOut>>), ApiError> {
     let robot = find_robot(&state, &robot_id).await?;
-    let total = records::session_count(&state.pool, &robot.id).await?;
-    let rows = records::sessions_page(&state.pool, &robot.id, page.offset, page.limit).await?;
-    let out: Vec<SessionOut> = rows.iter().map(session_out).collect::<Result<_, _>>()?;
-    Ok((page.headers(total, out.len()), Json(out)))
+    page.respond(records::sessions_page(&state.pool, &robot.id, page.offset, page.limit).await?, |r| session_out(&r))
 }
 
 /// Get a session.

@@ -107,10 +107,7 @@ pub async fn list(
     _auth: Authorized<ADMIN>,
     page: Paging,
 ) -> Result<(HeaderMap, Json<Vec<TokenOut>>), ApiError> {
-    let total = tokens::count(&state.pool).await?;
-    let out: Vec<TokenOut> =
-        tokens::page(&state.pool, page.offset, page.limit).await?.iter().map(|t| token_out(t, None)).collect();
-    Ok((page.headers(total, out.len()), Json(out)))
+    page.respond(tokens::page(&state.pool, page.offset, page.limit).await?, |t| Ok(token_out(&t, None)))
 }
 
 /// Revoke a token.
