@@ -5,6 +5,7 @@
 pub mod base;
 pub mod crossval;
 pub mod detmax;
+mod hold;
 pub mod identifiability;
 pub mod noise;
 pub mod observability;
@@ -21,6 +22,7 @@ use crate::cell::Cell;
 use crate::kinematics::{JointTerm, Param, ParamLayout, ParameterSet, Tool};
 use crate::metrology::registration::RegistrationError;
 use base::{estimate_base_of, register_base_and_tcps};
+pub use hold::COMPLIANCE_SIGNIFICANCE;
 pub use identifiability::Status;
 pub use noise::NoiseModel;
 pub use problem::{GlobalParam, MeasurementSelection, Prior, Problem, ProblemError, tool_blocks};
@@ -192,6 +194,10 @@ pub struct IdentifyOptions {
     /// compliances with 0 kg. A compliance is a deflection per N·m of holding torque: with the
     /// payload's torque left out, the wrist's compliances have almost nothing to act on.
     pub identify_payload: bool,
+    /// Hold every compliance whose fitted change is below [`COMPLIANCE_SIGNIFICANCE`] of its own
+    /// standard deviation at its start value, and say so in its status (`hold.rs`: an
+    /// undetermined compliance extrapolates to poses of larger torque by millimetres).
+    pub hold_undetermined_compliance: bool,
 }
 
 /// The default of [`IdentifyOptions::residual_ratio_limit`]: a fit is refused when its residual RMS
@@ -254,6 +260,7 @@ impl Default for IdentifyOptions {
             residual_ratio_limit: RESIDUAL_RATIO_LIMIT,
             outlier_factor: OUTLIER_FACTOR,
             identify_payload: true,
+            hold_undetermined_compliance: true,
         }
     }
 }
@@ -929,6 +936,17 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
             x[g] = x0[g];
             fit = solver::solve(&problem, &free, &x, &opts.solver)?;
         }
+    }
+    if opts.hold_undetermined_compliance {
+        let f = hold::Fitted {
+            problem: &problem,
+            x0: &x0,
+            rows: &rows,
+            pose_of_obs: &pose_of_obs,
+            n_poses,
+            solver: &opts.solver,
+        };
+        hold::hold_undetermined_compliances(&f, &mut fit, &mut free, &mut status);
     }
     let mut quality = Quality::of(&fit, problem.obs.len(), &rows);
     quality.make_robust(&fit, &rows, &pose_of_obs, n_poses);
