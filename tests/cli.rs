@@ -475,14 +475,14 @@ fn diagnose_names_accepts_and_refuses() {
     let (ok, _, err) = robocal(&["diagnose", &p("none-p.json"), &p("none.json"), "--validation", "nope"]);
     assert!(!ok && err.contains("nope"), "{err}");
     let out = Command::new(env!("CARGO_BIN_EXE_robocal"))
-        .args(["bench-diagnosis", "--seeds", "1", "--cases", "coupling 5→6 (no logs)", "--markdown"])
+        .args(["bench-diagnosis", "--seeds", "1", "--cases", "cyclic j5 h1 (no logs)", "--markdown"])
         .output()
         .expect("runs");
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let out = String::from_utf8(out.stdout).unwrap();
-    // One case row, its confusion row (named: coupling), and the summary table.
-    assert!(out.contains("| coupling 5→6 (no logs) | `coupling"), "{out}");
-    assert!(out.contains("| coupling 5→6 (no logs) | 1 |"), "{out}");
+    // One case row, its confusion row (named: cyclic), and the summary table.
+    assert!(out.contains("| cyclic j5 h1 (no logs) | `cyclic"), "{out}");
+    assert!(out.contains("| cyclic j5 h1 (no logs) | 1 |"), "{out}");
     assert!(out.contains("| top-1 naming, separable effects (right kind, joint, harmonic) | 1/1 |"), "{out}");
     let (ok, _, err) = robocal(&["bench-diagnosis", "--cases", "no such case"]);
     assert!(!ok && err.contains("--cases"), "{err}");

@@ -559,13 +559,15 @@ fn start_options(input: &Input<'_>, opts: &DiagnoseOptions, sessions: Vec<String
 /// Identification options whose fits are never refused for their residual: the diagnosis studies
 /// models that miss (a withheld effect, a nominal start) and poses they miss by much; that is its
 /// evidence, not an error (issue 13's refusals are for calibrations). The set's own decision
-/// about an undeclared payload (identified: a term of its model; held: left out) is every model's
-/// here; the diagnosis does not decide it again.
+/// about an undeclared payload (identified: a term of its model; held: left out) and about each
+/// compliance (held when its data did not determine it) is every model's here; the diagnosis
+/// does not decide them again.
 fn unrefused() -> IdentifyOptions {
     IdentifyOptions {
         residual_ratio_limit: f64::INFINITY,
         outlier_factor: f64::INFINITY,
         identify_payload: false,
+        hold_undetermined_compliance: false,
         ..IdentifyOptions::default()
     }
 }

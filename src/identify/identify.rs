@@ -127,6 +127,17 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
             fit = solver::solve(&problem, &free, &x, &opts.solver)?;
         }
     }
+    if opts.hold_undetermined_compliance {
+        let f = super::hold::Fitted {
+            problem: &problem,
+            x0: &x0,
+            rows: &rows,
+            pose_of_obs: &pose_of_obs,
+            n_poses,
+            solver: &opts.solver,
+        };
+        super::hold::hold_undetermined_compliances(&f, &mut fit, &mut free, &mut status);
+    }
     let mut quality = Quality::of(&fit, problem.obs.len(), &rows);
     quality.make_robust(&fit, &rows, &pose_of_obs, n_poses);
     if opts.noise.is_some() {

@@ -14,6 +14,7 @@ pub mod solver;
 pub mod study;
 
 mod error;
+mod hold;
 #[allow(clippy::module_inception)] // the fit itself: `identify::identify`, as issue 28 names the parts
 mod identify;
 mod options;
@@ -21,6 +22,7 @@ mod pool;
 mod prepare;
 
 pub use error::{IdentifyError, Worst};
+pub use hold::COMPLIANCE_SIGNIFICANCE;
 pub use identifiability::Status;
 pub use identify::{Identification, PAYLOAD_SIGNIFICANCE, ToolResult, WORST_REPORTED, identify};
 pub use noise::NoiseModel;

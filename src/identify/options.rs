@@ -171,6 +171,10 @@ pub struct IdentifyOptions {
     /// compliances with 0 kg. A compliance is a deflection per N·m of holding torque: with the
     /// payload's torque left out, the wrist's compliances have almost nothing to act on.
     pub identify_payload: bool,
+    /// Hold every compliance whose fitted change is below [`super::COMPLIANCE_SIGNIFICANCE`] of
+    /// its own standard deviation at its start value, and say so in its status (`hold.rs`: an
+    /// undetermined compliance extrapolates to poses of larger torque by millimetres).
+    pub hold_undetermined_compliance: bool,
 }
 
 /// The default of [`IdentifyOptions::residual_ratio_limit`]: a fit is refused when its residual RMS
@@ -233,6 +237,7 @@ impl Default for IdentifyOptions {
             residual_ratio_limit: RESIDUAL_RATIO_LIMIT,
             outlier_factor: OUTLIER_FACTOR,
             identify_payload: true,
+            hold_undetermined_compliance: true,
         }
     }
 }
