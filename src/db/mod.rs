@@ -14,6 +14,7 @@ pub mod iso9283;
 pub mod jobs;
 pub mod records;
 pub mod tokens;
+pub mod transfer;
 
 use std::path::Path;
 use std::str::FromStr;
