@@ -714,7 +714,7 @@ fn sqlite_select(p: &TablePlan, after: bool) -> String {
         let marks: Vec<String> = (1..=key.len()).map(|i| format!("?{i}")).collect();
         let _ = write!(sql, " WHERE ({}) > ({})", key.join(", "), marks.join(", "));
     }
-    let _ = write!(sql, " ORDER BY {} LIMIT ?{}", key.join(", "), key.len() + 1);
+    let _ = write!(sql, " ORDER BY {} LIMIT ?{}", key.join(", "), if after { key.len() + 1 } else { 1 });
     sql
 }
 
@@ -739,7 +739,7 @@ fn pg_select(p: &TablePlan, after: bool, collate_c: bool) -> String {
         let marks: Vec<String> = (1..=key.len()).map(|i| format!("${i}")).collect();
         let _ = write!(sql, " WHERE ({}) > ({})", key.join(", "), marks.join(", "));
     }
-    let _ = write!(sql, " ORDER BY {} LIMIT ${}", key.join(", "), key.len() + 1);
+    let _ = write!(sql, " ORDER BY {} LIMIT ${}", key.join(", "), if after { key.len() + 1 } else { 1 });
     sql
 }
 
