@@ -271,8 +271,9 @@ pub struct ForeignKey {
 
 /// The tables in an order where every parent comes before its children (alphabetical among
 /// equals), and the (table, column) pairs deferred to break cycles: when no table is left whose
-/// parents are all placed, a foreign key among the remaining tables whose columns are all nullable
-/// is deferred (the first such by child and parent name). A cycle through NOT NULL columns only
+/// parents are all placed, a foreign key on a cycle among the remaining tables whose columns are
+/// all nullable is deferred (one whose table then waits on nothing else first, then by child and
+/// parent name). A cycle through NOT NULL columns only
 /// cannot be copied row by row and is an error.
 pub fn order_tables(
     tables: &BTreeMap<String, Vec<Column>>,
@@ -292,10 +293,31 @@ pub fn order_tables(
         let nullable = |f: &ForeignKey| {
             f.columns.iter().all(|c| tables[&f.child].iter().any(|col| &col.name == c && col.nullable))
         };
+        // Whether `from` depends, through the remaining tables' keys, on `to`.
+        let depends = |from: &String, to: &String| {
+            let (mut seen, mut stack) = (BTreeSet::new(), vec![from]);
+            while let Some(t) = stack.pop() {
+                if t == to {
+                    return true;
+                }
+                if seen.insert(t) {
+                    stack.extend(edges.iter().filter(|f| &f.child == t && left.contains(&f.parent)).map(|f| &f.parent));
+                }
+            }
+            false
+        };
+        // A key on a cycle: its parent depends on its child.
         let mut candidates: Vec<usize> = (0..edges.len())
-            .filter(|&i| left.contains(&edges[i].child) && left.contains(&edges[i].parent) && nullable(edges[i]))
+            .filter(|&i| {
+                left.contains(&edges[i].child)
+                    && left.contains(&edges[i].parent)
+                    && nullable(edges[i])
+                    && depends(&edges[i].parent, &edges[i].child)
+            })
             .collect();
-        candidates.sort_by(|&a, &b| (&edges[a].child, &edges[a].parent).cmp(&(&edges[b].child, &edges[b].parent)));
+        // Fewest deferrals: first a key whose child then waits on nothing else.
+        let waits = |t: &String| edges.iter().filter(|f| &f.child == t && left.contains(&f.parent)).count();
+        candidates.sort_by_key(|&i| (waits(&edges[i].child), &edges[i].child, &edges[i].parent));
         let Some(&i) = candidates.first() else {
             let names: Vec<&str> = left.iter().map(|s| s.as_str()).collect();
             return Err(format!("a foreign-key cycle through NOT NULL columns among {}", names.join(", ")));
