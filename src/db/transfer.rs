@@ -269,16 +269,16 @@ pub struct ForeignKey {
     pub parent: String,
 }
 
+/// The tables in copy order, and the (table, column) pairs written NULL first.
+pub type TableOrder = (Vec<String>, BTreeSet<(String, String)>);
+
 /// The tables in an order where every parent comes before its children (alphabetical among
 /// equals), and the (table, column) pairs deferred to break cycles: when no table is left whose
 /// parents are all placed, a foreign key on a cycle among the remaining tables whose columns are
 /// all nullable is deferred (one whose table then waits on nothing else first, then by child and
 /// parent name). A cycle through NOT NULL columns only
 /// cannot be copied row by row and is an error.
-pub fn order_tables(
-    tables: &BTreeMap<String, Vec<Column>>,
-    fks: &[ForeignKey],
-) -> Result<(Vec<String>, BTreeSet<(String, String)>), String> {
+pub fn order_tables(tables: &BTreeMap<String, Vec<Column>>, fks: &[ForeignKey]) -> Result<TableOrder, String> {
     let mut edges: Vec<&ForeignKey> = fks.iter().filter(|f| tables.contains_key(&f.parent)).collect();
     let mut placed: Vec<String> = Vec::new();
     let mut deferred = BTreeSet::new();
