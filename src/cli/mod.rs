@@ -8,6 +8,7 @@ mod export;
 mod filter;
 mod iso9283;
 mod kinematics;
+mod migrate;
 mod plan;
 mod progress;
 mod reports;
@@ -31,6 +32,7 @@ pub use export::{DriftArgs, ExportArgs};
 pub use filter::FilterArgs;
 pub use iso9283::Iso9283Command;
 pub use kinematics::{CompensateArgs, FkArgs, IkArgs, ModelArgs, NominalArgs, ToolArgs};
+pub use migrate::MigrateArgs;
 pub use service::{DemoArgs, OpenapiArgs, ServeArgs, TokenCommand};
 
 #[derive(Parser, Debug)]
@@ -104,6 +106,9 @@ pub enum Command {
     /// calibrated (predicted); pose-assignment files.
     #[command(subcommand)]
     Iso9283(Iso9283Command),
+    /// Copy a SQLite database into an empty PostgreSQL one (every row of every table), verify
+    /// counts and checksums per table; resumes an interrupted run of the same command.
+    Migrate(MigrateArgs),
 }
 
 /// A command-line failure: the argument (or file and field) and the reason — input refused, exit
@@ -163,6 +168,7 @@ pub fn run(cli: Cli) -> Result<String, CliError> {
         Command::Openapi(a) => write_or_return(&a.out, crate::http::openapi_json().trim_end().to_string()),
         Command::Demo(a) => service::demo(a),
         Command::Iso9283(c) => iso9283::run(c),
+        Command::Migrate(a) => migrate::migrate(a),
     }
 }
 

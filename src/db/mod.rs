@@ -15,6 +15,7 @@ pub mod jobs;
 pub mod paging;
 pub mod records;
 pub mod tokens;
+pub mod transfer;
 
 use std::path::Path;
 use std::str::FromStr;
