@@ -18,10 +18,12 @@ pub enum IdentifyError {
     StartRobot { set: String, set_dof: usize, cell: String, cell_dof: usize },
     #[error("{rows} residual rows cannot determine {params} parameters")]
     Underdetermined { rows: usize, params: usize },
-    #[error("rank-deficient fit: these data do not separate {combination}")]
+    #[error(
+        "rank-deficient fit: these data do not separate {combination}: hold one of them at a known value, or measure poses that separate them"
+    )]
     RankDeficient { combination: String },
     #[error(
-        "ill-conditioned fit: κ of the scaled Jacobian = {kappa:.1} exceeds the limit {limit:.0}; the weakest combination is {combination}"
+        "ill-conditioned fit: κ of the scaled Jacobian = {kappa:.1} exceeds the limit {limit:.0}; the weakest combination is {combination}: hold one of its parameters at a known value (the one known best, e.g. a TCP measured apart; a parameter equivalent to it may then take its place and need holding too), or measure poses that change that combination"
     )]
     IllConditioned { kappa: f64, limit: f64, combination: String },
     #[error("{0}")]
