@@ -98,9 +98,13 @@ pub async fn serve(
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> Result<(), ServeError> {
     // Before anything touches the database: a second server on it is refused here.
-    let mut lock = DbLock::acquire(&opts.db)?;
-    let pool =
-        db::connect(&opts.db).await.map_err(|source| ServeError::Db { path: opts.db.display().to_string(), source })?;
+    // (SQLite only: several servers may share a PostgreSQL database, issue 27.)
+    let target = db::Target::parse(&opts.db);
+    let mut lock = match &target {
+        db::Target::Sqlite(path) => DbLock::acquire(path)?,
+        db::Target::Postgres(_) => None,
+    };
+    let pool = db::open(&opts.db).await.map_err(|source| ServeError::Db { path: target.display(), source })?;
     let require_auth = opts.require_auth || !opts.bind.ip().is_loopback();
     if require_auth {
         let live =
@@ -108,7 +112,7 @@ pub async fn serve(
         if live == 0 {
             tracing::warn!(
                 "bearer tokens are required but none exists: create one with `robocal token create --db {} --name admin --scopes admin`",
-                opts.db.display()
+                target.display()
             );
         }
     }
@@ -126,14 +130,14 @@ pub async fn serve(
     let state = AppState::new(pool.clone(), config);
     let workers = Workers::start(state.clone(), opts.workers, opts.grace)
         .await
-        .map_err(|source| ServeError::Db { path: opts.db.display().to_string(), source })?;
+        .map_err(|source| ServeError::Db { path: target.display(), source })?;
     if let Some(lock) = lock.as_mut()
         && let Err(e) = lock.listening(addr)
     {
         tracing::warn!(lock_file = %lock.path().display(), error = %e, "cannot record the address in the lock file");
     }
     tracing::info!(
-        %addr, db = %opts.db.display(), require_auth, workers = opts.workers, cors = %opts.config.cors, "robocal serving"
+        %addr, db = %target.display(), require_auth, workers = opts.workers, cors = %opts.config.cors, "robocal serving"
     );
     if let Some(tx) = ready {
         let _ = tx.send(addr);

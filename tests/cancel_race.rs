@@ -5,6 +5,7 @@
 //! lost. The phases are driven one at a time through `robocal::jobs::phases` (the functions the
 //! workers run back to back), and then with real workers and randomized cancel times.
 
+#[path = "common/mod.rs"]
 mod common;
 
 use std::time::Duration;
@@ -40,7 +41,7 @@ async fn submit(app: &TestApp, path: &str) -> String {
 
 /// Parameter sets stored by job `id` (read from the table, not the API).
 async fn sets_of(app: &TestApp, id: &str) -> i64 {
-    sqlx::query_scalar("SELECT COUNT(*) FROM parameter_sets WHERE job_id = ?")
+    sqlx::query_scalar("SELECT COUNT(*) FROM parameter_sets WHERE job_id = $1")
         .bind(id)
         .fetch_one(&app.state.pool)
         .await

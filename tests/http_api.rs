@@ -2,6 +2,7 @@
 //! included: 400 malformed, 404 unknown id, 409 conflict, 413 too large, 415 media type, 422
 //! invalid values — never a 500, never a partial write.
 
+#[path = "common/mod.rs"]
 mod common;
 
 use axum::http::{Method, StatusCode};
@@ -1375,7 +1376,7 @@ async fn sessions_and_artefacts_are_deleted_only_when_unused() {
     assert!(r.body["detail"].as_str().unwrap().contains(&format!("identification job {job} (queued)")), "{}", r.text);
     assert!(r.body["hint"].as_str().unwrap().contains("exclude"), "{}", r.text);
     // A parameter set made from it (its sessions name it) holds it too.
-    sqlx::query("INSERT INTO parameter_sets (id, robot_id, version, doc_json, sessions_json, created_at) VALUES ('ps', ?, 7, '{}', '[\"used\"]', 't')")
+    sqlx::query("INSERT INTO parameter_sets (id, robot_id, version, doc_json, sessions_json, created_at) VALUES ('ps', $1, 7, '{}', '[\"used\"]', 't')")
         .bind(&rid)
         .execute(&app.state.pool)
         .await
@@ -1393,7 +1394,7 @@ async fn sessions_and_artefacts_are_deleted_only_when_unused() {
     assert_problem(&app.get(&format!("/v1/sessions/{wrong}")).await, 404, None);
     assert_problem(&app.get(&format!("/v1/sessions/{wrong}/measurements")).await, 404, None);
     assert_problem(&del(&format!("/v1/sessions/{wrong}?reason=again")).await, 404, None);
-    let left: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM measurements WHERE session_id = ?")
+    let left: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM measurements WHERE session_id = $1")
         .bind(&wrong)
         .fetch_one(&app.state.pool)
         .await

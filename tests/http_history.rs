@@ -2,6 +2,7 @@
 //! filtered by date), the drift between two sets (`GET /v1/parameter-sets/{a}/drift?against=b`),
 //! and the exports (`GET …/export?format=json|csv-dh|urdf`, `POST …/export?format=rapid`).
 
+#[path = "common/mod.rs"]
 mod common;
 
 use axum::http::{Method, StatusCode, header};
@@ -44,7 +45,7 @@ async fn import(app: &TestApp, rid: &str, file: &Value) -> String {
 }
 
 async fn set_created(app: &TestApp, id: &str, at: &str) {
-    sqlx::query("UPDATE parameter_sets SET created_at = ? WHERE id = ?")
+    sqlx::query("UPDATE parameter_sets SET created_at = $1 WHERE id = $2")
         .bind(at)
         .bind(id)
         .execute(&app.state.pool)

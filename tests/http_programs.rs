@@ -2,6 +2,7 @@
 //! the same program with the same set, byte for byte (the CLI makes the same call); the set is gated
 //! as compensation is; a KRL pair as multipart/form-data; refusals name the field.
 
+#[path = "common/mod.rs"]
 mod common;
 
 use axum::http::{Method, StatusCode};

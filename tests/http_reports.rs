@@ -4,6 +4,7 @@
 //! `robocal identify|validate --report` writes from the service's exported files. JSON-only
 //! clients get 406; unknown ids 404; a token without `read` 403.
 
+#[path = "common/mod.rs"]
 mod common;
 
 use axum::http::{StatusCode, header};

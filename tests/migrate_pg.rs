@@ -21,38 +21,20 @@ use std::io::Write;
 use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
-use std::str::FromStr;
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use common::fresh_dir;
 use robocal::db;
 use robocal::db::transfer::{self, Options, TransferError};
-use sqlx::postgres::PgConnectOptions;
 use sqlx::sqlite::SqliteConnectOptions;
 use sqlx::{Column, Connection, PgConnection, Row, SqliteConnection, TypeInfo, ValueRef};
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
 const BIN: &str = env!("CARGO_BIN_EXE_robocal");
 
-/// Every table of the store (`tests/postgres_schema.rs` lists them from the catalogue too).
-const TABLES: [&str; 15] = [
-    "artefacts",
-    "audit_events",
-    "batches",
-    "diagnoses",
-    "iso9283_evaluations",
-    "jobs",
-    "measurement_exclusions",
-    "measurements",
-    "parameter_set_activations",
-    "parameter_sets",
-    "pose_plans",
-    "robots",
-    "sessions",
-    "tokens",
-    "validations",
-];
+/// Every table of the store.
+const TABLES: [&str; 15] = common::STORE_TABLES;
 
 fn server_url(test: &str) -> Option<String> {
     match std::env::var("ROBOCAL_TEST_PG") {
@@ -69,37 +51,17 @@ fn server_url(test: &str) -> Option<String> {
     }
 }
 
-/// A database of its own on the test server, empty (not migrated).
-struct PgDb {
-    admin: PgConnectOptions,
-    name: String,
-    url: String,
+/// A database of its own on the test server, empty (not migrated): `tests/common`'s, with what
+/// these tests read of it.
+use common::PgDb;
+
+trait PgDbExt {
+    async fn tables(&self) -> Vec<String>;
+    async fn counts(&self) -> BTreeMap<String, i64>;
+    async fn has_marker(&self) -> bool;
 }
 
-impl PgDb {
-    async fn create(server: &str) -> PgDb {
-        let admin = PgConnectOptions::from_str(server).unwrap_or_else(|e| panic!("ROBOCAL_TEST_PG={server}: {e}"));
-        let name = format!("robocal_mig_{}", db::new_id().replace('-', ""));
-        let mut conn = PgConnection::connect_with(&admin).await.unwrap_or_else(|e| panic!("{server}: {e}"));
-        sqlx::query(sqlx::AssertSqlSafe(format!("CREATE DATABASE {name}"))).execute(&mut conn).await.unwrap();
-        conn.close().await.unwrap();
-        let (base, query) = match server.split_once('?') {
-            Some((b, q)) => (b, format!("?{q}")),
-            None => (server, String::new()),
-        };
-        let (host, _) = base.rsplit_once('/').expect("a URL with a database");
-        let url = format!("{host}/{name}{query}");
-        PgDb { admin, name, url }
-    }
-
-    fn options(&self) -> PgConnectOptions {
-        self.admin.clone().database(&self.name)
-    }
-
-    async fn connect(&self) -> PgConnection {
-        PgConnection::connect_with(&self.options()).await.unwrap()
-    }
-
+impl PgDbExt for PgDb {
     /// The base tables of its schema.
     async fn tables(&self) -> Vec<String> {
         let mut c = self.connect().await;
@@ -130,15 +92,6 @@ impl PgDb {
 
     async fn has_marker(&self) -> bool {
         self.tables().await.iter().any(|t| t == transfer::MARKER_TABLE)
-    }
-
-    async fn drop(self) {
-        let mut conn = PgConnection::connect_with(&self.admin).await.unwrap();
-        sqlx::query(sqlx::AssertSqlSafe(format!("DROP DATABASE {} WITH (FORCE)", self.name)))
-            .execute(&mut conn)
-            .await
-            .unwrap();
-        conn.close().await.unwrap();
     }
 }
 
@@ -336,7 +289,7 @@ async fn assert_same_rows(source: &Path, target: &PgDb) -> BTreeMap<String, usiz
 async fn the_walkthrough_database_migrates_row_for_row() {
     let Some(server) = server_url("the_walkthrough_database_migrates_row_for_row") else { return };
     let source = walkthrough_db();
-    let target = PgDb::create(&server).await;
+    let target = PgDb::create(&server, "robocal_mig").await;
     let started = Instant::now();
     let out = robocal(&[
         "migrate",
@@ -387,7 +340,7 @@ async fn the_walkthrough_database_migrates_row_for_row() {
         counts.values().sum::<usize>(),
         took.as_secs_f64()
     );
-    target.drop().await;
+    drop(target);
 }
 
 /// 2. A target holding any row is refused before anything is written to it: one holding another
@@ -398,7 +351,7 @@ async fn a_non_empty_target_is_refused_and_nothing_is_written() {
     let source = walkthrough_db();
     let from = format!("sqlite:{}", source.display());
 
-    let other = PgDb::create(&server).await;
+    let other = PgDb::create(&server, "robocal_mig").await;
     let mut c = other.connect().await;
     sqlx::raw_sql("CREATE TABLE notes (x INTEGER); INSERT INTO notes VALUES (1)").execute(&mut c).await.unwrap();
     c.close().await.unwrap();
@@ -408,9 +361,9 @@ async fn a_non_empty_target_is_refused_and_nothing_is_written() {
     assert!(stderr.contains("the target database is not empty (notes: 1 row)"), "{stderr}");
     assert!(stderr.contains("nothing was written"), "{stderr}");
     assert_eq!(other.tables().await, ["notes"], "no migration, no marker, no table was written");
-    other.drop().await;
+    drop(other);
 
-    let full = PgDb::create(&server).await;
+    let full = PgDb::create(&server, "robocal_mig").await;
     let v = transfer::migrate(source, &full.options(), &Options::default(), &mut |_| {}).await.unwrap();
     assert!(v.ok(), "{}", v.table());
     let before = full.counts().await;
@@ -420,7 +373,7 @@ async fn a_non_empty_target_is_refused_and_nothing_is_written() {
     assert!(stderr.contains("the target database is not empty (") && stderr.contains("robots: 1 row,"), "{stderr}");
     assert_eq!(full.counts().await, before, "nothing written");
     assert!(!full.has_marker().await);
-    full.drop().await;
+    drop(full);
 }
 
 /// 3. A migration stopped after a few batches at a time (as a killed process stops: the batches
@@ -431,7 +384,7 @@ async fn a_non_empty_target_is_refused_and_nothing_is_written() {
 async fn an_interrupted_migration_resumes_to_the_same_result() {
     let Some(server) = server_url("an_interrupted_migration_resumes_to_the_same_result") else { return };
     let source = walkthrough_db();
-    let target = PgDb::create(&server).await;
+    let target = PgDb::create(&server, "robocal_mig").await;
     let source_counts = {
         let mut s = open_sqlite(source).await;
         let mut m = BTreeMap::new();
@@ -474,7 +427,7 @@ async fn an_interrupted_migration_resumes_to_the_same_result() {
     assert_eq!(target.counts().await, source_counts);
     assert!(!target.has_marker().await);
     assert_same_rows(source, &target).await;
-    target.drop().await;
+    drop(target);
 
     // A marker is honoured only for the same source, unchanged.
     let dir = fresh_dir("migrate-small");
@@ -484,7 +437,7 @@ async fn an_interrupted_migration_resumes_to_the_same_result() {
         db::tokens::create(&pool, "admin", &[db::tokens::Scope::Admin]).await.unwrap();
         pool.close().await;
     }
-    let target = PgDb::create(&server).await;
+    let target = PgDb::create(&server, "robocal_mig").await;
     let mut m = transfer::prepare(&a, &target.options()).await.unwrap();
     let stop = Options { batch_rows: 10, stop_after_batches: Some(0) };
     assert!(matches!(m.copy(&stop, &mut |_| {}).await, Err(TransferError::Interrupted(0))));
@@ -498,7 +451,7 @@ async fn an_interrupted_migration_resumes_to_the_same_result() {
     let e = transfer::migrate(&a, &target.options(), &Options::default(), &mut |_| {}).await.err().unwrap();
     assert!(e.to_string().contains("changed since it was started"), "{e}");
     assert_eq!(target.counts().await["tokens"], 0);
-    target.drop().await;
+    drop(target);
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -508,7 +461,7 @@ async fn an_interrupted_migration_resumes_to_the_same_result() {
 async fn a_checksum_mismatch_names_the_table() {
     let Some(server) = server_url("a_checksum_mismatch_names_the_table") else { return };
     let source = walkthrough_db();
-    let target = PgDb::create(&server).await;
+    let target = PgDb::create(&server, "robocal_mig").await;
     let mut m = transfer::prepare(source, &target.options()).await.unwrap();
     m.copy(&Options::default(), &mut |_| {}).await.unwrap();
     let mut c = target.connect().await;
@@ -539,7 +492,7 @@ async fn a_checksum_mismatch_names_the_table() {
     assert!(line.contains("MISMATCH"), "{line}");
     assert_eq!(stdout.matches("MISMATCH").count(), 1, "{stdout}");
     assert!(stderr.contains("the copy differs from the source in measurements"), "{stderr}");
-    target.drop().await;
+    drop(target);
 }
 
 /// Refusals before any server is needed: a source missing or not at the latest migration, an

@@ -4,21 +4,29 @@
 mod common;
 
 use std::path::Path;
-use std::str::FromStr;
 
 use common::fresh_dir;
 use robocal::db;
-use sqlx::SqlitePool;
-use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions};
+use robocal::db::Pool as SqlitePool;
 
 /// A database file at schema version `version` only, with foreign-key enforcement as asked.
 async fn at_version(path: &Path, version: i64, foreign_keys: bool) -> SqlitePool {
-    let opts = SqliteConnectOptions::from_str(&format!("sqlite://{}", path.display()))
-        .unwrap()
-        .create_if_missing(true)
-        .journal_mode(SqliteJournalMode::Wal)
-        .foreign_keys(foreign_keys);
-    let pool = SqlitePoolOptions::new().max_connections(1).connect_with(opts).await.unwrap();
+    // Through `Any`, as the store opens it: the pragmas on each new connection.
+    sqlx::any::install_default_drivers();
+    let pool = sqlx::any::AnyPoolOptions::new()
+        .max_connections(1)
+        .after_connect(move |conn, _| {
+            Box::pin(async move {
+                use sqlx::Executor;
+                conn.execute("PRAGMA journal_mode = WAL").await?;
+                conn.execute(if foreign_keys { "PRAGMA foreign_keys = ON" } else { "PRAGMA foreign_keys = OFF" })
+                    .await?;
+                Ok(())
+            })
+        })
+        .connect(&format!("sqlite://{}?mode=rwc", path.display()))
+        .await
+        .unwrap();
     db::MIGRATOR.run_to(version, &pool).await.unwrap();
     pool
 }
@@ -115,7 +123,7 @@ async fn a_version_1_database_migrates_keeps_its_rows_and_still_enforces_foreign
     let mut conns = Vec::new();
     for _ in 0..3 {
         let mut c = pool.acquire().await.unwrap();
-        let on: bool = sqlx::query_scalar("PRAGMA foreign_keys").fetch_one(&mut *c).await.unwrap();
+        let on = sqlx::query_scalar::<_, db::types::Flag>("PRAGMA foreign_keys").fetch_one(&mut *c).await.unwrap().0;
         assert!(on);
         conns.push(c);
     }
@@ -183,7 +191,7 @@ async fn a_database_with_dangling_references_is_not_migrated() {
 async fn the_in_memory_database_is_migrated_with_foreign_keys_on() {
     let pool = db::connect_memory().await.unwrap();
     assert_eq!(applied(&pool).await, db::MIGRATOR.iter().count() as i64);
-    let on: bool = sqlx::query_scalar("PRAGMA foreign_keys").fetch_one(&pool).await.unwrap();
+    let on = sqlx::query_scalar::<_, db::types::Flag>("PRAGMA foreign_keys").fetch_one(&pool).await.unwrap().0;
     assert!(on);
     let e = sqlx::query("INSERT INTO jobs (id, kind, robot_id, state, request_json, created_at, updated_at) VALUES ('j', 'diagnosis', 'none', 'queued', '{}', 't', 't')")
         .execute(&pool)

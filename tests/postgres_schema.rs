@@ -14,11 +14,10 @@ mod common;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::Write;
-use std::str::FromStr;
 
 use common::fresh_dir;
 use robocal::db;
-use sqlx::postgres::{PgConnectOptions, PgPoolOptions};
+use sqlx::postgres::PgPoolOptions;
 use sqlx::{Connection, PgConnection, PgPool, SqliteConnection};
 
 /// SQLite has no boolean type: these INTEGER columns hold 0/1 flags (read as `bool` by the store)
@@ -109,6 +108,11 @@ fn postgres_action(code: &str) -> String {
         other => other,
     }
     .to_string()
+}
+
+/// A plain SQLite connection to a file the store made (the catalogue's pragmas, typed).
+async fn sqlite_file(path: &std::path::Path) -> SqliteConnection {
+    SqliteConnection::connect_with(&sqlx::sqlite::SqliteConnectOptions::new().filename(path)).await.unwrap()
 }
 
 async fn describe_sqlite(conn: &mut SqliteConnection) -> Schema {
@@ -322,19 +326,17 @@ fn differences(sqlite: &Schema, postgres: &Schema) -> Vec<String> {
 /// `db::connect`.
 async fn sqlite_schema() -> Schema {
     let dir = fresh_dir("schema");
-    let pool = db::connect(&dir.join("robocal.db")).await.unwrap();
-    let mut conn = pool.acquire().await.unwrap();
+    db::connect(&dir.join("robocal.db")).await.unwrap().close().await;
+    let mut conn = sqlite_file(&dir.join("robocal.db")).await;
     let schema = describe_sqlite(&mut conn).await;
     drop(conn);
-    pool.close().await;
     let _ = std::fs::remove_dir_all(&dir);
     schema
 }
 
 /// A database of its own on the test server, migrated; `None` (said loudly) without a server.
 struct PgDatabase {
-    admin: PgConnectOptions,
-    name: String,
+    db: common::PgDb,
     pool: PgPool,
 }
 
@@ -350,24 +352,15 @@ impl PgDatabase {
             );
             return None;
         };
-        let admin = PgConnectOptions::from_str(&url).unwrap_or_else(|e| panic!("ROBOCAL_TEST_PG={url}: {e}"));
-        let name = format!("robocal_schema_{}", db::new_id().replace('-', ""));
-        let mut conn = PgConnection::connect_with(&admin).await.unwrap_or_else(|e| panic!("{url}: {e}"));
-        sqlx::query(sqlx::AssertSqlSafe(format!("CREATE DATABASE {name}"))).execute(&mut conn).await.unwrap();
-        conn.close().await.unwrap();
-        let pool = PgPoolOptions::new().max_connections(2).connect_with(admin.clone().database(&name)).await.unwrap();
+        let db = common::PgDb::create(&url, "robocal_schema").await;
+        let pool = PgPoolOptions::new().max_connections(2).connect_with(db.options()).await.unwrap();
         db::POSTGRES_MIGRATOR.run(&pool).await.unwrap();
-        Some(PgDatabase { admin, name, pool })
+        Some(PgDatabase { db, pool })
     }
 
     async fn drop(self) {
         self.pool.close().await;
-        let mut conn = PgConnection::connect_with(&self.admin).await.unwrap();
-        sqlx::query(sqlx::AssertSqlSafe(format!("DROP DATABASE {} WITH (FORCE)", self.name)))
-            .execute(&mut conn)
-            .await
-            .unwrap();
-        conn.close().await.unwrap();
+        drop(self.db);
     }
 }
 
@@ -377,26 +370,7 @@ impl PgDatabase {
 async fn the_sqlite_schema_is_read_from_its_catalogue() {
     let s = sqlite_schema().await;
     let tables: Vec<&str> = s.keys().map(String::as_str).collect();
-    assert_eq!(
-        tables,
-        [
-            "artefacts",
-            "audit_events",
-            "batches",
-            "diagnoses",
-            "iso9283_evaluations",
-            "jobs",
-            "measurement_exclusions",
-            "measurements",
-            "parameter_set_activations",
-            "parameter_sets",
-            "pose_plans",
-            "robots",
-            "sessions",
-            "tokens",
-            "validations"
-        ]
-    );
+    assert_eq!(tables, common::STORE_TABLES);
     let m = &s["measurements"];
     assert_eq!(m.primary_key, ["session_id", "seq"]);
     assert_eq!(m.columns[1], Column { name: "seq".into(), ty: Ok(Ty::Integer), not_null: true }, "{:?}", m.columns);
@@ -519,8 +493,8 @@ async fn an_altered_schema_is_told_apart() {
 
     // The SQLite side altered (DDL is transactional there too).
     let dir = fresh_dir("schema-altered");
-    let pool = db::connect(&dir.join("robocal.db")).await.unwrap();
-    let mut conn = pool.acquire().await.unwrap();
+    db::connect(&dir.join("robocal.db")).await.unwrap().close().await;
+    let mut conn = sqlite_file(&dir.join("robocal.db")).await;
     for (sql, want) in [
         ("CREATE INDEX robots_by_time ON robots (created_at)", "table robots: index only on SQLite"),
         ("ALTER TABLE artefacts ADD COLUMN weight_kg REAL", "table artefacts: columns differ"),
@@ -532,7 +506,6 @@ async fn an_altered_schema_is_told_apart() {
         assert!(!diffs.is_empty() && diffs.iter().all(|d| d.starts_with(want)), "{sql}:\n{}", diffs.join("\n"));
     }
     drop(conn);
-    pool.close().await;
     let _ = std::fs::remove_dir_all(&dir);
     pg.drop().await;
 }

@@ -21,8 +21,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
+use crate::db::Pool;
 use quick_cache::sync::Cache;
-use sqlx::SqlitePool;
 
 use super::AppError;
 use crate::db::records::{self, ParameterSetRow, RobotRow};
@@ -71,7 +71,7 @@ impl Caches {
     }
 
     /// The live token with this secret (`None`: unknown or revoked).
-    pub async fn token(&self, pool: &SqlitePool, secret: &str) -> Result<Option<Arc<TokenRow>>, sqlx::Error> {
+    pub async fn token(&self, pool: &Pool, secret: &str) -> Result<Option<Arc<TokenRow>>, sqlx::Error> {
         let hash = tokens::hash(secret);
         if let Some((t, checked)) = self.tokens.get(&hash)
             && checked.elapsed() < TOKEN_RECHECK
@@ -98,7 +98,7 @@ impl Caches {
     }
 
     /// The robot row, from the cache or the database.
-    pub async fn robot(&self, pool: &SqlitePool, id: &str) -> Result<Option<Arc<RobotRow>>, sqlx::Error> {
+    pub async fn robot(&self, pool: &Pool, id: &str) -> Result<Option<Arc<RobotRow>>, sqlx::Error> {
         if let Some(r) = self.robots.get(id) {
             return Ok(Some(r));
         }
@@ -118,7 +118,7 @@ impl Caches {
     }
 
     /// The parameter set, compiled, from the cache or the database (`None`: no such set).
-    pub async fn parameter_set(&self, pool: &SqlitePool, id: &str) -> Result<Option<Arc<CompiledSet>>, AppError> {
+    pub async fn parameter_set(&self, pool: &Pool, id: &str) -> Result<Option<Arc<CompiledSet>>, AppError> {
         if let Some(s) = self.sets.get(id) {
             return Ok(Some(s));
         }

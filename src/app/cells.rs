@@ -8,8 +8,8 @@
 //! worst residuals, outliers, validation residuals) names measurements by their stored index,
 //! the one the API lists and excludes by.
 
+use crate::db::Pool;
 use serde_json::Value;
-use sqlx::SqlitePool;
 
 use super::AppError;
 use crate::db::records::{self, RobotRow, SessionRow};
@@ -19,7 +19,7 @@ use crate::domain::cell::{ArtefactSpec, CellFile, MeasurementSpec, PoseXyzAbc, P
 /// The robot's sessions named (by id or name) in a request field; 422 naming the item when one
 /// is unknown or repeated.
 pub async fn resolve_sessions(
-    pool: &SqlitePool,
+    pool: &Pool,
     robot_id: &str,
     names: &[String],
     field: &str,
@@ -43,7 +43,7 @@ pub async fn resolve_sessions(
 /// The robot's sessions named in a request field (see [`resolve_sessions`]), each of `purpose`
 /// and holding measurements; 422 naming the item otherwise.
 pub async fn checked_sessions(
-    pool: &SqlitePool,
+    pool: &Pool,
     robot_id: &str,
     names: &[String],
     purpose: PurposeSpec,
@@ -77,7 +77,7 @@ pub async fn checked_sessions(
 /// Every session of the robot with `purpose` that holds measurements not excluded, in creation
 /// order.
 pub async fn sessions_with_purpose(
-    pool: &SqlitePool,
+    pool: &Pool,
     robot_id: &str,
     purpose: PurposeSpec,
 ) -> Result<Vec<SessionRow>, AppError> {
@@ -117,7 +117,7 @@ impl StoredIndices {
 
 /// Every stored measurement of a session, in order, and whether it is excluded.
 pub async fn session_measurements(
-    pool: &SqlitePool,
+    pool: &Pool,
     session_id: &str,
 ) -> Result<Vec<(usize, MeasurementSpec, bool)>, AppError> {
     let rows = records::measurements_with_state(pool, session_id).await?;
@@ -142,14 +142,14 @@ pub struct StoredCell {
 /// The cell file of `sessions` of `robot`, in the given order, without the excluded
 /// measurements: what the jobs identify, validate and diagnose from. Sessions that use an
 /// artefact must all use the same one (a cell has one world frame).
-pub async fn cell_file(pool: &SqlitePool, robot: &RobotRow, sessions: &[SessionRow]) -> Result<CellFile, AppError> {
+pub async fn cell_file(pool: &Pool, robot: &RobotRow, sessions: &[SessionRow]) -> Result<CellFile, AppError> {
     Ok(stored_cell(pool, robot, sessions, false).await?.file)
 }
 
 /// As [`cell_file`], with the stored index of every measurement; `include_excluded` keeps the
 /// excluded measurements in (the store's whole content).
 pub async fn stored_cell(
-    pool: &SqlitePool,
+    pool: &Pool,
     robot: &RobotRow,
     sessions: &[SessionRow],
     include_excluded: bool,
@@ -218,7 +218,7 @@ pub async fn stored_cell(
 /// The artefact the robot was calibrated on: the one its identification sessions use, when they
 /// all use the same one. A validation on sessions without an artefact (a laser tracker's) places
 /// its calibration zone (the ball triangle's centroid) with it, as a cell file does.
-pub async fn calibration_artefact(pool: &SqlitePool, robot_id: &str) -> Result<Option<ArtefactSpec>, AppError> {
+pub async fn calibration_artefact(pool: &Pool, robot_id: &str) -> Result<Option<ArtefactSpec>, AppError> {
     let sessions = sessions_with_purpose(pool, robot_id, PurposeSpec::Identification).await?;
     let mut ids: Vec<&str> = sessions.iter().filter_map(|s| s.artefact_id.as_deref()).collect();
     ids.sort_unstable();

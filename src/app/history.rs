@@ -4,9 +4,9 @@
 //! active. The JSON route (`GET /v1/robots/{id}/history`) and any page plotting it call
 //! [`history`].
 
+use crate::db::Pool;
 use serde::Serialize;
 use serde_json::Value;
-use sqlx::SqlitePool;
 use utoipa::ToSchema;
 
 use super::AppError;
@@ -124,7 +124,7 @@ fn fit_sessions(doc_json: &str, listed: &[String]) -> Result<Vec<String>, serde_
 }
 
 /// The history of robot `robot_id` (which must exist: the caller has found it) in `filter`.
-pub async fn history(pool: &SqlitePool, robot_id: &str, filter: &HistoryFilter) -> Result<HistoryPage, AppError> {
+pub async fn history(pool: &Pool, robot_id: &str, filter: &HistoryFilter) -> Result<HistoryPage, AppError> {
     let robot = records::robot(pool, robot_id)
         .await?
         .ok_or_else(|| AppError::invalid("robot_id", format!("no robot '{robot_id}'")))?;

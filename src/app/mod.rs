@@ -12,7 +12,7 @@ pub mod robots;
 use std::sync::Arc;
 use std::time::Duration;
 
-use sqlx::SqlitePool;
+use crate::db::Pool;
 use tokio::sync::Notify;
 
 pub use crate::domain::origin::CorsOrigins;
@@ -56,7 +56,7 @@ impl Default for ServiceConfig {
 /// What every handler shares (and the job workers take their context from).
 #[derive(Clone)]
 pub struct AppState {
-    pub pool: SqlitePool,
+    pub pool: Pool,
     pub config: Arc<ServiceConfig>,
     pub metrics: Arc<Metrics>,
     /// Wakes the job workers when a job is queued.
@@ -69,7 +69,7 @@ pub struct AppState {
 }
 
 impl AppState {
-    pub fn new(pool: SqlitePool, config: ServiceConfig) -> Self {
+    pub fn new(pool: Pool, config: ServiceConfig) -> Self {
         AppState {
             pool,
             config: Arc::new(config),

@@ -11,7 +11,8 @@ use crate::domain::origin::CorsOrigins;
 
 #[derive(Args, Debug)]
 pub struct ServeArgs {
-    /// SQLite database file (created and migrated on first start).
+    /// SQLite database file or `sqlite:` URL (created and migrated on first start), or a
+    /// `postgres://user@host/db` URL (migrated on start; its collation must be C).
     #[arg(long, env = "ROBOCAL_DB", default_value = "robocal.db")]
     pub db: PathBuf,
     /// Address to listen on. Any non-loopback address requires bearer tokens.
@@ -199,7 +200,7 @@ pub(super) fn token(t: TokenCommand) -> Result<String, CliError> {
     let rt = runtime()?;
     rt.block_on(async {
         let open = |TokenDb { db }: TokenDb| async move {
-            crate::db::connect(&db).await.map_err(|e| CliError::msg(format!("{}: {e}", db.display())))
+            crate::db::open(&db).await.map_err(|e| CliError::msg(format!("{}: {e}", crate::db::Target::parse(&db).display())))
         };
         match t {
             TokenCommand::Create { db, name, scopes } => {

@@ -2,8 +2,8 @@
 //! timeline, parameter-set activations and archiving, and what a session or an artefact is still
 //! referenced by before it may be deleted.
 
-use sqlx::SqlitePool;
-use sqlx::sqlite::SqliteExecutor;
+use crate::db::AnyExecutor;
+use crate::db::{Backend, Pool};
 
 use super::paging::{self, Page};
 use super::records::{ArtefactRow, SessionRow};
@@ -24,11 +24,11 @@ pub struct ExclusionRow {
 
 /// The measurement's open exclusion, if it is excluded.
 pub async fn open_exclusion(
-    db: impl SqliteExecutor<'_>,
+    db: impl AnyExecutor<'_>,
     session_id: &str,
     seq: i64,
 ) -> Result<Option<ExclusionRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM measurement_exclusions WHERE session_id = ? AND seq = ? AND restored_at IS NULL")
+    sqlx::query_as("SELECT * FROM measurement_exclusions WHERE session_id = $1 AND seq = $2 AND restored_at IS NULL")
         .bind(session_id)
         .bind(seq)
         .fetch_optional(db)
@@ -37,11 +37,11 @@ pub async fn open_exclusion(
 
 /// Every exclusion a measurement had, oldest first.
 pub async fn exclusion_history(
-    db: impl SqliteExecutor<'_>,
+    db: impl AnyExecutor<'_>,
     session_id: &str,
     seq: i64,
 ) -> Result<Vec<ExclusionRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM measurement_exclusions WHERE session_id = ? AND seq = ? ORDER BY excluded_at, id")
+    sqlx::query_as("SELECT * FROM measurement_exclusions WHERE session_id = $1 AND seq = $2 ORDER BY excluded_at, id")
         .bind(session_id)
         .bind(seq)
         .fetch_all(db)
@@ -50,13 +50,13 @@ pub async fn exclusion_history(
 
 /// The open exclusions of a session's measurements `first..first + count`, by index.
 pub async fn open_exclusions(
-    db: impl SqliteExecutor<'_>,
+    db: impl AnyExecutor<'_>,
     session_id: &str,
     first: i64,
     count: i64,
 ) -> Result<Vec<ExclusionRow>, sqlx::Error> {
     sqlx::query_as(
-        "SELECT * FROM measurement_exclusions WHERE session_id = ? AND seq >= ? AND seq < ? AND restored_at IS NULL \
+        "SELECT * FROM measurement_exclusions WHERE session_id = $1 AND seq >= $2 AND seq < $3 AND restored_at IS NULL \
          ORDER BY seq",
     )
     .bind(session_id)
@@ -66,9 +66,9 @@ pub async fn open_exclusions(
     .await
 }
 
-pub async fn insert_exclusion(db: impl SqliteExecutor<'_>, e: &ExclusionRow) -> Result<(), sqlx::Error> {
+pub async fn insert_exclusion(db: impl AnyExecutor<'_>, e: &ExclusionRow) -> Result<(), sqlx::Error> {
     sqlx::query(
-        "INSERT INTO measurement_exclusions (id, session_id, seq, reason, excluded_by, excluded_at) VALUES (?, ?, ?, ?, ?, ?)",
+        "INSERT INTO measurement_exclusions (id, session_id, seq, reason, excluded_by, excluded_at) VALUES ($1, $2, $3, $4, $5, $6)",
     )
     .bind(&e.id)
     .bind(&e.session_id)
@@ -83,15 +83,15 @@ pub async fn insert_exclusion(db: impl SqliteExecutor<'_>, e: &ExclusionRow) -> 
 
 /// Close an open exclusion; `false` when it is no longer open.
 pub async fn close_exclusion(
-    db: impl SqliteExecutor<'_>,
+    db: impl AnyExecutor<'_>,
     id: &str,
     reason: &str,
     by: Option<&str>,
     at: &str,
 ) -> Result<bool, sqlx::Error> {
     let r = sqlx::query(
-        "UPDATE measurement_exclusions SET restore_reason = ?, restored_by = ?, restored_at = ? \
-         WHERE id = ? AND restored_at IS NULL",
+        "UPDATE measurement_exclusions SET restore_reason = $1, restored_by = $2, restored_at = $3 \
+         WHERE id = $4 AND restored_at IS NULL",
     )
     .bind(reason)
     .bind(by)
@@ -117,10 +117,10 @@ pub struct AuditRow {
     pub detail_json: String,
 }
 
-pub async fn insert_audit(db: impl SqliteExecutor<'_>, a: &AuditRow) -> Result<(), sqlx::Error> {
+pub async fn insert_audit(db: impl AnyExecutor<'_>, a: &AuditRow) -> Result<(), sqlx::Error> {
     sqlx::query(
         "INSERT INTO audit_events (id, at, actor, action, robot_id, subject_id, reason, detail_json) \
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+         VALUES ($1, $2, $3, $4, $5, $6, $7, $8)",
     )
     .bind(&a.id)
     .bind(&a.at)
@@ -138,7 +138,7 @@ pub async fn insert_audit(db: impl SqliteExecutor<'_>, a: &AuditRow) -> Result<(
 /// Audit events `offset..offset + limit`, newest first, optionally of one robot and/or about one
 /// subject.
 pub async fn audit_events(
-    db: &SqlitePool,
+    db: &Pool,
     robot_id: Option<&str>,
     subject_id: Option<&str>,
     offset: i64,
@@ -146,8 +146,8 @@ pub async fn audit_events(
 ) -> Result<Page<AuditRow>, sqlx::Error> {
     let query = sqlx::query_as(
         "SELECT *, COUNT(*) OVER () AS total_rows FROM audit_events \
-         WHERE (?1 IS NULL OR robot_id = ?1) AND (?2 IS NULL OR subject_id = ?2) \
-         ORDER BY at DESC, id DESC LIMIT ?3 OFFSET ?4",
+         WHERE ($1 IS NULL OR robot_id = $1) AND ($2 IS NULL OR subject_id = $2) \
+         ORDER BY at DESC, id DESC LIMIT $3 OFFSET $4",
     )
     .bind(robot_id)
     .bind(subject_id);
@@ -155,12 +155,12 @@ pub async fn audit_events(
 }
 
 pub async fn audit_count(
-    db: impl SqliteExecutor<'_>,
+    db: impl AnyExecutor<'_>,
     robot_id: Option<&str>,
     subject_id: Option<&str>,
 ) -> Result<i64, sqlx::Error> {
     sqlx::query_scalar(
-        "SELECT COUNT(*) FROM audit_events WHERE (?1 IS NULL OR robot_id = ?1) AND (?2 IS NULL OR subject_id = ?2)",
+        "SELECT COUNT(*) FROM audit_events WHERE ($1 IS NULL OR robot_id = $1) AND ($2 IS NULL OR subject_id = $2)",
     )
     .bind(robot_id)
     .bind(subject_id)
@@ -183,7 +183,7 @@ pub struct ActivationRow {
 /// Make `set_id` the robot's active set and record the activation (call inside a transaction
 /// when it must go with other writes). `false` when the robot does not exist.
 pub async fn activate(
-    tx: &mut sqlx::SqliteConnection,
+    tx: &mut crate::db::Conn,
     robot_id: &str,
     set_id: &str,
     by: Option<&str>,
@@ -194,7 +194,7 @@ pub async fn activate(
     }
     sqlx::query(
         "INSERT INTO parameter_set_activations (id, robot_id, parameter_set_id, activated_at, activated_by, job_id) \
-         VALUES (?, ?, ?, ?, ?, ?)",
+         VALUES ($1, $2, $3, $4, $5, $6)",
     )
     .bind(super::new_id())
     .bind(robot_id)
@@ -209,30 +209,30 @@ pub async fn activate(
 
 /// A robot's activations `offset..offset + limit`, newest first (those of unknown time last).
 pub async fn activations(
-    db: &SqlitePool,
+    db: &Pool,
     robot_id: &str,
     offset: i64,
     limit: i64,
 ) -> Result<Page<ActivationRow>, sqlx::Error> {
     let query = sqlx::query_as(
-        "SELECT *, COUNT(*) OVER () AS total_rows FROM parameter_set_activations WHERE robot_id = ? \
-         ORDER BY COALESCE(activated_at, '') DESC, id DESC LIMIT ? OFFSET ?",
+        "SELECT *, COUNT(*) OVER () AS total_rows FROM parameter_set_activations WHERE robot_id = $1 \
+         ORDER BY COALESCE(activated_at, '') DESC, id DESC LIMIT $2 OFFSET $3",
     )
     .bind(robot_id);
     paging::fetch(db, query, offset, limit, activation_count(db, robot_id)).await
 }
 
-pub async fn activation_count(db: impl SqliteExecutor<'_>, robot_id: &str) -> Result<i64, sqlx::Error> {
-    sqlx::query_scalar("SELECT COUNT(*) FROM parameter_set_activations WHERE robot_id = ?")
+pub async fn activation_count(db: impl AnyExecutor<'_>, robot_id: &str) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM parameter_set_activations WHERE robot_id = $1")
         .bind(robot_id)
         .fetch_one(db)
         .await
 }
 
 /// A parameter set's activations, oldest first (those of unknown time first).
-pub async fn activations_of_set(db: impl SqliteExecutor<'_>, set_id: &str) -> Result<Vec<ActivationRow>, sqlx::Error> {
+pub async fn activations_of_set(db: impl AnyExecutor<'_>, set_id: &str) -> Result<Vec<ActivationRow>, sqlx::Error> {
     sqlx::query_as(
-        "SELECT * FROM parameter_set_activations WHERE parameter_set_id = ? ORDER BY COALESCE(activated_at, ''), id",
+        "SELECT * FROM parameter_set_activations WHERE parameter_set_id = $1 ORDER BY COALESCE(activated_at, ''), id",
     )
     .bind(set_id)
     .fetch_all(db)
@@ -241,7 +241,7 @@ pub async fn activations_of_set(db: impl SqliteExecutor<'_>, set_id: &str) -> Re
 
 /// Archive (`Some((at, by, reason))`) or unarchive (`None`) a parameter set.
 pub async fn set_archived(
-    db: impl SqliteExecutor<'_>,
+    db: impl AnyExecutor<'_>,
     set_id: &str,
     archived: Option<(&str, Option<&str>, &str)>,
 ) -> Result<bool, sqlx::Error> {
@@ -249,58 +249,94 @@ pub async fn set_archived(
         Some((at, by, reason)) => (Some(at), by, Some(reason)),
         None => (None, None, None),
     };
-    let r = sqlx::query("UPDATE parameter_sets SET archived_at = ?, archived_by = ?, archive_reason = ? WHERE id = ?")
-        .bind(at)
-        .bind(by)
-        .bind(reason)
-        .bind(set_id)
-        .execute(db)
-        .await?;
+    let r =
+        sqlx::query("UPDATE parameter_sets SET archived_at = $1, archived_by = $2, archive_reason = $3 WHERE id = $4")
+            .bind(at)
+            .bind(by)
+            .bind(reason)
+            .bind(set_id)
+            .execute(db)
+            .await?;
     Ok(r.rows_affected() == 1)
+}
+
+/// SQLite's text or PostgreSQL's, where their JSON functions differ.
+fn pick(pg: bool, sqlite: &'static str, postgres: &'static str) -> &'static str {
+    if pg { postgres } else { sqlite }
 }
 
 /// What still refers to a session, as sentences for a 409: the robot's parameter sets,
 /// validations and diagnoses made from it (they name their sessions), and the jobs queued or
 /// running on it (their requests name sessions by id). Finished jobs do not hold a session: their
 /// requests stay as they were sent.
-pub async fn session_references(db: &mut sqlx::SqliteConnection, s: &SessionRow) -> Result<Vec<String>, sqlx::Error> {
+pub async fn session_references(db: &mut crate::db::Conn, s: &SessionRow) -> Result<Vec<String>, sqlx::Error> {
+    let pg = Backend::of_conn(db) == Backend::Postgres;
     let mut out = Vec::new();
-    let sets: Vec<i64> = sqlx::query_scalar(
-        "SELECT p.version FROM parameter_sets p WHERE p.robot_id = ?1 \
-         AND EXISTS (SELECT 1 FROM json_each(p.sessions_json) j WHERE j.value = ?2) ORDER BY p.version",
-    )
+    let sets: Vec<i64> = sqlx::query_scalar(pick(
+        pg,
+        "SELECT p.version FROM parameter_sets p WHERE p.robot_id = $1 \
+             AND EXISTS (SELECT 1 FROM json_each(p.sessions_json) j WHERE j.value = $2) ORDER BY p.version",
+        "SELECT p.version FROM parameter_sets p WHERE p.robot_id = $1 \
+             AND EXISTS (SELECT 1 FROM jsonb_array_elements_text(p.sessions_json::jsonb) j WHERE j.value = $2) \
+             ORDER BY p.version",
+    ))
     .bind(&s.robot_id)
     .bind(&s.name)
     .fetch_all(&mut *db)
     .await?;
     out.extend(sets.iter().map(|v| format!("parameter set version {v}")));
-    let validations: Vec<String> = sqlx::query_scalar(
-        "SELECT v.id FROM validations v JOIN parameter_sets p ON p.id = v.parameter_set_id WHERE p.robot_id = ?1 \
-         AND EXISTS (SELECT 1 FROM json_each(v.sessions_json) j WHERE j.value = ?2) ORDER BY v.created_at",
-    )
+    let validations: Vec<String> = sqlx::query_scalar(pick(
+        pg,
+        "SELECT v.id FROM validations v JOIN parameter_sets p ON p.id = v.parameter_set_id WHERE p.robot_id = $1 \
+             AND EXISTS (SELECT 1 FROM json_each(v.sessions_json) j WHERE j.value = $2) ORDER BY v.created_at",
+        "SELECT v.id FROM validations v JOIN parameter_sets p ON p.id = v.parameter_set_id WHERE p.robot_id = $1 \
+             AND EXISTS (SELECT 1 FROM jsonb_array_elements_text(v.sessions_json::jsonb) j WHERE j.value = $2) \
+             ORDER BY v.created_at",
+    ))
     .bind(&s.robot_id)
     .bind(&s.name)
     .fetch_all(&mut *db)
     .await?;
     out.extend(validations.iter().map(|v| format!("validation {v}")));
-    let diagnoses: Vec<String> = sqlx::query_scalar(
-        "SELECT d.id FROM diagnoses d JOIN parameter_sets p ON p.id = d.parameter_set_id WHERE p.robot_id = ?1 \
-         AND (EXISTS (SELECT 1 FROM json_each(d.sessions_json, '$.identification') j WHERE j.value = ?2) \
-           OR EXISTS (SELECT 1 FROM json_each(d.sessions_json, '$.validation') j WHERE j.value = ?2)) \
-         ORDER BY d.created_at",
-    )
+    let diagnoses: Vec<String> = sqlx::query_scalar(pick(
+        pg,
+        "SELECT d.id FROM diagnoses d JOIN parameter_sets p ON p.id = d.parameter_set_id WHERE p.robot_id = $1 \
+             AND (EXISTS (SELECT 1 FROM json_each(d.sessions_json, '$.identification') j WHERE j.value = $2) \
+               OR EXISTS (SELECT 1 FROM json_each(d.sessions_json, '$.validation') j WHERE j.value = $2)) \
+             ORDER BY d.created_at",
+        "SELECT d.id FROM diagnoses d JOIN parameter_sets p ON p.id = d.parameter_set_id WHERE p.robot_id = $1 \
+             AND (EXISTS (SELECT 1 FROM jsonb_array_elements_text(d.sessions_json::jsonb -> 'identification') j \
+                          WHERE j.value = $2) \
+               OR EXISTS (SELECT 1 FROM jsonb_array_elements_text(d.sessions_json::jsonb -> 'validation') j \
+                          WHERE j.value = $2)) \
+             ORDER BY d.created_at",
+    ))
     .bind(&s.robot_id)
     .bind(&s.name)
     .fetch_all(&mut *db)
     .await?;
     out.extend(diagnoses.iter().map(|d| format!("diagnosis {d}")));
-    let jobs: Vec<(String, String, String)> = sqlx::query_as(
-        "SELECT id, kind, state FROM jobs WHERE robot_id = ?1 AND state IN ('queued', 'running') \
-         AND (EXISTS (SELECT 1 FROM json_each(request_json, '$.sessions') j WHERE j.value IN (?2, ?3)) \
-           OR EXISTS (SELECT 1 FROM json_each(request_json, '$.identification') j WHERE j.value IN (?2, ?3)) \
-           OR EXISTS (SELECT 1 FROM json_each(request_json, '$.validation') j WHERE j.value IN (?2, ?3))) \
-         ORDER BY created_at",
-    )
+    let jobs: Vec<(String, String, String)> = sqlx::query_as(pick(
+        pg,
+        "SELECT id, kind, state FROM jobs WHERE robot_id = $1 AND state IN ('queued', 'running') \
+             AND (EXISTS (SELECT 1 FROM json_each(request_json, '$.sessions') j WHERE j.value IN ($2, $3)) \
+               OR EXISTS (SELECT 1 FROM json_each(request_json, '$.identification') j WHERE j.value IN ($2, $3)) \
+               OR EXISTS (SELECT 1 FROM json_each(request_json, '$.validation') j WHERE j.value IN ($2, $3))) \
+             ORDER BY created_at",
+        // `jsonb_path_query` with lax arrays: a key that is absent (or not an array) yields
+        // no element, as SQLite's `json_each` of a missing path does.
+        "SELECT id, kind, state FROM jobs WHERE robot_id = $1 AND state IN ('queued', 'running') \
+             AND EXISTS (SELECT 1 FROM jsonb_path_query(request_json::jsonb, \
+                           'lax $.sessions[*] ? (@.type() == \"string\")') j \
+                         WHERE j #>> '{}' IN ($2, $3) \
+                         UNION ALL SELECT 1 FROM jsonb_path_query(request_json::jsonb, \
+                           'lax $.identification[*] ? (@.type() == \"string\")') j \
+                         WHERE j #>> '{}' IN ($2, $3) \
+                         UNION ALL SELECT 1 FROM jsonb_path_query(request_json::jsonb, \
+                           'lax $.validation[*] ? (@.type() == \"string\")') j \
+                         WHERE j #>> '{}' IN ($2, $3)) \
+             ORDER BY created_at",
+    ))
     .bind(&s.robot_id)
     .bind(&s.id)
     .bind(&s.name)
@@ -311,10 +347,13 @@ pub async fn session_references(db: &mut sqlx::SqliteConnection, s: &SessionRow)
     // names one session, by id).
     let evaluations = super::iso9283::of_session(&mut *db, &s.id).await?;
     out.extend(evaluations.iter().map(|e| format!("ISO 9283 evaluation {e}")));
-    let iso_jobs: Vec<(String, String)> = sqlx::query_as(
-        "SELECT id, state FROM jobs WHERE robot_id = ?1 AND kind = 'iso9283' AND state IN ('queued', 'running') \
-         AND json_extract(request_json, '$.session') = ?2 ORDER BY created_at",
-    )
+    let iso_jobs: Vec<(String, String)> = sqlx::query_as(pick(
+        pg,
+        "SELECT id, state FROM jobs WHERE robot_id = $1 AND kind = 'iso9283' AND state IN ('queued', 'running') \
+             AND json_extract(request_json, '$.session') = $2 ORDER BY created_at",
+        "SELECT id, state FROM jobs WHERE robot_id = $1 AND kind = 'iso9283' AND state IN ('queued', 'running') \
+             AND request_json::jsonb ->> 'session' = $2 ORDER BY created_at",
+    ))
     .bind(&s.robot_id)
     .bind(&s.id)
     .fetch_all(&mut *db)
@@ -325,41 +364,47 @@ pub async fn session_references(db: &mut sqlx::SqliteConnection, s: &SessionRow)
 
 /// Delete a session with its exclusions, measurements and batches. Call inside the transaction
 /// that checked [`session_references`] and writes the audit event.
-pub async fn delete_session(tx: &mut sqlx::SqliteConnection, session_id: &str) -> Result<bool, sqlx::Error> {
+pub async fn delete_session(tx: &mut crate::db::Conn, session_id: &str) -> Result<bool, sqlx::Error> {
     for sql in [
-        "DELETE FROM measurement_exclusions WHERE session_id = ?",
-        "DELETE FROM measurements WHERE session_id = ?",
-        "DELETE FROM batches WHERE session_id = ?",
+        "DELETE FROM measurement_exclusions WHERE session_id = $1",
+        "DELETE FROM measurements WHERE session_id = $1",
+        "DELETE FROM batches WHERE session_id = $1",
     ] {
         sqlx::query(sql).bind(session_id).execute(&mut *tx).await?;
     }
-    let r = sqlx::query("DELETE FROM sessions WHERE id = ?").bind(session_id).execute(&mut *tx).await?;
+    let r = sqlx::query("DELETE FROM sessions WHERE id = $1").bind(session_id).execute(&mut *tx).await?;
     Ok(r.rows_affected() == 1)
 }
 
 /// What still uses an artefact, as sentences for a 409: the sessions measured on it (robot and
 /// session name), the pose plans made for it, the pose-plan jobs queued or running on it.
-pub async fn artefact_references(db: &mut sqlx::SqliteConnection, a: &ArtefactRow) -> Result<Vec<String>, sqlx::Error> {
+pub async fn artefact_references(db: &mut crate::db::Conn, a: &ArtefactRow) -> Result<Vec<String>, sqlx::Error> {
+    let pg = Backend::of_conn(db) == Backend::Postgres;
     let mut out = Vec::new();
     let sessions: Vec<(String, String)> = sqlx::query_as(
-        "SELECT r.name, s.name FROM sessions s JOIN robots r ON r.id = s.robot_id WHERE s.artefact_id = ? \
+        "SELECT r.name, s.name FROM sessions s JOIN robots r ON r.id = s.robot_id WHERE s.artefact_id = $1 \
          ORDER BY s.created_at",
     )
     .bind(&a.id)
     .fetch_all(&mut *db)
     .await?;
     out.extend(sessions.iter().map(|(r, s)| format!("session '{s}' of robot '{r}'")));
-    let plans: Vec<String> = sqlx::query_scalar(
-        "SELECT id FROM pose_plans WHERE json_extract(request_json, '$.artefact_id') = ? ORDER BY created_at",
-    )
+    let plans: Vec<String> = sqlx::query_scalar(pick(
+        pg,
+        "SELECT id FROM pose_plans WHERE json_extract(request_json, '$.artefact_id') = $1 ORDER BY created_at",
+        "SELECT id FROM pose_plans WHERE request_json::jsonb ->> 'artefact_id' = $1 ORDER BY created_at",
+    ))
     .bind(&a.id)
     .fetch_all(&mut *db)
     .await?;
     out.extend(plans.iter().map(|p| format!("pose plan {p}")));
-    let jobs: Vec<(String, String)> = sqlx::query_as(
+    let jobs: Vec<(String, String)> = sqlx::query_as(pick(
+        pg,
         "SELECT id, state FROM jobs WHERE kind = 'pose_plan' AND state IN ('queued', 'running') \
-         AND json_extract(request_json, '$.artefact_id') = ? ORDER BY created_at",
-    )
+             AND json_extract(request_json, '$.artefact_id') = $1 ORDER BY created_at",
+        "SELECT id, state FROM jobs WHERE kind = 'pose_plan' AND state IN ('queued', 'running') \
+             AND request_json::jsonb ->> 'artefact_id' = $1 ORDER BY created_at",
+    ))
     .bind(&a.id)
     .fetch_all(&mut *db)
     .await?;
@@ -367,7 +412,7 @@ pub async fn artefact_references(db: &mut sqlx::SqliteConnection, a: &ArtefactRo
     Ok(out)
 }
 
-pub async fn delete_artefact(db: impl SqliteExecutor<'_>, id: &str) -> Result<bool, sqlx::Error> {
-    let r = sqlx::query("DELETE FROM artefacts WHERE id = ?").bind(id).execute(db).await?;
+pub async fn delete_artefact(db: impl AnyExecutor<'_>, id: &str) -> Result<bool, sqlx::Error> {
+    let r = sqlx::query("DELETE FROM artefacts WHERE id = $1").bind(id).execute(db).await?;
     Ok(r.rows_affected() == 1)
 }

@@ -17,7 +17,7 @@ use std::collections::HashMap;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-use sqlx::SqlitePool;
+use crate::db::Pool;
 
 use super::{StorageTrouble, storage_trouble};
 
@@ -87,12 +87,21 @@ pub enum Probe {
 }
 
 /// A committed one-page write: `PRAGMA user_version` set to the value it has (the version is not
-/// used by robocal or by sqlx's migrations; SQLite writes page 1 all the same).
-pub async fn probe(pool: &SqlitePool) -> Probe {
+/// used by robocal or by sqlx's migrations; SQLite writes page 1 all the same). On PostgreSQL, a
+/// committed transaction that was given an id (its commit record goes to the WAL).
+pub async fn probe(pool: &Pool) -> Probe {
     let write = async {
         let mut tx = super::begin_write(pool).await?;
-        let v: i64 = sqlx::query_scalar("PRAGMA user_version").fetch_one(&mut *tx).await?;
-        sqlx::query(sqlx::AssertSqlSafe(format!("PRAGMA user_version = {v}"))).execute(&mut *tx).await?;
+        match super::Backend::of(pool) {
+            super::Backend::Sqlite => {
+                let v: i64 = sqlx::query_scalar("PRAGMA user_version").fetch_one(&mut *tx).await?;
+                sqlx::query(sqlx::AssertSqlSafe(format!("PRAGMA user_version = {v}"))).execute(&mut *tx).await?;
+            }
+            // A transaction id is assigned, so its COMMIT is written to PostgreSQL's WAL.
+            super::Backend::Postgres => {
+                sqlx::query("SELECT txid_current()").execute(&mut *tx).await?;
+            }
+        }
         tx.commit().await
     };
     match tokio::time::timeout(PROBE_WAIT, write).await {

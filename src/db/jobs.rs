@@ -6,9 +6,9 @@
 use std::fmt;
 use std::time::{Duration, SystemTime};
 
+use crate::db::AnyExecutor;
+use crate::db::Pool;
 use serde::{Deserialize, Serialize};
-use sqlx::SqlitePool;
-use sqlx::sqlite::SqliteExecutor;
 
 use super::paging::{self, Page};
 use super::{now, time_text};
@@ -93,8 +93,10 @@ impl fmt::Display for JobState {
 #[derive(Clone, Debug, PartialEq, sqlx::FromRow)]
 pub struct JobRow {
     pub id: String,
+    #[sqlx(try_from = "String")]
     pub kind: JobKind,
     pub robot_id: String,
+    #[sqlx(try_from = "String")]
     pub state: JobState,
     pub progress: f64,
     pub request_json: String,
@@ -103,6 +105,7 @@ pub struct JobRow {
     pub attempts: i64,
     pub lease_owner: Option<String>,
     pub lease_expires_at: Option<String>,
+    #[sqlx(try_from = "crate::db::types::Flag")]
     pub cancel_requested: bool,
     pub created_at: String,
     pub started_at: Option<String>,
@@ -114,7 +117,7 @@ pub struct JobRow {
 
 /// Queue a new job.
 pub async fn insert(
-    db: impl SqliteExecutor<'_>,
+    db: impl AnyExecutor<'_>,
     id: &str,
     kind: JobKind,
     robot_id: &str,
@@ -123,7 +126,7 @@ pub async fn insert(
     let t = now();
     sqlx::query(
         "INSERT INTO jobs (id, kind, robot_id, state, progress, request_json, created_at, updated_at) \
-         VALUES (?, ?, ?, 'queued', 0, ?, ?, ?)",
+         VALUES ($1, $2, $3, 'queued', 0, $4, $5, $6)",
     )
     .bind(id)
     .bind(kind)
@@ -136,13 +139,13 @@ pub async fn insert(
     Ok(())
 }
 
-pub async fn get(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<JobRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM jobs WHERE id = ?").bind(id).fetch_optional(db).await
+pub async fn get(db: impl AnyExecutor<'_>, id: &str) -> Result<Option<JobRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM jobs WHERE id = $1").bind(id).fetch_optional(db).await
 }
 
 /// Jobs, newest first, optionally of one robot and/or one state.
 pub async fn list(
-    db: &SqlitePool,
+    db: &Pool,
     robot_id: Option<&str>,
     state: Option<JobState>,
     offset: i64,
@@ -150,8 +153,8 @@ pub async fn list(
 ) -> Result<Page<JobRow>, sqlx::Error> {
     let query = sqlx::query_as(
         "SELECT *, COUNT(*) OVER () AS total_rows FROM jobs \
-         WHERE (?1 IS NULL OR robot_id = ?1) AND (?2 IS NULL OR state = ?2) \
-         ORDER BY created_at DESC, id DESC LIMIT ?3 OFFSET ?4",
+         WHERE ($1 IS NULL OR robot_id = $1) AND ($2 IS NULL OR state = $2) \
+         ORDER BY created_at DESC, id DESC LIMIT $3 OFFSET $4",
     )
     .bind(robot_id)
     .bind(state);
@@ -160,11 +163,11 @@ pub async fn list(
 
 /// Jobs matching the filters of [`list`].
 pub async fn count(
-    db: impl SqliteExecutor<'_>,
+    db: impl AnyExecutor<'_>,
     robot_id: Option<&str>,
     state: Option<JobState>,
 ) -> Result<i64, sqlx::Error> {
-    sqlx::query_scalar("SELECT COUNT(*) FROM jobs WHERE (?1 IS NULL OR robot_id = ?1) AND (?2 IS NULL OR state = ?2)")
+    sqlx::query_scalar("SELECT COUNT(*) FROM jobs WHERE ($1 IS NULL OR robot_id = $1) AND ($2 IS NULL OR state = $2)")
         .bind(robot_id)
         .bind(state)
         .fetch_one(db)
@@ -172,12 +175,12 @@ pub async fn count(
 }
 
 /// Claim the oldest queued job for `owner` with a lease of `lease`: one atomic statement.
-pub async fn claim(pool: &SqlitePool, owner: &str, lease: Duration) -> Result<Option<JobRow>, sqlx::Error> {
+pub async fn claim(pool: &Pool, owner: &str, lease: Duration) -> Result<Option<JobRow>, sqlx::Error> {
     let t = now();
     let until = time_text(SystemTime::now() + lease);
     sqlx::query_as(
-        "UPDATE jobs SET state = 'running', lease_owner = ?, lease_expires_at = ?, attempts = attempts + 1, \
-             started_at = COALESCE(started_at, ?), updated_at = ?, progress = 0 \
+        "UPDATE jobs SET state = 'running', lease_owner = $1, lease_expires_at = $2, attempts = attempts + 1, \
+             started_at = COALESCE(started_at, $3), updated_at = $4, progress = 0 \
          WHERE id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY created_at, id LIMIT 1) AND state = 'queued' \
          RETURNING *",
     )
@@ -190,16 +193,10 @@ pub async fn claim(pool: &SqlitePool, owner: &str, lease: Duration) -> Result<Op
 }
 
 /// Record a running job's progress (0–1, never backwards) and phase.
-pub async fn progress(
-    pool: &SqlitePool,
-    id: &str,
-    owner: &str,
-    progress: f64,
-    phase: &str,
-) -> Result<bool, sqlx::Error> {
+pub async fn progress(pool: &Pool, id: &str, owner: &str, progress: f64, phase: &str) -> Result<bool, sqlx::Error> {
     let r = sqlx::query(
-        "UPDATE jobs SET progress = MAX(progress, ?), phase = ?, updated_at = ? \
-         WHERE id = ? AND lease_owner = ? AND state = 'running'",
+        "UPDATE jobs SET progress = CASE WHEN progress > $1 THEN progress ELSE $1 END, phase = $2, updated_at = $3 \
+         WHERE id = $4 AND lease_owner = $5 AND state = 'running'",
     )
     .bind(progress)
     .bind(phase)
@@ -214,15 +211,15 @@ pub async fn progress(
 /// Extend a running job's lease and record its progress; `false` when the job is no longer this
 /// owner's (requeued by another process after the lease expired).
 pub async fn heartbeat(
-    pool: &SqlitePool,
+    pool: &Pool,
     id: &str,
     owner: &str,
     lease: Duration,
     progress: f64,
 ) -> Result<bool, sqlx::Error> {
     let r = sqlx::query(
-        "UPDATE jobs SET lease_expires_at = ?, progress = MAX(progress, ?), updated_at = ? \
-         WHERE id = ? AND lease_owner = ? AND state = 'running'",
+        "UPDATE jobs SET lease_expires_at = $1, progress = CASE WHEN progress > $2 THEN progress ELSE $2 END, updated_at = $3 \
+         WHERE id = $4 AND lease_owner = $5 AND state = 'running'",
     )
     .bind(time_text(SystemTime::now() + lease))
     .bind(progress)
@@ -235,12 +232,12 @@ pub async fn heartbeat(
 }
 
 /// Whether cancellation was asked for.
-pub async fn cancel_requested(db: impl SqliteExecutor<'_>, id: &str) -> Result<bool, sqlx::Error> {
-    Ok(sqlx::query_scalar::<_, bool>("SELECT cancel_requested FROM jobs WHERE id = ?")
+pub async fn cancel_requested(db: impl AnyExecutor<'_>, id: &str) -> Result<bool, sqlx::Error> {
+    Ok(sqlx::query_scalar::<_, crate::db::types::Flag>("SELECT cancel_requested FROM jobs WHERE id = $1")
         .bind(id)
         .fetch_optional(db)
         .await?
-        .unwrap_or(false))
+        .is_some_and(bool::from))
 }
 
 /// Final state of a job this owner holds, inside the caller's transaction (with the result rows).
@@ -249,7 +246,7 @@ pub async fn cancel_requested(db: impl SqliteExecutor<'_>, id: &str) -> Result<b
 /// is ended with `state = Cancelled`, which the flag does not block). The flag is checked by this
 /// very statement, so a cancel committed before it is never overwritten by a result.
 pub async fn finish(
-    db: impl SqliteExecutor<'_>,
+    db: impl AnyExecutor<'_>,
     id: &str,
     owner: &str,
     state: JobState,
@@ -258,9 +255,9 @@ pub async fn finish(
 ) -> Result<bool, sqlx::Error> {
     let t = now();
     let r = sqlx::query(
-        "UPDATE jobs SET state = ?1, result_json = ?2, error_json = ?3, progress = CASE WHEN ?1 = 'succeeded' THEN 1 ELSE progress END, \
-             finished_at = ?4, updated_at = ?4, lease_owner = NULL, lease_expires_at = NULL \
-         WHERE id = ?5 AND lease_owner = ?6 AND state = 'running' AND (?1 = 'cancelled' OR cancel_requested = 0)",
+        "UPDATE jobs SET state = $1, result_json = $2, error_json = $3, progress = CASE WHEN $1 = 'succeeded' THEN 1 ELSE progress END, \
+             finished_at = $4, updated_at = $4, lease_owner = NULL, lease_expires_at = NULL \
+         WHERE id = $5 AND lease_owner = $6 AND state = 'running' AND ($1 = 'cancelled' OR cancel_requested = FALSE)",
     )
     .bind(state)
     .bind(result_json)
@@ -274,10 +271,10 @@ pub async fn finish(
 }
 
 /// Put a held job back in the queue (graceful shutdown with the solver still running).
-pub async fn release(pool: &SqlitePool, id: &str, owner: &str) -> Result<bool, sqlx::Error> {
+pub async fn release(pool: &Pool, id: &str, owner: &str) -> Result<bool, sqlx::Error> {
     let r = sqlx::query(
-        "UPDATE jobs SET state = 'queued', lease_owner = NULL, lease_expires_at = NULL, updated_at = ? \
-         WHERE id = ? AND lease_owner = ? AND state = 'running'",
+        "UPDATE jobs SET state = 'queued', lease_owner = NULL, lease_expires_at = NULL, updated_at = $1 \
+         WHERE id = $2 AND lease_owner = $3 AND state = 'running'",
     )
     .bind(now())
     .bind(id)
@@ -292,12 +289,12 @@ pub async fn release(pool: &SqlitePool, id: &str, owner: &str) -> Result<bool, s
 /// workers: `instance/`) are left alone: their worker is alive, and may hold a computed result
 /// it waits to store while the disk is full — the lease it could not renew meanwhile must not
 /// make the job run again. Returns the number requeued.
-pub async fn requeue_stale(pool: &SqlitePool, all: bool, except: Option<&str>) -> Result<u64, sqlx::Error> {
+pub async fn requeue_stale(pool: &Pool, all: bool, except: Option<&str>) -> Result<u64, sqlx::Error> {
     let t = now();
     let r = sqlx::query(
-        "UPDATE jobs SET state = 'queued', lease_owner = NULL, lease_expires_at = NULL, updated_at = ? \
-         WHERE state = 'running' AND (? OR lease_expires_at IS NULL OR lease_expires_at < ?) \
-           AND (? IS NULL OR lease_owner IS NULL OR substr(lease_owner, 1, length(?)) <> ?)",
+        "UPDATE jobs SET state = 'queued', lease_owner = NULL, lease_expires_at = NULL, updated_at = $1 \
+         WHERE state = 'running' AND ($2 OR lease_expires_at IS NULL OR lease_expires_at < $3) \
+           AND ($4 IS NULL OR lease_owner IS NULL OR substr(lease_owner, 1, length($5)) <> $6)",
     )
     .bind(&t)
     .bind(all)
@@ -327,11 +324,11 @@ pub enum Cancel {
 /// Because a worker ends its job in a write transaction that reads the flag (and its final UPDATE
 /// requires it clear), a cancel is either seen by that transaction or finds the job ended: never
 /// both a stored result and a `cancelled` job, and never a cancel answered yet lost.
-pub async fn cancel(pool: &SqlitePool, id: &str) -> Result<Option<(Cancel, JobRow)>, sqlx::Error> {
+pub async fn cancel(pool: &Pool, id: &str) -> Result<Option<(Cancel, JobRow)>, sqlx::Error> {
     let t = now();
     let mut tx = super::begin_write(pool).await?;
     let ended = sqlx::query(
-        "UPDATE jobs SET state = 'cancelled', finished_at = ?, updated_at = ? WHERE id = ? AND state = 'queued'",
+        "UPDATE jobs SET state = 'cancelled', finished_at = $1, updated_at = $2 WHERE id = $3 AND state = 'queued'",
     )
     .bind(&t)
     .bind(&t)
@@ -340,7 +337,7 @@ pub async fn cancel(pool: &SqlitePool, id: &str) -> Result<Option<(Cancel, JobRo
     .await?
     .rows_affected();
     let flagged =
-        sqlx::query("UPDATE jobs SET cancel_requested = 1, updated_at = ? WHERE id = ? AND state = 'running'")
+        sqlx::query("UPDATE jobs SET cancel_requested = TRUE, updated_at = $1 WHERE id = $2 AND state = 'running'")
             .bind(&t)
             .bind(id)
             .execute(&mut *tx)
@@ -357,8 +354,12 @@ pub async fn cancel(pool: &SqlitePool, id: &str) -> Result<Option<(Cancel, JobRo
 }
 
 /// Job counts by state (for /metrics).
-pub async fn counts(db: impl SqliteExecutor<'_>) -> Result<Vec<(JobState, i64)>, sqlx::Error> {
-    sqlx::query_as("SELECT state, COUNT(*) FROM jobs GROUP BY state").fetch_all(db).await
+pub async fn counts(db: impl AnyExecutor<'_>) -> Result<Vec<(JobState, i64)>, sqlx::Error> {
+    let rows: Vec<(String, i64)> =
+        sqlx::query_as("SELECT state, COUNT(*) FROM jobs GROUP BY state").fetch_all(db).await?;
+    rows.into_iter()
+        .map(|(s, n)| JobState::try_from(s).map(|s| (s, n)).map_err(|e| sqlx::Error::Decode(e.into())))
+        .collect()
 }
 
 #[cfg(test)]
@@ -366,7 +367,7 @@ mod tests {
     use super::*;
 
     /// An in-memory database holding one robot, `r`, for jobs to point at.
-    async fn pool_with_robot() -> SqlitePool {
+    async fn pool_with_robot() -> Pool {
         let pool = crate::db::connect_memory().await.unwrap();
         sqlx::query("INSERT INTO robots (id, name, model_json, created_at) VALUES ('r', 'r', '{}', 't')")
             .execute(&pool)

@@ -5,9 +5,11 @@
 
 use std::future::Future;
 
+use sqlx::any::{AnyArguments, AnyRow};
 use sqlx::query::QueryAs;
-use sqlx::sqlite::{SqliteArguments, SqliteRow};
-use sqlx::{FromRow, Row, Sqlite, SqlitePool};
+use sqlx::{Any, FromRow, Row};
+
+use super::Pool;
 
 /// A row of a page query and the length of the whole list beside it (the query's `total_rows`
 /// column, `COUNT(*) OVER () AS total_rows`).
@@ -17,8 +19,8 @@ pub struct Counted<T> {
     pub total: i64,
 }
 
-impl<'r, T: FromRow<'r, SqliteRow>> FromRow<'r, SqliteRow> for Counted<T> {
-    fn from_row(row: &'r SqliteRow) -> Result<Self, sqlx::Error> {
+impl<'r, T: FromRow<'r, AnyRow>> FromRow<'r, AnyRow> for Counted<T> {
+    fn from_row(row: &'r AnyRow) -> Result<Self, sqlx::Error> {
         Ok(Counted { row: T::from_row(row)?, total: row.try_get("total_rows")? })
     }
 }
@@ -53,14 +55,14 @@ impl<T> Page<T> {
 /// after the parameters the query has bound already); `count` is the list's length on its own
 /// (see [`Page::of`]).
 pub async fn fetch<'q, T>(
-    db: &SqlitePool,
-    query: QueryAs<'q, Sqlite, Counted<T>, SqliteArguments>,
+    db: &Pool,
+    query: QueryAs<'q, Any, Counted<T>, AnyArguments>,
     offset: i64,
     limit: i64,
     count: impl Future<Output = Result<i64, sqlx::Error>>,
 ) -> Result<Page<T>, sqlx::Error>
 where
-    T: Send + Unpin + for<'r> FromRow<'r, SqliteRow>,
+    T: Send + Unpin + for<'r> FromRow<'r, AnyRow>,
 {
     let rows = query.bind(limit).bind(offset).fetch_all(db).await?;
     Page::of(rows, offset, count).await
@@ -70,21 +72,21 @@ where
 mod tests {
     use super::*;
 
-    async fn numbers(n: i64) -> sqlx::SqlitePool {
-        let db = sqlx::SqlitePool::connect("sqlite::memory:").await.unwrap();
+    async fn numbers(n: i64) -> crate::db::Pool {
+        let db = crate::db::connect_memory().await.unwrap();
         sqlx::query("CREATE TABLE t (k INTEGER, odd INTEGER)").execute(&db).await.unwrap();
         for k in 0..n {
-            sqlx::query("INSERT INTO t VALUES (?, ?)").bind(k).bind(k % 2).execute(&db).await.unwrap();
+            sqlx::query("INSERT INTO t VALUES ($1, $2)").bind(k).bind(k % 2).execute(&db).await.unwrap();
         }
         db
     }
 
-    async fn page(db: &sqlx::SqlitePool, odd: i64, offset: i64, limit: i64) -> Page<(i64,)> {
+    async fn page(db: &crate::db::Pool, odd: i64, offset: i64, limit: i64) -> Page<(i64,)> {
         let query = sqlx::query_as(
-            "SELECT k, COUNT(*) OVER () AS total_rows FROM t WHERE odd = ? ORDER BY k DESC LIMIT ? OFFSET ?",
+            "SELECT k, COUNT(*) OVER () AS total_rows FROM t WHERE odd = $1 ORDER BY k DESC LIMIT $2 OFFSET $3",
         )
         .bind(odd);
-        let count = sqlx::query_scalar("SELECT COUNT(*) FROM t WHERE odd = ?").bind(odd).fetch_one(db);
+        let count = sqlx::query_scalar("SELECT COUNT(*) FROM t WHERE odd = $1").bind(odd).fetch_one(db);
         fetch(db, query, offset, limit, count).await.unwrap()
     }
 

@@ -4,8 +4,8 @@
 //! transaction. A list's page ([`Page`]) takes the pool: past the list's end it counts the list
 //! with a second statement.
 
-use sqlx::SqlitePool;
-use sqlx::sqlite::SqliteExecutor;
+use crate::db::AnyExecutor;
+use crate::db::{Backend, Pool};
 
 use super::paging::{self, Page};
 use crate::domain::cell::{InstrumentSpec, OrderSpec, PurposeSpec};
@@ -21,10 +21,10 @@ pub struct RobotRow {
     pub created_at: String,
 }
 
-pub async fn insert_robot(db: impl SqliteExecutor<'_>, r: &RobotRow) -> Result<(), sqlx::Error> {
+pub async fn insert_robot(db: impl AnyExecutor<'_>, r: &RobotRow) -> Result<(), sqlx::Error> {
     sqlx::query(
         "INSERT INTO robots (id, name, model_json, base_guess_json, active_parameter_set_id, created_at) \
-         VALUES (?, ?, ?, ?, ?, ?)",
+         VALUES ($1, $2, $3, $4, $5, $6)",
     )
     .bind(&r.id)
     .bind(&r.name)
@@ -37,27 +37,28 @@ pub async fn insert_robot(db: impl SqliteExecutor<'_>, r: &RobotRow) -> Result<(
     Ok(())
 }
 
-pub async fn robot(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<RobotRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM robots WHERE id = ?").bind(id).fetch_optional(db).await
+pub async fn robot(db: impl AnyExecutor<'_>, id: &str) -> Result<Option<RobotRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM robots WHERE id = $1").bind(id).fetch_optional(db).await
 }
 
 /// Robots `offset..offset + limit`, oldest first.
-pub async fn robots(db: &SqlitePool, offset: i64, limit: i64) -> Result<Page<RobotRow>, sqlx::Error> {
-    let query =
-        sqlx::query_as("SELECT *, COUNT(*) OVER () AS total_rows FROM robots ORDER BY created_at, id LIMIT ? OFFSET ?");
+pub async fn robots(db: &Pool, offset: i64, limit: i64) -> Result<Page<RobotRow>, sqlx::Error> {
+    let query = sqlx::query_as(
+        "SELECT *, COUNT(*) OVER () AS total_rows FROM robots ORDER BY created_at, id LIMIT $1 OFFSET $2",
+    );
     paging::fetch(db, query, offset, limit, robot_count(db)).await
 }
 
-pub async fn robot_count(db: impl SqliteExecutor<'_>) -> Result<i64, sqlx::Error> {
+pub async fn robot_count(db: impl AnyExecutor<'_>) -> Result<i64, sqlx::Error> {
     sqlx::query_scalar("SELECT COUNT(*) FROM robots").fetch_one(db).await
 }
 
 pub async fn set_active_parameter_set(
-    db: impl SqliteExecutor<'_>,
+    db: impl AnyExecutor<'_>,
     robot_id: &str,
     set_id: &str,
 ) -> Result<bool, sqlx::Error> {
-    let r = sqlx::query("UPDATE robots SET active_parameter_set_id = ? WHERE id = ?")
+    let r = sqlx::query("UPDATE robots SET active_parameter_set_id = $1 WHERE id = $2")
         .bind(set_id)
         .bind(robot_id)
         .execute(db)
@@ -74,8 +75,8 @@ pub struct ArtefactRow {
     pub created_at: String,
 }
 
-pub async fn insert_artefact(db: impl SqliteExecutor<'_>, a: &ArtefactRow) -> Result<(), sqlx::Error> {
-    sqlx::query("INSERT INTO artefacts (id, name, spec_json, created_at) VALUES (?, ?, ?, ?)")
+pub async fn insert_artefact(db: impl AnyExecutor<'_>, a: &ArtefactRow) -> Result<(), sqlx::Error> {
+    sqlx::query("INSERT INTO artefacts (id, name, spec_json, created_at) VALUES ($1, $2, $3, $4)")
         .bind(&a.id)
         .bind(&a.name)
         .bind(&a.spec_json)
@@ -85,19 +86,19 @@ pub async fn insert_artefact(db: impl SqliteExecutor<'_>, a: &ArtefactRow) -> Re
     Ok(())
 }
 
-pub async fn artefact(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<ArtefactRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM artefacts WHERE id = ?").bind(id).fetch_optional(db).await
+pub async fn artefact(db: impl AnyExecutor<'_>, id: &str) -> Result<Option<ArtefactRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM artefacts WHERE id = $1").bind(id).fetch_optional(db).await
 }
 
 /// Artefacts `offset..offset + limit`, oldest first.
-pub async fn artefacts(db: &SqlitePool, offset: i64, limit: i64) -> Result<Page<ArtefactRow>, sqlx::Error> {
+pub async fn artefacts(db: &Pool, offset: i64, limit: i64) -> Result<Page<ArtefactRow>, sqlx::Error> {
     let query = sqlx::query_as(
-        "SELECT *, COUNT(*) OVER () AS total_rows FROM artefacts ORDER BY created_at, id LIMIT ? OFFSET ?",
+        "SELECT *, COUNT(*) OVER () AS total_rows FROM artefacts ORDER BY created_at, id LIMIT $1 OFFSET $2",
     );
     paging::fetch(db, query, offset, limit, artefact_count(db)).await
 }
 
-pub async fn artefact_count(db: impl SqliteExecutor<'_>) -> Result<i64, sqlx::Error> {
+pub async fn artefact_count(db: impl AnyExecutor<'_>) -> Result<i64, sqlx::Error> {
     sqlx::query_scalar("SELECT COUNT(*) FROM artefacts").fetch_one(db).await
 }
 
@@ -107,14 +108,18 @@ pub struct SessionRow {
     pub id: String,
     pub robot_id: String,
     pub name: String,
+    #[sqlx(try_from = "String")]
     pub purpose: PurposeSpec,
+    #[sqlx(try_from = "String")]
     pub instrument: InstrumentSpec,
     pub tool_json: String,
+    #[sqlx(try_from = "crate::db::types::Flag")]
     pub identify_tcp: bool,
     pub artefact_id: Option<String>,
     pub created_at: String,
     /// Whether the measurements are listed in measuring order (column `measuring_order`, 0003).
     #[sqlx(rename = "measuring_order")]
+    #[sqlx(try_from = "String")]
     pub order: OrderSpec,
     /// The physical target measured (column `target`, 0004): sessions naming one share a TCP.
     pub target: Option<String>,
@@ -137,10 +142,10 @@ const SESSION_COLUMNS: &str = "s.id, s.robot_id, s.name, s.purpose, s.instrument
      s.artefact_id, s.created_at, s.measuring_order, s.target, (SELECT COUNT(*) FROM measurements m WHERE m.session_id = s.id) AS measurements, \
      (SELECT COUNT(*) FROM measurement_exclusions e WHERE e.session_id = s.id AND e.restored_at IS NULL) AS excluded";
 
-pub async fn insert_session(db: impl SqliteExecutor<'_>, s: &SessionRow) -> Result<(), sqlx::Error> {
+pub async fn insert_session(db: impl AnyExecutor<'_>, s: &SessionRow) -> Result<(), sqlx::Error> {
     sqlx::query(
         "INSERT INTO sessions (id, robot_id, name, purpose, instrument, tool_json, identify_tcp, artefact_id, created_at, \
-         measuring_order, target) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+         measuring_order, target) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)",
     )
     .bind(&s.id)
     .bind(&s.robot_id)
@@ -158,8 +163,8 @@ pub async fn insert_session(db: impl SqliteExecutor<'_>, s: &SessionRow) -> Resu
     Ok(())
 }
 
-pub async fn session(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<SessionRow>, sqlx::Error> {
-    sqlx::query_as(sqlx::AssertSqlSafe(format!("SELECT {SESSION_COLUMNS} FROM sessions s WHERE s.id = ?")))
+pub async fn session(db: impl AnyExecutor<'_>, id: &str) -> Result<Option<SessionRow>, sqlx::Error> {
+    sqlx::query_as(sqlx::AssertSqlSafe(format!("SELECT {SESSION_COLUMNS} FROM sessions s WHERE s.id = $1")))
         .bind(id)
         .fetch_optional(db)
         .await
@@ -167,12 +172,12 @@ pub async fn session(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<Ses
 
 /// A robot's session by id or by name.
 pub async fn session_of_robot(
-    db: impl SqliteExecutor<'_>,
+    db: impl AnyExecutor<'_>,
     robot_id: &str,
     id_or_name: &str,
 ) -> Result<Option<SessionRow>, sqlx::Error> {
     sqlx::query_as(sqlx::AssertSqlSafe(format!(
-        "SELECT {SESSION_COLUMNS} FROM sessions s WHERE s.robot_id = ? AND (s.id = ? OR s.name = ?)"
+        "SELECT {SESSION_COLUMNS} FROM sessions s WHERE s.robot_id = $1 AND (s.id = $2 OR s.name = $3)"
     )))
     .bind(robot_id)
     .bind(id_or_name)
@@ -181,9 +186,9 @@ pub async fn session_of_robot(
     .await
 }
 
-pub async fn sessions_of_robot(db: impl SqliteExecutor<'_>, robot_id: &str) -> Result<Vec<SessionRow>, sqlx::Error> {
+pub async fn sessions_of_robot(db: impl AnyExecutor<'_>, robot_id: &str) -> Result<Vec<SessionRow>, sqlx::Error> {
     sqlx::query_as(sqlx::AssertSqlSafe(format!(
-        "SELECT {SESSION_COLUMNS} FROM sessions s WHERE s.robot_id = ? ORDER BY s.created_at, s.id"
+        "SELECT {SESSION_COLUMNS} FROM sessions s WHERE s.robot_id = $1 ORDER BY s.created_at, s.id"
     )))
     .bind(robot_id)
     .fetch_all(db)
@@ -192,21 +197,21 @@ pub async fn sessions_of_robot(db: impl SqliteExecutor<'_>, robot_id: &str) -> R
 
 /// A robot's sessions `offset..offset + limit`, oldest first.
 pub async fn sessions_page(
-    db: &SqlitePool,
+    db: &Pool,
     robot_id: &str,
     offset: i64,
     limit: i64,
 ) -> Result<Page<SessionRow>, sqlx::Error> {
     let query = sqlx::query_as(sqlx::AssertSqlSafe(format!(
-        "SELECT {SESSION_COLUMNS}, COUNT(*) OVER () AS total_rows FROM sessions s WHERE s.robot_id = ? \
-         ORDER BY s.created_at, s.id LIMIT ? OFFSET ?"
+        "SELECT {SESSION_COLUMNS}, COUNT(*) OVER () AS total_rows FROM sessions s WHERE s.robot_id = $1 \
+         ORDER BY s.created_at, s.id LIMIT $2 OFFSET $3"
     )))
     .bind(robot_id);
     paging::fetch(db, query, offset, limit, session_count(db, robot_id)).await
 }
 
-pub async fn session_count(db: impl SqliteExecutor<'_>, robot_id: &str) -> Result<i64, sqlx::Error> {
-    sqlx::query_scalar("SELECT COUNT(*) FROM sessions WHERE robot_id = ?").bind(robot_id).fetch_one(db).await
+pub async fn session_count(db: impl AnyExecutor<'_>, robot_id: &str) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM sessions WHERE robot_id = $1").bind(robot_id).fetch_one(db).await
 }
 
 /// A stored batch of measurements (for idempotent replays and duplicate checks).
@@ -238,13 +243,13 @@ pub fn content_hash(specs_json: &[String]) -> String {
 /// hashed to `hash`): by its content hash, or — for batches stored before 0005 — by hashing
 /// their rows.
 pub async fn identical_batch(
-    tx: &mut sqlx::SqliteConnection,
+    tx: &mut crate::db::Conn,
     session_id: &str,
     hash: &str,
     count: i64,
 ) -> Result<Option<BatchRow>, sqlx::Error> {
     let candidates: Vec<BatchRow> = sqlx::query_as(
-        "SELECT * FROM batches WHERE session_id = ?1 AND (content_hash = ?2 OR (content_hash IS NULL AND count = ?3)) \
+        "SELECT * FROM batches WHERE session_id = $1 AND (content_hash = $2 OR (content_hash IS NULL AND count = $3)) \
          ORDER BY first_seq",
     )
     .bind(session_id)
@@ -256,12 +261,13 @@ pub async fn identical_batch(
         if b.content_hash.as_deref() == Some(hash) {
             return Ok(Some(b));
         }
-        let rows: Vec<String> =
-            sqlx::query_scalar("SELECT spec_json FROM measurements WHERE session_id = ? AND batch_id = ? ORDER BY seq")
-                .bind(session_id)
-                .bind(&b.id)
-                .fetch_all(&mut *tx)
-                .await?;
+        let rows: Vec<String> = sqlx::query_scalar(
+            "SELECT spec_json FROM measurements WHERE session_id = $1 AND batch_id = $2 ORDER BY seq",
+        )
+        .bind(session_id)
+        .bind(&b.id)
+        .fetch_all(&mut *tx)
+        .await?;
         if content_hash(&rows) == hash {
             return Ok(Some(b));
         }
@@ -270,21 +276,21 @@ pub async fn identical_batch(
 }
 
 pub async fn batch_by_key(
-    db: impl SqliteExecutor<'_>,
+    db: impl AnyExecutor<'_>,
     session_id: &str,
     key: &str,
 ) -> Result<Option<BatchRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM batches WHERE session_id = ? AND idempotency_key = ?")
+    sqlx::query_as("SELECT * FROM batches WHERE session_id = $1 AND idempotency_key = $2")
         .bind(session_id)
         .bind(key)
         .fetch_optional(db)
         .await
 }
 
-pub async fn insert_batch(db: impl SqliteExecutor<'_>, b: &BatchRow) -> Result<(), sqlx::Error> {
+pub async fn insert_batch(db: impl AnyExecutor<'_>, b: &BatchRow) -> Result<(), sqlx::Error> {
     sqlx::query(
         "INSERT INTO batches (id, session_id, idempotency_key, request_hash, first_seq, count, created_at, content_hash) \
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+         VALUES ($1, $2, $3, $4, $5, $6, $7, $8)",
     )
     .bind(&b.id)
     .bind(&b.session_id)
@@ -300,8 +306,8 @@ pub async fn insert_batch(db: impl SqliteExecutor<'_>, b: &BatchRow) -> Result<(
 }
 
 /// Measurements stored in a session.
-pub async fn measurement_count(db: impl SqliteExecutor<'_>, session_id: &str) -> Result<i64, sqlx::Error> {
-    sqlx::query_scalar("SELECT COUNT(*) FROM measurements WHERE session_id = ?").bind(session_id).fetch_one(db).await
+pub async fn measurement_count(db: impl AnyExecutor<'_>, session_id: &str) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM measurements WHERE session_id = $1").bind(session_id).fetch_one(db).await
 }
 
 /// Rows per multi-row INSERT: 4 bound values each, well under SQLite's 32,766 variables, and
@@ -312,7 +318,7 @@ const MEASUREMENT_ROWS_PER_STATEMENT: usize = 1000;
 /// Append the measurements of one batch (their spec JSON, in order) at `first_seq…`. Call inside
 /// the batch's transaction: a failure part-way leaves nothing once the transaction is dropped.
 pub async fn insert_measurements(
-    tx: &mut sqlx::SqliteConnection,
+    tx: &mut crate::db::Conn,
     session_id: &str,
     first_seq: i64,
     batch_id: &str,
@@ -320,23 +326,37 @@ pub async fn insert_measurements(
 ) -> Result<(), sqlx::Error> {
     for (c, chunk) in specs_json.chunks(MEASUREMENT_ROWS_PER_STATEMENT).enumerate() {
         let first = first_seq + (c * MEASUREMENT_ROWS_PER_STATEMENT) as i64;
-        let mut q = sqlx::QueryBuilder::new("INSERT INTO measurements (session_id, seq, batch_id, spec_json) ");
-        q.push_values(chunk.iter().enumerate(), |mut row, (i, spec)| {
-            row.push_bind(session_id).push_bind(first + i as i64).push_bind(batch_id).push_bind(spec.as_str());
-        });
-        q.build().execute(&mut *tx).await?;
+        // Numbered placeholders, which both backends read (`QueryBuilder` writes `?` for `Any`,
+        // which PostgreSQL does not).
+        let mut sql = String::from("INSERT INTO measurements (session_id, seq, batch_id, spec_json) VALUES ");
+        for i in 0..chunk.len() {
+            let b = 4 * i;
+            sql.push_str(&format!(
+                "{}(${}, ${}, ${}, ${})",
+                if i == 0 { "" } else { ", " },
+                b + 1,
+                b + 2,
+                b + 3,
+                b + 4
+            ));
+        }
+        let mut q = sqlx::query(sqlx::AssertSqlSafe(sql));
+        for (i, spec) in chunk.iter().enumerate() {
+            q = q.bind(session_id).bind(first + i as i64).bind(batch_id).bind(spec.as_str());
+        }
+        q.execute(&mut *tx).await?;
     }
     Ok(())
 }
 
 /// Measurements `offset..offset + limit` of a session, in order: (index, spec JSON).
 pub async fn measurements(
-    db: impl SqliteExecutor<'_>,
+    db: impl AnyExecutor<'_>,
     session_id: &str,
     offset: i64,
     limit: i64,
 ) -> Result<Vec<(i64, String)>, sqlx::Error> {
-    sqlx::query_as("SELECT seq, spec_json FROM measurements WHERE session_id = ? AND seq >= ? ORDER BY seq LIMIT ?")
+    sqlx::query_as("SELECT seq, spec_json FROM measurements WHERE session_id = $1 AND seq >= $2 ORDER BY seq LIMIT $3")
         .bind(session_id)
         .bind(offset)
         .bind(limit)
@@ -347,17 +367,18 @@ pub async fn measurements(
 /// Every stored measurement of a session in order, with whether it is excluded: (index, spec
 /// JSON, excluded). One statement, so the measurements and their exclusions are read together.
 pub async fn measurements_with_state(
-    db: impl SqliteExecutor<'_>,
+    db: impl AnyExecutor<'_>,
     session_id: &str,
 ) -> Result<Vec<(i64, String, bool)>, sqlx::Error> {
     sqlx::query_as(
         "SELECT m.seq, m.spec_json, EXISTS (SELECT 1 FROM measurement_exclusions e \
              WHERE e.session_id = m.session_id AND e.seq = m.seq AND e.restored_at IS NULL) \
-         FROM measurements m WHERE m.session_id = ? ORDER BY m.seq",
+         FROM measurements m WHERE m.session_id = $1 ORDER BY m.seq",
     )
     .bind(session_id)
     .fetch_all(db)
     .await
+    .map(|rows: Vec<(i64, String, super::types::Flag)>| rows.into_iter().map(|(s, j, f)| (s, j, f.0)).collect())
 }
 
 /// A parameter-set row.
@@ -379,14 +400,14 @@ pub struct ParameterSetRow {
 /// Insert a new version of a robot's parameter set (the next version number is taken inside the
 /// caller's transaction).
 pub async fn insert_parameter_set(
-    tx: &mut sqlx::SqliteConnection,
+    tx: &mut crate::db::Conn,
     robot_id: &str,
     doc_json: &str,
     sessions_json: &str,
     job_id: Option<&str>,
 ) -> Result<ParameterSetRow, sqlx::Error> {
     let version: i64 =
-        sqlx::query_scalar("SELECT COALESCE(MAX(version), 0) + 1 FROM parameter_sets WHERE robot_id = ?")
+        sqlx::query_scalar("SELECT COALESCE(MAX(version), 0) + 1 FROM parameter_sets WHERE robot_id = $1")
             .bind(robot_id)
             .fetch_one(&mut *tx)
             .await?;
@@ -404,7 +425,7 @@ pub async fn insert_parameter_set(
     };
     sqlx::query(
         "INSERT INTO parameter_sets (id, robot_id, version, doc_json, sessions_json, job_id, created_at) \
-         VALUES (?, ?, ?, ?, ?, ?, ?)",
+         VALUES ($1, $2, $3, $4, $5, $6, $7)",
     )
     .bind(&row.id)
     .bind(&row.robot_id)
@@ -418,14 +439,14 @@ pub async fn insert_parameter_set(
     Ok(row)
 }
 
-pub async fn parameter_set(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<ParameterSetRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM parameter_sets WHERE id = ?").bind(id).fetch_optional(db).await
+pub async fn parameter_set(db: impl AnyExecutor<'_>, id: &str) -> Result<Option<ParameterSetRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM parameter_sets WHERE id = $1").bind(id).fetch_optional(db).await
 }
 
 /// A robot's parameter sets `offset..offset + limit`, newest version first; archived ones only
 /// when asked for.
 pub async fn parameter_sets_of_robot(
-    db: &SqlitePool,
+    db: &Pool,
     robot_id: &str,
     include_archived: bool,
     offset: i64,
@@ -433,8 +454,8 @@ pub async fn parameter_sets_of_robot(
 ) -> Result<Page<ParameterSetRow>, sqlx::Error> {
     let query = sqlx::query_as(
         "SELECT *, COUNT(*) OVER () AS total_rows FROM parameter_sets \
-         WHERE robot_id = ? AND (? OR archived_at IS NULL) \
-         ORDER BY version DESC LIMIT ? OFFSET ?",
+         WHERE robot_id = $1 AND ($2 OR archived_at IS NULL) \
+         ORDER BY version DESC LIMIT $3 OFFSET $4",
     )
     .bind(robot_id)
     .bind(include_archived);
@@ -442,11 +463,11 @@ pub async fn parameter_sets_of_robot(
 }
 
 pub async fn parameter_set_count(
-    db: impl SqliteExecutor<'_>,
+    db: impl AnyExecutor<'_>,
     robot_id: &str,
     include_archived: bool,
 ) -> Result<i64, sqlx::Error> {
-    sqlx::query_scalar("SELECT COUNT(*) FROM parameter_sets WHERE robot_id = ? AND (? OR archived_at IS NULL)")
+    sqlx::query_scalar("SELECT COUNT(*) FROM parameter_sets WHERE robot_id = $1 AND ($2 OR archived_at IS NULL)")
         .bind(robot_id)
         .bind(include_archived)
         .fetch_one(db)
@@ -457,7 +478,7 @@ pub async fn parameter_set_count(
 /// (the history's time order), `offset..offset + limit`; archived ones only when asked for.
 #[allow(clippy::too_many_arguments)]
 pub async fn parameter_sets_in_range(
-    db: impl SqliteExecutor<'_>,
+    db: impl AnyExecutor<'_>,
     robot_id: &str,
     include_archived: bool,
     from: Option<&str>,
@@ -466,9 +487,9 @@ pub async fn parameter_sets_in_range(
     limit: i64,
 ) -> Result<Vec<ParameterSetRow>, sqlx::Error> {
     sqlx::query_as(
-        "SELECT * FROM parameter_sets WHERE robot_id = ?1 AND (?2 OR archived_at IS NULL) \
-         AND (?3 IS NULL OR created_at >= ?3) AND (?4 IS NULL OR created_at < ?4) \
-         ORDER BY created_at, version LIMIT ?5 OFFSET ?6",
+        "SELECT * FROM parameter_sets WHERE robot_id = $1 AND ($2 OR archived_at IS NULL) \
+         AND ($3 IS NULL OR created_at >= $3) AND ($4 IS NULL OR created_at < $4) \
+         ORDER BY created_at, version LIMIT $5 OFFSET $6",
     )
     .bind(robot_id)
     .bind(include_archived)
@@ -482,15 +503,15 @@ pub async fn parameter_sets_in_range(
 
 /// How many sets [`parameter_sets_in_range`] pages through.
 pub async fn parameter_set_count_in_range(
-    db: impl SqliteExecutor<'_>,
+    db: impl AnyExecutor<'_>,
     robot_id: &str,
     include_archived: bool,
     from: Option<&str>,
     to: Option<&str>,
 ) -> Result<i64, sqlx::Error> {
     sqlx::query_scalar(
-        "SELECT COUNT(*) FROM parameter_sets WHERE robot_id = ?1 AND (?2 OR archived_at IS NULL) \
-         AND (?3 IS NULL OR created_at >= ?3) AND (?4 IS NULL OR created_at < ?4)",
+        "SELECT COUNT(*) FROM parameter_sets WHERE robot_id = $1 AND ($2 OR archived_at IS NULL) \
+         AND ($3 IS NULL OR created_at >= $3) AND ($4 IS NULL OR created_at < $4)",
     )
     .bind(robot_id)
     .bind(include_archived)
@@ -511,10 +532,10 @@ pub struct ValidationRow {
     pub created_at: String,
 }
 
-pub async fn insert_validation(db: impl SqliteExecutor<'_>, v: &ValidationRow) -> Result<(), sqlx::Error> {
+pub async fn insert_validation(db: impl AnyExecutor<'_>, v: &ValidationRow) -> Result<(), sqlx::Error> {
     sqlx::query(
         "INSERT INTO validations (id, parameter_set_id, sessions_json, report_json, job_id, created_at) \
-         VALUES (?, ?, ?, ?, ?, ?)",
+         VALUES ($1, $2, $3, $4, $5, $6)",
     )
     .bind(&v.id)
     .bind(&v.parameter_set_id)
@@ -527,8 +548,8 @@ pub async fn insert_validation(db: impl SqliteExecutor<'_>, v: &ValidationRow) -
     Ok(())
 }
 
-pub async fn validation(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<ValidationRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM validations WHERE id = ?").bind(id).fetch_optional(db).await
+pub async fn validation(db: impl AnyExecutor<'_>, id: &str) -> Result<Option<ValidationRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM validations WHERE id = $1").bind(id).fetch_optional(db).await
 }
 
 /// The latest held-out validation of a set — one that validates at least one validation session
@@ -536,25 +557,42 @@ pub async fn validation(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<
 /// `validate::report::is_held_out`, stated here in SQL so old reports are judged as new ones) —
 /// read from the stored report without parsing its residuals.
 pub async fn latest_held_out_validation(
-    db: impl SqliteExecutor<'_>,
+    db: &Pool,
     set_id: &str,
     fit_sessions: &[String],
 ) -> Result<Option<HeldOutValidation>, sqlx::Error> {
-    sqlx::query_as(
-        "SELECT id, json_extract(report_json, '$.mean_mm') AS mean_mm, \
-         json_extract(report_json, '$.nominal.mean_mm') AS nominal_mean_mm, \
-         json_extract(report_json, '$.validated_envelope') AS envelope, \
-         json_extract(report_json, '$.uncertainty') AS uncertainty \
-         FROM validations WHERE parameter_set_id = ?1 \
-         AND EXISTS (SELECT 1 FROM json_each(report_json, '$.purposes') WHERE value = 'validation') \
-         AND NOT EXISTS (SELECT 1 FROM json_each(sessions_json) AS v \
-                         WHERE v.value IN (SELECT value FROM json_each(?2))) \
-         ORDER BY created_at DESC, id DESC LIMIT 1",
-    )
-    .bind(set_id)
-    .bind(serde_json::to_string(fit_sessions).expect("strings serialise"))
-    .fetch_optional(db)
-    .await
+    let sql = match Backend::of(db) {
+        Backend::Sqlite => {
+            "SELECT id, json_extract(report_json, '$.mean_mm') AS mean_mm, \
+             json_extract(report_json, '$.nominal.mean_mm') AS nominal_mean_mm, \
+             json_extract(report_json, '$.validated_envelope') AS envelope, \
+             json_extract(report_json, '$.uncertainty') AS uncertainty \
+             FROM validations WHERE parameter_set_id = $1 \
+             AND EXISTS (SELECT 1 FROM json_each(report_json, '$.purposes') WHERE value = 'validation') \
+             AND NOT EXISTS (SELECT 1 FROM json_each(sessions_json) AS v \
+                             WHERE v.value IN (SELECT value FROM json_each($2))) \
+             ORDER BY created_at DESC, id DESC LIMIT 1"
+        }
+        // The numbers read back as their JSON text cast to float8 (correctly rounded, as serde
+        // reads them); the objects as JSON text (parsed by the caller).
+        Backend::Postgres => {
+            "SELECT id, (report_json::jsonb ->> 'mean_mm')::float8 AS mean_mm, \
+             (report_json::jsonb #>> '{nominal,mean_mm}')::float8 AS nominal_mean_mm, \
+             (report_json::jsonb -> 'validated_envelope')::text AS envelope, \
+             (report_json::jsonb -> 'uncertainty')::text AS uncertainty \
+             FROM validations WHERE parameter_set_id = $1 \
+             AND EXISTS (SELECT 1 FROM jsonb_array_elements_text(report_json::jsonb -> 'purposes') AS p \
+                         WHERE p.value = 'validation') \
+             AND NOT EXISTS (SELECT 1 FROM jsonb_array_elements_text(sessions_json::jsonb) AS v \
+                             WHERE v.value IN (SELECT f.value FROM jsonb_array_elements_text($2::jsonb) AS f)) \
+             ORDER BY created_at DESC, id DESC LIMIT 1"
+        }
+    };
+    sqlx::query_as(sql)
+        .bind(set_id)
+        .bind(serde_json::to_string(fit_sessions).expect("strings serialise"))
+        .fetch_optional(db)
+        .await
 }
 
 /// What compensation reads of a set's latest held-out validation.
@@ -571,8 +609,8 @@ pub struct HeldOutValidation {
 }
 
 /// A parameter set's validations, newest first.
-pub async fn validations_of_set(db: impl SqliteExecutor<'_>, set_id: &str) -> Result<Vec<ValidationRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM validations WHERE parameter_set_id = ? ORDER BY created_at DESC, id DESC")
+pub async fn validations_of_set(db: impl AnyExecutor<'_>, set_id: &str) -> Result<Vec<ValidationRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM validations WHERE parameter_set_id = $1 ORDER BY created_at DESC, id DESC")
         .bind(set_id)
         .fetch_all(db)
         .await
@@ -580,20 +618,21 @@ pub async fn validations_of_set(db: impl SqliteExecutor<'_>, set_id: &str) -> Re
 
 /// The validations of several sets (a history page), newest first within each: one query, the
 /// ids bound as one JSON array.
-pub async fn validations_of_sets(
-    db: impl SqliteExecutor<'_>,
-    set_ids: &[&str],
-) -> Result<Vec<ValidationRow>, sqlx::Error> {
+pub async fn validations_of_sets(db: &Pool, set_ids: &[&str]) -> Result<Vec<ValidationRow>, sqlx::Error> {
     if set_ids.is_empty() {
         return Ok(Vec::new());
     }
-    sqlx::query_as(
-        "SELECT * FROM validations WHERE parameter_set_id IN (SELECT value FROM json_each(?)) \
-         ORDER BY created_at DESC, id DESC",
-    )
-    .bind(serde_json::to_string(set_ids).expect("strings serialise"))
-    .fetch_all(db)
-    .await
+    let sql = match Backend::of(db) {
+        Backend::Sqlite => {
+            "SELECT * FROM validations WHERE parameter_set_id IN (SELECT value FROM json_each($1)) \
+             ORDER BY created_at DESC, id DESC"
+        }
+        Backend::Postgres => {
+            "SELECT * FROM validations WHERE parameter_set_id IN \
+             (SELECT value FROM jsonb_array_elements_text($1::jsonb)) ORDER BY created_at DESC, id DESC"
+        }
+    };
+    sqlx::query_as(sql).bind(serde_json::to_string(set_ids).expect("strings serialise")).fetch_all(db).await
 }
 
 /// A diagnosis row.
@@ -610,11 +649,11 @@ pub struct DiagnosisRow {
     pub created_at: String,
 }
 
-pub async fn insert_diagnosis(db: impl SqliteExecutor<'_>, d: &DiagnosisRow) -> Result<(), sqlx::Error> {
+pub async fn insert_diagnosis(db: impl AnyExecutor<'_>, d: &DiagnosisRow) -> Result<(), sqlx::Error> {
     sqlx::query(
         "INSERT INTO diagnoses (id, parameter_set_id, request_json, sessions_json, report_json, accepted_doc_json, \
              accepted_parameter_set_id, job_id, created_at) \
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+         VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)",
     )
     .bind(&d.id)
     .bind(&d.parameter_set_id)
@@ -630,38 +669,38 @@ pub async fn insert_diagnosis(db: impl SqliteExecutor<'_>, d: &DiagnosisRow) -> 
     Ok(())
 }
 
-pub async fn diagnosis(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<DiagnosisRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM diagnoses WHERE id = ?").bind(id).fetch_optional(db).await
+pub async fn diagnosis(db: impl AnyExecutor<'_>, id: &str) -> Result<Option<DiagnosisRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM diagnoses WHERE id = $1").bind(id).fetch_optional(db).await
 }
 
 /// A parameter set's diagnoses `offset..offset + limit`, newest first.
 pub async fn diagnoses_of_set(
-    db: &SqlitePool,
+    db: &Pool,
     set_id: &str,
     offset: i64,
     limit: i64,
 ) -> Result<Page<DiagnosisRow>, sqlx::Error> {
     let query = sqlx::query_as(
-        "SELECT *, COUNT(*) OVER () AS total_rows FROM diagnoses WHERE parameter_set_id = ? \
-         ORDER BY created_at DESC, id DESC LIMIT ? OFFSET ?",
+        "SELECT *, COUNT(*) OVER () AS total_rows FROM diagnoses WHERE parameter_set_id = $1 \
+         ORDER BY created_at DESC, id DESC LIMIT $2 OFFSET $3",
     )
     .bind(set_id);
     paging::fetch(db, query, offset, limit, diagnosis_count(db, set_id)).await
 }
 
-pub async fn diagnosis_count(db: impl SqliteExecutor<'_>, set_id: &str) -> Result<i64, sqlx::Error> {
-    sqlx::query_scalar("SELECT COUNT(*) FROM diagnoses WHERE parameter_set_id = ?").bind(set_id).fetch_one(db).await
+pub async fn diagnosis_count(db: impl AnyExecutor<'_>, set_id: &str) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM diagnoses WHERE parameter_set_id = $1").bind(set_id).fetch_one(db).await
 }
 
 /// Record the parameter set accepting a diagnosis created; `false` when it already has one (or
 /// does not exist). Call inside the transaction that inserts the set.
 pub async fn set_diagnosis_accepted(
-    db: impl SqliteExecutor<'_>,
+    db: impl AnyExecutor<'_>,
     diagnosis_id: &str,
     set_id: &str,
 ) -> Result<bool, sqlx::Error> {
     let r = sqlx::query(
-        "UPDATE diagnoses SET accepted_parameter_set_id = ? WHERE id = ? AND accepted_parameter_set_id IS NULL",
+        "UPDATE diagnoses SET accepted_parameter_set_id = $1 WHERE id = $2 AND accepted_parameter_set_id IS NULL",
     )
     .bind(set_id)
     .bind(diagnosis_id)
@@ -681,9 +720,9 @@ pub struct PosePlanRow {
     pub created_at: String,
 }
 
-pub async fn insert_pose_plan(db: impl SqliteExecutor<'_>, p: &PosePlanRow) -> Result<(), sqlx::Error> {
+pub async fn insert_pose_plan(db: impl AnyExecutor<'_>, p: &PosePlanRow) -> Result<(), sqlx::Error> {
     sqlx::query(
-        "INSERT INTO pose_plans (id, robot_id, request_json, result_json, job_id, created_at) VALUES (?, ?, ?, ?, ?, ?)",
+        "INSERT INTO pose_plans (id, robot_id, request_json, result_json, job_id, created_at) VALUES ($1, $2, $3, $4, $5, $6)",
     )
     .bind(&p.id)
     .bind(&p.robot_id)
@@ -696,25 +735,25 @@ pub async fn insert_pose_plan(db: impl SqliteExecutor<'_>, p: &PosePlanRow) -> R
     Ok(())
 }
 
-pub async fn pose_plan(db: impl SqliteExecutor<'_>, id: &str) -> Result<Option<PosePlanRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM pose_plans WHERE id = ?").bind(id).fetch_optional(db).await
+pub async fn pose_plan(db: impl AnyExecutor<'_>, id: &str) -> Result<Option<PosePlanRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM pose_plans WHERE id = $1").bind(id).fetch_optional(db).await
 }
 
 /// A robot's pose plans `offset..offset + limit`, newest first.
 pub async fn pose_plans_of_robot(
-    db: &SqlitePool,
+    db: &Pool,
     robot_id: &str,
     offset: i64,
     limit: i64,
 ) -> Result<Page<PosePlanRow>, sqlx::Error> {
     let query = sqlx::query_as(
-        "SELECT *, COUNT(*) OVER () AS total_rows FROM pose_plans WHERE robot_id = ? \
-         ORDER BY created_at DESC, id DESC LIMIT ? OFFSET ?",
+        "SELECT *, COUNT(*) OVER () AS total_rows FROM pose_plans WHERE robot_id = $1 \
+         ORDER BY created_at DESC, id DESC LIMIT $2 OFFSET $3",
     )
     .bind(robot_id);
     paging::fetch(db, query, offset, limit, pose_plan_count(db, robot_id)).await
 }
 
-pub async fn pose_plan_count(db: impl SqliteExecutor<'_>, robot_id: &str) -> Result<i64, sqlx::Error> {
-    sqlx::query_scalar("SELECT COUNT(*) FROM pose_plans WHERE robot_id = ?").bind(robot_id).fetch_one(db).await
+pub async fn pose_plan_count(db: impl AnyExecutor<'_>, robot_id: &str) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM pose_plans WHERE robot_id = $1").bind(robot_id).fetch_one(db).await
 }

@@ -1,9 +1,9 @@
 //! Bearer tokens. The secret is shown once, at creation; the store keeps only its SHA-256, so a
 //! copy of the database does not hand out access.
 
+use crate::db::AnyExecutor;
+use crate::db::Pool;
 use sha2::{Digest, Sha256};
-use sqlx::SqlitePool;
-use sqlx::sqlite::SqliteExecutor;
 
 use super::paging::{self, Page};
 
@@ -90,11 +90,7 @@ impl TokenRow {
 }
 
 /// Create a token; returns the row and the secret (never stored).
-pub async fn create(
-    db: impl SqliteExecutor<'_>,
-    name: &str,
-    scopes: &[Scope],
-) -> Result<(TokenRow, String), sqlx::Error> {
+pub async fn create(db: impl AnyExecutor<'_>, name: &str, scopes: &[Scope]) -> Result<(TokenRow, String), sqlx::Error> {
     let secret = new_secret();
     let row = TokenRow {
         id: super::new_id(),
@@ -104,7 +100,7 @@ pub async fn create(
         created_at: super::now(),
         revoked_at: None,
     };
-    sqlx::query("INSERT INTO tokens (id, name, hash, scopes, created_at) VALUES (?, ?, ?, ?, ?)")
+    sqlx::query("INSERT INTO tokens (id, name, hash, scopes, created_at) VALUES ($1, $2, $3, $4, $5)")
         .bind(&row.id)
         .bind(&row.name)
         .bind(&row.hash)
@@ -116,33 +112,34 @@ pub async fn create(
 }
 
 /// The live token with this secret.
-pub async fn by_secret(db: impl SqliteExecutor<'_>, secret: &str) -> Result<Option<TokenRow>, sqlx::Error> {
+pub async fn by_secret(db: impl AnyExecutor<'_>, secret: &str) -> Result<Option<TokenRow>, sqlx::Error> {
     by_hash(db, &hash(secret)).await
 }
 
 /// The live token whose secret hashes to `hash`.
-pub async fn by_hash(db: impl SqliteExecutor<'_>, hash: &str) -> Result<Option<TokenRow>, sqlx::Error> {
-    sqlx::query_as("SELECT * FROM tokens WHERE hash = ? AND revoked_at IS NULL").bind(hash).fetch_optional(db).await
+pub async fn by_hash(db: impl AnyExecutor<'_>, hash: &str) -> Result<Option<TokenRow>, sqlx::Error> {
+    sqlx::query_as("SELECT * FROM tokens WHERE hash = $1 AND revoked_at IS NULL").bind(hash).fetch_optional(db).await
 }
 
-pub async fn list(db: impl SqliteExecutor<'_>) -> Result<Vec<TokenRow>, sqlx::Error> {
+pub async fn list(db: impl AnyExecutor<'_>) -> Result<Vec<TokenRow>, sqlx::Error> {
     sqlx::query_as("SELECT * FROM tokens ORDER BY created_at, id").fetch_all(db).await
 }
 
 /// Tokens `offset..offset + limit`, oldest first.
-pub async fn page(db: &SqlitePool, offset: i64, limit: i64) -> Result<Page<TokenRow>, sqlx::Error> {
-    let query =
-        sqlx::query_as("SELECT *, COUNT(*) OVER () AS total_rows FROM tokens ORDER BY created_at, id LIMIT ? OFFSET ?");
+pub async fn page(db: &Pool, offset: i64, limit: i64) -> Result<Page<TokenRow>, sqlx::Error> {
+    let query = sqlx::query_as(
+        "SELECT *, COUNT(*) OVER () AS total_rows FROM tokens ORDER BY created_at, id LIMIT $1 OFFSET $2",
+    );
     paging::fetch(db, query, offset, limit, count(db)).await
 }
 
-pub async fn count(db: impl SqliteExecutor<'_>) -> Result<i64, sqlx::Error> {
+pub async fn count(db: impl AnyExecutor<'_>) -> Result<i64, sqlx::Error> {
     sqlx::query_scalar("SELECT COUNT(*) FROM tokens").fetch_one(db).await
 }
 
 /// Revoke; `false` if unknown or already revoked.
-pub async fn revoke(db: impl SqliteExecutor<'_>, id: &str) -> Result<bool, sqlx::Error> {
-    let r = sqlx::query("UPDATE tokens SET revoked_at = ? WHERE id = ? AND revoked_at IS NULL")
+pub async fn revoke(db: impl AnyExecutor<'_>, id: &str) -> Result<bool, sqlx::Error> {
+    let r = sqlx::query("UPDATE tokens SET revoked_at = $1 WHERE id = $2 AND revoked_at IS NULL")
         .bind(super::now())
         .bind(id)
         .execute(db)

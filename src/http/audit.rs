@@ -41,12 +41,7 @@ pub struct Event<'a> {
 }
 
 /// Record a correction (inside the transaction that makes it).
-pub async fn record(
-    tx: &mut sqlx::SqliteConnection,
-    actor: Option<&str>,
-    at: &str,
-    e: Event<'_>,
-) -> Result<(), ApiError> {
+pub async fn record(tx: &mut crate::db::Conn, actor: Option<&str>, at: &str, e: Event<'_>) -> Result<(), ApiError> {
     let row = corrections::AuditRow {
         id: db::new_id(),
         at: at.to_string(),

@@ -352,7 +352,7 @@ mod tests {
 
     #[tokio::test]
     async fn a_unique_violation_is_a_conflict_naming_the_field_and_nothing_else_is() {
-        let db = sqlx::SqlitePool::connect("sqlite::memory:").await.unwrap();
+        let db = crate::db::connect_memory().await.unwrap();
         sqlx::query("CREATE TABLE t (name TEXT UNIQUE)").execute(&db).await.unwrap();
         let insert = || sqlx::query("INSERT INTO t (name) VALUES ('a')").execute(&db);
         insert().await.or_conflict("name", || unreachable!("no conflict")).unwrap();

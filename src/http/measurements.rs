@@ -333,7 +333,7 @@ pub struct MeasurementOut {
 
 /// A session's measurement by index, or 404.
 async fn measurement_out(
-    db: &mut sqlx::SqliteConnection,
+    db: &mut crate::db::Conn,
     session: &records::SessionRow,
     index: i64,
 ) -> Result<MeasurementOut, ApiError> {

@@ -45,7 +45,7 @@ pub struct Readiness {
         (status = 503, description = "The database is not usable, or writes are failing", body = super::Problem, content_type = "application/problem+json")))]
 pub async fn readyz(State(state): State<AppState>) -> Result<Json<Readiness>, ApiError> {
     let applied: Result<i64, sqlx::Error> =
-        sqlx::query_scalar("SELECT COUNT(*) FROM _sqlx_migrations WHERE success = 1").fetch_one(&state.pool).await;
+        sqlx::query_scalar("SELECT COUNT(*) FROM _sqlx_migrations WHERE success = TRUE").fetch_one(&state.pool).await;
     let n = match applied {
         Ok(n) if n as usize == db::MIGRATOR.iter().count() => n,
         Ok(n) => {

@@ -445,7 +445,7 @@ pub async fn activate(
     Ok(Json(set_out(&state, &row, true, true).await?))
 }
 
-async fn find_in(tx: &mut sqlx::SqliteConnection, id: &str) -> Result<records::ParameterSetRow, ApiError> {
+async fn find_in(tx: &mut crate::db::Conn, id: &str) -> Result<records::ParameterSetRow, ApiError> {
     records::parameter_set(&mut *tx, id).await?.ok_or_else(|| ApiError::not_found("parameter set", id))
 }
 

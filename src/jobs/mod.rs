@@ -17,7 +17,7 @@ use tokio::sync::watch;
 use tokio::task::JoinHandle;
 use tracing::Instrument;
 
-use sqlx::SqlitePool;
+use crate::db::Pool;
 use tokio::sync::Notify;
 
 use crate::app::cache::Caches;
@@ -93,7 +93,7 @@ impl From<sqlx::Error> for JobError {
 /// where storage trouble is recorded (for `/readyz`, and a waiting job's `phase`).
 #[derive(Clone)]
 pub struct JobContext {
-    pub pool: SqlitePool,
+    pub pool: Pool,
     pub wake: Arc<Notify>,
     pub caches: Arc<Caches>,
     pub metrics: Arc<Metrics>,
@@ -131,7 +131,11 @@ impl Workers {
     /// long [`Workers::shutdown`] lets running jobs go on.
     pub async fn start(ctx: impl Into<JobContext>, n: usize, grace: Duration) -> Result<Workers, sqlx::Error> {
         let state: JobContext = ctx.into();
-        let requeued = db::jobs::requeue_stale(&state.pool, true, None).await?;
+        // SQLite: this process holds the database alone (the serve lock), so every running job
+        // was left by a previous process. PostgreSQL: other replicas may be running theirs now;
+        // only expired leases are taken back (a dead replica's lease runs out).
+        let alone = db::Backend::of(&state.pool) == db::Backend::Sqlite;
+        let requeued = db::jobs::requeue_stale(&state.pool, alone, None).await?;
         if requeued > 0 {
             tracing::warn!(requeued, "requeued jobs left running by a previous process");
         }

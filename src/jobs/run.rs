@@ -2,8 +2,8 @@
 //! (blocking, off the async runtime — the same library calls the CLI makes), store the result
 //! (inside the transaction that also ends the job).
 
+use crate::db::Pool;
 use serde_json::{Value, json};
-use sqlx::SqlitePool;
 
 use super::JobError;
 use super::requests::{
@@ -120,7 +120,7 @@ pub struct DiagnosisSessions {
 /// measurements (422 at `identification[i]` / `validation[i]`); there must be at least one
 /// identification session (422 at `identification`).
 pub async fn diagnosis_sessions(
-    pool: &SqlitePool,
+    pool: &Pool,
     robot_id: &str,
     identification: &[String],
     validation: Option<&[String]>,
@@ -150,7 +150,7 @@ fn stored<T: serde::de::DeserializeOwned>(json: &str, what: &str) -> Result<T, J
 }
 
 /// Load a job's inputs.
-pub async fn load(pool: &SqlitePool, kind: JobKind, robot_id: &str, request_json: &str) -> Result<Inputs, JobError> {
+pub async fn load(pool: &Pool, kind: JobKind, robot_id: &str, request_json: &str) -> Result<Inputs, JobError> {
     let robot =
         records::robot(pool, robot_id).await?.ok_or_else(|| JobError::Internal(format!("robot {robot_id} missing")))?;
     match kind {
@@ -632,7 +632,7 @@ pub fn plan_poses(
 
 /// Write a job's output; returns the job's result.
 pub async fn store(
-    tx: &mut sqlx::SqliteConnection,
+    tx: &mut crate::db::Conn,
     job_id: &str,
     robot_id: &str,
     request_json: &str,

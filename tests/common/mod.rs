@@ -1,5 +1,10 @@
-//! Helpers for the HTTP tests: the real router on a fresh SQLite database (a file, WAL, as in
-//! production), with or without job workers, and one-line requests.
+//! Helpers for the HTTP tests: the real router on a fresh database, with or without job workers,
+//! and one-line requests.
+//!
+//! The backend is chosen by `ROBOCAL_TEST_BACKEND`: unset or `sqlite`, a fresh SQLite file (WAL,
+//! as in production); `postgres`, a fresh database of its own on the server `ROBOCAL_TEST_PG`
+//! names (`scripts/pg_cluster.sh start` prints one), created with the C collation and dropped
+//! when the test's app is dropped.
 
 #![allow(dead_code)]
 
@@ -22,6 +27,115 @@ pub struct TestApp {
     pub workers: Option<Workers>,
     pub dir: PathBuf,
     pub token: Option<String>,
+    /// The PostgreSQL database of this app (dropped with it), when the backend is PostgreSQL.
+    pub pg: Option<PgDb>,
+}
+
+/// Every table of the store, in name order (`tests/postgres_schema.rs` reads them from both
+/// catalogues and checks this list; `tests/migrate_pg.rs` copies and counts each).
+pub const STORE_TABLES: [&str; 15] = [
+    "artefacts",
+    "audit_events",
+    "batches",
+    "diagnoses",
+    "iso9283_evaluations",
+    "jobs",
+    "measurement_exclusions",
+    "measurements",
+    "parameter_set_activations",
+    "parameter_sets",
+    "pose_plans",
+    "robots",
+    "sessions",
+    "tokens",
+    "validations",
+];
+
+/// The backend the HTTP and job tests run on (`ROBOCAL_TEST_BACKEND`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TestBackend {
+    Sqlite,
+    Postgres,
+}
+
+pub fn test_backend() -> TestBackend {
+    match std::env::var("ROBOCAL_TEST_BACKEND").as_deref() {
+        Err(_) | Ok("" | "sqlite") => TestBackend::Sqlite,
+        Ok("postgres") => TestBackend::Postgres,
+        Ok(other) => panic!("ROBOCAL_TEST_BACKEND={other}: say sqlite or postgres"),
+    }
+}
+
+/// The server `ROBOCAL_TEST_PG` names; a clear panic when the PostgreSQL backend is asked for
+/// without one.
+pub fn test_server() -> String {
+    std::env::var("ROBOCAL_TEST_PG").unwrap_or_else(|_| {
+        panic!(
+            "ROBOCAL_TEST_BACKEND=postgres needs ROBOCAL_TEST_PG=<server URL>: start one with `scripts/pg_cluster.sh start`"
+        )
+    })
+}
+
+/// A database of its own on a PostgreSQL server, created empty with the C collation; dropped
+/// (`WITH (FORCE)`, so open connections do not keep it) when this is dropped.
+pub struct PgDb {
+    pub admin: sqlx::postgres::PgConnectOptions,
+    pub name: String,
+    pub url: String,
+}
+
+impl PgDb {
+    pub async fn create(server: &str, prefix: &str) -> PgDb {
+        use sqlx::Connection;
+        let admin: sqlx::postgres::PgConnectOptions =
+            server.parse().unwrap_or_else(|e| panic!("ROBOCAL_TEST_PG={server}: {e}"));
+        let name = format!("{prefix}_{}", robocal::db::new_id().replace('-', ""));
+        let mut conn = sqlx::PgConnection::connect_with(&admin).await.unwrap_or_else(|e| panic!("{server}: {e}"));
+        sqlx::query(sqlx::AssertSqlSafe(format!(
+            "CREATE DATABASE {name} TEMPLATE template0 LC_COLLATE 'C' LC_CTYPE 'C' ENCODING 'UTF8'"
+        )))
+        .execute(&mut conn)
+        .await
+        .unwrap();
+        conn.close().await.unwrap();
+        let (base, query) = match server.split_once('?') {
+            Some((b, q)) => (b, format!("?{q}")),
+            None => (server, String::new()),
+        };
+        let (host, _) = base.rsplit_once('/').expect("a URL with a database");
+        let url = format!("{host}/{name}{query}");
+        PgDb { admin, name, url }
+    }
+
+    pub fn options(&self) -> sqlx::postgres::PgConnectOptions {
+        self.admin.clone().database(&self.name)
+    }
+
+    pub async fn connect(&self) -> sqlx::PgConnection {
+        use sqlx::Connection;
+        sqlx::PgConnection::connect_with(&self.options()).await.unwrap()
+    }
+}
+
+impl Drop for PgDb {
+    fn drop(&mut self) {
+        // On a thread of its own with its own runtime: drop runs inside the test's runtime,
+        // which must not be blocked on.
+        let (admin, name) = (self.admin.clone(), self.name.clone());
+        let _ = std::thread::spawn(move || {
+            let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+            rt.block_on(async move {
+                use sqlx::Connection;
+                if let Ok(mut conn) = sqlx::PgConnection::connect_with(&admin).await {
+                    let _ = sqlx::query(sqlx::AssertSqlSafe(format!("DROP DATABASE IF EXISTS {name} WITH (FORCE)")))
+                        .execute(&mut conn)
+                        .await;
+                    let _ = conn.close().await;
+                }
+            })
+        })
+        .join();
+    }
 }
 
 pub struct Res {
@@ -41,11 +155,17 @@ pub fn fresh_dir(tag: &str) -> PathBuf {
 impl TestApp {
     pub async fn new(config: ServiceConfig, workers: bool) -> TestApp {
         let dir = fresh_dir("http");
-        let pool = robocal::db::connect(&dir.join("robocal.db")).await.unwrap();
+        let (pool, pg) = match test_backend() {
+            TestBackend::Sqlite => (robocal::db::connect(&dir.join("robocal.db")).await.unwrap(), None),
+            TestBackend::Postgres => {
+                let pg = PgDb::create(&test_server(), "robocal_t").await;
+                (robocal::db::connect_url(&pg.url).await.unwrap(), Some(pg))
+            }
+        };
         let state = AppState::new(pool, config);
         let w =
             if workers { Some(Workers::start(state.clone(), 1, Duration::from_secs(5)).await.unwrap()) } else { None };
-        TestApp { router: app(state.clone()), state, workers: w, dir, token: None }
+        TestApp { router: app(state.clone()), state, workers: w, dir, token: None, pg }
     }
 
     pub async fn default() -> TestApp {
