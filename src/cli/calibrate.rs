@@ -170,6 +170,7 @@ pub(super) fn identify(a: IdentifyArgs) -> Result<String, CliError> {
         q.residual_ratio,
         q.expected_rms / MM
     ) + &payload_note(&id)
+        + &id.notes.iter().map(|n| format!("; {n}")).collect::<String>()
         + &reported)
 }
 

@@ -230,7 +230,17 @@ pub struct Paired {
     pub gain_rms: f64,
     /// Mean |e| of `base` minus that of `better`, m.
     pub gain_mean: f64,
+    /// The RMS gain over the poses without the worst [`CORE_TRIM`] of them (ranked by the larger
+    /// of their two errors), per observation, m: the gain of the bulk of the poses, which one
+    /// pose predicted centimetres wrong by either model cannot dominate.
+    pub gain_rms_core: f64,
+    /// The largest per-pose RMS error of `base` and of `better`, m.
+    pub worst: (f64, f64),
 }
+
+/// The share of the poses, the worst predicted, that [`Paired::gain_rms_core`] leaves out (at
+/// least one pose once there are 20).
+pub const CORE_TRIM: f64 = 0.01;
 
 pub fn paired(base: &Heldout, better: &Heldout) -> Paired {
     let d: Vec<f64> = base.pose_sq.iter().zip(&better.pose_sq).map(|(a, b)| a - b).collect();
@@ -242,5 +252,34 @@ pub fn paired(base: &Heldout, better: &Heldout) -> Paired {
         p: super::stats::wilcoxon_greater(&d),
         gain_rms: rms(base) - rms(better),
         gain_mean: mean(base) - mean(better),
+        gain_rms_core: core_gain(&base.pose_sq, &better.pose_sq) / obs_per_pose(base).sqrt(),
+        worst: (worst_pose(base), worst_pose(better)),
     }
+}
+
+/// The largest per-pose error of a model's held-out poses, m: the root of the pose's summed
+/// squared errors over the mean number of observations per pose (the pose's |e| with one target).
+fn worst_pose(h: &Heldout) -> f64 {
+    (h.pose_sq.iter().fold(0.0_f64, |m, &s| m.max(s)) / obs_per_pose(h)).sqrt()
+}
+
+/// The mean number of observations per tested pose (1 with one target, 3 with three reflectors).
+fn obs_per_pose(h: &Heldout) -> f64 {
+    (h.errors.len() as f64 / h.pose_sq.len().max(1) as f64).max(1.0)
+}
+
+/// The RMS gain of per-pose squared errors without the worst [`CORE_TRIM`] of the poses (per
+/// pose, not yet per observation).
+fn core_gain(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len());
+    if n == 0 {
+        return 0.0;
+    }
+    let trim = if n >= 20 { ((n as f64 * CORE_TRIM).ceil() as usize).max(1) } else { 0 };
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&i, &j| a[i].max(b[i]).total_cmp(&a[j].max(b[j])));
+    let kept = &order[..n - trim];
+    let m = kept.len().max(1) as f64;
+    let rms = |x: &[f64]| (kept.iter().map(|&i| x[i]).sum::<f64>() / m).sqrt();
+    rms(a) - rms(b)
 }

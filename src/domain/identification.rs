@@ -281,6 +281,7 @@ pub fn identification_doc(id: &Identification, sessions: &[String], selection: O
         "residual_ratio": q.residual_ratio,
         "envelope": super::validity::Envelope::of_identification(id).map(|e| super::validity::envelope_json(&e)),
         "worst": id.worst.iter().map(|w| json!({"session": w.session, "index": w.index, "residual_mm": w.residual / MM, "ratio": w.ratio})).collect::<Vec<_>>(),
+        "notes": id.notes,
     }));
     if q.weighted
         && let Some(obj) = doc.quality.as_mut().and_then(|v| v.as_object_mut())

@@ -5,6 +5,7 @@
 
 pub mod cell;
 pub mod diagnosis;
+pub mod diagnosis_spec;
 pub mod drift;
 pub mod export;
 pub mod history;

@@ -472,6 +472,12 @@ pub fn crossval_with_progress(
     opts: &CrossvalOptions,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Crossval, IdentifyError> {
+    // Approach directions from the measuring order of the whole sessions, before any fold takes
+    // a subset of them (a subset's consecutive rows are not consecutive stops).
+    let models: Vec<&super::ModelOptions> =
+        std::iter::once(&opts.before.model).chain(opts.variants.iter().map(|v| &v.options.model)).collect();
+    let filled = super::prepare::with_approach(cell, &models);
+    let cell = filled.as_ref().map_or(cell, |f| &f.0);
     let split = Split::of(cell, &opts.sessions)?;
     check_schemes(cell, opts, &split)?;
     let mut variants = vec![Variant::before(&opts.before)];

@@ -12,7 +12,7 @@
 //! and C (where they are 0.8–2.7 σ) left the held-out mean unchanged (0.362 → 0.363, 0.432 →
 //! 0.432 mm).
 //!
-//! So, like an undeclared payload ([`super::PAYLOAD_SIGNIFICANCE`]), a compliance is kept only
+//! So, like an undeclared payload ([`PAYLOAD_SIGNIFICANCE`]), a compliance is kept only
 //! when its change from the start value exceeds [`COMPLIANCE_SIGNIFICANCE`] of its own (reported,
 //! cluster-robust) standard deviation. The least determined one is held at its start value, the
 //! model refitted, and the test repeated, since holding one sharpens the others. Each held
@@ -21,17 +21,21 @@
 use super::identifiability::Status;
 use super::problem::{GlobalParam, Problem};
 use super::quality::Quality;
-use super::solver::{self, Fit, SolverOptions};
+use super::solver::{self, Fit, SolveError, SolverOptions};
 use crate::kinematics::{JointTerm, Param};
 
 /// A fitted compliance must differ from its start value by more than this many of its standard
 /// deviations to be kept (the same rule as an undeclared payload's mass).
 pub const COMPLIANCE_SIGNIFICANCE: f64 = 3.0;
 
-/// The fit and the statistics [`hold_undetermined_compliances`] works on.
+/// An unknown payload's identified mass must exceed this many of its standard deviations to be
+/// kept (see [`super::IdentifyOptions::identify_payload`]).
+pub const PAYLOAD_SIGNIFICANCE: f64 = 3.0;
+
+/// The fit and the statistics [`hold_undetermined`] works on.
 pub(super) struct Fitted<'a> {
     pub problem: &'a Problem,
-    /// The start values (a held compliance returns to its own).
+    /// The start values (a held parameter returns to its own).
     pub x0: &'a [f64],
     /// Per observation, its (first row, row count) in the residual.
     pub rows: &'a [(usize, usize)],
@@ -39,48 +43,88 @@ pub(super) struct Fitted<'a> {
     pub pose_of_obs: &'a [usize],
     pub n_poses: usize,
     pub solver: &'a SolverOptions,
+    /// The global index of an unknown payload's mass, when the problem identifies one.
+    pub payload: Option<usize>,
+    /// Hold the compliances the data do not determine too
+    /// ([`super::IdentifyOptions::hold_undetermined_compliance`]).
+    pub compliances: bool,
 }
 
-/// Hold, one at a time, every free compliance the data do not determine (see the module's
-/// documentation), refitting after each. A refit that fails leaves the last good fit and the
-/// compliance free: holding is a refinement, never a new way to fail.
-pub(super) fn hold_undetermined_compliances(
+/// What the next round holds: (column in `free`, global index, its statistic).
+enum Undetermined {
+    /// An unknown payload whose mass is not above [`PAYLOAD_SIGNIFICANCE`] of its σ (one-sided:
+    /// a negative mass is not determined either).
+    Payload(usize, usize, f64),
+    /// A compliance whose change from its start is below [`COMPLIANCE_SIGNIFICANCE`] of its σ.
+    Compliance(usize, usize, f64),
+}
+
+/// Hold, one at a time, every free parameter the data do not determine (see the module's
+/// documentation): an unknown payload first (the compliances act through it), then the
+/// compliances, least determined first, refitting after each. Returns the quality (with its
+/// cluster-robust σ) of the fit that stands.
+///
+/// A compliance's refit that fails leaves the last good fit and the compliance free: holding
+/// one is a refinement, never a new way to fail. A payload's refit that fails is an error: the
+/// fit with an undetermined payload cannot stand.
+pub(super) fn hold_undetermined(
     f: &Fitted<'_>,
     fit: &mut Fit,
     free: &mut Vec<usize>,
     status: &mut [Status],
-) {
+) -> Result<Quality, SolveError> {
     loop {
         let mut q = Quality::of(fit, f.problem.obs.len(), f.rows);
         q.make_robust(fit, f.rows, f.pose_of_obs, f.n_poses);
-        let Some((c, g, t)) = weakest_compliance(f.problem, f.x0, fit, free, &q) else { return };
+        let next = undetermined_payload(f, fit, free, &q)
+            .or_else(|| f.compliances.then(|| weakest_compliance(f.problem, f.x0, fit, free, &q)).flatten());
+        let Some(next) = next else { return Ok(q) };
+        let (c, g) = match next {
+            Undetermined::Payload(c, g, _) | Undetermined::Compliance(c, g, _) => (c, g),
+        };
         let mut held: Vec<usize> = free.clone();
         held.remove(c);
         let mut x = fit.x.clone();
         x[g] = f.x0[g];
-        let Ok(refit) = solver::solve(f.problem, &held, &x, f.solver) else { return };
-        status[g] = Status::Fixed(format!(
-            "{} not determined by these data ({:+.3e} ± {:.3e} deg/(N·m) from its start, {} σ, below {COMPLIANCE_SIGNIFICANCE} σ): held at {} deg/(N·m)",
-            f.problem.name(g),
-            (fit.x[g] - f.x0[g]).to_degrees(),
-            q.std[c].to_degrees(),
-            if t.is_finite() { format!("{t:.1}") } else { "undefined".into() },
-            if f.x0[g] == 0.0 { "0".to_string() } else { format!("{:.3e}", f.x0[g].to_degrees()) },
-        ));
+        let refit = match (&next, solver::solve(f.problem, &held, &x, f.solver)) {
+            (_, Ok(refit)) => refit,
+            (Undetermined::Payload(..), Err(e)) => return Err(e),
+            (Undetermined::Compliance(..), Err(_)) => return Ok(q),
+        };
+        status[g] = Status::Fixed(match next {
+            Undetermined::Payload(_, _, m) => format!(
+                "payload not determined by these data ({m:.3} ± {:.3} kg, below {PAYLOAD_SIGNIFICANCE} σ): held at the declared 0 kg",
+                q.std[c]
+            ),
+            Undetermined::Compliance(_, _, t) => format!(
+                "{} not determined by these data ({:+.3e} ± {:.3e} deg/(N·m) from its start, {} σ, below {COMPLIANCE_SIGNIFICANCE} σ): held at {} deg/(N·m)",
+                f.problem.name(g),
+                (fit.x[g] - f.x0[g]).to_degrees(),
+                q.std[c].to_degrees(),
+                if t.is_finite() { format!("{t:.1}") } else { "undefined".into() },
+                if f.x0[g] == 0.0 { "0".to_string() } else { format!("{:.3e}", f.x0[g].to_degrees()) },
+            ),
+        });
         *fit = refit;
         *free = held;
     }
 }
 
-/// The free compliance with the smallest |change|/σ below the threshold: (column, global index,
-/// ratio). A σ that is not finite counts as undetermined.
-fn weakest_compliance(
-    problem: &Problem,
-    x0: &[f64],
-    fit: &Fit,
-    free: &[usize],
-    q: &Quality,
-) -> Option<(usize, usize, f64)> {
+/// The unknown payload, when it is free and its mass is not above [`PAYLOAD_SIGNIFICANCE`] of
+/// its σ: (column, global index, mass in kg). A mass below that is one direction with the
+/// compliances (c5·m, c3·m… act as products when the arm's own weight barely loads a joint), the
+/// fit crawls along it and every fold lands elsewhere.
+fn undetermined_payload(f: &Fitted<'_>, fit: &Fit, free: &[usize], q: &Quality) -> Option<Undetermined> {
+    let g = f.payload?;
+    let c = free.iter().position(|&x| x == g)?;
+    let (m, sd) = (fit.x[g], q.std[c]);
+    let determined = m > PAYLOAD_SIGNIFICANCE * sd; // false for a NaN σ too
+    (!determined).then_some(Undetermined::Payload(c, g, m))
+}
+
+/// The free compliance with the smallest |change|/σ below the threshold (with its column, global
+/// index and ratio). A σ that is not finite counts as undetermined.
+fn weakest_compliance(problem: &Problem, x0: &[f64], fit: &Fit, free: &[usize], q: &Quality) -> Option<Undetermined> {
     free.iter()
         .enumerate()
         .filter(|&(_, &g)| is_compliance(problem, g))
@@ -90,6 +134,7 @@ fn weakest_compliance(
         })
         .filter(|&(_, _, t)| t < COMPLIANCE_SIGNIFICANCE)
         .min_by(|a, b| a.2.total_cmp(&b.2))
+        .map(|(c, g, t)| Undetermined::Compliance(c, g, t))
 }
 
 fn is_compliance(problem: &Problem, g: usize) -> bool {

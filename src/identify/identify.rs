@@ -45,11 +45,10 @@ pub struct Identification {
     pub problem: Problem,
     pub free: Vec<usize>,
     pub x: Vec<f64>,
+    /// What was derived rather than given, in sentences (e.g. approach directions taken from the
+    /// measuring order).
+    pub notes: Vec<String>,
 }
-
-/// An unknown payload's identified mass must exceed this many of its standard deviations to be
-/// kept (see [`IdentifyOptions::identify_payload`]).
-pub const PAYLOAD_SIGNIFICANCE: f64 = 3.0;
 
 /// The global index of the payload's mass, when the problem has one.
 fn payload_mass(problem: &Problem) -> Option<usize> {
@@ -57,8 +56,21 @@ fn payload_mass(problem: &Problem) -> Option<usize> {
     problem.params.iter().position(|p| *p == GlobalParam::Robot(i))
 }
 
-/// Identify a cell's robot.
+/// Identify a cell's robot. A model with backlash terms on sessions that do not log the approach
+/// directions takes them from the measuring order ([`super::prepare::with_approach`]; said in
+/// [`Identification::notes`]).
 pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, IdentifyError> {
+    match super::prepare::with_approach(cell, &[&opts.model]) {
+        Some((filled, notes)) => {
+            let mut id = identify_cell(&filled, opts)?;
+            id.notes.extend(notes);
+            Ok(id)
+        }
+        None => identify_cell(cell, opts),
+    }
+}
+
+fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, IdentifyError> {
     let Prepared { problem, x0, mut free, mut status, base, fixed, payload_unknown } = prepare(cell, opts)?;
     if problem.n_obs_rows + problem.priors.len() <= free.len() {
         return Err(IdentifyError::Underdetermined { rows: problem.n_obs_rows, params: free.len() });
@@ -105,41 +117,18 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
     // and the cluster-robust σ ([`Quality::make_robust`]).
     let (pose_of_obs, n_poses) =
         crate::cell::poses::group_poses(problem.obs.iter().map(|o| &o.state.q[..cell.model.dof()]));
-    // An unknown payload is kept only when the data determine it: a mass below
-    // PAYLOAD_SIGNIFICANCE of its own σ is one direction with the compliances (c5·m, c3·m… act
-    // as products when the arm's own weight barely loads a joint), the fit crawls along it and
-    // every fold lands elsewhere. It is then held at the declared 0 kg and reported as such.
-    if payload_unknown
-        && let Some((g, c)) = payload_mass(&problem).and_then(|g| free.iter().position(|&f| f == g).map(|c| (g, c)))
-    {
-        let mut q = Quality::of(&fit, problem.obs.len(), &rows);
-        q.make_robust(&fit, &rows, &pose_of_obs, n_poses);
-        let (m, sd) = (fit.x[g], q.std[c]);
-        let determined = m > PAYLOAD_SIGNIFICANCE * sd; // false for a NaN σ too
-        if !determined {
-            free.remove(c);
-            status[g] = Status::Fixed(format!(
-                "payload not determined by these data ({:.3} ± {:.3} kg, below {PAYLOAD_SIGNIFICANCE} σ): held at the declared 0 kg",
-                m, sd
-            ));
-            let mut x = fit.x.clone();
-            x[g] = x0[g];
-            fit = solver::solve(&problem, &free, &x, &opts.solver)?;
-        }
-    }
-    if opts.hold_undetermined_compliance {
-        let f = super::hold::Fitted {
-            problem: &problem,
-            x0: &x0,
-            rows: &rows,
-            pose_of_obs: &pose_of_obs,
-            n_poses,
-            solver: &opts.solver,
-        };
-        super::hold::hold_undetermined_compliances(&f, &mut fit, &mut free, &mut status);
-    }
-    let mut quality = Quality::of(&fit, problem.obs.len(), &rows);
-    quality.make_robust(&fit, &rows, &pose_of_obs, n_poses);
+    // An unknown payload, and the compliances, are kept only when the data determine them.
+    let f = super::hold::Fitted {
+        problem: &problem,
+        x0: &x0,
+        rows: &rows,
+        pose_of_obs: &pose_of_obs,
+        n_poses,
+        solver: &opts.solver,
+        payload: payload_unknown.then(|| payload_mass(&problem)).flatten(),
+        compliances: opts.hold_undetermined_compliance,
+    };
+    let mut quality = super::hold::hold_undetermined(&f, &mut fit, &mut free, &mut status)?;
     if opts.noise.is_some() {
         // Weighted rows: the RMS of the measurement residuals in metres, from the rows divided
         // by their weights (and the robust weights, which the fit's residual carries too).
@@ -257,6 +246,7 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
         downweighted,
         quality,
         x: fit.x,
+        notes: Vec::new(),
         problem,
         free,
     })

@@ -22,9 +22,9 @@ mod pool;
 mod prepare;
 
 pub use error::{IdentifyError, Worst};
-pub use hold::COMPLIANCE_SIGNIFICANCE;
+pub use hold::{COMPLIANCE_SIGNIFICANCE, PAYLOAD_SIGNIFICANCE};
 pub use identifiability::Status;
-pub use identify::{Identification, PAYLOAD_SIGNIFICANCE, ToolResult, WORST_REPORTED, identify};
+pub use identify::{Identification, ToolResult, WORST_REPORTED, identify};
 pub use noise::NoiseModel;
 pub use options::{
     Anchor, DEFAULT_MAP_SMOOTHING, IdentifyOptions, ModelOptions, OUTLIER_FACTOR, RESIDUAL_RATIO_LIMIT, map_knots,

@@ -8,7 +8,7 @@ use faer::Mat;
 use super::base::{Registration, estimate_base_of, register_base_and_tcps};
 use super::noise::NoiseModel;
 use super::problem::{GlobalParam, Prior, Problem, tool_blocks};
-use super::{Anchor, IdentifyError, IdentifyOptions, Status, identifiability, map_knots};
+use super::{Anchor, IdentifyError, IdentifyOptions, ModelOptions, Status, identifiability, map_knots};
 use crate::cell::Cell;
 use crate::kinematics::{JointTerm, Param, ParamLayout};
 
@@ -25,6 +25,23 @@ pub struct Prepared {
     pub fixed: HashMap<usize, String>,
     /// The payload is unknown (every tool declares 0 kg) and identified as `tool_mass`.
     pub payload_unknown: bool,
+}
+
+/// A model with backlash terms acts through each measurement's approach direction (the sign of
+/// each joint's move into the stop). When some measurement does not log it, the cell with the
+/// directions derived from the measuring order (times, sequence numbers, or the rows' order, as
+/// the diagnosis derives them: [`crate::cell::order::fill_approach`]) and what was done, in
+/// sentences; `None` when the model has no backlash term or every direction is logged. A
+/// session marked resampled or shuffled is refused there (its order says nothing of the moves),
+/// and its backlash terms stay fixed with their reason.
+pub fn with_approach(cell: &Cell, models: &[&ModelOptions]) -> Option<(Cell, Vec<String>)> {
+    let wants = models.iter().any(|m| m.extra.iter().any(|p| matches!(p, Param::Joint(_, JointTerm::Backlash))));
+    if !wants || cell.sessions.iter().all(|s| s.measurements.iter().all(|m| m.approach.is_some())) {
+        return None;
+    }
+    let mut filled = cell.clone();
+    let notes = crate::cell::order::fill_approach(&mut filled, &[]).notes();
+    Some((filled, notes))
 }
 
 /// Build the problem, the starting point and the identifiable set: the layout, the base, the

@@ -1,0 +1,385 @@
+//! The verdict from the rounds of the search: what was named (each with its estimate and the
+//! held-out figures of the refitted models), or why nothing was — and the experiment that would
+//! tell.
+
+use super::library::{Candidate, Kind};
+use super::search::{self, Decision};
+use super::{Decomposition, Effect, ParamEstimate, Status, Verdict};
+use crate::kinematics::{Param, Unit};
+use crate::validate::stats::ErrorStats;
+
+/// The experiment that separates two kinds of effect (DIAGNOSIS §1).
+pub fn experiment(a: Kind, b: Option<Kind>) -> String {
+    use Kind::*;
+    let pair = |x: Kind, y: Kind| (a == x && b == Some(y)) || (a == y && b == Some(x));
+    if pair(Compliance, ToolMass) || pair(ComplianceCubic, ToolMass) || (a == ToolMass && b.is_none()) {
+        "measure with a second payload (add a known mass to the tool)".into()
+    } else if a == Thermal || b == Some(Thermal) {
+        "a temperature ramp, or the same poses measured cold and warm".into()
+    } else if a == Backlash || b == Some(Backlash) {
+        "the same poses approached from both sides of every joint".into()
+    } else if a.is_transmission() && b.is_some_and(|k| k.is_transmission()) {
+        "a sweep of the joint in fine steps (a few tenths of a degree) over its range".into()
+    } else if a == Base || b == Some(Base) || a == HayatiBeta || b == Some(HayatiBeta) {
+        "more balls and more orientations: calibration poses spread over the workspace".into()
+    } else if matches!(a, Compliance | ComplianceCubic) || b.is_some_and(|k| matches!(k, Compliance | ComplianceCubic))
+    {
+        "a second payload, and poses that vary the holding torque of the suspect joint".into()
+    } else {
+        "poses spread over the whole range of the joints involved, and more of them".into()
+    }
+}
+
+pub(super) fn effect_of(s: &search::Search, round: usize, index: usize, stage_after: Option<usize>) -> Effect {
+    let r = &s.rounds[round];
+    let sc = &r.screened[index];
+    let ev = r.evaluated.iter().find(|e| e.index == index);
+    let c = sc.candidate.clone();
+    // Parameter values: from the model that carries the effect when accepted, else the screening's
+    // linear estimate.
+    let mut parameters = Vec::new();
+    match stage_after.map(|k| &s.stages[k]) {
+        Some(st) => {
+            let pr = &st.problem;
+            let found: Vec<(Param, usize)> =
+                c.params.iter().filter_map(|p| pr.robot_index(*p).map(|g| (*p, g))).collect();
+            let stds = st.stds_of(&found.iter().map(|f| f.1).collect::<Vec<_>>());
+            for ((p, g), std) in found.into_iter().zip(stds) {
+                parameters.push(ParamEstimate { param: p, value: st.x[g], std });
+            }
+        }
+        None => {
+            for (p, v) in c.params.iter().zip(&sc.score.estimate) {
+                parameters.push(ParamEstimate { param: *p, value: *v, std: None });
+            }
+        }
+    }
+    let (estimate, std, unit) = magnitude(&c, &parameters);
+    // An accepted effect's gain is the refitted model's (what is reported and accepted); a
+    // suspect's, the linearised confirmation's.
+    let gain = match (stage_after, &r.refit) {
+        (Some(_), Some(refit)) => Some(refit),
+        _ => ev.map(|e| &e.vs_model),
+    };
+    Effect {
+        estimate,
+        std,
+        unit,
+        parameters,
+        gain_mean: gain.map_or(0.0, |g| g.gain_mean),
+        gain_rms: gain.map_or(0.0, |g| g.gain_rms),
+        confirm_p: gain.and_then(|g| g.p),
+        screen_log10_p: sc.log10_p_holm,
+        separability: sc.score.rho,
+        candidate: c,
+    }
+}
+
+/// The size of an effect in one number: the amplitude of a cyclic pair, the RMS of a table, the
+/// value of a one-parameter effect, the largest (in σ) of a group.
+fn magnitude(c: &Candidate, p: &[ParamEstimate]) -> (Option<f64>, Option<f64>, Unit) {
+    let unit = p.first().map_or(Unit::Mm, |e| e.param.unit());
+    match c.kind {
+        Kind::Cyclic if p.len() == 2 => {
+            let (a, b) = (p[0].value, p[1].value);
+            let amp = a.hypot(b);
+            let std = match (p[0].std, p[1].std) {
+                (Some(sa), Some(sb)) if amp > 0.0 => Some(((a * sa).powi(2) + (b * sb).powi(2)).sqrt() / amp),
+                _ => None,
+            };
+            (Some(amp), std, unit)
+        }
+        Kind::JointMap if !p.is_empty() => {
+            let rms = (p.iter().map(|e| e.value * e.value).sum::<f64>() / p.len() as f64).sqrt();
+            (Some(rms), None, unit)
+        }
+        _ if p.len() == 1 => (Some(p[0].value), p[0].std, unit),
+        _ => {
+            let best = p.iter().max_by(|a, b| {
+                let z = |e: &ParamEstimate| e.std.map_or(0.0, |s| (e.value / s).abs());
+                z(a).total_cmp(&z(b))
+            });
+            (best.map(|e| e.value), best.and_then(|e| e.std), best.map_or(unit, |e| e.param.unit()))
+        }
+    }
+}
+
+/// A number in four significant digits, without an exponent where it reads as plain decimals.
+fn num(v: f64) -> String {
+    let a = v.abs();
+    if a == 0.0 {
+        "0".into()
+    } else if (1e-3..1e5).contains(&a) {
+        let digits = (3 - a.log10().floor() as i32).clamp(0, 6) as usize;
+        format!("{v:.digits$}")
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
+/// A held-out RMS this many times the floor's, and this much above it (m), is an excess that a
+/// `none` would hide.
+const EXCESS_RATIO: f64 = 2.0;
+const EXCESS_MIN: f64 = 10e-6;
+
+/// What the last round of the search found, or why it named nothing.
+struct Finding {
+    status: Status,
+    summary: String,
+    lookalike: Option<Candidate>,
+    canonical_correlation: Option<f64>,
+    absorbed_by: Vec<(String, f64)>,
+    experiment: Option<String>,
+    /// The effects it suspects without naming them.
+    suspects: Vec<Effect>,
+}
+
+impl Finding {
+    fn new(status: Status, summary: String) -> Finding {
+        Finding {
+            status,
+            summary,
+            lookalike: None,
+            canonical_correlation: None,
+            absorbed_by: Vec::new(),
+            experiment: None,
+            suspects: Vec::new(),
+        }
+    }
+}
+
+/// The verdict from the rounds of the search: the effects named (with the last round's finding
+/// as what remains), or the last round's finding when none was.
+pub(super) fn verdict(s: &search::Search, d: &Decomposition) -> Verdict {
+    let mut effects = Vec::new();
+    for (k, round) in s.rounds.iter().enumerate() {
+        if let Decision::Accept(i) = round.decision {
+            effects.push(effect_of(s, k, i, Some(k + 1)));
+        }
+    }
+    let f = last_finding(s, d);
+    if effects.is_empty() {
+        return Verdict {
+            status: f.status,
+            effects: f.suspects,
+            summary: f.summary,
+            lookalike: f.lookalike,
+            canonical_correlation: f.canonical_correlation,
+            absorbed_by: f.absorbed_by,
+            experiment: f.experiment,
+            remaining: None,
+        };
+    }
+    Verdict {
+        status: Status::Named,
+        summary: format!("{} named and confirmed on held-out poses by the refitted model", named(s, d, &effects)),
+        effects,
+        lookalike: None,
+        canonical_correlation: None,
+        absorbed_by: Vec::new(),
+        experiment: None,
+        remaining: (f.status != Status::None).then_some((f.status, f.summary)),
+    }
+}
+
+fn mm(x: f64) -> String {
+    format!("{:.4} mm", x * 1e3)
+}
+
+/// Candidates these data cannot test, as a clause for a summary ("" when there are none).
+fn untestable(s: &search::Search) -> String {
+    let missing: Vec<String> = s.unavailable.iter().map(|u| format!("{} ({})", u.kind.name(), u.reason)).collect();
+    if missing.is_empty() { String::new() } else { format!("; not testable on these data: {}", missing.join("; ")) }
+}
+
+/// What the last round found (or did not).
+fn last_finding(s: &search::Search, d: &Decomposition) -> Finding {
+    let last = s.rounds.len() - 1;
+    let lr = &s.rounds[last];
+    match &lr.decision {
+        Decision::Accept(_) | Decision::Nothing => nothing_new(s, d),
+        Decision::NotSeparable { best, lookalike, canonical, reason } => {
+            let b = &lr.screened[*best];
+            let la = lookalike.map(|i| lr.screened[i].candidate.clone());
+            let mut suspects = vec![effect_of(s, last, *best, None)];
+            if let Some(i) = lookalike {
+                suspects.push(effect_of(s, last, *i, None));
+            }
+            Finding {
+                experiment: Some(experiment(b.candidate.kind, la.as_ref().map(|c| c.kind))),
+                lookalike: la,
+                canonical_correlation: *canonical,
+                absorbed_by: b.absorbed_by.clone(),
+                suspects,
+                ..Finding::new(Status::NotSeparable, format!("{}: {reason}", b.candidate.label()))
+            }
+        }
+        Decision::Partial { best, share, smoother_gain_rms } => {
+            let b = &lr.screened[*best];
+            let gain = lr.evaluated.iter().find(|e| e.index == *best).map_or(0.0, |e| e.vs_model.gain_rms);
+            let summary = format!(
+                "{} explains {:.0} % of what a smooth function of the configuration explains beyond the model (held-out RMS gain {} against {}); the rest is unexplained: an effect outside the library, of which this term is a look-alike",
+                b.candidate.label(),
+                share * 100.0,
+                mm(gain),
+                mm(*smoother_gain_rms)
+            );
+            Finding {
+                absorbed_by: b.absorbed_by.clone(),
+                experiment: Some(experiment(b.candidate.kind, None)),
+                suspects: vec![effect_of(s, last, *best, None)],
+                ..Finding::new(Status::Partial, summary)
+            }
+        }
+        Decision::Refuted { best, reason, .. } => {
+            let b = &lr.screened[*best];
+            Finding {
+                absorbed_by: b.absorbed_by.clone(),
+                experiment: Some(experiment(b.candidate.kind, None)),
+                suspects: vec![effect_of(s, last, *best, None)],
+                ..Finding::new(
+                    Status::NotSeparable,
+                    format!("{}: {reason}; not named, and the model is kept without it", b.candidate.label()),
+                )
+            }
+        }
+        Decision::Unknown { best } => {
+            let what = match best {
+                Some(i) => format!(
+                    "a smooth function of the configuration predicts the residual better than the best candidate ({}), which is one of its forms",
+                    lr.screened[*i].candidate.label()
+                ),
+                None => "a smooth function of the configuration predicts the residual; no candidate does".into(),
+            };
+            // Candidates these data cannot test are named here too: the cause may be one of them.
+            Finding::new(Status::UnknownEffect, format!("{what}{}", untestable(s)))
+        }
+    }
+}
+
+/// The last round accepted an effect or found none to test: an excess far above the floor that
+/// nothing predicts comes first (its cause may be untestable on these data); then screening
+/// evidence that no held-out test could confirm (an effect the current model absorbs); else none.
+fn nothing_new(s: &search::Search, d: &Decomposition) -> Finding {
+    let last = s.rounds.len() - 1;
+    let lr = &s.rounds[last];
+    let last_fig = match s.refits.last() {
+        Some(Ok(h)) => h,
+        _ => s.baselines.last().expect("a baseline"),
+    };
+    let now = ErrorStats::of(&last_fig.norms()).unwrap_or(d.heldout);
+    let strong = lr
+        .screened
+        .iter()
+        .filter(|c| c.significant && c.log10_p_holm < -6.0 && c.score.rho < 0.5)
+        .max_by(|a, b| a.score.bic_gain.total_cmp(&b.score.bic_gain));
+    // Candidates these data cannot test: named in the summary, with the log that would make them
+    // testable, whenever the verdict is not a plain `none`.
+    let untestable = untestable(s);
+    let exp = s
+        .unavailable
+        .iter()
+        .map(|u| match u.kind {
+            Kind::Backlash => {
+                "log each joint's approach direction, or keep the measuring order with its times".to_string()
+            }
+            Kind::Thermal => "log the robot's temperature".to_string(),
+            k => experiment(k, None),
+        })
+        .collect::<Vec<_>>();
+    match strong {
+        _ if now.rms > EXCESS_RATIO * d.floor.rms && now.rms - d.floor.rms > EXCESS_MIN => Finding {
+            experiment: Some(if exp.is_empty() {
+                "repeat poses to measure the robot's repeatability, and check the instrument's noise".into()
+            } else {
+                exp.join("; ")
+            }),
+            ..Finding::new(
+                Status::NotSeparable,
+                format!(
+                    "the held-out error (RMS {}) stands far above the floor ({}), but neither a candidate nor a smooth function of the configuration predicts it: an error that changes from pose to pose{untestable}",
+                    mm(now.rms),
+                    mm(d.floor.rms),
+                ),
+            )
+        },
+        Some(c) if !matches!(lr.decision, Decision::Accept(_)) => {
+            let i = lr.screened.iter().position(|x| std::ptr::eq(x, c)).expect("from the list");
+            Finding {
+                absorbed_by: c.absorbed_by.clone(),
+                experiment: Some(
+                    std::iter::once(experiment(c.candidate.kind, None)).chain(exp).collect::<Vec<_>>().join("; "),
+                ),
+                suspects: vec![effect_of(s, last, i, None)],
+                ..Finding::new(
+                    Status::NotSeparable,
+                    format!(
+                        "{} is in the data (screening p = 1e{:.0}) but the current model absorbs {:.0} % of it (ρ = {:.2}): it does not predict held-out poses better{untestable}",
+                        c.candidate.label(),
+                        c.log10_p_holm,
+                        (1.0 - c.score.rho * c.score.rho) * 100.0,
+                        c.score.rho
+                    ),
+                )
+            }
+        }
+        _ => Finding::new(
+            Status::None,
+            format!(
+                "no effect above the floor (held-out mean {} against a floor of {})",
+                mm(d.heldout.mean),
+                mm(d.floor.mean)
+            ),
+        ),
+    }
+}
+
+/// Each named effect with its numbers: the estimate ± σ, and the held-out mean of the refitted
+/// models before and after it (the shrink table's rows), with the gap closure; "; "-separated.
+fn named(s: &search::Search, d: &Decomposition, effects: &[Effect]) -> String {
+    let figures: Vec<Option<f64>> = s
+        .refits
+        .iter()
+        .zip(&s.baselines)
+        .map(|(r, b)| ErrorStats::of(&r.as_ref().unwrap_or(b).norms()).map(|e| e.mean))
+        .collect();
+    let gap_mean = d.heldout.mean - d.floor.mean;
+    let one = |v: f64, sd: Option<f64>, unit: Unit| match sd {
+        Some(sd) => format!("{} ± {} {}", num(v / unit.to_si()), num(sd / unit.to_si()), unit.as_str()),
+        None => format!("{} {}", num(v / unit.to_si()), unit.as_str()),
+    };
+    effects
+        .iter()
+        .enumerate()
+        .map(|(k, e)| {
+            // A group (every joint's backlash or compliance) says each term; a table its RMS; a
+            // cyclic pair its amplitude.
+            let value = if e.candidate.joint.is_none() && e.parameters.len() > 1 && e.candidate.kind != Kind::JointMap {
+                let terms: Vec<String> = e
+                    .parameters
+                    .iter()
+                    .map(|p| format!("{} {}", p.param, one(p.value, p.std, p.param.unit())))
+                    .collect();
+                format!(" ({})", terms.join(", "))
+            } else {
+                match e.estimate {
+                    Some(v) => format!(" {}", one(v, e.std, e.unit)),
+                    None => String::new(),
+                }
+            };
+            let held = match (figures.get(k).copied().flatten(), figures.get(k + 1).copied().flatten()) {
+                (Some(a), Some(b)) => {
+                    let closure = if gap_mean > 0.0 {
+                        format!(", closing {:.0} % of the gap to the floor", (d.heldout.mean - b) / gap_mean * 100.0)
+                    } else {
+                        String::new()
+                    };
+                    format!(" (held-out mean {} → {}{closure})", mm(a), mm(b))
+                }
+                _ => String::new(),
+            };
+            format!("{}{value}{held}", e.candidate.label())
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
+}
