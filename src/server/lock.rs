@@ -133,10 +133,15 @@ impl DbLock {
 }
 
 impl Drop for DbLock {
-    /// Empty the file (what it says is true only while it is locked), then the lock goes with
-    /// the file handle.
+    /// Empty the file (what it says is true only while it is locked), then release the lock
+    /// explicitly. Closing the handle alone is not enough: the lock belongs to the open file
+    /// description, which a process forked by this one in the meantime (a test harness or a demo
+    /// spawning a child, between its fork and its exec) still shares — the lock would outlive
+    /// this server by that window, and the next server on the database be refused
+    /// ("its lock file says nothing yet"). An unlock releases it for every sharer.
     fn drop(&mut self) {
         let _ = self.file.set_len(0);
+        let _ = self.file.unlock();
     }
 }
 
