@@ -543,6 +543,26 @@ async fn refusals_name_their_reason() {
     let stderr = text(&out.stderr);
     assert!(stderr.contains("--to: cannot reach the PostgreSQL server robocal@127.0.0.1:1/x"), "{stderr}");
 
+    // A source a server holds is refused naming it; one a migration reads is not (two
+    // migrations may read one source), but a server will not start on it meanwhile.
+    let ok = dir.join("ok.db");
+    let server = robocal::server::lock::DbLock::acquire(&ok).unwrap().unwrap();
+    let out = robocal(&["migrate", "--from", ok.to_str().unwrap(), "--to", "postgres://robocal@127.0.0.1:1/x"]);
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains("is served by another robocal process") && stderr.contains("stop it before migrating"),
+        "{stderr}"
+    );
+    drop(server);
+    let reader = robocal::server::lock::DbLock::acquire_shared(&ok).unwrap().unwrap();
+    let out = robocal(&["migrate", "--from", ok.to_str().unwrap(), "--to", "postgres://robocal@127.0.0.1:1/x"]);
+    assert!(text(&out.stderr).contains("--to: cannot reach"), "{}", text(&out.stderr));
+    let out = robocal(&["serve", "--db", ok.to_str().unwrap(), "--bind", "127.0.0.1:0"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("is being read by `robocal migrate`"), "{}", text(&out.stderr));
+    drop(reader);
+
     let out = robocal(&["migrate", "--from", dir.join("ok.db").to_str().unwrap(), "--to", "mysql://x@y/z"]);
     assert_eq!(out.status.code(), Some(2));
     assert!(text(&out.stderr).contains("--to: expected a postgres://"), "{}", text(&out.stderr));

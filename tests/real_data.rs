@@ -276,4 +276,23 @@ fn the_named_hysteresis_is_fitted_from_the_row_order() {
     let (m, s) = (id.set.values[i], id.std[i].expect("identified"));
     eprintln!("payload {m:.3} ± {s:.3} kg");
     assert!((m - 1.0).abs() < 3.0 * s && s < 0.3, "payload {m} ± {s} kg (true 1 kg)");
+
+    // Cross-validation derives them as well, from the whole sessions before any fold, and says so.
+    let o = CrossvalOptions {
+        sessions: cell.sessions.iter().map(|s| s.name.clone()).collect(),
+        folds: 2,
+        sizes: Vec::new(),
+        draws: 0,
+        transfer: Vec::new(),
+        transfer_kappa_limit: None,
+        transfer_fixed: Vec::new(),
+        variants: vec![Variant { name: "hysteresis".into(), options: o.clone() }],
+        before: IdentifyOptions::default(),
+        seed: 1,
+        threads: 2,
+    };
+    let cv = crossval(&cell, &o).unwrap();
+    assert_eq!(cv.notes, id.notes);
+    let f = cv.folds.iter().find(|f| f.variant == "hysteresis").unwrap();
+    assert!(f.pooled.is_some(), "{:?}", f.per_fold);
 }

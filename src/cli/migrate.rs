@@ -35,11 +35,12 @@ pub(super) fn migrate(a: MigrateArgs) -> Result<String, CliError> {
     let target =
         PgConnectOptions::from_str(&a.to).map_err(|e| CliError::arg("--to", format!("not a PostgreSQL URL: {e}")))?;
     // No server may write the source while it is copied (what it wrote after the snapshot would
-    // be lost); holding the server's lock also keeps one from starting meanwhile. A source in a
+    // be lost); a reader's share of the server's lock also keeps one from starting meanwhile, and
+    // lets two migrations read one source at once. A source in a
     // directory where the lock file cannot be made (a read-only copy) has no server either.
     // (A missing source gets no lock file: `prepare` refuses it.)
     let _lock = if source.is_file() {
-        match crate::server::lock::DbLock::acquire(&source) {
+        match crate::server::lock::DbLock::acquire_shared(&source) {
             Ok(lock) => lock,
             Err(e @ crate::server::lock::LockError::Held { .. }) => {
                 return Err(CliError::msg(format!("--from: {e}; stop it before migrating")));

@@ -38,6 +38,9 @@ pub struct CrossvalReport {
     pub sizes: Vec<SizeFigures>,
     pub transfer: Vec<TransferFigures>,
     pub quartiles: &'static str,
+    /// What the run derived and did not read (approach directions from the measuring order).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
     /// Wall-clock seconds and worker threads: the text's, not the document's.
     #[serde(skip)]
     pub seconds: f64,
@@ -304,6 +307,7 @@ impl CrossvalReport {
                 })
                 .collect(),
             quartiles: "min, q1, median, q3, max over the draws",
+            notes: cv.notes.clone(),
             seconds,
             threads,
         }
@@ -322,6 +326,9 @@ impl CrossvalReport {
                 self.session, self.measurements, self.seconds, self.threads
             ),
         };
+        for note in &self.notes {
+            text.push_str(&format!("note: {note}\n"));
+        }
         if !self.kfold.is_empty() {
             text.push_str(&format!(
                 "\n{}-fold cross-validation, pooled held-out errors (mm; orientation mrad)\n",

@@ -260,6 +260,9 @@ pub struct Crossval {
     pub folds: Vec<FoldsResult>,
     pub sizes: Vec<SizeResult>,
     pub transfer: Vec<TransferResult>,
+    /// What the run derived and did not read (the backlash terms' approach directions from the
+    /// measuring order, or why they could not be), one sentence each.
+    pub notes: Vec<String>,
 }
 
 /// A cell holding one session with the given measurements of `session` (the artefact, model and
@@ -477,7 +480,10 @@ pub fn crossval_with_progress(
     let models: Vec<&super::ModelOptions> =
         std::iter::once(&opts.before.model).chain(opts.variants.iter().map(|v| &v.options.model)).collect();
     let filled = super::prepare::with_approach(cell, &models);
-    let cell = filled.as_ref().map_or(cell, |f| &f.0);
+    let (cell, notes) = match &filled {
+        Some((f, notes)) => (f, notes.clone()),
+        None => (cell, Vec::new()),
+    };
     let split = Split::of(cell, &opts.sessions)?;
     check_schemes(cell, opts, &split)?;
     let mut variants = vec![Variant::before(&opts.before)];
@@ -501,6 +507,7 @@ pub fn crossval_with_progress(
         folds,
         sizes,
         transfer,
+        notes,
     })
 }
 

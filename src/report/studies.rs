@@ -126,6 +126,9 @@ pub fn crossval_report(cv: &Crossval) -> String {
         cv.measurements,
         cv.poses
     );
+    for note in &cv.notes {
+        s.push_str(&format!("<p class=\"meta\">Note: {}</p>", esc(note)));
+    }
     let curves = learning_curves(cv);
     if !curves.is_empty() {
         s.push_str("<h2>Learning curve</h2>");

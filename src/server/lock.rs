@@ -24,6 +24,10 @@ pub enum LockError {
         "the database {db} is served by another robocal process ({holder}); one server per database: its caches would go stale"
     )]
     Held { db: String, holder: String },
+    #[error(
+        "the database {db} is being read by `robocal migrate` (a shared lock); start the server once it has finished"
+    )]
+    Read { db: String },
     #[error("cannot lock the database {db} ({path}): {source}")]
     Io { db: String, path: String, source: io::Error },
 }
@@ -48,12 +52,15 @@ impl Holder {
     }
 }
 
-/// The exclusive lock on a database; released when dropped (and by the OS if the process dies).
+/// The lock on a database; released when dropped (and by the OS if the process dies). A server's
+/// is exclusive; a reader's (`robocal migrate` copying the database) is shared: readers exclude a
+/// server, not each other, and write nothing into the file (they cannot all write it).
 #[derive(Debug)]
 pub struct DbLock {
     file: File,
     path: PathBuf,
     holder: Holder,
+    shared: bool,
 }
 
 /// The lock file of the database at `db`: beside it, its file name with `.lock` appended, in the
@@ -78,6 +85,16 @@ impl DbLock {
     /// Take the lock of the database at `db`, or say who holds it. `Ok(None)` for SQLite's
     /// `:memory:`, which no other process can open.
     pub fn acquire(db: &Path) -> Result<Option<DbLock>, LockError> {
+        Self::take(db, false)
+    }
+
+    /// A reader's lock: shared with other readers, refused while a server holds the database
+    /// (naming it), and keeping one from starting until it is dropped.
+    pub fn acquire_shared(db: &Path) -> Result<Option<DbLock>, LockError> {
+        Self::take(db, true)
+    }
+
+    fn take(db: &Path, shared: bool) -> Result<Option<DbLock>, LockError> {
         if db.as_os_str() == ":memory:" {
             return Ok(None);
         }
@@ -91,9 +108,15 @@ impl DbLock {
             |source| LockError::Io { db: db.display().to_string(), path: path.display().to_string(), source };
         let mut file =
             OpenOptions::new().read(true).write(true).create(true).truncate(false).open(&path).map_err(io_error)?;
-        match file.try_lock() {
+        let taken = if shared { file.try_lock_shared() } else { file.try_lock() };
+        match taken {
             Ok(()) => {}
             Err(TryLockError::WouldBlock) => {
+                // Refused an exclusive lock: if a shared one is granted, only readers hold it.
+                if !shared && file.try_lock_shared().is_ok() {
+                    let _ = file.unlock();
+                    return Err(LockError::Read { db: db.display().to_string() });
+                }
                 return Err(LockError::Held { db: db.display().to_string(), holder: read_holder(&mut file) });
             }
             Err(TryLockError::Error(e)) => return Err(io_error(e)),
@@ -103,13 +126,16 @@ impl DbLock {
             addr: None,
             since: humantime::format_rfc3339_seconds(SystemTime::now()).to_string(),
         };
-        let mut lock = DbLock { file, path: path.clone(), holder };
-        lock.write().map_err(io_error)?;
+        let mut lock = DbLock { file, path: path.clone(), holder, shared };
+        if !shared {
+            lock.write().map_err(io_error)?;
+        }
         Ok(Some(lock))
     }
 
     /// Record the address the server listens on (once it is bound).
     pub fn listening(&mut self, addr: SocketAddr) -> io::Result<()> {
+        debug_assert!(!self.shared, "a reader does not listen");
         self.holder.addr = Some(addr.to_string());
         self.write()
     }
@@ -133,10 +159,17 @@ impl DbLock {
 }
 
 impl Drop for DbLock {
-    /// Empty the file (what it says is true only while it is locked), then the lock goes with
-    /// the file handle.
+    /// Empty the file (what it says is true only while it is locked), then release the lock
+    /// explicitly. Closing the handle alone is not enough: the lock belongs to the open file
+    /// description, which a process forked by this one in the meantime (a test harness or a demo
+    /// spawning a child, between its fork and its exec) still shares — the lock would outlive
+    /// this server by that window, and the next server on the database be refused
+    /// ("its lock file says nothing yet"). An unlock releases it for every sharer.
     fn drop(&mut self) {
-        let _ = self.file.set_len(0);
+        if !self.shared {
+            let _ = self.file.set_len(0);
+        }
+        let _ = self.file.unlock();
     }
 }
 
@@ -189,6 +222,27 @@ mod tests {
         let written: Holder = serde_json::from_str(&std::fs::read_to_string(again.path()).unwrap()).unwrap();
         assert_eq!(written, *again.holder());
         drop(again);
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn readers_share_the_lock_and_exclude_a_server() {
+        let d = dir("shared");
+        let db = d.join("robocal.db");
+        let first = DbLock::acquire_shared(&db).unwrap().unwrap();
+        let second = DbLock::acquire_shared(&db).unwrap().unwrap();
+        let e = DbLock::acquire(&db).unwrap_err();
+        assert!(matches!(e, LockError::Read { .. }) && e.to_string().contains("robocal migrate"), "{e}");
+        drop(first);
+        assert!(matches!(DbLock::acquire(&db), Err(LockError::Read { .. })));
+        drop(second);
+        // A server's lock refuses a reader, naming the server; the file a reader leaves is empty.
+        assert_eq!(std::fs::read_to_string(d.join("robocal.db.lock")).unwrap(), "");
+        let server = DbLock::acquire(&db).unwrap().unwrap();
+        let e = DbLock::acquire_shared(&db).unwrap_err().to_string();
+        assert!(e.contains(&format!("PID {}", std::process::id())) && e.contains("one server per database"), "{e}");
+        drop(server);
+        assert!(DbLock::acquire_shared(&db).unwrap().is_some());
         let _ = std::fs::remove_dir_all(&d);
     }
 
