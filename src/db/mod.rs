@@ -160,6 +160,11 @@ pub async fn connect(path: &Path) -> Result<Pool, sqlx::Error> {
 /// (`benches/upload.rs`) and for scratch databases whose loss at a power cut does not matter.
 pub async fn connect_with(path: &Path, synchronous: SqliteSynchronous) -> Result<Pool, sqlx::Error> {
     sqlx::any::install_default_drivers();
+    // SQLite's name for a private in-memory database: one per connection, so the pool must keep
+    // exactly one (a file URL would create a file named `:memory:` instead).
+    if path.as_os_str() == ":memory:" {
+        return connect_memory().await;
+    }
     // Switching a new database to WAL needs an exclusive lock that SQLite's busy timeout does not
     // wait for, so a process opening the file while another creates it can get "database is
     // locked" at once: retry that for as long as the busy timeout would have waited.
@@ -458,4 +463,23 @@ pub fn storage_trouble(e: &sqlx::Error) -> Option<StorageTrouble> {
 /// Whether an error is a UNIQUE (or primary-key) constraint violation.
 pub fn is_unique_violation(e: &sqlx::Error) -> bool {
     e.as_database_error().is_some_and(|d| d.is_unique_violation())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `--db :memory:` is one private database for the whole pool, migrated, and no file.
+    #[tokio::test]
+    async fn the_memory_name_is_one_database_and_no_file() {
+        let pool = connect(Path::new(":memory:")).await.unwrap();
+        assert_eq!(Backend::of(&pool), Backend::Sqlite);
+        let before: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM robots").fetch_one(&pool).await.unwrap();
+        let mut held = pool.acquire().await.unwrap();
+        sqlx::query("CREATE TABLE scratch (x INTEGER)").execute(&mut *held).await.unwrap();
+        drop(held);
+        let after: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM scratch").fetch_one(&pool).await.unwrap();
+        assert_eq!((before, after), (0, 0));
+        assert!(!Path::new(":memory:").exists(), "a file named :memory: was created");
+    }
 }
