@@ -128,6 +128,11 @@ pub async fn serve(
     let addr = listener.local_addr().map_err(ServeError::Serve)?;
     let config = ServiceConfig { require_auth, ..opts.config.clone() };
     let state = AppState::new(pool.clone(), config);
+    // Replicas sharing a PostgreSQL database tell each other what changed (the caches' module).
+    let listener_task = match &target {
+        db::Target::Postgres(url) => Some(tokio::spawn(crate::app::cache::listen(url.clone(), state.caches.clone()))),
+        db::Target::Sqlite(_) => None,
+    };
     let workers = Workers::start(state.clone(), opts.workers, opts.grace)
         .await
         .map_err(|source| ServeError::Db { path: target.display(), source })?;
@@ -153,6 +158,9 @@ pub async fn serve(
     })
     .await;
     workers.shutdown().await;
+    if let Some(t) = listener_task {
+        t.abort();
+    }
     if tokio::time::timeout(Duration::from_secs(1), pool.close()).await.is_err() {
         tracing::warn!("shutdown: database connections still busy after 1 s; closing regardless");
     }

@@ -970,13 +970,13 @@ async fn tokens_and_scopes() {
     assert_problem(&app.get("/v1/robots").await, 401, None);
 
     // Revoked from another process (`robocal token revoke` writes the database): the server
-    // trusts a verified token for at most TOKEN_RECHECK.
+    // trusts a verified token for at most RECHECK.
     let (cli, cli_secret) =
         robocal::db::tokens::create(&app.state.pool, "cli", &[robocal::db::tokens::Scope::Read]).await.unwrap();
     app.token = Some(cli_secret);
     assert_eq!(app.get("/v1/robots").await.status, StatusCode::OK);
     assert!(robocal::db::tokens::revoke(&app.state.pool, &cli.id).await.unwrap());
-    tokio::time::sleep(robocal::http::cache::TOKEN_RECHECK + std::time::Duration::from_millis(50)).await;
+    tokio::time::sleep(robocal::http::cache::RECHECK + std::time::Duration::from_millis(50)).await;
     assert_problem(&app.get("/v1/robots").await, 401, None);
     app.stop().await;
 }

@@ -12,6 +12,10 @@
 //! the same assertions. `cargo test` does not run this binary (`test = false` in Cargo.toml): on
 //! SQLite it would repeat the suites it already ran.
 
+// Each suite declares `tests/common` itself (it is also a test binary of its own), so the helpers
+// are loaded once per suite here: the copies are identical and private to their suite.
+#![allow(clippy::duplicate_mod)]
+
 #[path = "http_api.rs"]
 mod http_api;
 
@@ -35,3 +39,6 @@ mod http_programs;
 
 #[path = "http_reports.rs"]
 mod http_reports;
+
+#[path = "replicas.rs"]
+mod replicas;

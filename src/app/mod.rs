@@ -37,6 +37,8 @@ pub struct ServiceConfig {
     /// `body_min_rate` bytes received); slower is cut with 408.
     pub body_min_rate: u64,
     pub body_grace: Duration,
+    /// A claimed job's lease (see [`crate::jobs::JobContext::lease`]).
+    pub job_lease: Duration,
 }
 
 impl Default for ServiceConfig {
@@ -49,6 +51,7 @@ impl Default for ServiceConfig {
             cors: CorsOrigins::Off,
             body_min_rate: 1024,
             body_grace: Duration::from_secs(10),
+            job_lease: crate::jobs::LEASE,
         }
     }
 }
@@ -70,12 +73,17 @@ pub struct AppState {
 
 impl AppState {
     pub fn new(pool: Pool, config: ServiceConfig) -> Self {
+        let backend = crate::db::Backend::of(&pool);
         AppState {
             pool,
             config: Arc::new(config),
             metrics: Arc::new(Metrics::new()),
             wake: Arc::new(Notify::new()),
-            caches: Arc::new(cache::Caches::new(256)),
+            // Replicas sharing a PostgreSQL database change robots behind each other's back.
+            caches: Arc::new(match backend {
+                crate::db::Backend::Sqlite => cache::Caches::new(256),
+                crate::db::Backend::Postgres => cache::Caches::shared(256),
+            }),
             storage: Arc::new(crate::db::StorageHealth::default()),
         }
     }

@@ -32,6 +32,11 @@ pub struct ServeArgs {
     /// exits (within a second or two more).
     #[arg(long, env = "ROBOCAL_SHUTDOWN_GRACE_S", default_value_t = 10)]
     pub grace_s: u64,
+    /// Seconds of a claimed job's lease (renewed every sixth of it while the job runs): how long
+    /// a job whose server died waits before a replica sharing the PostgreSQL database takes it
+    /// over (on SQLite, the next start takes it at once). At least 3.
+    #[arg(long, env = "ROBOCAL_JOB_LEASE_S", default_value_t = 60)]
+    pub job_lease_s: u64,
     /// Seconds a client may take to send a request's headers; a kept-alive connection idle that
     /// long is closed too.
     #[arg(long, env = "ROBOCAL_HEADER_TIMEOUT_S", default_value_t = 10)]
@@ -169,6 +174,13 @@ pub(super) fn serve(a: ServeArgs) -> Result<String, CliError> {
     if a.min_body_rate == 0 {
         return Err(CliError::arg("--min-body-rate", "must be at least 1 byte a second"));
     }
+    let job_lease = std::time::Duration::from_secs(a.job_lease_s);
+    if job_lease < crate::jobs::LEASE_MIN {
+        return Err(CliError::arg(
+            "--job-lease-s",
+            format!("must be at least {} s (it is renewed every sixth of it)", crate::jobs::LEASE_MIN.as_secs()),
+        ));
+    }
     let cors = CorsOrigins::parse(&a.cors_origins, "--cors-origin").map_err(|e| CliError::msg(e.to_string()))?;
     init_tracing(a.log_format);
     let mut opts = ServeOptions::new(a.db.clone(), bind);
@@ -180,6 +192,7 @@ pub(super) fn serve(a: ServeArgs) -> Result<String, CliError> {
     opts.config.max_batch = a.max_batch;
     opts.config.body_min_rate = a.min_body_rate;
     opts.config.cors = cors;
+    opts.config.job_lease = job_lease;
     let rt = runtime()?;
     let served = rt.block_on(serve(opts, None, shutdown_signal()));
     // A solver thread still running (its job was put back in the queue at the deadline) is not

@@ -1,7 +1,9 @@
 //! The persisted job queue. A job is a row; a worker claims the oldest queued one with a single
-//! atomic `UPDATE … RETURNING` (so two workers never take the same job), holds a lease it renews
-//! while the solver runs, and writes the result and the final state in one transaction. Leases
-//! left by a killed server are requeued at start-up: the job runs again from its request.
+//! atomic `UPDATE … RETURNING` (so two workers never take the same job; on PostgreSQL, replicas
+//! claiming at once skip each other's rows), holds a lease it renews while the solver runs, and
+//! writes the result and the final state in one transaction. Leases left by a killed server are
+//! requeued (SQLite: at the next start; PostgreSQL: by any replica once they expire): the job runs
+//! again from its request.
 
 use std::fmt;
 use std::time::{Duration, SystemTime};
@@ -174,23 +176,30 @@ pub async fn count(
         .await
 }
 
-/// Claim the oldest queued job for `owner` with a lease of `lease`: one atomic statement.
+/// Claim the oldest queued job for `owner` with a lease of `lease`: one atomic statement. On
+/// PostgreSQL the pick skips rows another claim has locked (`FOR UPDATE SKIP LOCKED`): replicas
+/// claiming at once each take a different job instead of queueing behind one and finding it
+/// gone. (SQLite has one writer at a time: the statement alone is enough.)
 pub async fn claim(pool: &Pool, owner: &str, lease: Duration) -> Result<Option<JobRow>, sqlx::Error> {
     let t = now();
     let until = time_text(SystemTime::now() + lease);
-    sqlx::query_as(
-        "UPDATE jobs SET state = 'running', lease_owner = $1, lease_expires_at = $2, attempts = attempts + 1, \
-             started_at = COALESCE(started_at, $3), updated_at = $4, progress = 0 \
-         WHERE id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY created_at, id LIMIT 1) AND state = 'queued' \
-         RETURNING *",
-    )
-    .bind(owner)
-    .bind(&until)
-    .bind(&t)
-    .bind(&t)
-    .fetch_optional(pool)
-    .await
+    let sql = match super::Backend::of(pool) {
+        super::Backend::Sqlite => CLAIM_SQLITE,
+        super::Backend::Postgres => CLAIM_POSTGRES,
+    };
+    sqlx::query_as(sql).bind(owner).bind(&until).bind(&t).bind(&t).fetch_optional(pool).await
 }
+
+const CLAIM_SQLITE: &str = "UPDATE jobs SET state = 'running', lease_owner = $1, lease_expires_at = $2, \
+         attempts = attempts + 1, started_at = COALESCE(started_at, $3), updated_at = $4, progress = 0 \
+     WHERE id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY created_at, id LIMIT 1) AND state = 'queued' \
+     RETURNING *";
+
+const CLAIM_POSTGRES: &str = "UPDATE jobs SET state = 'running', lease_owner = $1, lease_expires_at = $2, \
+         attempts = attempts + 1, started_at = COALESCE(started_at, $3), updated_at = $4, progress = 0 \
+     WHERE id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY created_at, id LIMIT 1 FOR UPDATE SKIP LOCKED) \
+       AND state = 'queued' \
+     RETURNING *";
 
 /// Record a running job's progress (0–1, never backwards) and phase.
 pub async fn progress(pool: &Pool, id: &str, owner: &str, progress: f64, phase: &str) -> Result<bool, sqlx::Error> {

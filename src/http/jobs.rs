@@ -109,6 +109,7 @@ impl From<AppState> for JobContext {
             metrics: s.metrics,
             failure_json,
             storage: s.storage,
+            lease: s.config.job_lease,
         }
     }
 }

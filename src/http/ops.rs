@@ -38,12 +38,26 @@ pub struct Readiness {
 ///
 /// Writes are taken when none has failed for storage trouble lately (a full disk, a read-only
 /// file system, an I/O error; a failure counts for 30 s unless a write succeeds after it) and a
-/// one-page probe write is committed.
+/// one-page probe write is committed — all within 2 s: a database that does not answer by then
+/// (a replica that lost its PostgreSQL server) is not ready, and a load balancer drains it.
 #[utoipa::path(get, path = "/readyz", tag = "ops",
     responses(
         (status = 200, description = "Ready to serve", body = Readiness),
         (status = 503, description = "The database is not usable, or writes are failing", body = super::Problem, content_type = "application/problem+json")))]
 pub async fn readyz(State(state): State<AppState>) -> Result<Json<Readiness>, ApiError> {
+    match tokio::time::timeout(READY_WITHIN, ready(&state)).await {
+        Ok(r) => r,
+        Err(_) => {
+            tracing::warn!("readiness: the database did not answer within {} s", READY_WITHIN.as_secs());
+            Err(ApiError::Unavailable(format!("the database does not answer within {} s", READY_WITHIN.as_secs())))
+        }
+    }
+}
+
+/// How long `/readyz` waits for the database.
+const READY_WITHIN: std::time::Duration = std::time::Duration::from_secs(2);
+
+async fn ready(state: &AppState) -> Result<Json<Readiness>, ApiError> {
     let applied: Result<i64, sqlx::Error> =
         sqlx::query_scalar("SELECT COUNT(*) FROM _sqlx_migrations WHERE success = TRUE").fetch_one(&state.pool).await;
     let n = match applied {

@@ -441,7 +441,7 @@ pub async fn activate(
     }
     corrections::activate(&mut tx, &robot.id, &row.id, auth.actor().as_deref(), None).await?;
     tx.commit().await?;
-    state.caches.robot_changed(&robot.id);
+    state.caches.robot_changed(&state.pool, &robot.id).await;
     Ok(Json(set_out(&state, &row, true, true).await?))
 }
 

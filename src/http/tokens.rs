@@ -123,7 +123,7 @@ pub async fn revoke(
     Path(token_id): Path<String>,
 ) -> Result<StatusCode, ApiError> {
     if tokens::revoke(&state.pool, &token_id).await? {
-        state.caches.tokens_changed();
+        state.caches.tokens_changed(&state.pool).await;
         Ok(StatusCode::NO_CONTENT)
     } else {
         Err(ApiError::not_found("live token", &token_id))

@@ -101,11 +101,25 @@ pub struct JobContext {
     /// so `GET /v1/jobs/{id}` shows a failed job's error as it shows any error).
     pub failure_json: fn(&JobError) -> String,
     pub storage: Arc<db::StorageHealth>,
+    /// A claimed job's lease ([`LEASE`] unless `serve --job-lease-s` says otherwise); renewed
+    /// every sixth of it while the job runs. How long a job whose server died waits before
+    /// another server sharing the database takes it.
+    pub lease: Duration,
 }
 
-/// A claimed job's lease; renewed every [`HEARTBEAT`] while it runs.
+/// The default lease of a claimed job.
 pub const LEASE: Duration = Duration::from_secs(60);
-pub const HEARTBEAT: Duration = Duration::from_secs(10);
+/// The shortest lease `serve` accepts: a renewal every sixth of it must not flood the database,
+/// and a busy database may delay one by a second or so.
+pub const LEASE_MIN: Duration = Duration::from_secs(3);
+
+impl JobContext {
+    /// How often a running job's lease is renewed: six renewals per lease, so that a few
+    /// delayed or failed ones do not lose it.
+    fn heartbeat(&self) -> Duration {
+        self.lease / 6
+    }
+}
 /// A running job's progress and phase are written at most this often (when they changed).
 pub const PROGRESS_EVERY: Duration = Duration::from_secs(1);
 /// Idle workers look for work (and for expired leases) at least this often.
@@ -179,7 +193,7 @@ async fn worker(state: JobContext, instance: String, owner: String, mut stop: St
         if stop.borrow().is_some() {
             return;
         }
-        if last_sweep.elapsed() > LEASE {
+        if last_sweep.elapsed() > state.lease {
             // Another process sharing the database may have died holding a lease (this process's
             // own workers are alive: their leases are theirs to end).
             if let Err(e) = db::jobs::requeue_stale(&state.pool, false, Some(&mine)).await {
@@ -187,7 +201,7 @@ async fn worker(state: JobContext, instance: String, owner: String, mut stop: St
             }
             last_sweep = Instant::now();
         }
-        match db::jobs::claim(&state.pool, &owner, LEASE).await {
+        match db::jobs::claim(&state.pool, &owner, state.lease).await {
             Ok(Some(job)) => {
                 let span = tracing::info_span!("job", id = %job.id, kind = %job.kind, attempt = job.attempts);
                 if run_one(&state, &owner, job, &stop).instrument(span).await {
@@ -269,7 +283,7 @@ async fn run_one(state: &JobContext, owner: &str, job: db::jobs::JobRow, stop: &
                 };
                 run::compute(inputs, &report)
             });
-            let mut beat = tokio::time::interval(HEARTBEAT);
+            let mut beat = tokio::time::interval(state.heartbeat());
             beat.tick().await;
             // Progress is written when it changed, at most every PROGRESS_EVERY.
             let mut tick = tokio::time::interval(PROGRESS_EVERY);
@@ -298,7 +312,7 @@ async fn run_one(state: &JobContext, owner: &str, job: db::jobs::JobRow, stop: &
                     }
                     _ = beat.tick() => {
                         let f = progress.load(Ordering::Relaxed) as f64 / 1000.0;
-                        match db::jobs::heartbeat(&state.pool, &job.id, owner, LEASE, f).await {
+                        match db::jobs::heartbeat(&state.pool, &job.id, owner, state.lease, f).await {
                             Ok(true) => {}
                             Ok(false) => {
                                 tracing::warn!("lease lost (requeued elsewhere); abandoning the result");
@@ -394,7 +408,7 @@ async fn write_end(state: &JobContext, owner: &str, job: &db::jobs::JobRow, mut 
                     }
                 }
                 wait = (wait * 2).min(STORE_RETRY_MAX);
-                if let Ok(false) = db::jobs::heartbeat(&state.pool, &job.id, owner, LEASE, 0.0).await {
+                if let Ok(false) = db::jobs::heartbeat(&state.pool, &job.id, owner, state.lease, 0.0).await {
                     tracing::warn!("lease lost while waiting for the storage; abandoning the result");
                     state.storage.job_done(&job.id);
                     return;
@@ -460,7 +474,7 @@ async fn finish(state: &JobContext, owner: &str, job: &db::jobs::JobRow, end: En
         tx.commit().await?;
         if !cancelled {
             // An identification may have activated its set.
-            state.caches.robot_changed(&job.robot_id);
+            state.caches.robot_changed(&state.pool, &job.robot_id).await;
             tracing::info!("job finished");
         }
     } else {
@@ -492,7 +506,7 @@ pub mod phases {
 
     /// Claim the oldest queued job for `owner`.
     pub async fn claim(ctx: &JobContext, owner: &str) -> Result<Option<db::jobs::JobRow>, sqlx::Error> {
-        db::jobs::claim(&ctx.pool, owner, LEASE).await
+        db::jobs::claim(&ctx.pool, owner, ctx.lease).await
     }
 
     /// Load the job's inputs and run its solver (off the async runtime).
