@@ -11,26 +11,46 @@
 # Medians of repeated runs. The load generator shares the machine's cores with the server.
 #   scripts/bench_service.sh            (needs curl, jq, python3; installs oha with cargo if missing)
 #   scripts/bench_service.sh --uploads  (the uploads only: 10,000 and 100 measurements)
+#   scripts/bench_service.sh --postgres N  (N = 1 or 2 replicas on PostgreSQL behind HAProxy:
+#                                           scripts/replicas.sh; every request with a bearer token)
 # ROBOCAL=path/to/robocal uses that binary instead of building one (to compare two builds). The
 # database is in mktemp's directory: put TMPDIR on the disk the server would use (a tmpfs makes
 # fsync free).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 uploads_only=false
-[ "${1:-}" = --uploads ] && uploads_only=true
+replicas=0
+case "${1:-}" in
+  --uploads) uploads_only=true ;;
+  --postgres) replicas=${2:?--postgres needs the number of replicas, 1 or 2} ;;
+esac
 if [ -z "${ROBOCAL:-}" ]; then
   cargo build --quiet --release
   ROBOCAL=target/release/robocal
 fi
 $uploads_only || command -v oha >/dev/null || cargo install --locked oha
 tmp=$(mktemp -d)
-port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
-"$ROBOCAL" serve --db "$tmp/bench.db" --bind "127.0.0.1:$port" >"$tmp/serve.log" 2>&1 &
-server=$!
-trap 'kill $server 2>/dev/null; rm -rf "$tmp"' EXIT
-API=http://127.0.0.1:$port; J='Content-Type: application/json'
-for _ in $(seq 100); do curl -sf "$API/readyz" >/dev/null && break; sleep 0.1; done
-TOKEN=$("$ROBOCAL" token create --db "$tmp/bench.db" --name bench --scopes compensate | grep -o 'rc_[0-9a-f]*')
+if [ "$replicas" = 0 ]; then
+  port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
+  "$ROBOCAL" serve --db "$tmp/bench.db" --bind "127.0.0.1:$port" >"$tmp/serve.log" 2>&1 &
+  server=$!
+  trap 'kill $server 2>/dev/null; rm -rf "$tmp"' EXIT
+  API=http://127.0.0.1:$port
+  for _ in $(seq 100); do curl -sf "$API/readyz" >/dev/null && break; sleep 0.1; done
+  TOKEN=$("$ROBOCAL" token create --db "$tmp/bench.db" --name bench --scopes compensate | grep -o 'rc_[0-9a-f]*')
+  AUTH=()
+  echo "store: SQLite ($tmp), one server"
+else
+  REPLICAS=$replicas ROBOCAL_BIN=$(realpath "$ROBOCAL") scripts/replicas.sh start >"$tmp/replicas"
+  trap 'scripts/replicas.sh stop; rm -rf "$tmp"' EXIT
+  API=$(sed -n 1p "$tmp/replicas")
+  TOKEN=$(sed -n 2p "$tmp/replicas")
+  AUTH=(-H "Authorization: Bearer $TOKEN")
+  echo "store: PostgreSQL ($(psql --version | cut -d' ' -f3), scripts/pg_cluster.sh: fsync off), $replicas replica(s) behind HAProxy"
+fi
+J='Content-Type: application/json'
+# Every request of the set-up and the timings carries the token when the server requires one.
+curl() { command curl "${AUTH[@]}" "$@"; }
 
 median() { sort -n | awk '{a[NR]=$1} END {printf "%.2f", a[int((NR+1)/2)]}'; }
 # One timed curl: its total and the server's Server-Timing (app;dur=…) appended to the samples.
@@ -117,9 +137,14 @@ load() { # label, then oha options
   jq -r --arg l "$label" '"\($l): \(.summary.requestsPerSec | floor) req/s, p50 \(.latencyPercentiles.p50 * 1000 | . * 100 | round / 100) ms, p99 \(.latencyPercentiles.p99 * 1000 | . * 100 | round / 100) ms, statuses \(.statusCodeDistribution)"' "$tmp/oha.json"
 }
 echo "single-target compensation, 64 connections, 15 s each:"
-load "  open loop 5,000 req/s, anonymous   " -q 5000 --latency-correction
-load "  open loop 5,000 req/s, bearer token" -q 5000 --latency-correction -H "Authorization: Bearer $TOKEN"
-load "  open loop 10,000 req/s, anonymous  " -q 10000 --latency-correction
-load "  closed loop, anonymous             "
-load "  closed loop, bearer token          " -H "Authorization: Bearer $TOKEN"
+if [ "$replicas" = 0 ]; then
+  load "  open loop 5,000 req/s, anonymous   " -q 5000 --latency-correction
+  load "  open loop 5,000 req/s, bearer token" -q 5000 --latency-correction -H "Authorization: Bearer $TOKEN"
+  load "  open loop 10,000 req/s, anonymous  " -q 10000 --latency-correction
+  load "  closed loop, anonymous             "
+  load "  closed loop, bearer token          " -H "Authorization: Bearer $TOKEN"
+else
+  load "  open loop 5,000 req/s, bearer token" -q 5000 --latency-correction "${AUTH[@]}"
+  load "  closed loop, bearer token          " "${AUTH[@]}"
+fi
 echo "GET /v1/robots/{id}: $(timed 51 $API/v1/robots/$ROBOT)"

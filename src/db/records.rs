@@ -326,19 +326,22 @@ pub async fn insert_measurements(
 ) -> Result<(), sqlx::Error> {
     for (c, chunk) in specs_json.chunks(MEASUREMENT_ROWS_PER_STATEMENT).enumerate() {
         let first = first_seq + (c * MEASUREMENT_ROWS_PER_STATEMENT) as i64;
-        // Numbered placeholders, which both backends read (`QueryBuilder` writes `?` for `Any`,
-        // which PostgreSQL does not).
+        // PostgreSQL needs numbered placeholders. SQLite reads them too, but as named ones: its
+        // parser looks each new name up in a list of the names before it, so 4,000 of them cost
+        // O(n²) — measured, a 10,000-row upload took 350 ms instead of 110. Plain `?` it numbers
+        // as it goes.
+        let numbered = crate::db::Backend::of_conn(tx) == crate::db::Backend::Postgres;
         let mut sql = String::from("INSERT INTO measurements (session_id, seq, batch_id, spec_json) VALUES ");
         for i in 0..chunk.len() {
-            let b = 4 * i;
-            sql.push_str(&format!(
-                "{}(${}, ${}, ${}, ${})",
-                if i == 0 { "" } else { ", " },
-                b + 1,
-                b + 2,
-                b + 3,
-                b + 4
-            ));
+            if i > 0 {
+                sql.push_str(", ");
+            }
+            if numbered {
+                let b = 4 * i;
+                sql.push_str(&format!("(${}, ${}, ${}, ${})", b + 1, b + 2, b + 3, b + 4));
+            } else {
+                sql.push_str("(?, ?, ?, ?)");
+            }
         }
         let mut q = sqlx::query(sqlx::AssertSqlSafe(sql));
         for (i, spec) in chunk.iter().enumerate() {
