@@ -10,22 +10,18 @@
 // four arrays read worse than the formulas they implement.
 #![allow(clippy::needless_range_loop)]
 
+// The numerical core lives in its own crate (crates/robocal-core), which compiles without the
+// service's dependencies; its modules keep their paths here.
+pub use robocal_core::{cell, diagnose, identify, kinematics, metrology, sim, units, validate};
+
 pub mod app;
-pub mod cell;
 pub mod cli;
 pub mod db;
 pub mod demo;
-pub mod diagnose;
 pub mod domain;
 pub mod experiments;
 pub mod http;
-pub mod identify;
 pub mod import;
 pub mod jobs;
-pub mod kinematics;
-pub mod metrology;
 pub mod report;
 pub mod server;
-pub mod sim;
-pub mod units;
-pub mod validate;

@@ -2,7 +2,7 @@
 //! carrying Hayati's β, with joint limits, link masses and centres of mass, and the gravity vector.
 //!
 //! Everything here is in SI units (m, rad, kg, m/s²). The wire format (mm, deg) is converted once,
-//! in `crate::domain`.
+//! in the service's `domain` module.
 
 use nalgebra::Vector3;
 

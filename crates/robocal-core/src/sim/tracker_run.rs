@@ -16,7 +16,7 @@
 //! - Afterwards a few rows are removed (the outlier rows a metrologist deletes), so that the
 //!   direction derived from consecutive kept rows is wrong where a removed stop reversed it.
 //!
-//! The output is the three-reflector text format ([`crate::import::three_reflector`]): a joints
+//! The output is the three-reflector text format (the service's `import::three_reflector`): a joints
 //! file in degrees and one positions file per SMR in mm. Deterministic for a seed.
 
 use std::path::{Path, PathBuf};

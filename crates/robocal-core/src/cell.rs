@@ -1,6 +1,6 @@
 //! The measurements of one robot cell, in SI units: the robot, an optional base guess, the
 //! artefact, and sessions of measurements taken with one tool each. Parsed from and written to
-//! cell files by [`crate::domain::cell`]; consumed by identification, validation and the simulator.
+//! cell files by the service's `domain::cell`; consumed by identification, validation and the simulator.
 
 use nalgebra::Vector3;
 
