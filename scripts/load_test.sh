@@ -14,7 +14,7 @@ cd "$(dirname "$0")/.."
 seconds=${1:-60}
 clients=${2:-64}
 slow=${3:-0}
-cargo build --quiet --release --bin robocal --example load
+cargo build --quiet --release --locked --bin robocal --example load
 tmp=$(mktemp -d)
 port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
 target/release/robocal serve --db "$tmp/load.db" --bind "127.0.0.1:$port" --grace-s 5 >"$tmp/serve.log" 2>&1 &

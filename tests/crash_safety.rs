@@ -14,7 +14,6 @@
 
 mod common;
 
-use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -25,10 +24,6 @@ use robocal::domain::cell::CellFile;
 use robocal::http::client::{Answer, Client};
 use robocal::sim::simulate::{SimulateOptions, simulate};
 use serde_json::{Value, json};
-
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
-}
 
 /// How the server process is started: directly, or under a file-size limit (bytes).
 #[derive(Clone, Copy)]
@@ -70,7 +65,7 @@ fn spawn(db: &Path, port: u16, launch: Launch) -> Child {
 
 impl Server {
     async fn start(db: &Path, launch: Launch) -> Server {
-        let port = free_port();
+        let port = common::free_port();
         let child = spawn(db, port, launch);
         let client = Client::new(&format!("http://127.0.0.1:{port}"), None).unwrap();
         let s = Server { child, client, port, db: db.to_path_buf() };

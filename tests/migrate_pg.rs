@@ -18,7 +18,6 @@ mod common;
 
 use std::collections::BTreeMap;
 use std::io::Write;
-use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::sync::OnceLock;
@@ -95,10 +94,6 @@ impl PgDbExt for PgDb {
     }
 }
 
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
-}
-
 fn robocal(args: &[&str]) -> Output {
     Command::new(BIN).args(args).output().unwrap()
 }
@@ -114,7 +109,7 @@ fn walkthrough_db() -> &'static Path {
         let started = Instant::now();
         let dir = fresh_dir("migrate-walkthrough");
         let db = dir.join("walkthrough.db");
-        let port = free_port();
+        let port = common::free_port();
         let mut server = Command::new(BIN)
             .args(["serve", "--db", db.to_str().unwrap(), "--bind", &format!("127.0.0.1:{port}")])
             .stdout(Stdio::null())

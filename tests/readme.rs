@@ -7,7 +7,8 @@
 //! `cargo test --release --test readme -- --ignored` (every command, 27 s in release). A command
 //! that fails on purpose says so on its line (`# exits 1: …`), and must exit with that status.
 
-use std::net::TcpListener;
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -196,10 +197,6 @@ fn the_readme_iso9283_block_is_an_excerpt_of_the_walkthrough() {
     assert_excerpt_of_walkthrough("/v1/robots/$ROBOT/iso9283", "ISO 9283 service block");
 }
 
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
-}
-
 struct Server(Child);
 
 impl Drop for Server {
@@ -218,7 +215,7 @@ fn the_api_walkthrough_runs_against_a_server() {
         assert!(found, "{tool} is needed (.ci/run installs it)");
     }
     let dir = scratch("api");
-    let port = free_port();
+    let port = common::free_port();
     let bin = env!("CARGO_BIN_EXE_robocal");
     let _server = Server(
         Command::new(bin)

@@ -20,7 +20,6 @@
 #[path = "common/mod.rs"]
 mod common;
 
-use std::net::TcpListener;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -34,10 +33,6 @@ use common::{PgDb, TestBackend, base_guess, test_backend, test_server};
 
 const LEASE_S: u64 = 3;
 
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
-}
-
 struct Replica {
     child: Child,
     client: Client,
@@ -45,7 +40,7 @@ struct Replica {
 
 impl Replica {
     async fn start(url: &str, token: &str) -> Replica {
-        let port = free_port();
+        let port = common::free_port();
         let child = Command::new(env!("CARGO_BIN_EXE_robocal"))
             .args(["serve", "--db", url, "--bind", &format!("127.0.0.1:{port}"), "--require-auth"])
             .args(["--job-lease-s", &LEASE_S.to_string(), "--grace-s", "1"])
@@ -55,16 +50,7 @@ impl Replica {
             .spawn()
             .expect("robocal serve starts");
         let client = Client::new(&format!("http://127.0.0.1:{port}"), Some(token.to_string())).unwrap();
-        let t = Instant::now();
-        loop {
-            if let Ok(a) = client.send(Method::GET, "/readyz", None, &[]).await
-                && a.status.is_success()
-            {
-                break;
-            }
-            assert!(t.elapsed() < Duration::from_secs(60), "the replica did not become ready");
-            tokio::time::sleep(Duration::from_millis(25)).await;
-        }
+        common::wait_ready(&client).await;
         Replica { child, client }
     }
 

@@ -7,7 +7,6 @@
 #[path = "common/mod.rs"]
 mod common;
 
-use std::net::TcpListener;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -175,10 +174,6 @@ fn the_server_binds_to_loopback_by_default() {
     assert!(String::from_utf8_lossy(&help.stdout).contains("[default: 127.0.0.1:8080]"));
 }
 
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
-}
-
 /// Tokens never appear in the server's logs, at the most verbose level, whether accepted,
 /// created over HTTP, refused or revoked.
 #[tokio::test]
@@ -186,7 +181,7 @@ async fn tokens_never_appear_in_the_logs() {
     let dir = common::fresh_dir("security-logs");
     let db = dir.join("robocal.db");
     let log = dir.join("serve.log");
-    let port = free_port();
+    let port = common::free_port();
     let mut server = Command::new(env!("CARGO_BIN_EXE_robocal"))
         .args(["serve", "--db", db.to_str().unwrap(), "--bind", &format!("127.0.0.1:{port}"), "--require-auth"])
         .args(["--grace-s", "1"])

@@ -16,10 +16,6 @@ use robocal::server::lock::LockError;
 use robocal::server::{ServeError, ServeOptions};
 use serde_json::{Value, json};
 
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
-}
-
 fn start(db: &Path, port: u16) -> Child {
     Command::new(env!("CARGO_BIN_EXE_robocal"))
         .args(["serve", "--db", db.to_str().unwrap(), "--bind", &format!("127.0.0.1:{port}"), "--grace-s", "1"])
@@ -28,19 +24,6 @@ fn start(db: &Path, port: u16) -> Child {
         .stderr(Stdio::null())
         .spawn()
         .expect("robocal serve starts")
-}
-
-async fn ready(client: &Client) {
-    let t = Instant::now();
-    while t.elapsed() < Duration::from_secs(60) {
-        if let Ok(a) = client.send(Method::GET, "/readyz", None, &[]).await
-            && a.status.is_success()
-        {
-            return;
-        }
-        tokio::time::sleep(Duration::from_millis(25)).await;
-    }
-    panic!("the server did not become ready");
 }
 
 fn signal(child: &Child, sig: &str) {
@@ -79,10 +62,10 @@ async fn setup(client: &Client) -> (String, String) {
 async fn serves_over_a_socket_and_stops_on_sigterm() {
     let dir = common::fresh_dir("socket");
     let db = dir.join("robocal.db");
-    let port = free_port();
+    let port = common::free_port();
     let mut child = start(&db, port);
     let client = Client::new(&format!("http://127.0.0.1:{port}"), None).unwrap();
-    ready(&client).await;
+    common::wait_ready(&client).await;
     let (rid, _) = setup(&client).await;
     let got: Value = client.get(&format!("/v1/robots/{rid}")).await.unwrap();
     assert_eq!(got["name"], "r");
@@ -97,7 +80,7 @@ async fn serves_over_a_socket_and_stops_on_sigterm() {
     assert!(status.success(), "graceful shutdown exits 0, got {status}");
     // The database survives, with the robot.
     let mut child = start(&db, port);
-    ready(&client).await;
+    common::wait_ready(&client).await;
     let got: Value = client.get(&format!("/v1/robots/{rid}")).await.unwrap();
     assert_eq!(got["id"], rid.as_str());
     child.kill().unwrap();
@@ -110,10 +93,10 @@ async fn serves_over_a_socket_and_stops_on_sigterm() {
 async fn a_job_survives_a_killed_server() {
     let dir = common::fresh_dir("kill");
     let db = dir.join("robocal.db");
-    let port = free_port();
+    let port = common::free_port();
     let mut child = start(&db, port);
     let client = Client::new(&format!("http://127.0.0.1:{port}"), None).unwrap();
-    ready(&client).await;
+    common::wait_ready(&client).await;
     let (rid, aid) = setup(&client).await;
     // A pose plan big enough to be caught running: 3 × 1500 candidates, DETMAX, 3000 tracker poses.
     let job: Value = client
@@ -140,7 +123,7 @@ async fn a_job_survives_a_killed_server() {
     let _ = child.wait();
 
     let mut child = start(&db, port);
-    ready(&client).await;
+    common::wait_ready(&client).await;
     let t = Instant::now();
     let done = loop {
         let j: Value = client.get(&format!("/v1/jobs/{id}")).await.unwrap();
@@ -171,10 +154,10 @@ async fn a_shutdown_ends_within_the_grace_period() {
     use std::io::Write;
     let dir = common::fresh_dir("grace");
     let db = dir.join("robocal.db");
-    let port = free_port();
+    let port = common::free_port();
     let mut child = start(&db, port);
     let client = Client::new(&format!("http://127.0.0.1:{port}"), None).unwrap();
-    ready(&client).await;
+    common::wait_ready(&client).await;
     let (rid, aid) = setup(&client).await;
     let job: Value = client
         .post(
@@ -211,7 +194,7 @@ async fn a_shutdown_ends_within_the_grace_period() {
     eprintln!("SIGTERM during a pose plan, --grace-s 1: exited after {took:?}");
     drop((slow_headers, slow_body));
     let mut child = start(&db, port);
-    ready(&client).await;
+    common::wait_ready(&client).await;
     let j: Value = client.get(&format!("/v1/jobs/{id}")).await.unwrap();
     assert!(j["state"] == "queued" || j["state"] == "running", "{j}");
     let t = Instant::now();
@@ -236,7 +219,7 @@ async fn processes_opening_a_new_database_together_take_turns() {
     for round in 0..5 {
         let dir = common::fresh_dir(&format!("new-db-{round}"));
         let db = dir.join("new.db");
-        let port = free_port();
+        let port = common::free_port();
         let mut server = start(&db, port);
         let create = |name: &str| {
             Command::new(env!("CARGO_BIN_EXE_robocal"))
@@ -255,7 +238,7 @@ async fn processes_opening_a_new_database_together_take_turns() {
             secrets.push(v["token"].as_str().unwrap().to_string());
         }
         let url = format!("http://127.0.0.1:{port}");
-        ready(&Client::new(&url, None).unwrap()).await;
+        common::wait_ready(&Client::new(&url, None).unwrap()).await;
         for s in &secrets {
             let authed = Client::new(&url, Some(s.clone())).unwrap();
             let r = authed.send(Method::GET, "/v1/tokens", None, &[]).await.unwrap();
@@ -274,10 +257,10 @@ async fn processes_opening_a_new_database_together_take_turns() {
 async fn a_second_server_on_one_database_is_refused_until_the_first_is_gone() {
     let dir = common::fresh_dir("one-server");
     let db = dir.join("robocal.db");
-    let (port, other_port) = (free_port(), free_port());
+    let (port, other_port) = (common::free_port(), common::free_port());
     let mut first = start(&db, port);
     let client = Client::new(&format!("http://127.0.0.1:{port}"), None).unwrap();
-    ready(&client).await;
+    common::wait_ready(&client).await;
 
     let t = Instant::now();
     let second = Command::new(env!("CARGO_BIN_EXE_robocal"))
@@ -306,7 +289,7 @@ async fn a_second_server_on_one_database_is_refused_until_the_first_is_gone() {
     let _ = first.wait();
     let mut next = start(&db, other_port);
     let next_client = Client::new(&format!("http://127.0.0.1:{other_port}"), None).unwrap();
-    ready(&next_client).await;
+    common::wait_ready(&next_client).await;
     let lock: Value = serde_json::from_str(&std::fs::read_to_string(dir.join("robocal.db.lock")).unwrap()).unwrap();
     assert_eq!(lock["pid"], next.id());
     assert_eq!(lock["addr"], format!("127.0.0.1:{other_port}"));
@@ -342,7 +325,7 @@ async fn a_refused_address_releases_the_database_lock() {
 async fn log_of_one_request(tag: &str, extra: &[&str], rid: &str) -> String {
     let dir = common::fresh_dir(tag);
     let db = dir.join("robocal.db");
-    let port = free_port();
+    let port = common::free_port();
     let child = Command::new(env!("CARGO_BIN_EXE_robocal"))
         .args(["serve", "--db", db.to_str().unwrap(), "--bind", &format!("127.0.0.1:{port}"), "--grace-s", "1"])
         .args(extra)
@@ -354,7 +337,7 @@ async fn log_of_one_request(tag: &str, extra: &[&str], rid: &str) -> String {
         .spawn()
         .unwrap();
     let client = Client::new(&format!("http://127.0.0.1:{port}"), None).unwrap();
-    ready(&client).await;
+    common::wait_ready(&client).await;
     let r = client.send(Method::GET, "/v1/robots", None, &[("x-request-id", rid)]).await.unwrap();
     assert_eq!(r.status.as_u16(), 200);
     signal(&child, "-TERM");

@@ -215,43 +215,41 @@ async fn announce(pool: &Pool, payload: &str) {
 /// aborted. Reconnects after a lost connection (forgetting everything cached meanwhile: an
 /// announcement may have been missed); the [`RECHECK`] fallback covers the time it takes.
 pub async fn listen(url: String, caches: Arc<Caches>) {
-    use sqlx::postgres::PgListener;
     let mut wait = Duration::from_millis(100);
     loop {
-        let mut listener = match PgListener::connect(&url).await {
+        let mut listener = match subscribe(&url).await {
             Ok(l) => l,
             Err(e) => {
-                tracing::warn!(error = %e, "cache listener: cannot connect; retrying");
+                tracing::warn!(error = %e, retry_in = ?wait, "cache listener: cannot subscribe; retrying");
                 tokio::time::sleep(wait).await;
                 wait = (wait * 2).min(Duration::from_secs(5));
                 continue;
             }
         };
-        if let Err(e) = listener.listen(CHANNEL).await {
-            tracing::warn!(error = %e, "cache listener: LISTEN failed; retrying");
-            tokio::time::sleep(wait).await;
-            wait = (wait * 2).min(Duration::from_secs(5));
-            continue;
-        }
         // Listening from here on; anything changed before is re-read (forget all).
         caches.forget_all();
         wait = Duration::from_millis(100);
         loop {
-            match listener.try_recv().await {
-                Ok(Some(n)) => caches.apply(n.payload()),
-                Ok(None) => {
-                    tracing::warn!("cache listener: connection lost; caches emptied, reconnecting");
-                    caches.forget_all();
-                    break;
+            let lost = match listener.try_recv().await {
+                Ok(Some(n)) => {
+                    caches.apply(n.payload());
+                    continue;
                 }
-                Err(e) => {
-                    tracing::warn!(error = %e, "cache listener failed; caches emptied, reconnecting");
-                    caches.forget_all();
-                    break;
-                }
-            }
+                Ok(None) => "connection lost".to_string(),
+                Err(e) => e.to_string(),
+            };
+            tracing::warn!(error = %lost, "cache listener: caches emptied, reconnecting");
+            caches.forget_all();
+            break;
         }
     }
+}
+
+/// A connection to the database that listens on [`CHANNEL`].
+async fn subscribe(url: &str) -> Result<sqlx::postgres::PgListener, sqlx::Error> {
+    let mut listener = sqlx::postgres::PgListener::connect(url).await?;
+    listener.listen(CHANNEL).await?;
+    Ok(listener)
 }
 
 #[cfg(test)]

@@ -190,16 +190,23 @@ pub async fn claim(pool: &Pool, owner: &str, lease: Duration) -> Result<Option<J
     sqlx::query_as(sql).bind(owner).bind(&until).bind(&t).bind(&t).fetch_optional(pool).await
 }
 
-const CLAIM_SQLITE: &str = "UPDATE jobs SET state = 'running', lease_owner = $1, lease_expires_at = $2, \
-         attempts = attempts + 1, started_at = COALESCE(started_at, $3), updated_at = $4, progress = 0 \
-     WHERE id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY created_at, id LIMIT 1) AND state = 'queued' \
-     RETURNING *";
+/// The claim, one text for both backends: the oldest queued job becomes this worker's. On
+/// PostgreSQL the inner SELECT adds `FOR UPDATE SKIP LOCKED`, so replicas claiming at once take
+/// different jobs instead of waiting on one row; SQLite has one writer at a time and no such clause.
+macro_rules! claim_sql {
+    ($lock:literal) => {
+        concat!(
+            "UPDATE jobs SET state = 'running', lease_owner = $1, lease_expires_at = $2, ",
+            "attempts = attempts + 1, started_at = COALESCE(started_at, $3), updated_at = $4, progress = 0 ",
+            "WHERE id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY created_at, id LIMIT 1",
+            $lock,
+            ") AND state = 'queued' RETURNING *"
+        )
+    };
+}
 
-const CLAIM_POSTGRES: &str = "UPDATE jobs SET state = 'running', lease_owner = $1, lease_expires_at = $2, \
-         attempts = attempts + 1, started_at = COALESCE(started_at, $3), updated_at = $4, progress = 0 \
-     WHERE id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY created_at, id LIMIT 1 FOR UPDATE SKIP LOCKED) \
-       AND state = 'queued' \
-     RETURNING *";
+const CLAIM_SQLITE: &str = claim_sql!("");
+const CLAIM_POSTGRES: &str = claim_sql!(" FOR UPDATE SKIP LOCKED");
 
 /// Record a running job's progress (0–1, never backwards) and phase.
 pub async fn progress(pool: &Pool, id: &str, owner: &str, progress: f64, phase: &str) -> Result<bool, sqlx::Error> {

@@ -292,3 +292,22 @@ pub async fn upload(app: &TestApp, robot_id: &str, artefact_id: &str, cell: &Cel
     }
     ids
 }
+
+/// A TCP port free on the loopback interface now (for a `robocal serve` process to bind).
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+/// Waits until a server answers `/readyz` with 2xx (at most 60 s, then panics).
+pub async fn wait_ready(client: &robocal::http::client::Client) {
+    let t = std::time::Instant::now();
+    while t.elapsed() < Duration::from_secs(60) {
+        if let Ok(a) = client.send(Method::GET, "/readyz", None, &[]).await
+            && a.status.is_success()
+        {
+            return;
+        }
+        tokio::time::sleep(Duration::from_millis(25)).await;
+    }
+    panic!("the server did not become ready within 60 s");
+}

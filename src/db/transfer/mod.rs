@@ -38,12 +38,12 @@ use sha2::{Digest, Sha256};
 mod tables;
 mod values;
 
-pub use tables::{Column, ForeignKey, TableCheck, TableOrder, TablePlan, Verification, order_tables};
-pub use values::{PgType, Value, convert, encode_row};
-use values::{hex, quote};
 use sqlx::postgres::{PgArguments, PgConnectOptions, PgRow};
 use sqlx::sqlite::{SqliteArguments, SqliteConnectOptions, SqliteRow};
 use sqlx::{Connection, PgConnection, Postgres, Row, Sqlite, SqliteConnection};
+pub use tables::{Column, ForeignKey, TableCheck, TableOrder, TablePlan, Verification, order_tables};
+pub use values::{PgType, Value, convert, encode_row};
+use values::{hex, quote};
 
 /// The marker of a migration in progress, in the target.
 pub const MARKER_TABLE: &str = "_robocal_migration";

@@ -134,4 +134,3 @@ impl std::fmt::Write for ByteWriter<'_> {
 pub(super) fn quote(name: &str) -> String {
     format!("\"{}\"", name.replace('"', "\"\""))
 }
-
