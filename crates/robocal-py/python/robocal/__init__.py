@@ -1,0 +1,10 @@
+"""robocal: robot calibration from Python, over the Rust core (robocal-core).
+
+Units at the boundary are millimetres and degrees, named in every argument (``joints_deg``,
+``pose_mm``), as in the project's files and command line. See ``__init__.pyi`` for the full
+documented surface.
+"""
+
+from ._robocal import InputError, Robot, UnreachableError, __version__
+
+__all__ = ["InputError", "Robot", "UnreachableError", "__version__"]

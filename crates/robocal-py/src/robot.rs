@@ -1,0 +1,408 @@
+//! `robocal.Robot`: a preset's nominal model (the controller's model), with forward kinematics,
+//! the joint Jacobian and inverse kinematics.
+//!
+//! Units at the boundary are those of the project's files and command line: millimetres and
+//! degrees, the unit in every argument's name. They are converted once, here, to the core's metres
+//! and radians (`units::MM`, `units::DEG`, the same constants the CLI divides and multiplies by,
+//! so both front ends give the same doubles).
+
+use numpy::PyArrayDyn;
+use pyo3::prelude::*;
+
+use robocal_core::kinematics::frame::{quaternion_from_rot, rot_from_quaternion};
+use robocal_core::kinematics::{
+    AnalyticIk, Branch, Chain, Compensator, Frame, IkError, JointState, ParameterSet, Preset, Seed, Tool,
+};
+use robocal_core::units::{DEG, MM};
+
+use crate::error::Error;
+use crate::input::{Dense, array, dense, element_path, int_array, shape_text};
+
+/// A float64 numpy array handed back to Python.
+type Array<'py> = Bound<'py, PyArrayDyn<f64>>;
+
+/// How far a given rotation block may be from orthonormal (max |RᵀR − I|); it is then projected
+/// onto the nearest rotation. Loose enough for matrices built from rounded decimals.
+const ORTHONORMAL_TOL: f64 = 1e-6;
+
+/// A robot's nominal kinematic model (a built-in preset with an optional tool).
+#[pyclass(module = "robocal", frozen)]
+pub struct Robot {
+    set: ParameterSet,
+    chain: Chain,
+    /// The closed form of the nominal model, for robots of the ABB family (configuration labels).
+    closed_form: Option<AnalyticIk>,
+    comp: Compensator,
+}
+
+/// Joint readings, validated, in radians: `n` configurations of `dof` joints, row-major.
+struct Joints {
+    /// `None` for one configuration given as a (dof,) array (the answer drops the batch axis).
+    n: Option<usize>,
+    q: Vec<f64>,
+}
+
+impl Joints {
+    fn count(&self) -> usize {
+        self.n.unwrap_or(1)
+    }
+
+    /// The output shape: the batch axis (when there is one) then `per`.
+    fn shape(&self, per: &[usize]) -> Vec<usize> {
+        let mut s: Vec<usize> = self.n.into_iter().collect();
+        s.extend_from_slice(per);
+        s
+    }
+}
+
+impl Robot {
+    fn new(preset: Preset, tool: Tool) -> Robot {
+        let set = ParameterSet::nominal(preset.model(), tool, [0.0; 6]);
+        let chain = set.nominal_chain();
+        let closed_form = AnalyticIk::new(&set.model, chain.base(), chain.tool()).ok();
+        let comp = Compensator::new(&set);
+        Robot { set, chain, closed_form, comp }
+    }
+
+    fn dof(&self) -> usize {
+        self.set.dof()
+    }
+
+    /// Joint readings (deg) of shape (dof,) or (N, dof): each finite and within its joint's limits,
+    /// as the CLI's `fk --joints-deg` requires.
+    fn joints(&self, d: &Dense, field: &str) -> Result<Joints, Error> {
+        let dof = self.dof();
+        let n = match d.shape.as_slice() {
+            [k] if *k == dof => None,
+            [n, k] if *k == dof => Some(*n),
+            s => {
+                return Err(Error::input(
+                    field,
+                    format!("expected shape ({dof},) or (N, {dof}) in degrees, got {}", shape_text(s)),
+                ));
+            }
+        };
+        let mut q = Vec::with_capacity(d.data.len());
+        for (i, &v) in d.data.iter().enumerate() {
+            let path = || element_path(field, &d.shape, i);
+            if !v.is_finite() {
+                return Err(Error::input(path(), format!("must be a finite number, got {v}")));
+            }
+            let j = i % dof;
+            let rad = v * DEG;
+            if !self.set.model.within_limits(j, rad) {
+                let [lo, hi] = self.set.model.links[j].limits;
+                return Err(Error::input(
+                    path(),
+                    format!("q{} = {v:.4}° is outside its limits [{:.1}°, {:.1}°]", j + 1, lo / DEG, hi / DEG),
+                ));
+            }
+            q.push(rad);
+        }
+        Ok(Joints { n, q })
+    }
+
+    /// A homogeneous transform (4, 4) with its translation in mm, as a frame in metres. The last
+    /// row must be (0, 0, 0, 1) and the rotation block a rotation (within `ORTHONORMAL_TOL`); it is
+    /// re-orthonormalised through its quaternion.
+    fn pose(d: &Dense, field: &str) -> Result<Frame, Error> {
+        if d.shape != [4, 4] {
+            return Err(Error::input(field, format!("expected shape (4, 4), got {}", shape_text(&d.shape))));
+        }
+        if let Some(i) = d.data.iter().position(|v| !v.is_finite()) {
+            return Err(Error::input(element_path(field, &d.shape, i), "must be a finite number"));
+        }
+        let m = |r: usize, c: usize| d.data[4 * r + c];
+        for (c, want) in [0.0, 0.0, 0.0, 1.0].into_iter().enumerate() {
+            if (m(3, c) - want).abs() > 1e-12 {
+                return Err(Error::input(format!("{field}[3][{c}]"), "the last row must be (0, 0, 0, 1)"));
+            }
+        }
+        let r = numpy::nalgebra::Matrix3::from_fn(m);
+        let off = (r.transpose() * r - numpy::nalgebra::Matrix3::identity()).abs().max();
+        if off > ORTHONORMAL_TOL || r.determinant() <= 0.0 {
+            return Err(Error::input(
+                field,
+                format!(
+                    "the upper-left 3×3 block is not a rotation (|RᵀR − I| = {off:.2e}, det = {:.6})",
+                    r.determinant()
+                ),
+            ));
+        }
+        let r = rot_from_quaternion(quaternion_from_rot(&r)).ok_or_else(|| Error::input(field, "not a rotation"))?;
+        let t = numpy::nalgebra::Vector3::new(m(0, 3) * MM, m(1, 3) * MM, m(2, 3) * MM);
+        Ok(Frame::new(r, t))
+    }
+
+    /// T_T^W of one configuration (rad), the nominal model at the reference temperature. The
+    /// nominal model has no compliance, so the gravity torques the CLI passes change nothing.
+    fn fk_one(&self, q: &[f64]) -> Frame {
+        self.chain.fk(&JointState::new(q))
+    }
+
+    /// IK of one branch (or from seed joints) on the nominal model, as `robocal ik` solves it.
+    fn solve(&self, target: &Frame, seed: Seed<'_>) -> Result<Vec<f64>, IkError> {
+        self.comp.pose(target, seed).map(|c| c.joints().to_vec())
+    }
+
+    fn ik_error(label: String, e: IkError) -> Error {
+        match e {
+            IkError::InvalidTarget(why) => Error::input("pose_mm", why),
+            e => Error::Unreachable { reasons: vec![format!("{label}: {e}")] },
+        }
+    }
+}
+
+fn to_deg(q: &[f64]) -> Vec<f64> {
+    q.iter().map(|v| v / DEG).collect()
+}
+
+/// Three numbers of a tool argument (`tcp_mm`, `tcp_rotation_deg`).
+fn three(obj: Option<&Bound<'_, PyAny>>, field: &str) -> PyResult<[f64; 3]> {
+    let Some(obj) = obj else { return Ok([0.0; 3]) };
+    let d = dense(obj, field)?;
+    if d.shape != [3] {
+        return Err(Error::input(field, format!("expected 3 numbers, got shape {}", shape_text(&d.shape))).into());
+    }
+    if let Some(i) = d.data.iter().position(|v| !v.is_finite()) {
+        return Err(Error::input(format!("{field}[{i}]"), "must be a finite number").into());
+    }
+    Ok([d.data[0], d.data[1], d.data[2]])
+}
+
+#[pymethods]
+impl Robot {
+    /// A built-in robot's nominal model; see `Robot.presets()`.
+    #[staticmethod]
+    #[pyo3(signature = (name, tcp_mm=None, tcp_rotation_deg=None))]
+    fn preset(
+        name: &str,
+        tcp_mm: Option<&Bound<'_, PyAny>>,
+        tcp_rotation_deg: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Robot> {
+        let Some(preset) = Preset::from_name(name) else {
+            let known: Vec<&str> = Preset::ALL.iter().map(|p| p.name()).collect();
+            return Err(
+                Error::input("name", format!("unknown preset {name:?}; known presets: {}", known.join(", "))).into()
+            );
+        };
+        let t = three(tcp_mm, "tcp_mm")?;
+        let r = three(tcp_rotation_deg, "tcp_rotation_deg")?;
+        let tool =
+            Tool { tcp: [t[0] * MM, t[1] * MM, t[2] * MM, r[0] * DEG, r[1] * DEG, r[2] * DEG], ..Tool::flange() };
+        Ok(Robot::new(preset, tool))
+    }
+
+    /// Names of the built-in robots.
+    #[staticmethod]
+    fn presets() -> Vec<&'static str> {
+        Preset::ALL.iter().map(|p| p.name()).collect()
+    }
+
+    #[getter]
+    fn name(&self) -> &str {
+        &self.set.model.name
+    }
+
+    #[getter(dof)]
+    fn dof_py(&self) -> usize {
+        self.dof()
+    }
+
+    /// Whether the closed-form inverse (eight configurations, `branch`) exists for this robot.
+    #[getter]
+    fn has_closed_form(&self) -> bool {
+        self.closed_form.is_some()
+    }
+
+    /// Lower and upper limit of each joint, degrees: shape (dof, 2).
+    #[getter]
+    fn joint_limits_deg<'py>(&self, py: Python<'py>) -> PyResult<Array<'py>> {
+        let data = self.set.model.links.iter().flat_map(|l| [l.limits[0] / DEG, l.limits[1] / DEG]).collect();
+        array(py, &[self.dof(), 2], data)
+    }
+
+    /// TCP poses as homogeneous transforms, translation in mm: (N, 4, 4), or (4, 4) for (dof,).
+    fn fk<'py>(&self, py: Python<'py>, joints_deg: &Bound<'py, PyAny>) -> PyResult<Array<'py>> {
+        let j = self.joints(&dense(joints_deg, "joints_deg")?, "joints_deg")?;
+        let dof = self.dof();
+        let data = py.detach(|| {
+            let mut out = Vec::with_capacity(16 * j.count());
+            for q in j.q.chunks_exact(dof) {
+                let f = self.fk_one(q);
+                for r in 0..3 {
+                    out.extend([f.r[(r, 0)], f.r[(r, 1)], f.r[(r, 2)], f.t[r] / MM]);
+                }
+                out.extend([0.0, 0.0, 0.0, 1.0]);
+            }
+            out
+        });
+        array(py, &j.shape(&[4, 4]), data)
+    }
+
+    /// TCP positions (mm) and orientations as unit quaternions (w, x, y, z), w ≥ 0.
+    fn fk_pose<'py>(&self, py: Python<'py>, joints_deg: &Bound<'py, PyAny>) -> PyResult<(Array<'py>, Array<'py>)> {
+        let j = self.joints(&dense(joints_deg, "joints_deg")?, "joints_deg")?;
+        let dof = self.dof();
+        let (p, q) = py.detach(|| {
+            let mut p = Vec::with_capacity(3 * j.count());
+            let mut q = Vec::with_capacity(4 * j.count());
+            for joints in j.q.chunks_exact(dof) {
+                let f = self.fk_one(joints);
+                p.extend([f.t.x / MM, f.t.y / MM, f.t.z / MM]);
+                q.extend(quaternion_from_rot(&f.r));
+            }
+            (p, q)
+        });
+        Ok((array(py, &j.shape(&[3]), p)?, array(py, &j.shape(&[4]), q)?))
+    }
+
+    /// Geometric Jacobian of the TCP: (N, 6, dof) or (6, dof). Column j is the TCP's linear
+    /// velocity (mm/rad, rows 0–2) and angular velocity (rad/rad, world frame, rows 3–5) per unit
+    /// rate of joint j.
+    fn jacobian<'py>(&self, py: Python<'py>, joints_deg: &Bound<'py, PyAny>) -> PyResult<Array<'py>> {
+        let j = self.joints(&dense(joints_deg, "joints_deg")?, "joints_deg")?;
+        let dof = self.dof();
+        let data = py.detach(|| {
+            let mut out = vec![0.0; 6 * dof * j.count()];
+            for (q, block) in j.q.chunks_exact(dof).zip(out.chunks_exact_mut(6 * dof)) {
+                let s = JointState::new(q);
+                let trace = self.chain.trace(&self.chain.joint_angles(&s));
+                let cols = self.chain.joint_jacobian(&trace);
+                for (c, col) in cols.iter().take(dof).enumerate() {
+                    for r in 0..6 {
+                        block[r * dof + c] = if r < 3 { col[r] / MM } else { col[r] };
+                    }
+                }
+            }
+            out
+        });
+        array(py, &j.shape(&[6, dof]), data)
+    }
+
+    /// ABB configuration data (cf1, cf4, cf6, cfx) of joint readings: (N, 4) or (4,).
+    fn confdata<'py>(&self, py: Python<'py>, joints_deg: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArrayDyn<i64>>> {
+        let Some(ik) = &self.closed_form else {
+            return Err(Error::Unsupported(format!("{} has no closed-form configuration labels", self.name())).into());
+        };
+        let j = self.joints(&dense(joints_deg, "joints_deg")?, "joints_deg")?;
+        let data =
+            j.q.chunks_exact(self.dof())
+                .flat_map(|q| {
+                    let c = ik.confdata(q);
+                    [c.cf1 as i64, c.cf4 as i64, c.cf6 as i64, c.cfx.cfx() as i64]
+                })
+                .collect();
+        int_array(py, &j.shape(&[4]), data)
+    }
+
+    /// Joints (deg) that put the TCP on `pose_mm` (4, 4): in configuration `branch` (cfx 0–7),
+    /// near `seed_joints_deg`, or (neither given) the lowest cfx that reaches it.
+    #[pyo3(signature = (pose_mm, branch=None, seed_joints_deg=None))]
+    fn ik<'py>(
+        &self,
+        py: Python<'py>,
+        pose_mm: &Bound<'py, PyAny>,
+        branch: Option<i64>,
+        seed_joints_deg: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Array<'py>> {
+        let target = Robot::pose(&dense(pose_mm, "pose_mm")?, "pose_mm")?;
+        let dof = self.dof();
+        let seed = match seed_joints_deg {
+            None => None,
+            Some(s) => {
+                let j = self.joints(&dense(s, "seed_joints_deg")?, "seed_joints_deg")?;
+                if j.n.is_some() {
+                    return Err(Error::input("seed_joints_deg", format!("expected shape ({dof},)")).into());
+                }
+                Some(j.q)
+            }
+        };
+        let branch = match branch {
+            None => None,
+            Some(_) if seed.is_some() => {
+                return Err(Error::input("branch", "give a branch or seed_joints_deg, not both").into());
+            }
+            Some(b) => match u8::try_from(b).ok().and_then(Branch::new) {
+                Some(b) => Some(b),
+                None => return Err(Error::input("branch", format!("cfx must be 0–7, got {b}")).into()),
+            },
+        };
+        if seed.is_none() && !self.comp.has_closed_form() {
+            let field = if branch.is_some() { "branch" } else { "seed_joints_deg" };
+            return Err(Error::input(
+                field,
+                format!("{} has no closed-form inverse: give seed_joints_deg (no configuration branches)", self.name()),
+            )
+            .into());
+        }
+        let q = py.detach(|| -> Result<Vec<f64>, Error> {
+            if let Some(s) = &seed {
+                return self.solve(&target, Seed::Joints(s)).map_err(|e| Robot::ik_error("from the seed".into(), e));
+            }
+            if let Some(b) = branch {
+                return self
+                    .solve(&target, Seed::Branch(b))
+                    .map_err(|e| Robot::ik_error(format!("cfx {}", b.cfx()), e));
+            }
+            let mut reasons = Vec::new();
+            for b in Branch::ALL {
+                match self.solve(&target, Seed::Branch(b)) {
+                    Ok(q) => return Ok(q),
+                    Err(e) => match Robot::ik_error(format!("cfx {}", b.cfx()), e) {
+                        Error::Unreachable { reasons: r } => reasons.extend(r),
+                        other => return Err(other),
+                    },
+                }
+            }
+            Err(Error::Unreachable { reasons })
+        })?;
+        array(py, &[dof], to_deg(&q))
+    }
+
+    /// Every configuration's joints (deg) for `pose_mm` (4, 4): (K, dof), in increasing cfx, only the
+    /// configurations that reach it within the joint limits (`confdata` labels them).
+    fn ik_all<'py>(&self, py: Python<'py>, pose_mm: &Bound<'py, PyAny>) -> PyResult<Array<'py>> {
+        let target = Robot::pose(&dense(pose_mm, "pose_mm")?, "pose_mm")?;
+        if !self.comp.has_closed_form() {
+            return Err(Error::Unsupported(format!(
+                "{} has no closed-form inverse: use ik(pose_mm, seed_joints_deg=...)",
+                self.name()
+            ))
+            .into());
+        }
+        let dof = self.dof();
+        let found = py.detach(|| -> Result<Vec<f64>, Error> {
+            let mut out = Vec::new();
+            let mut reasons = Vec::new();
+            for b in Branch::ALL {
+                match self.solve(&target, Seed::Branch(b)) {
+                    Ok(q) => out.extend(to_deg(&q)),
+                    Err(IkError::InvalidTarget(why)) => return Err(Error::input("pose_mm", why)),
+                    Err(e) => reasons.push(format!("cfx {}: {e}", b.cfx())),
+                }
+            }
+            if out.is_empty() { Err(Error::Unreachable { reasons }) } else { Ok(out) }
+        })?;
+        let k = found.len() / dof;
+        array(py, &[k, dof], found)
+    }
+
+    fn __repr__(&self) -> String {
+        let t = self.chain.tool_pose();
+        if t.iter().all(|v| *v == 0.0) {
+            format!("Robot.preset({:?})", self.name())
+        } else {
+            format!(
+                "Robot.preset({:?}, tcp_mm=[{}, {}, {}], tcp_rotation_deg=[{}, {}, {}])",
+                self.name(),
+                t[0] / MM,
+                t[1] / MM,
+                t[2] / MM,
+                t[3] / DEG,
+                t[4] / DEG,
+                t[5] / DEG
+            )
+        }
+    }
+}
