@@ -9,6 +9,7 @@
 
 pub mod cell;
 pub mod diagnose;
+pub mod formats;
 pub mod identify;
 pub mod kinematics;
 pub mod metrology;

@@ -12,7 +12,8 @@ use crate::kinematics::model::{
 use crate::units::{DEG, MM};
 
 /// One joint of a custom robot (modified DH unless the robot says `"convention": "standard"`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct JointSpec {
     pub alpha_deg: f64,
@@ -24,18 +25,19 @@ pub struct JointSpec {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub beta_deg: Option<f64>,
     /// [lower, upper], lower below upper.
-    #[schema(min_items = 2, max_items = 2)]
+    #[cfg_attr(feature = "openapi", schema(min_items = 2, max_items = 2))]
     pub limits_deg: [f64; 2],
     #[serde(default)]
-    #[schema(minimum = 0)]
+    #[cfg_attr(feature = "openapi", schema(minimum = 0))]
     pub mass_kg: f64,
     #[serde(default)]
-    #[schema(min_items = 3, max_items = 3)]
+    #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub com_mm: [f64; 3],
 }
 
 /// DH convention of a custom joint table.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(rename_all = "lowercase")]
 pub enum Convention {
     /// Craig's modified DH: `Rx(α_{i−1}) Tx(a_{i−1}) Rz(θ_i) Tz(d_i)`; CoM in frame {i}.
@@ -46,23 +48,28 @@ pub enum Convention {
 }
 
 /// A custom robot.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct CustomRobotSpec {
-    #[schema(min_length = 1, max_length = 200, pattern = "^[^\\u0000]*[^\\s\\u0000][^\\u0000]*$")]
+    #[cfg_attr(
+        feature = "openapi",
+        schema(min_length = 1, max_length = 200, pattern = "^[^\\u0000]*[^\\s\\u0000][^\\u0000]*$")
+    )]
     pub name: String,
     #[serde(default)]
     pub convention: Convention,
     /// Gravity in the base frame {0}, m/s²; default (0, 0, −9.80665).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[schema(min_items = 3, max_items = 3)]
+    #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub gravity_mps2: Option<[f64; 3]>,
-    #[schema(min_items = 1, max_items = 8)]
+    #[cfg_attr(feature = "openapi", schema(min_items = 1, max_items = 8))]
     pub joints: Vec<JointSpec>,
 }
 
 /// A robot preset's name.
-#[derive(Deserialize, utoipa::ToSchema)]
+#[derive(Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(rename_all = "lowercase")]
 #[allow(dead_code)] // a schema only: presets are parsed by `Preset::from_name`
 pub enum PresetName {
@@ -71,7 +78,8 @@ pub enum PresetName {
 }
 
 /// A robot preset: `{"preset": "irb120"}`.
-#[derive(Deserialize, utoipa::ToSchema)]
+#[derive(Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 #[allow(dead_code)] // a schema only
 pub struct PresetRef {
@@ -80,7 +88,8 @@ pub struct PresetRef {
 
 /// A robot as files and requests give it: a preset or a custom joint table (the schema of
 /// [`RobotSpec`], which is parsed by [`RobotSpec::from_json_value`]).
-#[derive(Deserialize, utoipa::ToSchema)]
+#[derive(Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(untagged)]
 #[allow(dead_code)] // a schema only
 pub enum RobotDoc {
@@ -274,19 +283,20 @@ fn model_error(e: ModelError) -> DomainError {
 
 /// A tool: TCP position (and optional ZY'X'' orientation) in the flange frame, payload mass and
 /// centre of mass in the flange frame.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct ToolSpec {
-    #[schema(min_items = 3, max_items = 3)]
+    #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub tcp_mm: [f64; 3],
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[schema(min_items = 3, max_items = 3)]
+    #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub tcp_rotation_deg: Option<[f64; 3]>,
     #[serde(default)]
-    #[schema(minimum = 0)]
+    #[cfg_attr(feature = "openapi", schema(minimum = 0))]
     pub mass_kg: f64,
     #[serde(default)]
-    #[schema(min_items = 3, max_items = 3)]
+    #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub com_mm: [f64; 3],
 }
 
@@ -325,7 +335,7 @@ impl ToolSpec {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::domain::from_json;
+    use crate::formats::from_json;
     use serde_json::json;
 
     #[test]

@@ -17,7 +17,8 @@ use crate::kinematics::ParameterSet;
 use crate::kinematics::model::Tool;
 use crate::kinematics::params::{JointTerm, Param, Unit};
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct ParamEntry {
     pub name: String,
@@ -34,10 +35,11 @@ pub struct ParamEntry {
     pub status: Option<String>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct ParameterSetFile {
-    #[schema(value_type = super::robot::RobotDoc)]
+    #[cfg_attr(feature = "openapi", schema(value_type = super::robot::RobotDoc))]
     pub robot: Value,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tool: Option<ToolSpec>,
@@ -45,7 +47,7 @@ pub struct ParameterSetFile {
     pub parameters: Vec<ParamEntry>,
     /// The identification's quality report, carried along unchanged.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[schema(value_type = Option<Object>)]
+    #[cfg_attr(feature = "openapi", schema(value_type = Option<Object>))]
     pub quality: Option<Value>,
 }
 
