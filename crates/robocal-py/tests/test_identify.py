@@ -109,6 +109,15 @@ def test_default_model_noise_free_predicts_new_poses(irb120):
     # Held-out poses: the identified model predicts the true positions.
     q_new = poses(20, seed=3)
     np.testing.assert_allclose(ident.robot().fk(q_new)[:, :3, 3], measure(q_new), rtol=0, atol=1e-4)
+    # The calibrated robot's inverse solves the calibrated model (the compensator's), in the
+    # configuration the nominal closed form labels: ik(fk(q)) gives q back (principal values).
+    robot = ident.robot()
+    for qi in q_new[:5]:
+        got = robot.ik(robot.fk(qi), branch=int(robot.confdata(qi)[3]))
+        np.testing.assert_allclose((got - qi + 180.0) % 360.0 - 180.0, 0, rtol=0, atol=1e-6)
+    # Compliances the data cannot determine (no payload) are held, and say why.
+    assert ident.std["c2"] is None and "not determined" in ident.status["c2"]
+    assert ident.units["c2"] == "deg/(N·m)"
 
 
 def test_noise_gives_residual_at_its_sigma(irb120):
@@ -278,19 +287,38 @@ def test_identify_equals_the_cli(irb120, tmp_path, model, only):
     ident = identify(irb120, q, p, tcp_mm=tcp_guess, base_guess_mm=guess_mm, base_guess_rotation_deg=guess_deg,
                      model=model, only=only)
     assert [e["name"] for e in cli["parameters"]] == list(ident.parameters)
-    # The file keeps 12 significant digits in file units; the same doubles otherwise.
+    # The same Cell and options give the same doubles; the file keeps 12 significant digits in
+    # file units (domain::rounding), and serde_json (without float_roundtrip) may read a decimal
+    # 1 ulp off: 1e-11 relative covers both.
     for e in cli["parameters"]:
         name = e["name"]
         assert e["value"] == pytest.approx(ident.parameters[name], rel=1e-11, abs=1e-12), name
         assert e.get("status") == ident.status[name]
         if e.get("std") is not None:
             assert e["std"] == pytest.approx(ident.std[name], rel=1e-11, abs=1e-12), name
+        else:
+            assert ident.std[name] is None, name
     qual = cli["quality"]
     assert qual["iterations"] == ident.iterations
     assert qual["free"] == ident.free_parameters
-    assert qual["rms_residual_mm"] == pytest.approx(ident.residual_rms_mm, rel=1e-9)
-    assert qual["kappa_scaled"] == pytest.approx(ident.condition_number, rel=1e-9)
-    assert qual["tools"][0]["tcp_mm"] == pytest.approx(ident.tools[0]["tcp_mm"], rel=1e-11)
+    assert qual["n_measurements"] == ident.n_measurements and qual["n_rows"] == ident.n_rows
+    assert qual["kappa_scaled"] == pytest.approx(ident.condition_number, rel=1e-11)
+    assert qual["kappa_si"] == pytest.approx(ident.condition_number_si, rel=1e-11)
+    # Quality fields named _mm are written at 1e-4 mm (domain::rounding, OUT_MM).
+    assert qual["rms_residual_mm"] == pytest.approx(ident.residual_rms_mm, rel=0, abs=0.51e-4)
+    assert qual["expected_rms_mm"] == pytest.approx(ident.expected_rms_mm, rel=0, abs=0.51e-4)
+    assert qual["tools"][0]["tcp_mm"] == pytest.approx(ident.tools[0]["tcp_mm"], rel=0, abs=0.51e-4)
+
+
+def test_gil_released_fits_give_the_same_answer_from_threads(irb120):
+    from concurrent.futures import ThreadPoolExecutor
+
+    q = poses(60, seed=14)
+    p = measure(q) + np.random.default_rng(15).normal(0.0, 0.02, size=(60, 3))
+    want = identify(irb120, q, p, tcp_mm=[0, 0, 90]).parameters
+    with ThreadPoolExecutor(3) as pool:
+        for got in pool.map(lambda _: identify(irb120, q, p, tcp_mm=[0, 0, 90]).parameters, range(3)):
+            assert got == want
 
 
 def test_exports():
