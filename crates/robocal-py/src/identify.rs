@@ -16,7 +16,8 @@ use pyo3::types::{PyDict, PyList};
 
 use robocal_core::cell::{Cell, Instrument, Measurement, MeasuringOrder, Observation, Purpose, Session, Sigma};
 use robocal_core::identify::{
-    IdentifyError, IdentifyOptions, ModelOptions, NoiseModel, RESIDUAL_RATIO_LIMIT, SolveError, SolverOptions,
+    IdentifyError, IdentifyOptions, MeasurementSelection, ModelOptions, NoiseModel, ProblemError, RESIDUAL_RATIO_LIMIT,
+    SolveError, SolverOptions,
 };
 use robocal_core::kinematics::ParameterSet;
 use robocal_core::units::{DEG, MM};
@@ -230,6 +231,10 @@ fn identify_error(e: IdentifyError) -> Error {
         IdentifyError::Option(m) if m.starts_with("--fix") => return Error::input("fix", m.clone()),
         IdentifyError::Option(m) if m.starts_with("--only") => return Error::input("only", m.clone()),
         IdentifyError::Option(_) => "option",
+        // The only selection Python gives is `exclude`: a session or index it names is unknown.
+        IdentifyError::Problem(ProblemError::UnknownSession(_) | ProblemError::UnknownMeasurement { .. }) => {
+            return Error::input("exclude", message);
+        }
         IdentifyError::Problem(_) => "problem",
         IdentifyError::Registration(_) => "registration",
         IdentifyError::StartRobot { .. } => "start",
@@ -253,12 +258,13 @@ struct Flags<'a> {
     kappa_limit: Option<f64>,
     huber: Option<f64>,
     residual_ratio_limit: Option<f64>,
+    exclude: Vec<(String, usize)>,
 }
 
 /// The options `robocal identify` would build from the same flags, checked as the CLI checks them
 /// (`IdentifySpec::to_options`), errors naming the Python argument.
 fn options(f: Flags<'_>, dof: usize) -> Result<IdentifyOptions, Error> {
-    let Flags { model, fix, only, weighted, kappa_limit, huber, residual_ratio_limit } = f;
+    let Flags { model, fix, only, weighted, kappa_limit, huber, residual_ratio_limit, exclude } = f;
     let defaults = IdentifyOptions::default();
     let kappa_limit = kappa_limit.unwrap_or(defaults.kappa_limit);
     if !(kappa_limit.is_finite() && kappa_limit > 1.0) {
@@ -272,7 +278,15 @@ fn options(f: Flags<'_>, dof: usize) -> Result<IdentifyOptions, Error> {
         return Err(Error::input("residual_ratio_limit", "must be above 1 (infinite: never refuse)"));
     }
     let model = ModelOptions::parse(model, dof).map_err(|e| Error::input("model", e))?;
+    let mut selection = MeasurementSelection::default();
+    for (i, (session, index)) in exclude.into_iter().enumerate() {
+        if session.trim().is_empty() {
+            return Err(Error::input(format!("exclude[{i}]"), "must name a session"));
+        }
+        selection.exclude.push((session, index));
+    }
     Ok(IdentifyOptions {
+        selection,
         noise: weighted.then(NoiseModel::default),
         residual_ratio_limit,
         model,
@@ -289,7 +303,7 @@ fn options(f: Flags<'_>, dof: usize) -> Result<IdentifyOptions, Error> {
 #[pyo3(signature = (
     robot, joints_deg, position_mm, *, tcp_mm=None, identify_tcp=true, base_guess_mm=None,
     base_guess_rotation_deg=None, sigma_mm=None, model="", fix=None, only=None, weighted=false,
-    kappa_limit=None, huber=None, residual_ratio_limit=None, session_names=None
+    kappa_limit=None, huber=None, residual_ratio_limit=None, session_names=None, exclude=None
 ))]
 #[allow(clippy::too_many_arguments)] // Python keyword arguments, one per CLI flag
 pub fn identify(
@@ -310,6 +324,7 @@ pub fn identify(
     huber: Option<f64>,
     residual_ratio_limit: Option<f64>,
     session_names: Option<Vec<String>>,
+    exclude: Option<Vec<(String, usize)>>,
 ) -> PyResult<Identification> {
     if robot.is_calibrated_set() {
         return Err(Error::input(
@@ -362,6 +377,7 @@ pub fn identify(
         kappa_limit,
         huber,
         residual_ratio_limit,
+        exclude: exclude.unwrap_or_default(),
     };
     let opts = options(flags, robot.set().dof())?;
     let cell = cell(robot, &d, &tcps, identify_tcp, base_guess, &names);

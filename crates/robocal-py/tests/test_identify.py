@@ -163,6 +163,21 @@ def test_several_reflectors_share_the_poses(irb120):
     assert [t["sessions"] for t in ident.tools] == [["reflector-1"], ["reflector-2"], ["reflector-3"]]
 
 
+def test_an_outlier_is_named_and_can_be_left_out(irb120):
+    q = poses(60, seed=16)
+    p = measure(q) + np.random.default_rng(17).normal(0.0, 0.02, size=(60, 3))
+    p[23] += [3.0, -2.0, 1.0]  # a reflector that slipped: ~190 times the noise
+    kw = dict(tcp_mm=[0, 0, 90], only=["base", "tool"], base_guess_mm=BASE_MM, base_guess_rotation_deg=BASE_DEG)
+    with pytest.raises(IdentificationError) as e:
+        identify(irb120, q, p, **kw)
+    assert e.value.kind == "outliers" and "measurements[23]" in str(e.value)
+    ident = identify(irb120, q, p, exclude=[("measurements", 23)], **kw)
+    assert ident.n_measurements == 59 and ident.residual_rms_mm < 0.05
+    # Or down-weighted by the Huber loss.
+    ident = identify(irb120, q, p, huber=2.5, **kw)
+    assert any(s == "measurements" and i == 23 and w < 0.1 for s, i, w in ident.downweighted)
+
+
 def test_bad_input_names_the_field(irb120):
     q = poses(10, seed=7)
     p = measure(q)
@@ -205,6 +220,9 @@ def test_bad_input_names_the_field(irb120):
     assert field(session_names=["a", "b"]) == "session_names"
     assert field(position_mm=np.stack([p, p]), session_names=["a", "a"]) == "session_names[1]"
     assert field(position_mm="nope") == "position_mm"
+    assert field(exclude=[("measurements", 10)]) == "exclude"
+    assert field(exclude=[("nosuch", 0)]) == "exclude"
+    assert field(exclude=[(" ", 0)]) == "exclude[0]"
     calibrated = identify(irb120, q, p, tcp_mm=TCP_MM, only=["base"]).robot()
     assert field(robot=calibrated) == "robot"
 

@@ -284,6 +284,7 @@ def identify(
     huber: float | None = None,
     residual_ratio_limit: float | None = None,
     session_names: Sequence[str] | None = None,
+    exclude: Sequence[tuple[str, int]] | None = None,
 ) -> Identification:
     """Identify the robot's parameters from joint readings and measured TCP positions.
 
@@ -307,6 +308,8 @@ def identify(
     ``only``: the only free parameters (names, or the groups ``"base"`` and ``"tool"``).
     ``kappa_limit`` (default 1000), ``huber`` (Huber threshold in robust σ; default plain least
     squares), ``residual_ratio_limit`` (default 50; ``float("inf")`` never refuses).
+    ``exclude``: measurements left out, ``(session, index)`` with the 0-based index into
+    ``joints_deg`` (the outliers an ``"outliers"`` refusal names as ``session[index]``).
 
     Raises InputError naming the argument or element (``position_mm[3][1]``, ``model``, ``fix``)
     for bad shapes, non-finite numbers, joints beyond limits, unknown options; IdentificationError
