@@ -160,14 +160,16 @@ fn data(robot: &Robot, joints: &Dense, position: &Dense, sigma: Option<&Dense>) 
     Ok(Data { sessions, n, q, p: position.data.clone(), sigma })
 }
 
-/// The TCP guess (mm) of each of `sessions` sessions: (3,) for all or (S, 3), else the robot's.
+/// The TCP guess (m) of each of `sessions` sessions: `tcp_mm` (3,) for all or (S, 3), else the
+/// robot's own TCP (taken as it is, not converted back and forth).
 fn tcp_guesses(robot: &Robot, tcp: Option<&Dense>, sessions: usize) -> Result<Vec<[f64; 3]>, Error> {
     let own = robot.set().tool.tcp;
-    let Some(d) = tcp else { return Ok(vec![[own[0] / MM, own[1] / MM, own[2] / MM]; sessions]) };
+    let Some(d) = tcp else { return Ok(vec![[own[0], own[1], own[2]]; sessions]) };
     finite(d, "tcp_mm")?;
+    let si = |c: &[f64]| [c[0] * MM, c[1] * MM, c[2] * MM];
     match d.shape[..] {
-        [3] => Ok(vec![[d.data[0], d.data[1], d.data[2]]; sessions]),
-        [s, 3] if s == sessions => Ok(d.data.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()),
+        [3] => Ok(vec![si(&d.data); sessions]),
+        [s, 3] if s == sessions => Ok(d.data.chunks_exact(3).map(si).collect()),
         _ => Err(Error::input(
             "tcp_mm",
             format!("expected shape (3,) or ({sessions}, 3) — one TCP per session — got {}", shape_text(&d.shape)),
@@ -188,7 +190,7 @@ fn cell(
     let sessions = (0..d.sessions)
         .map(|s| {
             let mut tool = robot.set().tool.clone();
-            tool.tcp[..3].copy_from_slice(&tcps[s].map(|v| v * MM));
+            tool.tcp[..3].copy_from_slice(&tcps[s]);
             let measurements = (0..d.n)
                 .map(|i| {
                     let at = 3 * (s * d.n + i);

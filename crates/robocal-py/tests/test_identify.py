@@ -138,6 +138,10 @@ def test_noise_gives_residual_at_its_sigma(irb120):
     tcp, tcp_std = ident.tools[0]["tcp_mm"], ident.tools[0]["std"]
     for k in range(3):
         assert abs(tcp[k] - TCP_MM[k]) < 4.5 * tcp_std[k]
+    # The robot's own TCP is the default guess: the same cell, the same doubles.
+    same = identify(Robot.preset("irb120", tcp_mm=[0, 0, 90]), q, p, only=["base", "tool"], base_guess_mm=BASE_MM,
+                    base_guess_rotation_deg=BASE_DEG)
+    assert same.parameters == ident.parameters and same.tools == ident.tools
     # Weighted by the given sigma: the residual is the instrument's, sigma_ratio near 1.
     w = identify(irb120, q, p, tcp_mm=[0, 0, 90], only=["base", "tool"], base_guess_mm=BASE_MM,
                  base_guess_rotation_deg=BASE_DEG, weighted=True, sigma_mm=sigma)
