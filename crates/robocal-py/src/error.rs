@@ -22,6 +22,16 @@ pyo3::create_exception!(
      beyond the joint limits). `reasons` lists why, one entry per configuration tried."
 );
 
+pyo3::create_exception!(
+    robocal,
+    IdentificationError,
+    pyo3::exceptions::PyException,
+    "The identification refused to answer: the data do not determine the parameters (rank \
+     deficiency, κ above its limit, fewer rows than parameters), the fit did not converge, or the \
+     model does not describe the data (residual far above the instrument's noise, outliers). The \
+     message is the core's, with its advice; `kind` names the case."
+);
+
 /// Why a call has no answer.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Error {
@@ -31,6 +41,9 @@ pub enum Error {
     Unreachable { reasons: Vec<String> },
     /// The robot lacks what the call needs (a closed-form inverse for `ik_all`).
     Unsupported(String),
+    /// An identification refused: `kind` (`rank_deficient`, `ill_conditioned`, …) and the core's
+    /// message.
+    Identification { kind: &'static str, message: String },
 }
 
 impl Error {
@@ -55,6 +68,11 @@ impl From<Error> for PyErr {
                 err
             }),
             Error::Unsupported(why) => PyNotImplementedError::new_err(why),
+            Error::Identification { kind, message } => Python::attach(|py| {
+                let err = IdentificationError::new_err(message);
+                set_attr(py, &err, "kind", kind);
+                err
+            }),
         }
     }
 }

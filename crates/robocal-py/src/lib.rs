@@ -1,22 +1,27 @@
 //! The native module of the `robocal` Python package (`robocal._robocal`): robocal-core's
-//! kinematics in millimetres and degrees, numpy arrays in and out, errors as Python exceptions.
+//! kinematics and identification in millimetres and degrees, numpy arrays in and out, errors as Python exceptions.
 //! The Python package (`python/robocal`) re-exports it and carries the type stubs.
 
 mod error;
+mod identify;
 mod input;
 mod robot;
 
 use pyo3::prelude::*;
 
-pub use error::{Error, InputError, UnreachableError};
+pub use error::{Error, IdentificationError, InputError, UnreachableError};
+pub use identify::Identification;
 pub use robot::Robot;
 
 #[pymodule]
 fn _robocal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add_class::<Robot>()?;
+    m.add_class::<Identification>()?;
+    m.add_function(wrap_pyfunction!(identify::identify, m)?)?;
     m.add("InputError", py.get_type::<InputError>())?;
     m.add("UnreachableError", py.get_type::<UnreachableError>())?;
+    m.add("IdentificationError", py.get_type::<IdentificationError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -11,7 +11,7 @@ use pyo3::prelude::*;
 
 use robocal_core::kinematics::frame::{quaternion_from_rot, rot_from_quaternion};
 use robocal_core::kinematics::{
-    AnalyticIk, Branch, Chain, Compensator, Frame, IkError, JointState, ParameterSet, Preset, Seed, Tool,
+    AnalyticIk, Branch, Chain, Compensator, Frame, GravityModel, IkError, JointState, ParameterSet, Preset, Seed, Tool,
 };
 use robocal_core::units::{DEG, MM};
 
@@ -25,21 +25,25 @@ type Array<'py> = Bound<'py, PyArrayDyn<f64>>;
 /// onto the nearest rotation. Loose enough for matrices built from rounded decimals.
 const ORTHONORMAL_TOL: f64 = 1e-6;
 
-/// A robot's nominal kinematic model (a built-in preset with an optional tool).
+/// A robot's kinematic model: a built-in preset's nominal model with an optional tool, or a
+/// calibrated parameter set (an identification's result).
 #[pyclass(module = "robocal", frozen)]
 pub struct Robot {
     set: ParameterSet,
     chain: Chain,
+    /// The gravity torques of a calibrated set (its compliances deflect under them); `None` for
+    /// the nominal model, which has no compliance.
+    gravity: Option<GravityModel>,
     /// The closed form of the nominal model, for robots of the ABB family (configuration labels).
     closed_form: Option<AnalyticIk>,
     comp: Compensator,
 }
 
 /// Joint readings, validated, in radians: `n` configurations of `dof` joints, row-major.
-struct Joints {
+pub(crate) struct Joints {
     /// `None` for one configuration given as a (dof,) array (the answer drops the batch axis).
-    n: Option<usize>,
-    q: Vec<f64>,
+    pub(crate) n: Option<usize>,
+    pub(crate) q: Vec<f64>,
 }
 
 impl Joints {
@@ -61,16 +65,51 @@ impl Robot {
         let chain = set.nominal_chain();
         let closed_form = AnalyticIk::new(&set.model, chain.base(), chain.tool()).ok();
         let comp = Compensator::new(&set);
-        Robot { set, chain, closed_form, comp }
+        Robot { set, chain, gravity: None, closed_form, comp }
+    }
+
+    /// A calibrated parameter set's model, evaluated as the CLI's `fk --params` evaluates it: the
+    /// chain at the set's values (base and tool included), joints deflected by the gravity torques
+    /// of the set's payload. `ik` then solves the calibrated model (the compensator's inverse);
+    /// configuration labels come from the nominal closed form.
+    pub fn calibrated(set: ParameterSet) -> Robot {
+        let nominal = set.nominal_chain();
+        let closed_form = AnalyticIk::new(&set.model, nominal.base(), nominal.tool()).ok();
+        let chain = set.chain();
+        let gravity = Some(set.gravity());
+        let comp = Compensator::new(&set);
+        Robot { set, chain, gravity, closed_form, comp }
+    }
+
+    /// The joint state of one configuration (rad): with the gravity torques when the model has
+    /// compliance.
+    fn state(&self, q: &[f64]) -> JointState {
+        match &self.gravity {
+            Some(g) => {
+                let tau = g.torques(q);
+                JointState::with_torques(q, &tau[..self.dof()])
+            }
+            None => JointState::new(q),
+        }
     }
 
     fn dof(&self) -> usize {
         self.set.dof()
     }
 
+    /// The parameter set the model evaluates (nominal for a preset).
+    pub fn set(&self) -> &ParameterSet {
+        &self.set
+    }
+
+    /// Whether this is a calibrated parameter set's model.
+    pub fn is_calibrated_set(&self) -> bool {
+        self.gravity.is_some()
+    }
+
     /// Joint readings (deg) of shape (dof,) or (N, dof): each finite and within its joint's limits,
     /// as the CLI's `fk --joints-deg` requires.
-    fn joints(&self, d: &Dense, field: &str) -> Result<Joints, Error> {
+    pub(crate) fn joints(&self, d: &Dense, field: &str) -> Result<Joints, Error> {
         let dof = self.dof();
         let n = match d.shape.as_slice() {
             [k] if *k == dof => None,
@@ -134,10 +173,11 @@ impl Robot {
         Ok(Frame::new(r, t))
     }
 
-    /// T_T^W of one configuration (rad), the nominal model at the reference temperature. The
-    /// nominal model has no compliance, so the gravity torques the CLI passes change nothing.
+    /// T_T^W of one configuration (rad) at the reference temperature. The nominal model has no
+    /// compliance, so the gravity torques the CLI passes change nothing there; a calibrated one
+    /// gets them.
     fn fk_one(&self, q: &[f64]) -> Frame {
-        self.chain.fk(&JointState::new(q))
+        self.chain.fk(&self.state(q))
     }
 
     /// IK of one branch (or from seed joints) on the nominal model, as `robocal ik` solves it.
@@ -158,7 +198,7 @@ fn to_deg(q: &[f64]) -> Vec<f64> {
 }
 
 /// Three numbers of a tool argument (`tcp_mm`, `tcp_rotation_deg`).
-fn three(obj: Option<&Bound<'_, PyAny>>, field: &str) -> PyResult<[f64; 3]> {
+pub(crate) fn three(obj: Option<&Bound<'_, PyAny>>, field: &str) -> PyResult<[f64; 3]> {
     let Some(obj) = obj else { return Ok([0.0; 3]) };
     let d = dense(obj, field)?;
     if d.shape != [3] {
@@ -266,7 +306,7 @@ impl Robot {
         let data = py.detach(|| {
             let mut out = vec![0.0; 6 * dof * j.count()];
             for (q, block) in j.q.chunks_exact(dof).zip(out.chunks_exact_mut(6 * dof)) {
-                let s = JointState::new(q);
+                let s = self.state(q);
                 let trace = self.chain.trace(&self.chain.joint_angles(&s));
                 let cols = self.chain.joint_jacobian(&trace);
                 for (c, col) in cols.iter().take(dof).enumerate() {
@@ -388,7 +428,16 @@ impl Robot {
         array(py, &[k, dof], found)
     }
 
+    /// Whether this is a calibrated parameter set's model (from `Identification.robot()`).
+    #[getter]
+    fn is_calibrated(&self) -> bool {
+        self.is_calibrated_set()
+    }
+
     fn __repr__(&self) -> String {
+        if self.is_calibrated() {
+            return format!("<Robot {:?} (calibrated)>", self.name());
+        }
         let t = self.chain.tool_pose();
         if t.iter().all(|v| *v == 0.0) {
             format!("Robot.preset({:?})", self.name())

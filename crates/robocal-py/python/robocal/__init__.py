@@ -1,10 +1,27 @@
-"""robocal: robot calibration from Python, over the Rust core (robocal-core).
+"""robocal: robot calibration from Python, over the Rust core (robocal-core): kinematics and
+identification.
 
 Units at the boundary are millimetres and degrees, named in every argument (``joints_deg``,
 ``pose_mm``), as in the project's files and command line. See ``__init__.pyi`` for the full
 documented surface.
 """
 
-from ._robocal import InputError, Robot, UnreachableError, __version__
+from ._robocal import (
+    Identification,
+    IdentificationError,
+    InputError,
+    Robot,
+    UnreachableError,
+    __version__,
+    identify,
+)
 
-__all__ = ["InputError", "Robot", "UnreachableError", "__version__"]
+__all__ = [
+    "Identification",
+    "IdentificationError",
+    "InputError",
+    "Robot",
+    "UnreachableError",
+    "__version__",
+    "identify",
+]

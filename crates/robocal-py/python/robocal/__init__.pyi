@@ -1,6 +1,6 @@
 """Type stubs of the robocal package (the native module robocal._robocal)."""
 
-from typing import Sequence, Union
+from typing import Any, Sequence, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -29,9 +29,27 @@ class UnreachableError(ValueError):
 
     reasons: list[str]
 
+class IdentificationError(Exception):
+    """The identification refused to answer, with the core's message and advice.
+
+    ``kind`` names the case: ``"rank_deficient"`` (the data do not separate a combination of
+    parameters), ``"ill_conditioned"`` (κ of the column-scaled Jacobian above ``kappa_limit``; the
+    message names the weakest combination), ``"underdetermined"`` (fewer residual rows than free
+    parameters), ``"no_convergence"`` or ``"diverged"`` (the Levenberg-Marquardt solver),
+    ``"misfit"`` (residual RMS above ``residual_ratio_limit`` times the instrument's noise: a wrong
+    TCP, another frame, unrelated data), ``"outliers"`` (single measurements far above the
+    typical residual; the message names them as ``session:index``), ``"registration"`` (no base
+    guess and the measured points cannot place the base), ``"option"`` or ``"problem"``.
+    Not a ValueError: the arguments were well-formed, the data cannot answer.
+    """
+
+    kind: str
+
 class Robot:
-    """A built-in robot's nominal kinematic model: the controller's model, at 20 °C, with no
-    compliance.
+    """A robot's kinematic model. From ``Robot.preset``: the nominal model (the controller's), at
+    20 °C, with no compliance. From ``Identification.robot()``: the calibrated parameter set
+    (base, geometry, compliance under the payload's gravity torques, the first tool), positions in
+    the measurements' frame {W}.
 
     Conventions: Craig's modified DH (with Hayati's beta on parallel axes), the world frame equal to
     the robot's base frame {0}, the TCP at the flange unless a tool is given. Lengths in mm, angles
@@ -65,6 +83,10 @@ class Robot:
     @property
     def dof(self) -> int:
         """Number of joints."""
+
+    @property
+    def is_calibrated(self) -> bool:
+        """Whether this is an identified parameter set's model (``Identification.robot()``)."""
 
     @property
     def has_closed_form(self) -> bool:
@@ -134,3 +156,162 @@ class Robot:
         increasing cfx, only the configurations that reach the pose within the joint limits
         (label them with ``confdata``). Raises UnreachableError when none does,
         NotImplementedError for a robot without a closed form."""
+
+class Identification:
+    """The result of ``identify``: the calibrated parameter set, every parameter's standard
+    deviation, the identified tools and the quality of the fit.
+
+    Per-parameter dicts are keyed by the parameter-set file's names (``alpha1``, ``a2``, ``d4``,
+    ``theta3``, ``beta3``, ``c2``, ``base_x`` … ``base_c``, ``tool_x`` …), in the file's order, values
+    in the file's units (``units``: mm, deg, deg/(N·m), …) at full double precision (the file
+    rounds to 12 significant digits).
+    """
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        """Calibrated value of every parameter of the set (fixed ones at their nominal value)."""
+
+    @property
+    def nominal(self) -> dict[str, float]:
+        """Nominal (start) value of every parameter."""
+
+    @property
+    def std(self) -> dict[str, float | None]:
+        """Standard deviation of each identified parameter (``None`` where held fixed), in its
+        unit: σ̂²(JᵀJ)⁻¹, or its larger with the cluster-robust by-pose one (``std_method``)."""
+
+    @property
+    def status(self) -> dict[str, str]:
+        """``"identified"`` or why the parameter was held fixed."""
+
+    @property
+    def units(self) -> dict[str, str]:
+        """The file unit of each parameter."""
+
+    @property
+    def tools(self) -> list[dict[str, Any]]:
+        """One dict per tool block (one per session when each reflector has its own TCP):
+        ``sessions``, ``tcp_mm`` (3), ``tcp_rotation_deg`` (3), ``std`` (6: mm then deg, ``None``
+        where fixed), ``status`` (6). Rotations of a TCP measured by positions alone stay fixed."""
+
+    @property
+    def free_parameters(self) -> list[str]:
+        """Names of the free parameters, in the order of ``correlation``."""
+
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def condition_number(self) -> float:
+        """κ of the column-scaled Jacobian, the figure ``kappa_limit`` bounds."""
+
+    @property
+    def condition_number_si(self) -> float:
+        """κ(J) in SI units (m, rad), the thesis's figure."""
+
+    @property
+    def observability_si(self) -> dict[str, float]:
+        """Observability indices ``O1`` … ``O5`` in SI units."""
+
+    @property
+    def singular_values_si(self) -> npt.NDArray[np.float64]:
+        """Singular values of the Jacobian (SI), descending, shape (m,)."""
+
+    @property
+    def residual_rms_mm(self) -> float:
+        """RMS over the measurements of the residual vector's length, mm (about σ·√3 for
+        per-axis noise σ and a right model)."""
+
+    @property
+    def expected_rms_mm(self) -> float:
+        """The RMS the instrument model (laser tracker, 16 µm + 0.8 µm/m, with the robot's
+        repeatability) or the given ``sigma_mm`` predicts, mm."""
+
+    @property
+    def residual_ratio(self) -> float:
+        """``residual_rms_mm / expected_rms_mm``."""
+
+    @property
+    def sigma_mm(self) -> float | None:
+        """Residual standard deviation per row, mm; ``None`` for a weighted fit."""
+
+    @property
+    def sigma_ratio(self) -> float | None:
+        """Residual standard deviation of a weighted fit relative to the instrument's σ (1 when
+        model and noise model are right); ``None`` unweighted."""
+
+    @property
+    def std_method(self) -> str: ...
+    @property
+    def n_measurements(self) -> int: ...
+    @property
+    def n_rows(self) -> int: ...
+    @property
+    def correlation(self) -> npt.NDArray[np.float64]:
+        """Correlation matrix of the free parameters, (m, m)."""
+
+    @property
+    def worst(self) -> list[dict[str, Any]]:
+        """Largest residuals against their expected noise: ``session``, ``index`` (0-based),
+        ``residual_mm``, ``ratio`` (times the typical measurement's)."""
+
+    @property
+    def downweighted(self) -> list[tuple[str, int, float]]:
+        """Measurements the Huber loss down-weighted: (session, index, weight)."""
+
+    @property
+    def notes(self) -> list[str]:
+        """What was derived rather than given, in sentences."""
+
+    def robot(self) -> Robot:
+        """The calibrated model: ``fk`` gives TCP poses in {W} (the measurements' frame) with the
+        identified base, geometry, compliance and the first tool; ``ik`` solves it."""
+
+def identify(
+    robot: Robot,
+    joints_deg: ArrayLike,
+    position_mm: ArrayLike,
+    *,
+    tcp_mm: ArrayLike | None = None,
+    identify_tcp: bool = True,
+    base_guess_mm: ArrayLike | None = None,
+    base_guess_rotation_deg: ArrayLike | None = None,
+    sigma_mm: ArrayLike | float | None = None,
+    model: str = "",
+    fix: Sequence[str] | None = None,
+    only: Sequence[str] | None = None,
+    weighted: bool = False,
+    kappa_limit: float | None = None,
+    huber: float | None = None,
+    residual_ratio_limit: float | None = None,
+    session_names: Sequence[str] | None = None,
+    exclude: Sequence[tuple[str, int]] | None = None,
+) -> Identification:
+    """Identify the robot's parameters from joint readings and measured TCP positions.
+
+    The same identification as ``robocal identify`` on a cell file with these numbers: laser
+    tracker sessions for identification, one per reflector, each with its tool (the TCP guess, no
+    payload), the same options and defaults; the fit runs without the GIL.
+
+    ``robot``: a preset's nominal model (``Robot.preset``), the start of the fit.
+    ``joints_deg``: (N, dof), degrees, within the joint limits. ``position_mm``: (N, 3) measured
+    TCP positions in the instrument's frame {W}, mm; or (S, N, 3) for S reflectors measured at the
+    same N stops (one session each, ``reflector-1`` …, or ``session_names``; one session is named
+    ``measurements``). ``tcp_mm``: the TCP guess in the flange frame, (3,) for every session or
+    (S, 3), default the robot's TCP; identified unless ``identify_tcp=False`` (then known and
+    held). ``base_guess_mm`` / ``base_guess_rotation_deg`` (x, y, z; a, b, c ZY'X''): the base
+    pose T_0^W's guess; without it the base is registered from the data first. ``sigma_mm``: each
+    reading's 1σ per axis, a number or the shape of ``position_mm`` (the instrument model's
+    otherwise); used for the expected noise and, with ``weighted=True``, to weight the rows.
+
+    ``model``: the CLI's ``--model`` (empty: geometry + β + compliance; e.g. ``"-compliance"``,
+    ``"+cyc2_h1,+backlash2"``). ``fix``: parameters held at nominal (``["a2", "tool_x"]``);
+    ``only``: the only free parameters (names, or the groups ``"base"`` and ``"tool"``).
+    ``kappa_limit`` (default 1000), ``huber`` (Huber threshold in robust σ; default plain least
+    squares), ``residual_ratio_limit`` (default 50; ``float("inf")`` never refuses).
+    ``exclude``: measurements left out, ``(session, index)`` with the 0-based index into
+    ``joints_deg`` (the outliers an ``"outliers"`` refusal names as ``session[index]``).
+
+    Raises InputError naming the argument or element (``position_mm[3][1]``, ``model``, ``fix``)
+    for bad shapes, non-finite numbers, joints beyond limits, unknown options; IdentificationError
+    when the data cannot answer.
+    """
