@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 import robocal
+from cli import cli_binary
 from robocal import InputError, Robot, UnreachableError
 
 REPO = pathlib.Path(__file__).resolve().parents[3]
@@ -352,15 +353,6 @@ def test_gil_released_batches_give_the_same_answer_from_threads(irb120):
 
 # --- The command line, when its binary exists (in CI `cargo test` has built it) ----------------
 
-
-def cli_binary():
-    named = os.environ.get("ROBOCAL_BIN")
-    if named:
-        # Named (as .ci/run does): the comparison must run, never be skipped.
-        assert os.path.isfile(named) and os.access(named, os.X_OK), f"ROBOCAL_BIN={named} is not an executable"
-        return named
-    path = str(REPO / "target" / "debug" / "robocal")
-    return path if os.path.isfile(path) and os.access(path, os.X_OK) else None
 
 
 def rust_round_to(v, step):
