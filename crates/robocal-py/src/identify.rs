@@ -4,9 +4,9 @@
 //! The arrays become the same [`Cell`] the CLI builds from a cell file with the same numbers —
 //! laser-tracker sessions of identification, one per reflector, each with its tool (TCP guess,
 //! no payload), measurements with their joints, position and optional σ — converted with the same
-//! constants (`units::MM`, `units::DEG`), and the options the same [`IdentifyOptions`] as
-//! `robocal identify`'s flags (`--model`, `--fix`, `--only`, `--kappa-limit`, `--huber`,
-//! `--weighted`, `--residual-ratio-limit`). The fit runs without the GIL; its refusals become
+//! constants (`units::MM`, `units::DEG`), and the options checked by the same
+//! `IdentifySpec::to_options` as `robocal identify`'s flags (`--model`, `--fix`, `--only`,
+//! `--kappa-limit`, `--huber`, `--weighted`, `--residual-ratio-limit`). The fit runs without the GIL; its refusals become
 //! `IdentificationError` with the core's message.
 
 use numpy::PyArrayDyn;
@@ -15,10 +15,8 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
 use robocal_core::cell::{Cell, Instrument, Measurement, MeasuringOrder, Observation, Purpose, Session, Sigma};
-use robocal_core::identify::{
-    IdentifyError, IdentifyOptions, MeasurementSelection, ModelOptions, NoiseModel, ProblemError, RESIDUAL_RATIO_LIMIT,
-    SolveError, SolverOptions,
-};
+use robocal_core::formats::identify_options::{IdentifySpec, MeasurementRef};
+use robocal_core::identify::{IdentifyError, ProblemError, SolveError};
 use robocal_core::kinematics::ParameterSet;
 use robocal_core::units::{DEG, MM};
 
@@ -251,55 +249,6 @@ fn identify_error(e: IdentifyError) -> Error {
     Error::Identification { kind, message }
 }
 
-/// The identification's keyword arguments, as given.
-struct Flags<'a> {
-    model: &'a str,
-    fix: Vec<String>,
-    only: Vec<String>,
-    weighted: bool,
-    kappa_limit: Option<f64>,
-    huber: Option<f64>,
-    residual_ratio_limit: Option<f64>,
-    exclude: Vec<(String, usize)>,
-}
-
-/// The options `robocal identify` would build from the same flags, checked as the CLI checks them
-/// (`IdentifySpec::to_options`), errors naming the Python argument.
-fn options(f: Flags<'_>, dof: usize) -> Result<IdentifyOptions, Error> {
-    let Flags { model, fix, only, weighted, kappa_limit, huber, residual_ratio_limit, exclude } = f;
-    let defaults = IdentifyOptions::default();
-    let kappa_limit = kappa_limit.unwrap_or(defaults.kappa_limit);
-    if !(kappa_limit.is_finite() && kappa_limit > 1.0) {
-        return Err(Error::input("kappa_limit", "must be above 1"));
-    }
-    if huber.is_some_and(|k| !k.is_finite() || k <= 0.0) {
-        return Err(Error::input("huber", "must be a positive threshold"));
-    }
-    let residual_ratio_limit = residual_ratio_limit.unwrap_or(RESIDUAL_RATIO_LIMIT);
-    if residual_ratio_limit.is_nan() || residual_ratio_limit <= 1.0 {
-        return Err(Error::input("residual_ratio_limit", "must be above 1 (infinite: never refuse)"));
-    }
-    let model = ModelOptions::parse(model, dof).map_err(|e| Error::input("model", e))?;
-    let mut selection = MeasurementSelection::default();
-    for (i, (session, index)) in exclude.into_iter().enumerate() {
-        if session.trim().is_empty() {
-            return Err(Error::input(format!("exclude[{i}]"), "must name a session"));
-        }
-        selection.exclude.push((session, index));
-    }
-    Ok(IdentifyOptions {
-        selection,
-        noise: weighted.then(NoiseModel::default),
-        residual_ratio_limit,
-        model,
-        fixed: fix,
-        kappa_limit,
-        solver: SolverOptions { huber, ..Default::default() },
-        only,
-        ..defaults
-    })
-}
-
 /// Identify the robot's parameters from joint readings and measured TCP positions.
 #[pyfunction]
 #[pyo3(signature = (
@@ -371,17 +320,28 @@ pub fn identify(
             n
         }
     };
-    let flags = Flags {
-        model,
+    // The options checked as every front end checks them (`IdentifySpec::to_options`, in the
+    // core); its errors already name the keyword argument, except an exclusion's session.
+    let defaults = IdentifySpec::default();
+    let spec = IdentifySpec {
+        model: model.to_string(),
         fix: fix.unwrap_or_default(),
         only: only.unwrap_or_default(),
         weighted,
-        kappa_limit,
+        kappa_limit: kappa_limit.unwrap_or(defaults.kappa_limit),
         huber,
-        residual_ratio_limit,
-        exclude: exclude.unwrap_or_default(),
+        residual_ratio_limit: residual_ratio_limit.unwrap_or(defaults.residual_ratio_limit),
+        exclude: exclude
+            .unwrap_or_default()
+            .into_iter()
+            .map(|(session, index)| MeasurementRef { session, index })
+            .collect(),
+        ..defaults
     };
-    let opts = options(flags, robot.set().dof())?;
+    let opts = spec.to_options(robot.set().dof()).map_err(|e| {
+        let field = e.path.strip_suffix(".session").unwrap_or(&e.path).to_string();
+        Error::input(field, e.reason)
+    })?;
     let cell = cell(robot, &d, &tcps, identify_tcp, base_guess, &names);
     let id = py.detach(|| robocal_core::identify::identify(&cell, &opts)).map_err(identify_error)?;
     Ok(Identification::of(id))
