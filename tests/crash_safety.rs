@@ -349,7 +349,11 @@ async fn identification_survives(kills: usize, seed: u64) {
         killed += 1;
         let j = s.json(Method::GET, &format!("/v1/jobs/{id}"), None, &[]).await.json();
         if j["state"] != "queued" && j["state"] != "running" {
-            id.clear(); // its end was committed just before the kill: another job
+            // Its end was committed just before the kill: that kill did not interrupt it, so
+            // another job must be killed `kills` times (without this reset the loop ended here and
+            // waited on no job at all).
+            id.clear();
+            killed = 0;
         }
     }
     let done = wait_job(&s, &id, Duration::from_secs(300)).await;
