@@ -474,6 +474,11 @@ fn diagnose_names_accepts_and_refuses() {
     assert!(!ok && err.contains("--folds"), "{err}");
     let (ok, _, err) = robocal(&["diagnose", &p("none-p.json"), &p("none.json"), "--validation", "nope"]);
     assert!(!ok && err.contains("nope"), "{err}");
+    // The core names a refused option by its field; the command line says which flag.
+    let (ok, _, err) = robocal(&["identify", &p("none.json"), "--fix", "a2,nonsense", "--out", &p("no-set.json")]);
+    assert!(!ok && err.contains("error: --fix: 'nonsense' is not a parameter of this problem"), "{err}");
+    let (ok, _, err) = robocal(&["crossval", &p("none.json"), "--session", "nope", "--folds", "3"]);
+    assert!(!ok && err.contains("error: --session: no session named 'nope' in the cell"), "{err}");
     let out = Command::new(env!("CARGO_BIN_EXE_robocal"))
         .args(["bench-diagnosis", "--seeds", "1", "--cases", "cyclic j5 h1 (no logs)", "--markdown"])
         .output()

@@ -70,7 +70,7 @@ fn bad_options_are_refused() {
     let s = sim(5, Noise::none());
     let err = |o: CrossvalOptions| crossval(&s.cell, &o).unwrap_err().to_string();
     assert!(err(CrossvalOptions { sessions: vec!["nope".into()], ..options(1) }).contains("no session named 'nope'"));
-    assert!(err(CrossvalOptions { folds: 1, ..options(1) }).contains("--folds"));
+    assert!(err(CrossvalOptions { folds: 1, ..options(1) }).contains("folds: must be 0 (skip) or at least 2"));
     assert!(err(CrossvalOptions { sizes: vec![46], ..options(1) }).contains("exceeds half the session"));
     assert!(err(CrossvalOptions { transfer: vec!["trical-1".into()], ..options(1) }).contains("session identified on"));
 }
@@ -115,7 +115,7 @@ fn reidentification_from_a_calibrated_set_refits_the_base_only() {
     let (dt, dr) = want.distance(&got);
     assert!(dt < 1e-9 && dr < 1e-9, "{dt:e} m, {dr:e} rad");
     let reason = &id.status[id.set.layout.find("a2").unwrap()];
-    assert_eq!(reason, "a2: fixed at its start value, not in --only");
+    assert_eq!(reason, "a2: fixed at its start value, not in `only`");
 
     // Unknown names are refused.
     let bad = IdentifyOptions { only: vec!["bass".into()], ..opts };

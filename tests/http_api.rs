@@ -476,6 +476,12 @@ async fn targets_and_exclusions_through_the_service() {
     };
     assert_eq!(measurements(&all).await, Some(n as u64));
     assert_eq!(measurements(&one_out).await, Some(n as u64 - 1), "the excluded reading is not in the fit");
+    // An option the fit refuses is named as the request writes it, with no command-line flag.
+    let r = app.post(&path, &json!({"sessions": ["trical-1"], "fix": ["a2", "nonsense"]})).await;
+    let j = app.wait(&r.body).await;
+    assert_eq!((j["state"].as_str(), j["error"]["field"].as_str()), (Some("failed"), Some("fix[1]")), "{j}");
+    let detail = j["error"]["detail"].as_str().unwrap();
+    assert!(detail.contains("'nonsense' is not a parameter") && !detail.contains("--"), "{j}");
     app.stop().await;
 }
 

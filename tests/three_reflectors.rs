@@ -141,7 +141,7 @@ fn an_outlier_is_named_and_then_excluded_or_down_weighted() {
     let IdentifyError::Outliers { outliers, .. } = &e else { panic!("{e}") };
     assert_eq!(outliers.len(), 1, "{e}");
     assert_eq!((outliers[0].session.as_str(), outliers[0].index), ("tracker-n2", 17));
-    assert!(e.to_string().contains("--exclude tracker-n2:17"), "{e}");
+    assert!(e.to_string().contains("(exclude tracker-n2:17) or fit with the Huber loss (huber 2.5)"), "{e}");
 
     let mut opts = sessions(&NESTS);
     opts.selection.exclude = vec![("tracker-n2".into(), 17)];

@@ -137,7 +137,7 @@ pub(super) fn identify(a: IdentifyArgs) -> Result<String, CliError> {
         }
         Some(other) => return Err(CliError::arg("--select", format!("'{other}' is not a selection method (detmax)"))),
     };
-    let (id, doc) = run_identification(&cell, opts, select, &|| ()).map_err(|e| CliError::msg(e.to_string()))?;
+    let (id, doc) = run_identification(&cell, opts, select, &|| ())?;
     let q = &id.quality;
     write(&a.out, &doc.to_json_pretty())?;
     let mut reported = String::new();

@@ -131,7 +131,7 @@ pub(super) fn study(a: StudyArgs) -> Result<String, CliError> {
     };
     let started = std::time::Instant::now();
     let bar = Progress::new("identifications", opts.sizes.len() * opts.sets);
-    let st = study_with_progress(&cell, &opts, &bar.callback()).map_err(|e| CliError::msg(e.to_string()))?;
+    let st = study_with_progress(&cell, &opts, &bar.callback())?;
     drop(bar);
     let elapsed = started.elapsed().as_secs_f64();
     let report = StudyReport::new(&st, a.sets, index, a.polish, a.detmax.seed, elapsed, threads);
@@ -208,7 +208,7 @@ pub(super) fn crossval(a: CrossvalArgs) -> Result<String, CliError> {
         kappa_limit(k, "transfer_kappa_limit").map_err(option_error)?;
     }
     let bar = Progress::new("identifications", 0);
-    let cv = crossval_with_progress(&cell, &opts, &bar.callback()).map_err(|e| CliError::msg(e.to_string()))?;
+    let cv = crossval_with_progress(&cell, &opts, &bar.callback())?;
     drop(bar);
     let elapsed = started.elapsed().as_secs_f64();
 

@@ -123,6 +123,21 @@ pub struct CliError {
     pub output: Option<String>,
 }
 
+/// The core names a refused option by its field (`fix`); the command line spells it `--fix`.
+impl From<crate::identify::IdentifyError> for CliError {
+    fn from(e: crate::identify::IdentifyError) -> Self {
+        match e {
+            crate::identify::IdentifyError::Option { field: Some(f), reason, .. } => {
+                CliError::arg(&format!("--{}", f.replace('_', "-")), reason)
+            }
+            crate::identify::IdentifyError::Outliers { outliers, factor } => {
+                CliError::msg(crate::identify::outliers_message(&outliers, factor, "--exclude", "--huber"))
+            }
+            e => CliError::msg(e.to_string()),
+        }
+    }
+}
+
 impl CliError {
     pub fn msg(message: impl Into<String>) -> Self {
         CliError { message: message.into(), output: None }

@@ -9,7 +9,6 @@ pub mod diagnosis_spec;
 pub mod drift;
 pub mod export;
 pub mod history;
-pub mod identification;
 pub mod iso9283;
 pub mod measurement_csv;
 pub mod origin;
@@ -17,17 +16,23 @@ pub mod pose;
 pub mod program;
 pub mod truth;
 pub mod validation;
-pub mod validity;
 
 // The formats of robots, tools and parameter sets, and the error type of every format, live in
 // the core (`robocal_core::formats`) so that its users read the same files; re-exported here
 // under their old paths.
 pub use pose::{Choice, CompensationResult, PoseOut, PoseSpec, Target, TargetSpec};
+pub use robocal_core::formats::validity;
 pub use robocal_core::formats::{
     DomainError, field_path, finite, from_json, from_value, joints_deg, limits, param_set, robot, rounding, to_deg,
     vec3_mm, with_article,
 };
 pub use robocal_core::formats::{JointSpec, RobotSpec, ToolSpec};
+/// An identification's run and its parameter-set document, and its options as given (checked
+/// once, for every front end), under their old path.
+pub mod identification {
+    pub use robocal_core::formats::identification::*;
+    pub use robocal_core::formats::identify_options::*;
+}
 pub use robocal_core::formats::{ParamEntry, ParameterSetDoc, ParameterSetFile};
 
 /// The boundary's units, defined once in [`crate::units`]; re-exported here because every file

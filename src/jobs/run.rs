@@ -336,7 +336,8 @@ pub fn identify_error(e: IdentifyError) -> JobError {
             JobError::Numerical { kind: "outliers", title: "Outlier measurements", detail }
         }
         IdentifyError::StartRobot { .. } => JobError::Invalid { detail, field: Some("parameter_set_id".into()) },
-        IdentifyError::Problem(_) | IdentifyError::Option(_) => JobError::Invalid { detail, field: None },
+        IdentifyError::Option { .. } => JobError::Invalid { field: e.field_path(), detail },
+        IdentifyError::Problem(_) => JobError::Invalid { detail, field: None },
     }
 }
 

@@ -22,6 +22,7 @@ use robocal_core::units::{DEG, MM};
 
 use crate::error::Error;
 use crate::input::{Dense, array, dense, element_path, shape_text};
+use crate::param_set::PyParameterSet;
 use crate::robot::{Robot, three};
 
 /// A float64 numpy array handed back to Python.
@@ -50,6 +51,8 @@ struct WorstOut {
 #[pyclass(module = "robocal", frozen)]
 pub struct Identification {
     set: ParameterSet,
+    /// The parameter-set file of this identification, as `robocal identify --out` writes it.
+    doc: robocal_core::formats::ParameterSetDoc,
     names: Vec<String>,
     units: Vec<&'static str>,
     /// File units (mm, deg, deg/(N·m), …), as the parameter-set file writes them.
@@ -223,14 +226,15 @@ fn cell(
     Cell { model: robot.set().model.clone(), base_guess, artefact: None, sessions }
 }
 
-/// The core's refusal as a Python exception: bad option names are input errors of the argument
-/// that carried them, the rest `IdentificationError` with its kind.
+/// The core's refusal as a Python exception: a refused option is an input error of the argument
+/// that carried it, the rest `IdentificationError` with its kind.
 fn identify_error(e: IdentifyError) -> Error {
     let message = e.to_string();
     let kind = match &e {
-        IdentifyError::Option(m) if m.starts_with("--fix") => return Error::input("fix", m.clone()),
-        IdentifyError::Option(m) if m.starts_with("--only") => return Error::input("only", m.clone()),
-        IdentifyError::Option(_) => "option",
+        IdentifyError::Option { field: Some(_), .. } => {
+            return Error::input(e.field_path().expect("a field is named"), message);
+        }
+        IdentifyError::Option { field: None, .. } => "option",
         // The only selection Python gives is `exclude`: a session or index it names is unknown.
         IdentifyError::Problem(ProblemError::UnknownSession(_) | ProblemError::UnknownMeasurement { .. }) => {
             return Error::input("exclude", message);
@@ -343,12 +347,14 @@ pub fn identify(
         Error::input(field, e.reason)
     })?;
     let cell = cell(robot, &d, &tcps, identify_tcp, base_guess, &names);
-    let id = py.detach(|| robocal_core::identify::identify(&cell, &opts)).map_err(identify_error)?;
-    Ok(Identification::of(id))
+    let (id, doc) = py
+        .detach(|| robocal_core::formats::identification::run_identification(&cell, opts, None, &|| ()))
+        .map_err(identify_error)?;
+    Ok(Identification::of(id, doc))
 }
 
 impl Identification {
-    fn of(id: robocal_core::identify::Identification) -> Identification {
+    fn of(id: robocal_core::identify::Identification, doc: robocal_core::formats::ParameterSetDoc) -> Identification {
         let set = id.set;
         let params = set.layout.params();
         let file = |i: usize, v: f64| v / params[i].unit().to_si();
@@ -405,6 +411,7 @@ impl Identification {
             downweighted: id.downweighted,
             notes: id.notes,
             set,
+            doc,
         }
     }
 
@@ -594,9 +601,22 @@ impl Identification {
 
     /// The calibrated model as a `Robot`: `fk`, `fk_pose`, `jacobian` and `ik` evaluate the
     /// identified parameters, base and first tool included (positions in the measurements'
-    /// frame), with the gravity torques of the tool's payload.
-    fn robot(&self) -> Robot {
-        Robot::calibrated(self.set.clone())
+    /// frame), with the gravity torques of the tool's payload; `compensate` within the calibrated
+    /// envelope of the fit.
+    fn robot(&self) -> PyResult<Robot> {
+        Ok(Robot::calibrated_doc(&self.doc)?)
+    }
+
+    /// The parameter-set file of this identification (what `robocal identify --out` writes:
+    /// values, nominal, σ, status, and the quality report with the calibrated envelope).
+    #[getter]
+    fn parameter_set(&self) -> PyParameterSet {
+        PyParameterSet::new(self.doc.clone())
+    }
+
+    /// Write the parameter-set file (`parameter_set.save(path)`).
+    fn save(&self, path: std::path::PathBuf) -> PyResult<()> {
+        self.parameter_set().save(path)
     }
 
     fn __repr__(&self) -> String {

@@ -1,16 +1,18 @@
 //! The native module of the `robocal` Python package (`robocal._robocal`): robocal-core's
-//! kinematics and identification in millimetres and degrees, numpy arrays in and out, errors as Python exceptions.
+//! kinematics, identification and parameter-set files in millimetres and degrees, numpy arrays in and out, errors as Python exceptions.
 //! The Python package (`python/robocal`) re-exports it and carries the type stubs.
 
 mod error;
 mod identify;
 mod input;
+mod param_set;
 mod robot;
 
 use pyo3::prelude::*;
 
 pub use error::{Error, IdentificationError, InputError, UnreachableError};
 pub use identify::Identification;
+pub use param_set::PyParameterSet;
 pub use robot::Robot;
 
 #[pymodule]
@@ -18,6 +20,7 @@ fn _robocal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add_class::<Robot>()?;
     m.add_class::<Identification>()?;
+    m.add_class::<PyParameterSet>()?;
     m.add_function(wrap_pyfunction!(identify::identify, m)?)?;
     m.add("InputError", py.get_type::<InputError>())?;
     m.add("UnreachableError", py.get_type::<UnreachableError>())?;

@@ -9,9 +9,12 @@
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 
+use robocal_core::formats::ParameterSetDoc;
+use robocal_core::formats::validity::Envelope;
 use robocal_core::kinematics::frame::{quaternion_from_rot, rot_from_quaternion};
 use robocal_core::kinematics::{
-    AnalyticIk, Branch, Chain, Compensator, Frame, GravityModel, IkError, JointState, ParameterSet, Preset, Seed, Tool,
+    AnalyticIk, Branch, Chain, Compensated, Compensator, Frame, GravityModel, IkError, JointState, ParameterSet,
+    Preset, Seed, Tool,
 };
 use robocal_core::units::{DEG, MM};
 
@@ -37,6 +40,9 @@ pub struct Robot {
     /// The closed form of the nominal model, for robots of the ABB family (configuration labels).
     closed_form: Option<AnalyticIk>,
     comp: Compensator,
+    /// The calibrated envelope of a parameter-set file (`quality.envelope`): compensation refuses
+    /// targets whose joints leave it unless asked, as the CLI and the service do.
+    envelope: Option<Envelope>,
 }
 
 /// Joint readings, validated, in radians: `n` configurations of `dof` joints, row-major.
@@ -65,7 +71,7 @@ impl Robot {
         let chain = set.nominal_chain();
         let closed_form = AnalyticIk::new(&set.model, chain.base(), chain.tool()).ok();
         let comp = Compensator::new(&set);
-        Robot { set, chain, gravity: None, closed_form, comp }
+        Robot { set, chain, gravity: None, closed_form, comp, envelope: None }
     }
 
     /// A calibrated parameter set's model, evaluated as the CLI's `fk --params` evaluates it: the
@@ -78,7 +84,13 @@ impl Robot {
         let chain = set.chain();
         let gravity = Some(set.gravity());
         let comp = Compensator::new(&set);
-        Robot { set, chain, gravity, closed_form, comp }
+        Robot { set, chain, gravity, closed_form, comp, envelope: None }
+    }
+
+    /// A parameter-set document's model, with the calibrated envelope it records.
+    pub fn calibrated_doc(doc: &ParameterSetDoc) -> Result<Robot, Error> {
+        let envelope = Envelope::of_doc(doc).map_err(|e| Error::input(e.path, e.reason))?;
+        Ok(Robot { envelope, ..Robot::calibrated(doc.set.clone()) })
     }
 
     /// The joint state of one configuration (rad): with the gravity torques when the model has
@@ -180,9 +192,70 @@ impl Robot {
         self.chain.fk(&self.state(q))
     }
 
-    /// IK of one branch (or from seed joints) on the nominal model, as `robocal ik` solves it.
+    /// IK of one branch (or from seed joints) on the model, as `robocal ik` solves it.
     fn solve(&self, target: &Frame, seed: Seed<'_>) -> Result<Vec<f64>, IkError> {
         self.comp.pose(target, seed).map(|c| c.joints().to_vec())
+    }
+
+    /// How `ik` and `compensate` choose among the solutions: `seed_joints_deg`, or a `branch`
+    /// (cfx 0–7), or neither (the lowest cfx that reaches the target; needs the closed form).
+    fn choice(
+        &self,
+        branch: Option<i64>,
+        seed_joints_deg: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<(Option<Vec<f64>>, Option<Branch>)> {
+        let dof = self.dof();
+        let seed = match seed_joints_deg {
+            None => None,
+            Some(s) => {
+                let j = self.joints(&dense(s, "seed_joints_deg")?, "seed_joints_deg")?;
+                if j.n.is_some() {
+                    return Err(Error::input("seed_joints_deg", format!("expected shape ({dof},)")).into());
+                }
+                Some(j.q)
+            }
+        };
+        let branch = match branch {
+            None => None,
+            Some(_) if seed.is_some() => {
+                return Err(Error::input("branch", "give a branch or seed_joints_deg, not both").into());
+            }
+            Some(b) => match u8::try_from(b).ok().and_then(Branch::new) {
+                Some(b) => Some(b),
+                None => return Err(Error::input("branch", format!("cfx must be 0–7, got {b}")).into()),
+            },
+        };
+        if seed.is_none() && !self.comp.has_closed_form() {
+            let field = if branch.is_some() { "branch" } else { "seed_joints_deg" };
+            return Err(Error::input(
+                field,
+                format!("{} has no closed-form inverse: give seed_joints_deg (no configuration branches)", self.name()),
+            )
+            .into());
+        }
+        Ok((seed, branch))
+    }
+
+    /// The solution of `target` by the choice of [`Robot::choice`]; without one, every branch in
+    /// increasing cfx until one reaches it (the reasons of all when none does).
+    fn reach(&self, target: &Frame, seed: Option<&[f64]>, branch: Option<Branch>) -> Result<Compensated, Error> {
+        if let Some(s) = seed {
+            return self.comp.pose(target, Seed::Joints(s)).map_err(|e| Robot::ik_error("from the seed".into(), e));
+        }
+        if let Some(b) = branch {
+            return self.comp.pose(target, Seed::Branch(b)).map_err(|e| Robot::ik_error(format!("cfx {}", b.cfx()), e));
+        }
+        let mut reasons = Vec::new();
+        for b in Branch::ALL {
+            match self.comp.pose(target, Seed::Branch(b)) {
+                Ok(c) => return Ok(c),
+                Err(e) => match Robot::ik_error(format!("cfx {}", b.cfx()), e) {
+                    Error::Unreachable { reasons: r } => reasons.extend(r),
+                    other => return Err(other),
+                },
+            }
+        }
+        Err(Error::Unreachable { reasons })
     }
 
     fn ik_error(label: String, e: IkError) -> Error {
@@ -191,6 +264,13 @@ impl Robot {
             e => Error::Unreachable { reasons: vec![format!("{label}: {e}")] },
         }
     }
+}
+
+/// `compensate`'s `branch`: one cfx for every target, or one per target.
+#[derive(FromPyObject)]
+pub enum Branches {
+    One(i64),
+    Each(Vec<i64>),
 }
 
 fn to_deg(q: &[f64]) -> Vec<f64> {
@@ -234,6 +314,12 @@ impl Robot {
     }
 
     /// Names of the built-in robots.
+    /// The calibrated model of a parameter-set file (`ParameterSet.load(path).robot()`).
+    #[staticmethod]
+    fn from_file(path: std::path::PathBuf) -> PyResult<Robot> {
+        crate::param_set::PyParameterSet::load(path)?.robot()
+    }
+
     #[staticmethod]
     fn presets() -> Vec<&'static str> {
         Preset::ALL.iter().map(|p| p.name()).collect()
@@ -347,57 +433,125 @@ impl Robot {
         seed_joints_deg: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Array<'py>> {
         let target = Robot::pose(&dense(pose_mm, "pose_mm")?, "pose_mm")?;
-        let dof = self.dof();
-        let seed = match seed_joints_deg {
-            None => None,
-            Some(s) => {
-                let j = self.joints(&dense(s, "seed_joints_deg")?, "seed_joints_deg")?;
-                if j.n.is_some() {
-                    return Err(Error::input("seed_joints_deg", format!("expected shape ({dof},)")).into());
-                }
-                Some(j.q)
-            }
-        };
-        let branch = match branch {
-            None => None,
-            Some(_) if seed.is_some() => {
-                return Err(Error::input("branch", "give a branch or seed_joints_deg, not both").into());
-            }
-            Some(b) => match u8::try_from(b).ok().and_then(Branch::new) {
-                Some(b) => Some(b),
-                None => return Err(Error::input("branch", format!("cfx must be 0–7, got {b}")).into()),
-            },
-        };
-        if seed.is_none() && !self.comp.has_closed_form() {
-            let field = if branch.is_some() { "branch" } else { "seed_joints_deg" };
-            return Err(Error::input(
-                field,
-                format!("{} has no closed-form inverse: give seed_joints_deg (no configuration branches)", self.name()),
-            )
+        let (seed, branch) = self.choice(branch, seed_joints_deg)?;
+        let c = py.detach(|| self.reach(&target, seed.as_deref(), branch))?;
+        array(py, &[self.dof()], to_deg(c.joints()))
+    }
+
+    /// Compensated ("fake") targets: the joints that put the *calibrated* robot's TCP on each pose
+    /// of `pose_mm` ((4, 4) or (N, 4, 4), mm, in the measurements' frame), and the pose to program
+    /// on the controller — where its nominal model puts the TCP at those joints. Returns
+    /// (joints_deg (dof,) or (N, dof), fake_pose_mm (4, 4) or (N, 4, 4)). Each target needs its
+    /// configuration, as in `robocal compensate`: `branch` (cfx 0–7, one for every target or one
+    /// per target) or `seed_joints_deg`. A target whose joints leave the calibrated envelope of
+    /// the parameter set (its joint ranges, widened by 5°) is refused unless
+    /// `allow_outside_envelope`: the model is not validated there.
+    #[pyo3(signature = (pose_mm, branch=None, seed_joints_deg=None, allow_outside_envelope=false))]
+    fn compensate<'py>(
+        &self,
+        py: Python<'py>,
+        pose_mm: &Bound<'py, PyAny>,
+        branch: Option<Branches>,
+        seed_joints_deg: Option<&Bound<'py, PyAny>>,
+        allow_outside_envelope: bool,
+    ) -> PyResult<(Array<'py>, Array<'py>)> {
+        if !self.is_calibrated_set() {
+            return Err(Error::Unsupported(format!(
+                "{} is a preset's nominal model, which needs no compensation: compensate with a calibrated \
+                 model (Robot.from_file, ParameterSet.robot(), Identification.robot())",
+                self.name()
+            ))
             .into());
         }
-        let q = py.detach(|| -> Result<Vec<f64>, Error> {
-            if let Some(s) = &seed {
-                return self.solve(&target, Seed::Joints(s)).map_err(|e| Robot::ik_error("from the seed".into(), e));
+        let d = dense(pose_mm, "pose_mm")?;
+        let (n, per) = match d.shape.as_slice() {
+            [4, 4] => (None, 16),
+            [n, 4, 4] => (Some(*n), 16),
+            s => {
+                return Err(Error::input(
+                    "pose_mm",
+                    format!("expected shape (4, 4) or (N, 4, 4), got {}", shape_text(s)),
+                )
+                .into());
             }
-            if let Some(b) = branch {
-                return self
-                    .solve(&target, Seed::Branch(b))
-                    .map_err(|e| Robot::ik_error(format!("cfx {}", b.cfx()), e));
+        };
+        let mut targets = Vec::with_capacity(n.unwrap_or(1));
+        for (i, m) in d.data.chunks_exact(per).enumerate() {
+            let field = n.map_or_else(|| "pose_mm".to_string(), |_| format!("pose_mm[{i}]"));
+            targets.push(Robot::pose(&Dense { shape: vec![4, 4], data: m.to_vec() }, &field)?);
+        }
+        let count = targets.len();
+        let per_target: Vec<i64> = match &branch {
+            None if seed_joints_deg.is_none() => {
+                return Err(Error::input(
+                    "branch",
+                    "a pose target needs its configuration: branch (cfx 0–7, one or one per target) or seed_joints_deg",
+                )
+                .into());
             }
-            let mut reasons = Vec::new();
-            for b in Branch::ALL {
-                match self.solve(&target, Seed::Branch(b)) {
-                    Ok(q) => return Ok(q),
-                    Err(e) => match Robot::ik_error(format!("cfx {}", b.cfx()), e) {
-                        Error::Unreachable { reasons: r } => reasons.extend(r),
-                        other => return Err(other),
+            None => Vec::new(),
+            Some(Branches::One(b)) => vec![*b; count],
+            Some(Branches::Each(v)) if n.is_some() && v.len() == count => v.clone(),
+            Some(Branches::Each(v)) => {
+                return Err(Error::input(
+                    "branch",
+                    format!("expected one cfx or {count} (one per target), got {} values", v.len()),
+                )
+                .into());
+            }
+        };
+        let (seed, first) = self.choice(per_target.first().copied(), seed_joints_deg)?;
+        let mut branches = vec![first; count];
+        for (i, &b) in per_target.iter().enumerate() {
+            let field =
+                if matches!(branch, Some(Branches::Each(_))) { format!("branch[{i}]") } else { "branch".into() };
+            branches[i] = Some(
+                u8::try_from(b)
+                    .ok()
+                    .and_then(Branch::new)
+                    .ok_or_else(|| Error::input(field, format!("cfx must be 0–7, got {b}")))?,
+            );
+        }
+        let dof = self.dof();
+        let (joints, fake) = py.detach(|| -> Result<(Vec<f64>, Vec<f64>), Error> {
+            let mut joints = Vec::with_capacity(dof * targets.len());
+            let mut fake = Vec::with_capacity(16 * targets.len());
+            for (i, target) in targets.iter().enumerate() {
+                let label = |e: Error| match (n, e) {
+                    (None, e) => e,
+                    (Some(_), Error::Unreachable { reasons }) => Error::Unreachable {
+                        reasons: reasons.into_iter().map(|r| format!("pose_mm[{i}]: {r}")).collect(),
                     },
+                    (Some(_), Error::Input { field, reason }) => {
+                        Error::Input { field: field.replacen("pose_mm", &format!("pose_mm[{i}]"), 1), reason }
+                    }
+                    (Some(_), e) => e,
+                };
+                let c = self.reach(target, seed.as_deref(), branches[i]).map_err(label)?;
+                if let Some(why) = self.envelope.as_ref().and_then(|e| e.outside(c.joints()))
+                    && !allow_outside_envelope
+                {
+                    let field = n.map_or_else(|| "pose_mm".to_string(), |_| format!("pose_mm[{i}]"));
+                    return Err(Error::input(
+                        field,
+                        format!(
+                            "outside the calibrated envelope: {why}; the model is not validated there \
+                             (allow_outside_envelope=True compensates it anyway)"
+                        ),
+                    ));
                 }
+                joints.extend(to_deg(c.joints()));
+                let f = &c.fake_pose;
+                for r in 0..3 {
+                    fake.extend([f.r[(r, 0)], f.r[(r, 1)], f.r[(r, 2)], f.t[r] / MM]);
+                }
+                fake.extend([0.0, 0.0, 0.0, 1.0]);
             }
-            Err(Error::Unreachable { reasons })
+            Ok((joints, fake))
         })?;
-        array(py, &[dof], to_deg(&q))
+        let lead: Vec<usize> = n.into_iter().collect();
+        let shape = |per: &[usize]| [lead.as_slice(), per].concat();
+        Ok((array(py, &shape(&[dof]), joints)?, array(py, &shape(&[4, 4]), fake)?))
     }
 
     /// Every configuration's joints (deg) for `pose_mm` (4, 4): (K, dof), in increasing cfx, only the

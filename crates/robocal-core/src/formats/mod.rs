@@ -4,11 +4,13 @@
 //! module re-exports these beside its wire formats. With the `openapi` feature the formats also
 //! derive their OpenAPI schemas (utoipa), which the service publishes.
 
+pub mod identification;
 pub mod identify_options;
 pub mod limits;
 pub mod param_set;
 pub mod robot;
 pub mod rounding;
+pub mod validity;
 
 use std::fmt;
 

@@ -515,15 +515,15 @@ impl<'a> Split<'a> {
     /// The named sessions of `cell` (each once) and their measurements grouped into poses.
     fn of(cell: &'a Cell, names: &[String]) -> Result<Split<'a>, IdentifyError> {
         if names.is_empty() {
-            return Err(IdentifyError::Option("name at least one session to split".into()));
+            return Err(IdentifyError::field("session", "name at least one session to split"));
         }
         let mut sessions: Vec<&Session> = Vec::with_capacity(names.len());
         for name in names {
             let s = cell
                 .session(name)
-                .ok_or_else(|| IdentifyError::Option(format!("no session named '{name}' in the cell")))?;
+                .ok_or_else(|| IdentifyError::field("session", format!("no session named '{name}' in the cell")))?;
             if sessions.iter().any(|t| t.name == *name) {
-                return Err(IdentifyError::Option(format!("session '{name}' is named twice")));
+                return Err(IdentifyError::field("session", format!("session '{name}' is named twice")));
             }
             sessions.push(s);
         }
@@ -548,27 +548,30 @@ fn check_schemes(cell: &Cell, opts: &CrossvalOptions, split: &Split) -> Result<(
         format!("the {n_poses} poses of the sessions")
     };
     if opts.folds == 1 {
-        return Err(IdentifyError::Option("--folds must be 0 (skip) or at least 2".into()));
+        return Err(IdentifyError::field("folds", "must be 0 (skip) or at least 2"));
     }
     if opts.folds > n_poses {
-        return Err(IdentifyError::Option(format!("--folds {} exceeds {what}", opts.folds)));
+        return Err(IdentifyError::field("folds", format!("{} exceeds {what}", opts.folds)));
     }
     if !opts.sizes.is_empty() && opts.draws == 0 {
-        return Err(IdentifyError::Option("--draws must be at least 1".into()));
+        return Err(IdentifyError::field("draws", "must be at least 1"));
     }
     if let Some(&n) = opts.sizes.iter().find(|&&n| n > n_poses / 2) {
-        return Err(IdentifyError::Option(format!(
-            "size {n} exceeds half the session{} ({} of {n_poses} poses): identification and test halves must be disjoint",
-            if split.sessions.len() == 1 { "" } else { "s" },
-            n_poses / 2
-        )));
+        return Err(IdentifyError::field(
+            "sizes",
+            format!(
+                "size {n} exceeds half the session{} ({} of {n_poses} poses): identification and test halves must be disjoint",
+                if split.sessions.len() == 1 { "" } else { "s" },
+                n_poses / 2
+            ),
+        ));
     }
-    for t in &opts.transfer {
+    for (i, t) in opts.transfer.iter().enumerate() {
         if cell.session(t).is_none() {
-            return Err(IdentifyError::Option(format!("--transfer: no session named '{t}' in the cell")));
+            return Err(IdentifyError::item("transfer", i, format!("no session named '{t}' in the cell")));
         }
         if opts.sessions.contains(t) {
-            return Err(IdentifyError::Option(format!("--transfer: '{t}' is the session identified on")));
+            return Err(IdentifyError::item("transfer", i, format!("'{t}' is the session identified on")));
         }
     }
     Ok(())

@@ -10,8 +10,11 @@ pub enum IdentifyError {
     Problem(#[from] ProblemError),
     #[error("base estimate: {0}")]
     Registration(#[from] RegistrationError),
-    #[error("{0}")]
-    Option(String),
+    /// An option refused: the option's name, spelled as the identification's own field (`fix`,
+    /// `only`, `folds`), the item of a list option that was refused, and why. Each front end
+    /// writes the field its way: `--fix` on the command line, `fix[2]` in a request.
+    #[error("{}", option_message(*field, *index, reason))]
+    Option { field: Option<&'static str>, index: Option<usize>, reason: String },
     #[error(
         "the start parameter set is for robot '{set}' ({set_dof} joints), not for the cell's robot '{cell}' ({cell_dof} joints)"
     )]
@@ -33,12 +36,46 @@ pub enum IdentifyError {
         mm(*rms), mm(*expected), worst_list(worst)
     )]
     Misfit { rms: f64, expected: f64, ratio: f64, limit: f64, worst: Vec<Worst> },
-    #[error(
-        "{} outlier measurement(s), each more than {factor:.0} times the typical residual: {}; leave them out (identify --exclude {}, or `exclude` in a request) or fit with the Huber loss (--huber 2.5)",
-        outliers.len(), worst_list(outliers), outliers.iter().take(5).map(|w| format!("{}:{}", w.session, w.index)).collect::<Vec<_>>().join(",")
-    )]
+    #[error("{}", outliers_message(outliers, *factor, "exclude", "huber"))]
     Outliers { outliers: Vec<Worst>, factor: f64 },
 }
+
+impl IdentifyError {
+    /// An option refused for a reason that no single option carries.
+    pub fn option(reason: impl Into<String>) -> Self {
+        IdentifyError::Option { field: None, index: None, reason: reason.into() }
+    }
+
+    /// An option refused: which one, and why.
+    pub fn field(field: &'static str, reason: impl Into<String>) -> Self {
+        IdentifyError::Option { field: Some(field), index: None, reason: reason.into() }
+    }
+
+    /// An item of a list option refused: which option, which item (0-based), and why.
+    pub fn item(field: &'static str, index: usize, reason: impl Into<String>) -> Self {
+        IdentifyError::Option { field: Some(field), index: Some(index), reason: reason.into() }
+    }
+
+    /// The refused option's field path as a request writes it (`fix[2]`, `folds`), if one is named.
+    pub fn field_path(&self) -> Option<String> {
+        match self {
+            IdentifyError::Option { field: Some(f), index, .. } => {
+                Some(index.map_or_else(|| f.to_string(), |i| format!("{f}[{i}]")))
+            }
+            _ => None,
+        }
+    }
+}
+
+fn option_message(field: Option<&str>, index: Option<usize>, reason: &str) -> String {
+    match (field, index) {
+        (Some(f), Some(i)) => format!("{f}[{i}]: {reason}"),
+        (Some(f), None) => format!("{f}: {reason}"),
+        (None, _) => reason.to_string(),
+    }
+}
+
+impl IdentifyError {}
 
 /// A measurement with a large residual.
 #[derive(Clone, Debug, PartialEq)]
@@ -51,6 +88,17 @@ pub struct Worst {
     /// How many times the typical measurement's residual it is, each row against its σ and the
     /// spread the model leaves ([`IdentifyError::Outliers`]).
     pub ratio: f64,
+}
+
+/// The outlier refusal, its two remedies named as the front end spells its options (`exclude`
+/// and `huber` in a request or in Python, `--exclude` and `--huber` on the command line).
+pub fn outliers_message(outliers: &[Worst], factor: f64, exclude: &str, huber: &str) -> String {
+    let refs = outliers.iter().take(5).map(|w| format!("{}:{}", w.session, w.index)).collect::<Vec<_>>().join(",");
+    format!(
+        "{} outlier measurement(s), each more than {factor:.0} times the typical residual: {}; leave them out ({exclude} {refs}) or fit with the Huber loss ({huber} 2.5)",
+        outliers.len(),
+        worst_list(outliers)
+    )
 }
 
 fn mm(v: f64) -> String {

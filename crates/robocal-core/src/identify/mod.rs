@@ -21,7 +21,7 @@ mod options;
 mod pool;
 mod prepare;
 
-pub use error::{IdentifyError, Worst};
+pub use error::{IdentifyError, Worst, outliers_message};
 pub use hold::{COMPLIANCE_SIGNIFICANCE, PAYLOAD_SIGNIFICANCE};
 pub use identifiability::Status;
 pub use identify::{Identification, ToolResult, WORST_REPORTED, identify};

@@ -83,7 +83,7 @@ impl DetmaxPool {
                 detmax::Block::new(3, data)
             })
             .collect();
-        detmax::Workspace::new(&blocks, self.m).map_err(|e| IdentifyError::Option(format!("DETMAX workspace: {e}")))
+        detmax::Workspace::new(&blocks, self.m).map_err(|e| IdentifyError::option(format!("DETMAX workspace: {e}")))
     }
 
     /// `n` measurements minimising the mean prediction variance over `workspace` (see
@@ -97,7 +97,7 @@ impl DetmaxPool {
     ) -> Result<(Vec<(String, usize)>, serde_json::Value), IdentifyError> {
         let o = detmax::DetmaxOptions { seed, ..detmax::DetmaxOptions::new(n) };
         let d = detmax::detmax_prediction(&self.blocks, self.m, workspace, &o)
-            .map_err(|e| IdentifyError::Option(format!("DETMAX: {e}")))?;
+            .map_err(|e| IdentifyError::option(format!("DETMAX: {e}")))?;
         let subset = d.selected.iter().map(|&i| self.members[i].clone()).collect();
         let info = serde_json::json!({
             "method": "detmax", "n": n, "criterion": "prediction", "seed": seed, "pool": self.blocks.len(),
@@ -141,7 +141,7 @@ impl DetmaxPool {
         o: &detmax::DetmaxOptions,
     ) -> Result<(Vec<(String, usize)>, serde_json::Value), IdentifyError> {
         let (n, index, seed) = (o.n, o.index, o.seed);
-        let d = detmax::detmax(&self.blocks, self.m, o).map_err(|e| IdentifyError::Option(format!("DETMAX: {e}")))?;
+        let d = detmax::detmax(&self.blocks, self.m, o).map_err(|e| IdentifyError::option(format!("DETMAX: {e}")))?;
         let subset = d.selected.iter().map(|&i| self.members[i].clone()).collect();
         let info = serde_json::json!({
             "method": "detmax", "n": n, "index": index.name(), "seed": seed, "pool": self.blocks.len(),

@@ -53,7 +53,7 @@ pub fn prepare(cell: &Cell, opts: &IdentifyOptions) -> Result<Prepared, Identify
     let (base, registration) = starting_base(cell, &picks)?;
     let mut problem = Problem::new(cell, layout, base, &opts.selection, opts.rotation_weight)?;
     if let Some(noise) = &opts.noise {
-        noise.check().map_err(IdentifyError::Option)?;
+        noise.check().map_err(IdentifyError::option)?;
         weight_by_instrument(&mut problem, cell, noise);
     }
     let (mut x0, from_start) = start_values(&problem, cell, opts)?;
@@ -77,7 +77,7 @@ fn layout_of(cell: &Cell, opts: &IdentifyOptions) -> Result<(ParamLayout, bool),
     let mut layout = ParamLayout::full(&cell.model);
     for p in &opts.model.extra {
         if !layout.admits(*p) {
-            return Err(IdentifyError::Option(format!("{p} is not a parameter of a {dof}-joint robot")));
+            return Err(IdentifyError::field("model", format!("{p} is not a parameter of a {dof}-joint robot")));
         }
     }
     layout.extend(&opts.model.extra);
@@ -163,16 +163,16 @@ fn fixed_parameters(problem: &Problem, opts: &IdentifyOptions) -> Result<HashMap
     if !opts.only.is_empty() {
         fix_all_but_only(problem, opts, &mut fixed)?;
     }
-    for f in &opts.fixed {
+    for (i, f) in opts.fixed.iter().enumerate() {
         let g = (0..problem.n_params())
             .find(|&g| &problem.name(g) == f)
-            .ok_or_else(|| IdentifyError::Option(format!("--fix: '{f}' is not a parameter of this problem")))?;
+            .ok_or_else(|| IdentifyError::item("fix", i, format!("'{f}' is not a parameter of this problem")))?;
         let at = if opts.start.is_some() { "at its start value" } else { "at nominal" };
         fixed.insert(g, format!("{f}: fixed by the user ({at})"));
     }
-    for s in &opts.free_tcp {
+    for (i, s) in opts.free_tcp.iter().enumerate() {
         if !problem.tools.iter().any(|b| b.sessions.contains(s)) {
-            return Err(IdentifyError::Option(format!("free TCP: '{s}' is not a session of this problem")));
+            return Err(IdentifyError::item("free_tcp", i, format!("'{s}' is not a session of this problem")));
         }
     }
     Ok(fixed)
@@ -216,7 +216,7 @@ fn fix_all_but_only(
     fixed: &mut HashMap<usize, String>,
 ) -> Result<(), IdentifyError> {
     let mut keep = vec![false; problem.n_params()];
-    for item in &opts.only {
+    for (i, item) in opts.only.iter().enumerate() {
         let hits: Vec<usize> = (0..problem.n_params())
             .filter(|&g| match (item.as_str(), problem.params[g]) {
                 ("base", GlobalParam::Robot(i)) => matches!(problem.layout.params()[i], Param::Base(_)),
@@ -225,9 +225,11 @@ fn fix_all_but_only(
             })
             .collect();
         if hits.is_empty() {
-            return Err(IdentifyError::Option(format!(
-                "--only: '{item}' is neither a parameter of this problem nor a group (base, tool)"
-            )));
+            return Err(IdentifyError::item(
+                "only",
+                i,
+                format!("'{item}' is neither a parameter of this problem nor a group (base, tool)"),
+            ));
         }
         hits.into_iter().for_each(|g| keep[g] = true);
     }
@@ -235,7 +237,7 @@ fn fix_all_but_only(
         if !k {
             let name = problem.name(g);
             let at = if opts.start.is_some() { "its start value" } else { "nominal" };
-            fixed.entry(g).or_insert_with(|| format!("{name}: fixed at {at}, not in --only"));
+            fixed.entry(g).or_insert_with(|| format!("{name}: fixed at {at}, not in `only`"));
         }
     }
     Ok(())
@@ -282,7 +284,7 @@ fn identifiable(
     }
     let (free, status) = identifiability::select(problem, &j0, fixed);
     if free.is_empty() {
-        return Err(IdentifyError::Option("no parameter is free to identify".into()));
+        return Err(IdentifyError::option("no parameter is free to identify"));
     }
     Ok((free, status))
 }
@@ -356,7 +358,7 @@ pub fn weight_by_instrument(problem: &mut Problem, cell: &Cell, noise: &NoiseMod
 /// one unit of curvature cost what one unit of a typical knot's value explains.
 pub fn map_priors(problem: &Problem, j0: &Mat<f64>, eta: f64) -> Result<Vec<Prior>, IdentifyError> {
     if !(eta.is_finite() && eta > 0.0) {
-        return Err(IdentifyError::Option(format!("map smoothing must be a positive number, got {eta}")));
+        return Err(IdentifyError::field("map_smoothing", format!("must be a positive number, got {eta}")));
     }
     // Tables: (joint, step) → knots (knot index, global parameter).
     let mut tables: std::collections::BTreeMap<(usize, u8), Vec<(i16, usize)>> = Default::default();

@@ -169,7 +169,7 @@ pub enum ProblemError {
     #[error("no session named '{0}' in the cell")]
     UnknownSession(String),
     #[error(
-        "session '{0}' is a validation session; identify with identification sessions (or name it explicitly with --sessions)"
+        "session '{0}' is a validation session; identify with identification sessions (or name it explicitly among the sessions to identify on)"
     )]
     WrongPurpose(String),
     #[error("measurement {index} of session '{session}' does not exist")]

@@ -102,38 +102,40 @@ pub fn study_with_progress(
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Study, IdentifyError> {
     if opts.sizes.is_empty() || opts.sets == 0 {
-        return Err(IdentifyError::Option("the study needs at least one size and one set".into()));
+        return Err(IdentifyError::option("the study needs at least one size and one set"));
     }
     if opts.threads == 0 {
-        return Err(IdentifyError::Option("threads must be at least 1".into()));
+        return Err(IdentifyError::field("threads", "must be at least 1"));
     }
     let validation = if opts.validation.is_empty() { validation_sessions(cell) } else { opts.validation.clone() };
     if validation.is_empty() {
-        return Err(IdentifyError::Option("the cell has no validation session to score the study on".into()));
+        return Err(IdentifyError::option("the cell has no validation session to score the study on"));
     }
     // Named sessions are checked once here, not discovered as a failure of every run.
     for name in &opts.validation {
         match cell.session(name) {
             None => {
                 let known = validation_sessions(cell).join(", ");
-                return Err(IdentifyError::Option(format!(
-                    "validation: no session '{name}' in the cell (its validation sessions: {known})"
-                )));
+                return Err(IdentifyError::field(
+                    "validation",
+                    format!("no session '{name}' in the cell (its validation sessions: {known})"),
+                ));
             }
             Some(s) if s.purpose != crate::cell::Purpose::Validation => {
-                return Err(IdentifyError::Option(format!(
-                    "validation: '{name}' is an identification session, not a validation one"
-                )));
+                return Err(IdentifyError::field(
+                    "validation",
+                    format!("'{name}' is an identification session, not a validation one"),
+                ));
             }
             Some(_) => {}
         }
     }
     let pool = DetmaxPool::new(cell, &opts.identify)?;
     if let Some(&n) = opts.sizes.iter().find(|&&n| n >= pool.len()) {
-        return Err(IdentifyError::Option(format!(
-            "set size {n} must be smaller than the pool's {} measurements",
-            pool.len()
-        )));
+        return Err(IdentifyError::field(
+            "sizes",
+            format!("set size {n} must be smaller than the pool's {} measurements", pool.len()),
+        ));
     }
     let jobs: Vec<(usize, usize)> = opts.sizes.iter().flat_map(|&n| (0..opts.sets).map(move |i| (n, i))).collect();
     let next = AtomicUsize::new(0);

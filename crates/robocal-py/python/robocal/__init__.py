@@ -1,5 +1,5 @@
-"""robocal: robot calibration from Python, over the Rust core (robocal-core): kinematics and
-identification.
+"""robocal: robot calibration from Python, over the Rust core (robocal-core): kinematics,
+identification and parameter-set files.
 
 Units at the boundary are millimetres and degrees, named in every argument (``joints_deg``,
 ``pose_mm``), as in the project's files and command line. See ``__init__.pyi`` for the full
@@ -10,6 +10,7 @@ from ._robocal import (
     Identification,
     IdentificationError,
     InputError,
+    ParameterSet,
     Robot,
     UnreachableError,
     __version__,
@@ -20,6 +21,7 @@ __all__ = [
     "Identification",
     "IdentificationError",
     "InputError",
+    "ParameterSet",
     "Robot",
     "UnreachableError",
     "__version__",

@@ -1,5 +1,6 @@
 """Type stubs of the robocal package (the native module robocal._robocal)."""
 
+import os
 from typing import Any, Sequence, Union
 
 import numpy as np
@@ -75,6 +76,12 @@ class Robot:
     @staticmethod
     def presets() -> list[str]:
         """Names of the built-in robots."""
+
+    @staticmethod
+    def from_file(path: str | os.PathLike[str]) -> Robot:
+        """The calibrated model of a parameter-set file (``robocal identify --out``, the service's
+        parameter sets): ``ParameterSet.load(path).robot()``. Raises InputError naming the field
+        inside the file, OSError when it cannot be read."""
 
     @property
     def name(self) -> str:
@@ -156,6 +163,25 @@ class Robot:
         increasing cfx, only the configurations that reach the pose within the joint limits
         (label them with ``confdata``). Raises UnreachableError when none does,
         NotImplementedError for a robot without a closed form."""
+
+    def compensate(
+        self,
+        pose_mm: ArrayLike,
+        branch: int | Sequence[int] | None = None,
+        seed_joints_deg: ArrayLike | None = None,
+        allow_outside_envelope: bool = False,
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """Compensated ("fake") targets of a calibrated model: for each pose of ``pose_mm``
+        ((4, 4) or (N, 4, 4), mm, in the measurements' frame), the joints in degrees that put the
+        calibrated robot's TCP on it, and the pose to program on the controller (where its nominal
+        model puts the TCP at those joints). Returns ``(joints_deg, fake_pose_mm)`` of shapes
+        (dof,) and (4, 4), or (N, dof) and (N, 4, 4). Each target needs its configuration, as in
+        ``robocal compensate``: ``branch`` (cfx 0–7, one for all targets or one per target) or
+        ``seed_joints_deg``; without one, InputError (``field == "branch"``). A target whose joints leave the parameter set's calibrated envelope (its measured joint
+        ranges widened by 5°) raises InputError (``field == "pose_mm[i]"``) unless
+        ``allow_outside_envelope``. The same joints as ``robocal compensate``. Raises
+        NotImplementedError for a preset's nominal model, UnreachableError for a target out of
+        reach."""
 
 class Identification:
     """The result of ``identify``: the calibrated parameter set, every parameter's standard
@@ -265,6 +291,68 @@ class Identification:
     def robot(self) -> Robot:
         """The calibrated model: ``fk`` gives TCP poses in {W} (the measurements' frame) with the
         identified base, geometry, compliance and the first tool; ``ik`` solves it."""
+
+    @property
+    def parameter_set(self) -> ParameterSet:
+        """The parameter-set file of this identification, as ``robocal identify --out`` writes it
+        (values, nominal, σ, status, and the quality report with the calibrated envelope)."""
+
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Write the parameter-set file (``parameter_set.save(path)``)."""
+
+class ParameterSet:
+    """A parameter-set file: each parameter's value, nominal value, σ, unit and status, and the
+    identification's quality report. The format of ``robocal identify --out`` and of the service's
+    ``GET /v1/parameter-sets/{id}``; values in the file's units (mm, deg, deg/(N·m), kg, 1/K), each
+    named in ``units``, kept to 12 significant digits."""
+
+    @staticmethod
+    def load(path: str | os.PathLike[str]) -> ParameterSet:
+        """Read and check a file. Raises InputError naming the field inside the file
+        (``parameters[3].nominal``), OSError when it cannot be read."""
+
+    @staticmethod
+    def from_json(text: str) -> ParameterSet:
+        """Parse and check the file's JSON text."""
+
+    def to_json(self) -> str:
+        """The file's text: the bytes ``robocal identify --out`` writes, without the final newline."""
+
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Write the file (``to_json()`` and a newline); a loaded file saves back byte for byte."""
+
+    @property
+    def robot_name(self) -> str:
+        """The robot's name (a preset's, or a custom table's)."""
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        """Values by parameter name, in file order and the file's units."""
+
+    @property
+    def nominal(self) -> dict[str, float]:
+        """Nominal values (the controller's model) by name."""
+
+    @property
+    def std(self) -> dict[str, float | None]:
+        """Standard deviations by name; ``None`` for a parameter that was not identified."""
+
+    @property
+    def status(self) -> dict[str, str | None]:
+        """``"identified"``, or why the parameter was held; ``None`` in a set typed by hand."""
+
+    @property
+    def units(self) -> dict[str, str]:
+        """Each parameter's unit."""
+
+    @property
+    def quality(self) -> dict[str, Any] | None:
+        """The identification's quality report as plain Python, or ``None``."""
+
+    def robot(self) -> Robot:
+        """The model of these parameters (FK, Jacobian and IK of the calibrated model, joints
+        deflected by the gravity torques of the set's payload; ``compensate`` within the
+        calibrated envelope the file records)."""
 
 def identify(
     robot: Robot,

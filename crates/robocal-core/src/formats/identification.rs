@@ -1,18 +1,16 @@
-//! Identifications at the boundary: their options as given (`robocal identify`'s flags, an
-//! identification request; checked once, in `robocal_core::formats::identify_options`); the run both
-//! front ends make; and the result written as a parameter-set file — per parameter value,
+//! Identifications at the boundary: the run every front end makes (the CLI, the service, Python;
+//! their options checked once, in [`super::identify_options`]), and the result written as a
+//! parameter-set file — per parameter value,
 //! nominal, std, unit and status, plus the quality report (in mm and degrees where it has lengths
 //! and angles).
 
 use serde_json::{Value, json};
 
-use super::ParameterSetDoc;
+use super::identify_options::DetmaxSelection;
+use super::param_set::ParameterSetDoc;
 use crate::cell::Cell;
 use crate::identify::{Identification, IdentifyError, IdentifyOptions};
 use crate::units::{DEG, MM};
-// The options as given, checked once for every front end (the CLI, the service, Python), live
-// in the core; re-exported here under their old paths.
-pub use robocal_core::formats::identify_options::*;
 
 /// An identification as `robocal identify` and the identification job both run it: the DETMAX
 /// selection when asked (its description goes into the quality report; `selected` is told when

@@ -17,9 +17,11 @@ use nalgebra::{DMatrix, Vector3};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-use super::{DEG, DomainError, MM, ParameterSetDoc};
+use super::DomainError;
+use super::param_set::ParameterSetDoc;
 use crate::identify::Identification;
 use crate::kinematics::{Chain, JointState, ParamLayout, Rows};
+use crate::units::{DEG, MM};
 use crate::validate::report::Region;
 
 /// Margin added on both sides of each joint's calibrated range, deg.
@@ -29,7 +31,8 @@ pub const POSITION_MARGIN_MM: f64 = 50.0;
 
 /// The calibrated envelope as a parameter set's quality report stores it (`quality.envelope`),
 /// in degrees and millimetres; the ranges are the measured ones, the margins apply on top.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct EnvelopeFile {
     /// Per joint, [min, max] of the identification measurements, deg.
@@ -318,7 +321,8 @@ pub const MAXWELL_K95: f64 = 1.613_881_245_898_081_5;
 /// What a held-out validation measured about the error a parameter set's covariance does not
 /// predict (its report's `uncertainty`; compensation reads it from the set's latest held-out
 /// validation). Lengths mm; each an RMS of the 3-D position error over the held-out measurements.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct HeldOutUncertainty {
     /// Held-out measurements these figures come from.
     pub n: usize,
@@ -345,7 +349,8 @@ pub struct HeldOutUncertainty {
 
 /// The held-out |error| against a distance: what its growth away from the validated poses is
 /// extrapolated from.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct GrowthFit {
     /// `zone` (the distance to the calibration zone, the artefact's ball centroid) or `base` (to
     /// the base origin, when the cell has no artefact).
@@ -449,7 +454,8 @@ impl HeldOutUncertainty {
 
 /// A compensated target's predicted position uncertainty, part by part (mm; each part the RMS of
 /// the 3-D position error it accounts for).
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct UncertaintyOut {
     /// From the identification's parameter covariance at these joints, √trace(J·Cov·Jᵀ); absent
     /// when the set records no covariance (a held-out validation's unexplained part then holds
@@ -545,7 +551,8 @@ impl UncertaintyOut {
 }
 
 /// What a compensation checked, reported with its results.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct ValidityOut {
     /// The calibrated envelope targets were checked against (measured ranges; the margins
     /// apply on top); absent when the set records none, and then nothing was checked.
@@ -572,7 +579,8 @@ pub struct ValidityOut {
 }
 
 /// The latest held-out validation of a parameter set, as compensation judges it.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct ValidationCheck {
     pub validation_id: String,
     pub mean_mm: f64,
