@@ -84,12 +84,24 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
     // with a guess stays judged at its guess (the UR10 probe: θ6 has no effect there). An
     // unknown payload acts through the compliances, which are zero at the start: its mass has
     // no effect there and is judged at the solution too.
-    if payload_unknown || problem.tools.iter().any(|b| b.identify_tcp && b.tool.tcp[..3] == [0.0; 3]) {
+    let tcp_unknown = problem.tools.iter().any(|b| b.identify_tcp && b.tool.tcp[..3] == [0.0; 3]);
+    if payload_unknown || tcp_unknown {
         let all: Vec<usize> = (0..problem.n_params()).collect();
         let mut j = Mat::<f64>::zeros(problem.n_rows, all.len());
         let mut r = vec![0.0; problem.n_rows];
         problem.linearise(&fit.x, &all, &mut j, &mut r);
-        let (again, mut again_status) = identifiability::select(&problem, &j, &fixed);
+        // Judged again for the payload alone, every other parameter keeps the start's judgement:
+        // a TCP guessed on axis 6 that the fit leaves a few µm off it (noise) would otherwise free
+        // the parameters its exact position made dependent (a5 on θ5, d5 on α5 for the IRB 120),
+        // and the refit would wander in their valley until its iteration limit.
+        let mut judged = fixed.clone();
+        if !tcp_unknown {
+            let mass = payload_mass(&problem);
+            for g in (0..problem.n_params()).filter(|g| !free.contains(g) && Some(*g) != mass) {
+                judged.entry(g).or_insert_with(|| status[g].label());
+            }
+        }
+        let (again, mut again_status) = identifiability::select(&problem, &j, &judged);
         if again != free && !again.is_empty() {
             let mass = payload_unknown.then(|| payload_mass(&problem)).flatten().filter(|g| again.contains(g));
             match solver::solve(&problem, &again, &fit.x, &opts.solver) {
