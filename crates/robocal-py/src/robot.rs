@@ -9,8 +9,8 @@
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 
-use robocal_core::formats::ParameterSetDoc;
 use robocal_core::formats::validity::Envelope;
+use robocal_core::formats::{ParameterSetDoc, to_deg};
 use robocal_core::kinematics::frame::{quaternion_from_rot, rot_from_quaternion};
 use robocal_core::kinematics::{
     AnalyticIk, Branch, Chain, Compensated, Compensator, Frame, GravityModel, IkError, JointState, ParameterSet,
@@ -271,10 +271,6 @@ impl Robot {
 pub enum Branches {
     One(i64),
     Each(Vec<i64>),
-}
-
-fn to_deg(q: &[f64]) -> Vec<f64> {
-    q.iter().map(|v| v / DEG).collect()
 }
 
 /// Three numbers of a tool argument (`tcp_mm`, `tcp_rotation_deg`).
