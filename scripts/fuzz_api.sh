@@ -78,7 +78,7 @@ admin_token() { # after the server has migrated the new database (two processes 
 }
 # Revoking tokens is left out: its stateful phase could revoke the fuzzer's own token (an id from
 # GET /v1/tokens) and turn every later request into a 401. Revocation is covered by
-# tests/security.rs and tests/http_api.rs.
+# tests/service/security.rs and tests/service/http_api.rs.
 no_revoke=(--exclude-path '/v1/tokens/{token_id}')
 
 echo "== mode 1: --require-auth, admin token"

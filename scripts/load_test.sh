@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Load test (issue 16, item 7): a release server on a fresh database, `clients` concurrent clients
+# Load test (issue 16, item 7): a release server (ROBOCAL_PROFILE=dev: the dev build, as CI runs
+# it; its latencies are not the release's) on a fresh database, `clients` concurrent clients
 # for `seconds` mixing measurement batches, compensation requests and history reads while
 # identification jobs run (examples/load.rs); then the checks — zero errors, every session holding
 # exactly the measurements acknowledged (nothing lost or duplicated), the job queue drained — the
@@ -14,10 +15,12 @@ cd "$(dirname "$0")/.."
 seconds=${1:-60}
 clients=${2:-64}
 slow=${3:-0}
-cargo build --quiet --release --locked --bin robocal --example load
+profile=${ROBOCAL_PROFILE:-release}
+case "$profile" in dev) dir=target/debug ;; *) dir=target/$profile ;; esac
+cargo build --quiet --profile "$profile" --locked --bin robocal --example load
 tmp=$(mktemp -d)
 port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
-target/release/robocal serve --db "$tmp/load.db" --bind "127.0.0.1:$port" --grace-s 5 >"$tmp/serve.log" 2>&1 &
+"$dir/robocal" serve --db "$tmp/load.db" --bind "127.0.0.1:$port" --grace-s 5 >"$tmp/serve.log" 2>&1 &
 server=$!
 trap 'kill $server 2>/dev/null || true; rm -rf "$tmp"' EXIT
 for _ in $(seq 200); do
@@ -25,7 +28,7 @@ for _ in $(seq 200); do
   sleep 0.05
 done
 status=0
-target/release/examples/load --url "http://127.0.0.1:$port" --seconds "$seconds" --clients "$clients" --slowloris "$slow" || status=$?
+"$dir/examples/load" --url "http://127.0.0.1:$port" --seconds "$seconds" --clients "$clients" --slowloris "$slow" || status=$?
 kill -TERM $server
 wait $server || { echo "FAILED: the server did not stop cleanly"; status=1; }
 if command -v sqlite3 >/dev/null; then

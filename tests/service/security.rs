@@ -4,8 +4,7 @@
 //! security the server's mode enforces; token management needs an admin token on loopback too;
 //! tokens never reach the logs; the server binds to loopback by default.
 
-#[path = "common/mod.rs"]
-mod common;
+use crate::common;
 
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};

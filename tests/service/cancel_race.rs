@@ -5,8 +5,7 @@
 //! lost. The phases are driven one at a time through `robocal::jobs::phases` (the functions the
 //! workers run back to back), and then with real workers and randomized cancel times.
 
-#[path = "common/mod.rs"]
-mod common;
+use crate::common;
 
 use std::time::Duration;
 

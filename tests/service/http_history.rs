@@ -2,8 +2,7 @@
 //! filtered by date), the drift between two sets (`GET /v1/parameter-sets/{a}/drift?against=b`),
 //! and the exports (`GET …/export?format=json|csv-dh|urdf`, `POST …/export?format=rapid`).
 
-#[path = "common/mod.rs"]
-mod common;
+use crate::common;
 
 use axum::http::{Method, StatusCode, header};
 use common::{TestApp, assert_problem, robot};

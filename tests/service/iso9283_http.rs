@@ -4,8 +4,7 @@
 //! the server exports; RP equals the hand computation from the measured positions; bad requests
 //! are 422 naming the field; the HTML report is served.
 
-#[path = "common/mod.rs"]
-mod common;
+use crate::common;
 
 use axum::http::{Method, StatusCode};
 use common::{TestApp, artefact, assert_problem, robot, upload};

@@ -4,8 +4,7 @@
 //! `robocal identify|validate --report` writes from the service's exported files. JSON-only
 //! clients get 406; unknown ids 404; a token without `read` 403.
 
-#[path = "common/mod.rs"]
-mod common;
+use crate::common;
 
 use axum::http::{StatusCode, header};
 use common::{Res, TestApp, artefact, assert_problem, robot, upload};

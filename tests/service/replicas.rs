@@ -14,11 +14,10 @@
 //! 5. A replica whose database is gone answers `/readyz` with 503 within 3 s, and 200 once it
 //!    is back.
 //!
-//! Part of the `postgres` test binary (`tests/postgres.rs`); skipped on SQLite, where one server
+//! Part of the `service` test binary (`tests/service/main.rs`); skipped on SQLite, where one server
 //! holds the database.
 
-#[path = "common/mod.rs"]
-mod common;
+use crate::common;
 
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};

@@ -2,8 +2,7 @@
 //! the same program with the same set, byte for byte (the CLI makes the same call); the set is gated
 //! as compensation is; a KRL pair as multipart/form-data; refusals name the field.
 
-#[path = "common/mod.rs"]
-mod common;
+use crate::common;
 
 use axum::http::{Method, StatusCode};
 use common::{TestApp, assert_problem, robot};
@@ -12,10 +11,10 @@ use robocal::domain::program::{Calibration, FilterOptions, ProgramFile, filter};
 use robocal::http::ServiceConfig;
 use robocal::kinematics::Compensator;
 
-const TABLE: &str = include_str!("../examples/irb120_table_5_1.json");
-const WELD_MOD: &[u8] = include_bytes!("../examples/programs/weld.mod");
-const WELD_SRC: &[u8] = include_bytes!("../examples/programs/weld.src");
-const WELD_DAT: &[u8] = include_bytes!("../examples/programs/weld.dat");
+const TABLE: &str = include_str!("../../examples/irb120_table_5_1.json");
+const WELD_MOD: &[u8] = include_bytes!("../../examples/programs/weld.mod");
+const WELD_SRC: &[u8] = include_bytes!("../../examples/programs/weld.src");
+const WELD_DAT: &[u8] = include_bytes!("../../examples/programs/weld.dat");
 
 /// A robot with the Table 5.1 set imported (not validated): robot id, set id.
 async fn robot_with_set(app: &TestApp) -> (String, String) {

@@ -2,8 +2,7 @@
 //! included: 400 malformed, 404 unknown id, 409 conflict, 413 too large, 415 media type, 422
 //! invalid values — never a 500, never a partial write.
 
-#[path = "common/mod.rs"]
-mod common;
+use crate::common;
 
 use axum::http::{Method, StatusCode};
 use common::{TestApp, artefact, assert_problem, base_guess, robot, upload};
@@ -28,7 +27,7 @@ async fn operations_endpoints() {
     assert_eq!(r.status, StatusCode::OK, "{}", r.text);
     assert_eq!(r.body["migrations"], robocal::db::MIGRATOR.iter().count());
     // The served OpenAPI document is this (loopback, no-auth) mode's; the committed one is the
-    // `--require-auth` form (tests/security.rs checks that a server in that mode serves it).
+    // `--require-auth` form (tests/service/security.rs checks that a server in that mode serves it).
     let r = app.get("/openapi.json").await;
     assert_eq!(r.status, StatusCode::OK);
     assert_eq!(r.body["openapi"], "3.1.0");
@@ -1362,7 +1361,7 @@ async fn sessions_and_artefacts_are_deleted_only_when_unused() {
     let r = del(&format!("/v1/sessions/{wrong}?reason=%00%C2%86p")).await;
     assert_problem(&r, 422, Some("reason"));
     assert!(r.text.contains("NUL"), "{}", r.text);
-    let spec: Value = serde_json::from_str(include_str!("../openapi/openapi.json")).unwrap();
+    let spec: Value = serde_json::from_str(include_str!("../../openapi/openapi.json")).unwrap();
     let reason = spec["paths"]["/v1/sessions/{session_id}"]["delete"]["parameters"]
         .as_array()
         .unwrap()

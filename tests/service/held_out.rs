@@ -3,8 +3,7 @@
 //! validation unlocks compensation — on the command line (`validate`, `compensate --validation`)
 //! and on the service (the validation job, the compensation gate, the set and history answers).
 
-#[path = "common/mod.rs"]
-mod common;
+use crate::common;
 
 use std::process::Command;
 
