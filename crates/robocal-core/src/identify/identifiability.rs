@@ -73,9 +73,63 @@ fn priority(problem: &Problem, g: usize) -> (u8, i64) {
     }
 }
 
+/// A geometric parameter whose standard deviation these data would leave above this is not
+/// determined by them ([`select_given_noise`]): no joint offset, twist or tool angle of a built
+/// robot is 0.1 rad (5.7°) from its drawing, so a fit that cannot pin one closer says nothing.
+pub const UNDETERMINED_ANGLE_RAD: f64 = 0.1;
+/// The same bound for a length (link lengths, base and tool positions): 100 mm.
+pub const UNDETERMINED_LENGTH_M: f64 = 0.1;
+
+/// The bound beyond which a parameter's standard deviation means "not determined", for the
+/// geometric parameters (the others — compliances, effect terms, thermal, payload — have no
+/// such scale and are judged by rank alone).
+/// `(bound, is an angle)`.
+fn undetermined_bound(problem: &Problem, g: usize) -> Option<(f64, bool)> {
+    let angle = Some((UNDETERMINED_ANGLE_RAD, true));
+    let length = Some((UNDETERMINED_LENGTH_M, false));
+    match problem.params[g] {
+        GlobalParam::Robot(i) => match problem.layout.params()[i] {
+            Param::Alpha(_) | Param::Theta(_) | Param::Beta(_) => angle,
+            Param::A(_) | Param::D(_) => length,
+            Param::Base(k) | Param::Tool(k) => {
+                if k < 3 {
+                    length
+                } else {
+                    angle
+                }
+            }
+            Param::Joint(..) | Param::Thermal | Param::ToolMass => None,
+        },
+        GlobalParam::Tool { k, .. } => {
+            if k < 3 {
+                length
+            } else {
+                angle
+            }
+        }
+    }
+}
+
 /// Decide the free parameters. `fixed` holds user- or model-fixed parameters with their reason.
 /// `jac` is the Jacobian at the starting point with one column per global parameter.
 pub fn select(problem: &Problem, jac: &Mat<f64>, fixed: &HashMap<usize, String>) -> (Vec<usize>, Vec<Status>) {
+    select_given_noise(problem, jac, fixed, None)
+}
+
+/// [`select`], and with `sigma` (the residual's standard deviation per row of `jac`, in its
+/// units) a statistical test beside the structural one: a geometric parameter whose column,
+/// beyond the span of the parameters kept before it, moves the residual by `lever` per unit has
+/// a standard deviation of at least `sigma / lever` (the others can only add to it); above
+/// [`UNDETERMINED_ANGLE_RAD`] or [`UNDETERMINED_LENGTH_M`] it is fixed as not determined by
+/// these data. This catches what rank alone cannot: a TCP a few µm off the last axis (where
+/// noise leaves a fit that started off it) keeps θ6 and the parameters its exact position made
+/// dependent formally independent, with standard deviations of radians and metres.
+pub fn select_given_noise(
+    problem: &Problem,
+    jac: &Mat<f64>,
+    fixed: &HashMap<usize, String>,
+    sigma: Option<f64>,
+) -> (Vec<usize>, Vec<Status>) {
     let n = problem.n_params();
     // Gram–Schmidt and least squares among the columns need only their inner products: on the
     // n×n R of J = Q·R when J is tall (a 5,000-pose problem: 15,000 rows), to rounding the same.
@@ -122,6 +176,21 @@ pub fn select(problem: &Problem, jac: &Mat<f64>, fixed: &HashMap<usize, String>)
         if rest < DEPENDENCE_TOL {
             status[g] = Status::Fixed(dependence_reason(problem, jac, g, &kept));
             continue;
+        }
+        if let (Some(sigma), Some((bound, is_angle))) = (sigma, undetermined_bound(problem, g)) {
+            let sd = sigma / (rest * norm);
+            if sd > bound {
+                let name = problem.name(g);
+                let (sd, bound) = if is_angle {
+                    (format!("{:.3}°", sd.to_degrees()), format!("{:.1}°", bound.to_degrees()))
+                } else {
+                    (format!("{:.3} mm", sd * 1e3), format!("{:.0} mm", bound * 1e3))
+                };
+                status[g] = Status::Fixed(format!(
+                    "{name}: not determined by these data (its standard deviation would be at least {sd}, beyond {bound})"
+                ));
+                continue;
+            }
         }
         v.iter_mut().for_each(|x| *x /= rest);
         basis.push(v);

@@ -76,7 +76,17 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
         return Err(IdentifyError::Underdetermined { rows: problem.n_obs_rows, params: free.len() });
     }
 
-    let mut fit = solver::solve(&problem, &free, &x0, &opts.solver)?;
+    let mut notes = Vec::new();
+    let mut fit = match solver::solve(&problem, &free, &x0, &opts.solver) {
+        Ok(fit) => fit,
+        Err(e) => {
+            let (f, again, again_status, note) =
+                judge_where_it_stopped(&problem, &x0, &free, &status, &fixed, &opts.solver, e)?;
+            notes.push(note);
+            (free, status) = (again, again_status);
+            f
+        }
+    };
     // Identifiability is judged at the start. An unknown TCP (no guess: the flange) may end far
     // from where the registration started it, and which of its components is one gauge with d6
     // and θ6 depends on where it lies (a point on the flange's y axis moves along x when θ6
@@ -258,10 +268,77 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
         downweighted,
         quality,
         x: fit.x,
-        notes: Vec::new(),
+        notes,
         problem,
         free,
     })
+}
+
+/// A fit that stopped before converging (diverged, or at the iteration limit) from the start's
+/// judgement of identifiability: judge again where it stopped, with the statistical test of
+/// [`identifiability::select_given_noise`] (σ from the residual there), and refit from there when
+/// the choice changed. The start's judgement is made where the guesses put the tools and the
+/// base; a TCP guessed a few millimetres off the last axis of a reflector that is on it frees θ6
+/// (and, on the IRB 120, a5 and d5), whose effects vanish as the fit brings the TCP onto the
+/// axis — the step turns singular (noise-free data) or the fit crawls in their valley (noisy
+/// data). Returns the fit, the free parameters, their statuses and a note saying what changed;
+/// or the first fit's error when nothing changed or the refit failed too.
+fn judge_where_it_stopped(
+    problem: &Problem,
+    x0: &[f64],
+    free: &[usize],
+    start: &[Status],
+    fixed: &std::collections::HashMap<usize, String>,
+    solver_opts: &solver::SolverOptions,
+    error: SolveError,
+) -> Result<(Fit, Vec<usize>, Vec<Status>, String), IdentifyError> {
+    let last = match &error {
+        SolveError::Diverged { last, .. } | SolveError::IterationLimit { last, .. } => last.clone(),
+    };
+    if last.iter().any(|v| !v.is_finite()) {
+        return Err(error.into());
+    }
+    let all: Vec<usize> = (0..problem.n_params()).collect();
+    let mut j = Mat::<f64>::zeros(problem.n_rows, all.len());
+    let mut r = vec![0.0; problem.n_rows];
+    problem.linearise(&last, &all, &mut j, &mut r);
+    let dof = problem.n_rows.saturating_sub(free.len()).max(1);
+    let sigma = (r.iter().map(|v| v * v).sum::<f64>() / dof as f64).sqrt();
+    if !sigma.is_finite() {
+        return Err(error.into());
+    }
+    // Only holding more: a parameter the start held keeps its reason (an unknown payload, which
+    // has no effect at the start, is judged at the solution below, as after a converged fit).
+    let mut judged = fixed.clone();
+    for g in (0..problem.n_params()).filter(|g| !free.contains(g)) {
+        judged.entry(g).or_insert_with(|| start[g].label());
+    }
+    let (again, status) = identifiability::select_given_noise(problem, &j, &judged, Some(sigma));
+    if again.is_empty() || again == free {
+        return Err(error.into());
+    }
+    // The held parameters go back to their start values: where the fit wandered in their valley
+    // is no estimate, and the free parameters they were dependent on take up the difference.
+    let mut from = last;
+    for g in free.iter().copied().filter(|g| !again.contains(g)) {
+        from[g] = x0[g];
+    }
+    let Ok(fit) = solver::solve(problem, &again, &from, solver_opts) else {
+        return Err(error.into());
+    };
+    let named = |set: &[usize], other: &[usize]| {
+        set.iter().filter(|g| !other.contains(g)).map(|&g| problem.name(g)).collect::<Vec<_>>().join(", ")
+    };
+    debug_assert!(again.iter().all(|g| free.contains(g)));
+    let stopped = match &error {
+        SolveError::Diverged { iteration, reason, .. } => format!("it diverged at iteration {iteration}: {reason}"),
+        SolveError::IterationLimit { iterations, .. } => format!("no convergence in {iterations} iterations"),
+    };
+    let note = format!(
+        "the fit with the parameters judged identifiable at the start did not converge ({stopped}); judged again where it stopped, {} were held at their start values (see their status), and the fit from there converged",
+        named(free, &again)
+    );
+    Ok((fit, again, status, note))
 }
 
 /// Measurements listed in [`Identification::worst`].

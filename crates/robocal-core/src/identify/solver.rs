@@ -43,7 +43,12 @@ impl Default for SolverOptions {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SolveError {
     #[error("diverged at iteration {iteration}: {reason}")]
-    Diverged { iteration: usize, reason: String },
+    Diverged {
+        iteration: usize,
+        reason: String,
+        /// The last accepted iterate (global parameter vector), where the fit stopped.
+        last: Vec<f64>,
+    },
     #[error(
         "no convergence in {iterations} iterations (last scaled step {step_m:.3e} m, relative cost change {cost_change:.3e}; the step still moves {} by {:.2} of its standard deviation): {}",
         moving.first().map_or("no parameter", |m| m.0.as_str()), moving.first().map_or(0.0, |m| m.1), advice(moving)
@@ -55,6 +60,8 @@ pub enum SolveError {
         /// The free parameters the last Gauss–Newton step moved most, in units of their own
         /// standard deviation (name, |step|/σ), largest first (at most 4).
         moving: Vec<(String, f64)>,
+        /// The last iterate (global parameter vector).
+        last: Vec<f64>,
     },
 }
 
@@ -119,7 +126,7 @@ pub fn solve(problem: &Problem, free: &[usize], x0: &[f64], opts: &SolverOptions
         }
         let cost = weighted_cost(problem, &res, &weights);
         if !cost.is_finite() {
-            return Err(SolveError::Diverged { iteration, reason: "the cost is not finite".into() });
+            return Err(SolveError::Diverged { iteration, reason: "the cost is not finite".into(), last: x });
         }
         for o in 0..problem.obs.len() {
             let ob = &problem.obs[o];
@@ -159,7 +166,11 @@ pub fn solve(problem: &Problem, free: &[usize], x0: &[f64], opts: &SolverOptions
         loop {
             let y = if lambda == 0.0 { gn.clone() } else { step_for(lambda) };
             if y.iter().any(|v| !v.is_finite()) {
-                return Err(SolveError::Diverged { iteration, reason: "the least-squares step is not finite".into() });
+                return Err(SolveError::Diverged {
+                    iteration,
+                    reason: "the least-squares step is not finite".into(),
+                    last: x,
+                });
             }
             let mut xt = x.clone();
             for c in 0..m {
@@ -197,6 +208,7 @@ pub fn solve(problem: &Problem, free: &[usize], x0: &[f64], opts: &SolverOptions
                 return Err(SolveError::Diverged {
                     iteration,
                     reason: format!("no damped step lowers the cost (λ = {lambda:.1e}, cost {cost:.3e} m²)"),
+                    last: x,
                 });
             }
         }
@@ -231,6 +243,7 @@ pub fn solve(problem: &Problem, free: &[usize], x0: &[f64], opts: &SolverOptions
         step_m: last_step,
         cost_change: last_change,
         moving,
+        last: x,
     })
 }
 
@@ -555,7 +568,7 @@ mod tests {
         assert!((0..p.n_rows).all(|row| jac[(row, 0)] == jac[(row, 1)]), "one column twice");
         let outcome = solve(&p, &free, &p.nominal, &SolverOptions::default());
         match outcome {
-            Err(SolveError::Diverged { iteration: 1, reason }) => {
+            Err(SolveError::Diverged { iteration: 1, reason, .. }) => {
                 assert!(reason.contains("step is not finite"), "{reason}")
             }
             other => panic!("{other:?}"),
@@ -570,7 +583,7 @@ mod tests {
         let p = problem(&c);
         let free = translations(&p);
         match solve(&p, &free, &p.nominal, &SolverOptions::default()) {
-            Err(SolveError::Diverged { iteration: 1, reason }) => {
+            Err(SolveError::Diverged { iteration: 1, reason, .. }) => {
                 assert!(reason.contains("cost is not finite"), "{reason}")
             }
             other => panic!("{other:?}"),
