@@ -299,3 +299,46 @@ fn a_three_reflector_file_calibrates_in_one_command() {
         best_single / MM
     );
 }
+
+/// Issue 24, item 1. One reflector in a nest on the flange's axis (80 mm out), no TCP guess, the
+/// tracker's noise and pose-to-pose errors of 0.15 mm RMS that no term explains, over the virtual
+/// cell's tracker poses. A TCP on axis 6 makes a5 and d5 dependent on θ5 and α5; the fit leaves
+/// the TCP a few µm off the axis, where they are formally independent with standard deviations
+/// of some 100 mm, and the fit crawled along their valley to its iteration limit (or was refused
+/// as ill-conditioned) on most seeds. They are held as not determined by these data; the fit
+/// converges and predicts held-out poses of the true robot to the unmodelled errors' share.
+#[test]
+fn one_reflector_on_the_flange_axis_without_a_guess_converges_under_unmodelled_errors() {
+    let exact = sim(Noise::none());
+    let tcp = [0.0, 0.0, 80.0 * MM, 0.0, 0.0, 0.0];
+    let truth = exact.truth.robot(&Tool { tcp, ..Tool::flange() });
+    let poses: Vec<Vec<f64>> =
+        NESTS.iter().flat_map(|n| exact.cell.session(n).unwrap().measurements.iter().map(|m| m.q.clone())).collect();
+    let (fit_poses, test_poses) = poses.split_at(poses.len() * 2 / 3);
+    let at = |q: &[f64]| truth.tcp(&truth.state(q, &[0.0; 6], 20.0)).t;
+    for seed in 0..4 {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let (tracker, unmodelled) =
+            (Normal::new(0.0, 16e-6).unwrap(), Normal::new(0.0, 0.15 * MM / 3f64.sqrt()).unwrap());
+        let mut cell = nest_cell(&exact, true);
+        cell.sessions.truncate(1);
+        let session = &mut cell.sessions[0];
+        let template = session.measurements[0].clone();
+        session.measurements = fit_poses
+            .iter()
+            .map(|q| {
+                let p = at(q) + Vector3::from_fn(|_, _| tracker.sample(&mut rng) + unmodelled.sample(&mut rng));
+                robocal::cell::Measurement { q: q.clone(), observation: Observation::Position(p), ..template.clone() }
+            })
+            .collect();
+        let name = session.name.clone();
+        let id = identify(&cell, &sessions(&[&name])).unwrap_or_else(|e| panic!("seed {seed}: {e}"));
+        for (p, name) in [(Param::A(5), "a5"), (Param::D(4), "d5")] {
+            let i = id.set.layout.index_of(p).unwrap();
+            assert_ne!(id.status[i].label(), "identified", "seed {seed}: {name} identified");
+        }
+        let miss =
+            test_poses.iter().map(|q| (predict(&id, 0, q) - at(q)).norm()).sum::<f64>() / test_poses.len() as f64;
+        assert!(miss < 0.08 * MM, "seed {seed}: held-out poses missed by {:.3} mm on average", miss / MM);
+    }
+}

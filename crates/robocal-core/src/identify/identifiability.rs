@@ -74,11 +74,13 @@ fn priority(problem: &Problem, g: usize) -> (u8, i64) {
 }
 
 /// A geometric parameter whose standard deviation these data would leave above this is not
-/// determined by them ([`select_given_noise`]): no joint offset, twist or tool angle of a built
-/// robot is 0.1 rad (5.7°) from its drawing, so a fit that cannot pin one closer says nothing.
-pub const UNDETERMINED_ANGLE_RAD: f64 = 0.1;
-/// The same bound for a length (link lengths, base and tool positions): 100 mm.
-pub const UNDETERMINED_LENGTH_M: f64 = 0.1;
+/// determined by them ([`select_given_noise`]). A calibration pins joint offsets and twists to
+/// millidegrees and lengths to micrometres; one it cannot pin within a degree (or 10 mm) is
+/// estimated from noise along a valley of the cost, and the fit would either crawl there or be
+/// refused as ill-conditioned (a σ 10⁴ times the others' is κ above its limit of 1000).
+pub const UNDETERMINED_ANGLE_RAD: f64 = std::f64::consts::PI / 180.0;
+/// The same bound for a length (link lengths, base and tool positions): 10 mm.
+pub const UNDETERMINED_LENGTH_M: f64 = 0.01;
 
 /// The bound beyond which a parameter's standard deviation means "not determined", for the
 /// geometric parameters (the others — compliances, effect terms, thermal, payload — have no
@@ -182,7 +184,7 @@ pub fn select_given_noise(
             if sd > bound {
                 let name = problem.name(g);
                 let (sd, bound) = if is_angle {
-                    (format!("{:.3}°", sd.to_degrees()), format!("{:.1}°", bound.to_degrees()))
+                    (format!("{:.3}°", sd.to_degrees()), format!("{:.0}°", bound.to_degrees()))
                 } else {
                     (format!("{:.3} mm", sd * 1e3), format!("{:.0} mm", bound * 1e3))
                 };

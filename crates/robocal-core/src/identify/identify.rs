@@ -77,12 +77,15 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
     }
 
     let mut notes = Vec::new();
+    // Parameters held where a first fit stopped: not freed again below.
+    let mut held_where_stopped = Vec::new();
     let mut fit = match solver::solve(&problem, &free, &x0, &opts.solver) {
         Ok(fit) => fit,
         Err(e) => {
             let (f, again, again_status, note) =
                 judge_where_it_stopped(&problem, &x0, &free, &status, &fixed, &opts.solver, e)?;
             notes.push(note);
+            held_where_stopped = free.iter().copied().filter(|g| !again.contains(g)).collect();
             (free, status) = (again, again_status);
             f
         }
@@ -105,13 +108,20 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
         // the parameters its exact position made dependent (a5 on θ5, d5 on α5 for the IRB 120),
         // and the refit would wander in their valley until its iteration limit.
         let mut judged = fixed.clone();
+        for &g in &held_where_stopped {
+            judged.insert(g, status[g].label());
+        }
         if !tcp_unknown {
             let mass = payload_mass(&problem);
             for g in (0..problem.n_params()).filter(|g| !free.contains(g) && Some(*g) != mass) {
                 judged.entry(g).or_insert_with(|| status[g].label());
             }
         }
-        let (again, mut again_status) = identifiability::select(&problem, &j, &judged);
+        // With the statistical test too (σ from the residual here): a TCP the fit leaves a few µm
+        // off the last axis keeps a5 and d5 formally independent of θ5 and α5, with standard
+        // deviations of some 180 mm (an SMR in a nest on the flange's axis, no guess).
+        let sigma = residual_sigma(&r, problem.n_rows, free.len());
+        let (again, mut again_status) = identifiability::select_given_noise(&problem, &j, &judged, sigma);
         if again != free && !again.is_empty() {
             let mass = payload_unknown.then(|| payload_mass(&problem)).flatten().filter(|g| again.contains(g));
             match solver::solve(&problem, &again, &fit.x, &opts.solver) {
@@ -274,6 +284,12 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
     })
 }
 
+/// The residual's standard deviation per row, √(Σr²/(n − m)), when finite.
+fn residual_sigma(r: &[f64], n: usize, m: usize) -> Option<f64> {
+    let sigma = (r.iter().map(|v| v * v).sum::<f64>() / n.saturating_sub(m).max(1) as f64).sqrt();
+    sigma.is_finite().then_some(sigma)
+}
+
 /// A fit that stopped before converging (diverged, or at the iteration limit) from the start's
 /// judgement of identifiability: judge again where it stopped, with the statistical test of
 /// [`identifiability::select_given_noise`] (σ from the residual there), and refit from there when
@@ -302,11 +318,9 @@ fn judge_where_it_stopped(
     let mut j = Mat::<f64>::zeros(problem.n_rows, all.len());
     let mut r = vec![0.0; problem.n_rows];
     problem.linearise(&last, &all, &mut j, &mut r);
-    let dof = problem.n_rows.saturating_sub(free.len()).max(1);
-    let sigma = (r.iter().map(|v| v * v).sum::<f64>() / dof as f64).sqrt();
-    if !sigma.is_finite() {
+    let Some(sigma) = residual_sigma(&r, problem.n_rows, free.len()) else {
         return Err(error.into());
-    }
+    };
     // Only holding more: a parameter the start held keeps its reason (an unknown payload, which
     // has no effect at the start, is judged at the solution below, as after a converged fit).
     let mut judged = fixed.clone();
