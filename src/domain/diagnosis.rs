@@ -125,8 +125,7 @@ pub struct SessionsOut {
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct VerdictOut {
-    /// `named`, `none`, `not_separable`, `unknown_effect` or `partial`.
-    pub status: String,
+    pub status: Status,
     pub summary: String,
     /// Named effects, most important first; for `not_separable`, the suspects.
     pub effects: Vec<EffectOut>,
@@ -145,7 +144,7 @@ pub struct VerdictOut {
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct RemainingOut {
-    pub status: String,
+    pub status: Status,
     pub summary: String,
 }
 
@@ -533,17 +532,14 @@ fn model_spec(d: &Diagnosis) -> String {
 pub fn diagnosis_out(d: &Diagnosis) -> DiagnosisOut {
     let v = &d.verdict;
     let verdict = VerdictOut {
-        status: v.status.as_str().to_string(),
+        status: v.status,
         summary: v.summary.clone(),
         effects: v.effects.iter().map(effect_out).collect(),
         lookalike: v.lookalike.as_ref().map(candidate_ref),
         canonical_correlation: v.canonical_correlation,
         absorbed_by: absorbed(&v.absorbed_by),
         experiment: v.experiment.clone(),
-        remaining: v
-            .remaining
-            .as_ref()
-            .map(|(s, t)| RemainingOut { status: s.as_str().to_string(), summary: t.clone() }),
+        remaining: v.remaining.as_ref().map(|(s, t)| RemainingOut { status: *s, summary: t.clone() }),
         approach_source: d.approach.map(|a| a.as_str().to_string()),
     };
     let dc = &d.decomposition;

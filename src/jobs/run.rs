@@ -497,7 +497,7 @@ pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64, &'static str) + Sync)) ->
                     stored_quality(&mut doc, &indices);
                     doc.to_json_pretty()
                 }),
-                status: out.verdict.status.clone(),
+                status: out.verdict.status.as_str().to_string(),
                 summary: out.verdict.summary.clone(),
                 effects: out.verdict.effects.iter().map(|e| e.which.label.clone()).collect(),
             })

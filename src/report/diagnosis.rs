@@ -61,11 +61,11 @@ pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
         d.sessions.folds
     ));
     s.push_str("<h2>Verdict</h2>");
-    s.push_str(&format!("<p><strong>{}</strong>: {}</p>", esc(&v.status), esc(&v.summary)));
+    s.push_str(&format!("<p><strong>{}</strong>: {}</p>", v.status, esc(&v.summary)));
     if !v.effects.is_empty() {
         // The shrink table holds the start, then one model per accepted effect in the order
         // they were named: effect k is shrink[k] → shrink[k + 1] (only for a named verdict).
-        let steps = v.status == "named" && d.shrink.len() == v.effects.len() + 1;
+        let steps = v.status == crate::diagnose::Status::Named && d.shrink.len() == v.effects.len() + 1;
         let rows: Vec<Vec<String>> = v
             .effects
             .iter()
@@ -100,7 +100,7 @@ pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
         ));
     }
     if let Some(r) = &v.remaining {
-        s.push_str(&format!("<p>What remains: <strong>{}</strong> — {}</p>", esc(&r.status), esc(&r.summary)));
+        s.push_str(&format!("<p>What remains: <strong>{}</strong> — {}</p>", r.status, esc(&r.summary)));
     }
     if let Some(x) = &v.experiment {
         s.push_str(&format!("<p class=\"note\">Experiment that would separate it: {}</p>", esc(x)));

@@ -125,8 +125,10 @@ pub enum DiagnoseError {
     Identify(#[from] IdentifyError),
 }
 
-/// The verdict's status.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// The verdict's status; on the wire and in files, its snake_case name (`not_separable`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema), schema(as = VerdictStatus))]
 pub enum Status {
     /// One or more effects named, each confirmed on held-out poses.
     Named,
@@ -140,6 +142,12 @@ pub enum Status {
     /// A library term explains part of what a smooth function of the configuration explains,
     /// not most of it: named as a partial explanation with its share, the rest unexplained.
     Partial,
+}
+
+impl std::fmt::Display for Status {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
 }
 
 impl Status {
