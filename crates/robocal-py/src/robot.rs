@@ -351,11 +351,7 @@ impl Robot {
         let data = py.detach(|| {
             let mut out = Vec::with_capacity(16 * j.count());
             for q in j.q.chunks_exact(dof) {
-                let f = self.fk_one(q);
-                for r in 0..3 {
-                    out.extend([f.r[(r, 0)], f.r[(r, 1)], f.r[(r, 2)], f.t[r] / MM]);
-                }
-                out.extend([0.0, 0.0, 0.0, 1.0]);
+                push_frame(&mut out, &self.fk_one(q));
             }
             out
         });
@@ -472,9 +468,10 @@ impl Robot {
             }
         };
         let mut targets = Vec::with_capacity(n.unwrap_or(1));
+        // The argument's name for target i: `pose_mm` for one (4, 4), `pose_mm[i]` in a batch.
+        let field = |i: usize| n.map_or_else(|| "pose_mm".to_string(), |_| format!("pose_mm[{i}]"));
         for (i, m) in d.data.chunks_exact(per).enumerate() {
-            let field = n.map_or_else(|| "pose_mm".to_string(), |_| format!("pose_mm[{i}]"));
-            targets.push(Robot::pose(&Dense { shape: vec![4, 4], data: m.to_vec() }, &field)?);
+            targets.push(Robot::pose(&Dense { shape: vec![4, 4], data: m.to_vec() }, &field(i))?);
         }
         let count = targets.len();
         let per_target: Vec<i64> = match &branch {
@@ -527,9 +524,8 @@ impl Robot {
                 if let Some(why) = self.envelope.as_ref().and_then(|e| e.outside(c.joints()))
                     && !allow_outside_envelope
                 {
-                    let field = n.map_or_else(|| "pose_mm".to_string(), |_| format!("pose_mm[{i}]"));
                     return Err(Error::input(
-                        field,
+                        field(i),
                         format!(
                             "outside the calibrated envelope: {why}; the model is not validated there \
                              (allow_outside_envelope=True compensates it anyway)"
@@ -537,11 +533,7 @@ impl Robot {
                     ));
                 }
                 joints.extend(to_deg(c.joints()));
-                let f = &c.fake_pose;
-                for r in 0..3 {
-                    fake.extend([f.r[(r, 0)], f.r[(r, 1)], f.r[(r, 2)], f.t[r] / MM]);
-                }
-                fake.extend([0.0, 0.0, 0.0, 1.0]);
+                push_frame(&mut fake, &c.fake_pose);
             }
             Ok((joints, fake))
         })?;
@@ -604,4 +596,12 @@ impl Robot {
             )
         }
     }
+}
+
+/// Append a frame as a row-major homogeneous 4×4, translation in mm (the wire's unit).
+fn push_frame(out: &mut Vec<f64>, f: &Frame) {
+    for r in 0..3 {
+        out.extend([f.r[(r, 0)], f.r[(r, 1)], f.r[(r, 2)], f.t[r] / MM]);
+    }
+    out.extend([0.0, 0.0, 0.0, 1.0]);
 }
