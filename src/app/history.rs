@@ -50,8 +50,7 @@ pub struct HistoryValidation {
 pub struct HistoryDiagnosis {
     pub diagnosis_id: String,
     pub created_at: String,
-    /// `named`, `none`, `not_separable`, `unknown_effect` or `partial`.
-    pub verdict: String,
+    pub verdict: crate::diagnose::Status,
     pub summary: String,
 }
 
@@ -180,12 +179,24 @@ pub async fn history(pool: &Pool, robot_id: &str, filter: &HistoryFilter) -> Res
         let diagnosis = match records::diagnoses_of_set(pool, &row.id, 0, 1).await?.items.into_iter().next() {
             None => None,
             Some(d) => {
-                let r = json(&d.report_json, &what)?;
+                // Only the verdict of the stored report, typed: a report without one is a stored
+                // document gone wrong, said as such, not an empty verdict.
+                #[derive(serde::Deserialize)]
+                struct Report {
+                    verdict: Verdict,
+                }
+                #[derive(serde::Deserialize)]
+                struct Verdict {
+                    status: crate::diagnose::Status,
+                    summary: String,
+                }
+                let r: Report = serde_json::from_str(&d.report_json)
+                    .map_err(|e| AppError::Internal(format!("{what}: stored diagnosis {}: {e}", d.id)))?;
                 Some(HistoryDiagnosis {
                     diagnosis_id: d.id,
                     created_at: d.created_at,
-                    verdict: r["verdict"]["status"].as_str().unwrap_or_default().to_string(),
-                    summary: r["verdict"]["summary"].as_str().unwrap_or_default().to_string(),
+                    verdict: r.verdict.status,
+                    summary: r.verdict.summary,
                 })
             }
         };

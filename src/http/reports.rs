@@ -209,7 +209,7 @@ pub async fn history(
                 .as_ref()
                 .map(|v| v.sessions.iter().filter(|s| e.fit_sessions.contains(s)).cloned().collect())
                 .unwrap_or_default(),
-            verdict: e.diagnosis.as_ref().map(|d| d.verdict.clone()),
+            verdict: e.diagnosis.as_ref().map(|d| d.verdict.to_string()),
         })
         .collect();
     Ok(html(report::history_report(&robot.name, &points)))

@@ -127,8 +127,7 @@ pub struct ValidationResult {
 pub struct DiagnosisResult {
     pub diagnosis_id: String,
     pub parameter_set_id: String,
-    /// The verdict: `named`, `none`, `not_separable`, `unknown_effect` or `partial`.
-    pub status: String,
+    pub status: crate::diagnose::Status,
     pub summary: String,
     /// Labels of the named effects (for `not_separable`, the suspects), most important first.
     pub effects: Vec<String>,

@@ -95,7 +95,7 @@ pub enum Output {
         sessions_json: String,
         report_json: String,
         accepted_doc_json: Option<String>,
-        status: String,
+        status: crate::diagnose::Status,
         summary: String,
         effects: Vec<String>,
     },
@@ -497,7 +497,7 @@ pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64, &'static str) + Sync)) ->
                     stored_quality(&mut doc, &indices);
                     doc.to_json_pretty()
                 }),
-                status: out.verdict.status.as_str().to_string(),
+                status: out.verdict.status,
                 summary: out.verdict.summary.clone(),
                 effects: out.verdict.effects.iter().map(|e| e.which.label.clone()).collect(),
             })
