@@ -3,12 +3,12 @@
 //! The target: ≤ 1 s on 2 cores.
 //!
 //! Run: `cargo bench --bench program_filter`. The programs are the tests' seeded generators
-//! (`tests/programs/mod.rs`): IRB 120 (thesis Table 5.1) for RAPID, KRL and Fanuc, a perturbed
+//! (`tests/suite/programs.rs`): IRB 120 (thesis Table 5.1) for RAPID, KRL and Fanuc, a perturbed
 //! UR10 for URScript; joint targets recomputed. The IRB 120 set is given a parameter covariance
 //! (σ 10 µm / 10 µrad per identified parameter, uncorrelated) so every target also pays for its
 //! uncertainty, as with a set identified by robocal.
 
-#[path = "../tests/programs/mod.rs"]
+#[path = "../tests/suite/programs.rs"]
 mod programs;
 
 use std::hint::black_box;

@@ -4,7 +4,7 @@
 # The measurements come from the virtual cell: `robocal simulate` writes them to a cell file,
 # its true robot with a small cyclic error on joint 3 that the model lacks (the diagnosis finds it).
 #   cargo run --release -- serve &      then      scripts/api_walkthrough.sh
-# (tests/readme.rs runs it against a server, and checks that README.md's service block is an
+# (tests/suite/readme.rs runs it against a server, and checks that README.md's service block is an
 # excerpt of it, line for line.)
 set -euo pipefail
 cd "$(dirname "$0")/.."

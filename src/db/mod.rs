@@ -73,7 +73,7 @@ pub type Conn = AnyConnection;
 pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations/sqlite");
 
 /// The PostgreSQL migrations (`migrations/postgres/`): the same schema in PostgreSQL's dialect,
-/// step for step (`tests/postgres_schema.rs` compares the two).
+/// step for step (`tests/suite/postgres_schema.rs` compares the two).
 pub static POSTGRES_MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations/postgres");
 
 /// The advisory-lock key a PostgreSQL write transaction holds to its end ("robocalw" in ASCII):

@@ -37,7 +37,7 @@
 //!   flange frame) is therefore `inverse(file) · Rz(180°)`: the same position, x and y flipped,
 //!   ZY'X'' ≈ (−89.95°, 0°, +0.05°). The file's rotation block, rounded to eight decimals, is
 //!   projected onto the nearest rotation first. It is only the authors' starting guess, so the
-//!   session asks for the TCP to be identified (`identify_tcp`); `tests/import.rs` checks all of
+//!   session asks for the TCP to be identified (`identify_tcp`); `tests/suite/import.rs` checks all of
 //!   this on the data.
 //! - `Trafo_TM_F_init_calib.txt` and `calibration_handeye.csv` are not read.
 //!

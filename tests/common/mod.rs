@@ -31,8 +31,8 @@ pub struct TestApp {
     pub pg: Option<PgDb>,
 }
 
-/// Every table of the store, in name order (`tests/postgres_schema.rs` reads them from both
-/// catalogues and checks this list; `tests/migrate_pg.rs` copies and counts each).
+/// Every table of the store, in name order (`tests/suite/postgres_schema.rs` reads them from both
+/// catalogues and checks this list; `tests/suite/migrate_pg.rs` copies and counts each).
 pub const STORE_TABLES: [&str; 15] = [
     "artefacts",
     "audit_events",

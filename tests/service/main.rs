@@ -19,6 +19,7 @@ mod common;
 mod cancel_race;
 mod held_out;
 mod http_api;
+mod http_diagnosis;
 mod http_history;
 mod http_programs;
 mod http_reports;

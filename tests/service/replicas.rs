@@ -96,7 +96,7 @@ fn admin_token(url: &str) -> String {
     v["token"].as_str().unwrap().to_string()
 }
 
-/// A pose plan big enough to be caught running (as `tests/server_process.rs`), deterministic
+/// A pose plan big enough to be caught running (as `tests/suite/server_process.rs`), deterministic
 /// from its seed.
 fn plan_request(artefact: &str) -> Value {
     json!({"artefact_id": artefact, "tool": {"tcp_mm": [40, 0, 130], "mass_kg": 1.7, "com_mm": [30, 0, 64]},

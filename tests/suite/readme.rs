@@ -4,10 +4,10 @@
 //! this build's binary in place of `cargo run --release --`, and must exit 0. The service block is
 //! an excerpt of `scripts/api_walkthrough.sh`, line for line, and that script runs against a
 //! server. The one long command (the Algorithm 5.1 study) runs with
-//! `cargo test --release --test readme -- --ignored` (every command, 27 s in release). A command
+//! `cargo test --release --test suite readme:: -- --ignored` (every command, 27 s in release). A command
 //! that fails on purpose says so on its line (`# exits 1: …`), and must exit with that status.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -123,7 +123,7 @@ fn run_cli_commands(include_slow: bool) {
     for c in cli_commands(&readme()) {
         let sub = c.text["cargo run --release -- ".len()..].split_whitespace().next().unwrap_or_default();
         if sub == "serve" {
-            continue; // long-running: tests/server_process.rs and the walkthrough below start it
+            continue; // long-running: tests/suite/server_process.rs and the walkthrough below start it
         }
         if slow(&c.text) && !include_slow {
             continue;

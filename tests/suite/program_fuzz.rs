@@ -3,10 +3,10 @@
 //! replacements) must be read and filtered into `Ok` or an error naming a line — never a panic, and
 //! within a time bound. The tests' generated programs (arrays, `MoveC`, FOLDs, `FRAME` tools, joint
 //! positions, a second motion group, `movec`, `pose_trans`, …) are mutated too, with whole tokens
-//! of each language spliced in. `PROPTEST_CASES=5000 cargo test --release --test program_fuzz` runs
+//! of each language spliced in. `PROPTEST_CASES=5000 cargo test --release --test suite program_fuzz::` runs
 //! longer.
 
-mod programs;
+use crate::programs;
 
 use std::time::{Duration, Instant};
 
@@ -28,13 +28,13 @@ const BOUND: Duration = Duration::from_secs(5);
 /// The example programs, one set of files per language.
 fn programs() -> Vec<Vec<(&'static str, &'static [u8])>> {
     vec![
-        vec![("weld.mod", include_bytes!("../examples/programs/weld.mod"))],
+        vec![("weld.mod", include_bytes!("../../examples/programs/weld.mod"))],
         vec![
-            ("weld.src", include_bytes!("../examples/programs/weld.src")),
-            ("weld.dat", include_bytes!("../examples/programs/weld.dat")),
+            ("weld.src", include_bytes!("../../examples/programs/weld.src")),
+            ("weld.dat", include_bytes!("../../examples/programs/weld.dat")),
         ],
-        vec![("weld.ls", include_bytes!("../examples/programs/weld.ls"))],
-        vec![("pick.script", include_bytes!("../examples/programs/pick.script"))],
+        vec![("weld.ls", include_bytes!("../../examples/programs/weld.ls"))],
+        vec![("pick.script", include_bytes!("../../examples/programs/pick.script"))],
     ]
 }
 
@@ -147,7 +147,7 @@ proptest! {
 
     #[test]
     fn mutated_programs_read_and_filter_without_panicking(lang in 0usize..4, which in 0usize..2, edits in prop::collection::vec(edit(), 1..8)) {
-        let doc = ParameterSetDoc::from_json(include_str!("../examples/irb120_table_5_1.json")).unwrap();
+        let doc = ParameterSetDoc::from_json(include_str!("../../examples/irb120_table_5_1.json")).unwrap();
         let comp = Compensator::new(&doc.set);
         let cal = Calibration { set: &doc.set, compensator: &comp, envelope: None, allow_outside_envelope: false, covariance: None, held_out: None };
         let mut frames = GivenFrames::default();

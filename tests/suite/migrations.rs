@@ -1,7 +1,7 @@
 //! Migrating a database made by an earlier schema: its rows survive, its foreign keys are still
 //! enforced afterwards, and a database whose rows would violate them is refused whole.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 

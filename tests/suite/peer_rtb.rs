@@ -14,7 +14,7 @@ fn pose(v: &Value) -> [f64; 6] {
 
 #[test]
 fn irb120_fk_matches_robotics_toolbox_to_1e_9_mm() {
-    let fixture: Value = serde_json::from_str(include_str!("data/rtb_irb120_fk.json")).unwrap();
+    let fixture: Value = serde_json::from_str(include_str!("../data/rtb_irb120_fk.json")).unwrap();
     let model = irb120();
     // The fixture's table is the preset's table.
     for (row, link) in fixture["mdh_table"].as_array().unwrap().iter().zip(&model.links) {

@@ -5,7 +5,7 @@ use robocal::kinematics::thesis::{irb120_table_5_1, trical_tool};
 
 #[test]
 fn example_parameter_set_is_table_5_1() {
-    let doc = ParameterSetDoc::from_json(include_str!("../examples/irb120_table_5_1.json")).unwrap();
+    let doc = ParameterSetDoc::from_json(include_str!("../../examples/irb120_table_5_1.json")).unwrap();
     let want = irb120_table_5_1(trical_tool());
     assert_eq!(doc.set.model, want.model);
     assert_eq!(doc.set.tool, want.tool);

@@ -10,7 +10,7 @@
 //! URL; `.ci/run` always sets it); each test works in a database of its own, dropped at the end.
 //! Without the variable the PostgreSQL tests say loudly that they were skipped.
 
-mod common;
+use crate::common;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::Write;

@@ -11,7 +11,7 @@
 //! - the targets meant to fail (out of reach) fail, are left as written and are marked on their
 //!   own line in the language's comment syntax.
 
-mod programs;
+use crate::programs;
 
 use std::collections::HashSet;
 

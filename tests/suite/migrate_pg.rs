@@ -14,7 +14,7 @@
 //! (`robocal_mig_<random>`), dropped at the end. Without the variable the tests that need the
 //! server say loudly that they were skipped.
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::io::Write;

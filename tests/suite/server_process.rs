@@ -3,7 +3,7 @@
 //! new database together; one server per database, enforced; logs without colour codes when
 //! stderr is not a terminal, and as JSON lines.
 
-mod common;
+use crate::common;
 
 use std::net::TcpListener;
 use std::path::Path;

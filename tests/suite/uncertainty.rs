@@ -8,7 +8,7 @@
 //! The set is identified from the TriCal session. Its held-out validation uses the half of the
 //! tracker poses nearest the calibration zone, every other one of them (A); the others of that
 //! half (B) test the bound in the zone, the far half away from it (where the bound adds the
-//! growth). `cargo test --release --test uncertainty -- --ignored --nocapture` prints the table of
+//! growth). `cargo test --release --test suite uncertainty:: -- --ignored --nocapture` prints the table of
 //! BENCHMARKS.md over several seeds.
 
 use robocal::cell::{Cell, Purpose};
@@ -195,7 +195,7 @@ fn the_95_percent_bound_covers_the_true_errors_in_the_zone_and_away_from_it() {
 
 /// The table in BENCHMARKS.md: seeds 1–5, the readings with their own σ and without.
 #[test]
-#[ignore = "a benchmark: cargo test --release --test uncertainty -- --ignored --nocapture"]
+#[ignore = "a benchmark: cargo test --release --test suite uncertainty:: -- --ignored --nocapture"]
 fn coverage_table() {
     for reported in [true, false] {
         println!(

@@ -6,7 +6,7 @@
 //! Meanwhile the server answers other clients. The connection limit is tested against the real
 //! `robocal serve` process (its flags), with slowloris connections taking every slot.
 
-mod common;
+use crate::common;
 
 use std::io::{Read, Write};
 use std::net::TcpStream;

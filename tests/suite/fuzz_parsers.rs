@@ -3,7 +3,7 @@
 //! mutated — fields removed, values of the wrong type, huge, negative-zero and non-finite
 //! numbers, huge arrays, deep nesting, unicode — must give `Ok` or an error, never a panic, and
 //! within a time bound. Default case counts keep each property to a few seconds in `cargo test`;
-//! `PROPTEST_CASES=5000 cargo test --release --test fuzz_parsers` runs longer.
+//! `PROPTEST_CASES=5000 cargo test --release --test suite fuzz_parsers::` runs longer.
 
 use std::sync::LazyLock;
 use std::time::{Duration, Instant};
@@ -33,11 +33,11 @@ static CELL: LazyLock<Value> = LazyLock::new(|| {
 });
 
 fn parameter_set() -> Value {
-    serde_json::from_str(include_str!("../examples/irb120_table_5_1.json")).unwrap()
+    serde_json::from_str(include_str!("../../examples/irb120_table_5_1.json")).unwrap()
 }
 
 fn targets() -> Value {
-    serde_json::from_str(include_str!("../examples/targets.json")).unwrap()
+    serde_json::from_str(include_str!("../../examples/targets.json")).unwrap()
 }
 
 /// A custom robot (a planar 2R arm with a wrist), valid.

@@ -12,7 +12,7 @@
 //!
 //! Longer variants (more kill points) are `#[ignore]`d; RELIABILITY.md gives their command.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};

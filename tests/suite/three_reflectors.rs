@@ -20,7 +20,7 @@ use robocal::sim::instruments::Noise;
 use robocal::sim::simulate::{SimulateOptions, Simulated, simulate};
 use robocal::units::{MM, UM};
 
-mod common;
+use crate::common;
 
 const NESTS: [&str; 3] = ["tracker-n1", "tracker-n2", "tracker-n3"];
 

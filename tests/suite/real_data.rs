@@ -22,7 +22,7 @@ use robocal::kinematics::model::irb120;
 use robocal::sim::tracker_run::{TrackerRun, TrackerRunOptions, tracker_run};
 use robocal::units::{DEG, MM};
 
-mod common;
+use crate::common;
 
 /// A run of `poses` stops, the plate centred on the flange axis (so the first SMR lies on the
 /// flange's y axis: its x is 0, the case where a TCP left in polar form crawls), written and

@@ -4,7 +4,7 @@
 //! extended model as the robot's next version — once. A cell without an effect has nothing to
 //! accept; bad requests are 422 naming the field.
 
-mod common;
+use crate::common;
 
 use axum::http::StatusCode;
 use common::{TestApp, artefact, assert_problem, robot, upload};

@@ -4,7 +4,7 @@
 //! joints lands on the requested positions with a mean error within 10% of the calibrated model's
 //! validation mean, where the targets as programmed miss by millimetres.
 
-mod common;
+use crate::common;
 
 use robocal::demo::{DemoOptions, run, table};
 use robocal::http::client::Client;
