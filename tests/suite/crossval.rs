@@ -4,7 +4,7 @@
 
 use robocal::cell::Observation;
 use robocal::identify::crossval::{CrossvalOptions, Variant, crossval};
-use robocal::identify::{IdentifyOptions, identify};
+use robocal::identify::{FixedReason, IdentifyOptions, Status, identify};
 use robocal::kinematics::{Frame, Param};
 use robocal::sim::instruments::Noise;
 use robocal::sim::simulate::{SimulateOptions, Simulated, simulate};
@@ -115,7 +115,8 @@ fn reidentification_from_a_calibrated_set_refits_the_base_only() {
     let (dt, dr) = want.distance(&got);
     assert!(dt < 1e-9 && dr < 1e-9, "{dt:e} m, {dr:e} rad");
     let reason = &id.status[id.set.layout.find("a2").unwrap()];
-    assert_eq!(reason, "a2: fixed at its start value, not in `only`");
+    assert_eq!(*reason, Status::Fixed(FixedReason::NotInOnly { name: "a2".into(), at_start: true }));
+    assert_eq!(reason.to_string(), "a2: fixed at its start value, not in `only`");
 
     // Unknown names are refused.
     let bad = IdentifyOptions { only: vec!["bass".into()], ..opts };

@@ -86,7 +86,7 @@ fn ur10_fine_joint_structure_on_joints_1_to_3() {
     let mut id_opts = IdentifyOptions::default();
     id_opts.selection.sessions = vec!["series-C".into()];
     let id = identify(&cell, &id_opts).unwrap();
-    let identified: Vec<bool> = id.status.iter().map(|s| *s == "identified").collect();
+    let identified: Vec<bool> = id.status.iter().map(|s| matches!(s, robocal::identify::Status::Identified)).collect();
     let input = Input { cell: &cell, set: &id.set, identified: Some(identified), fixed: Vec::new() };
     let opts = DiagnoseOptions {
         identification: vec!["series-C".into()],
@@ -153,7 +153,7 @@ fn compensation_with_an_accepted_effect_lands_on_the_virtual_robot() {
     let sim = simulate(&SimulateOptions { seed: 4, effects, ..SimulateOptions::default() }).unwrap();
     let cell = sim.cell;
     let id = identify(&cell, &IdentifyOptions::default()).unwrap();
-    let identified: Vec<bool> = id.status.iter().map(|s| *s == "identified").collect();
+    let identified: Vec<bool> = id.status.iter().map(|s| matches!(s, robocal::identify::Status::Identified)).collect();
     let input = Input { cell: &cell, set: &id.set, identified: Some(identified), fixed: Vec::new() };
     let d = diagnose(&input, &DiagnoseOptions::default()).unwrap();
     assert_eq!(d.verdict.status, Status::Named, "{}", d.verdict.summary);
@@ -285,7 +285,8 @@ fn a_shuffled_session_gives_no_backlash_direction() {
     }
     let run = |cell: &Cell| {
         let id = identify(cell, &IdentifyOptions::default()).unwrap();
-        let identified: Vec<bool> = id.status.iter().map(|s| s == "identified").collect();
+        let identified: Vec<bool> =
+            id.status.iter().map(|s| matches!(s, robocal::identify::Status::Identified)).collect();
         let input = Input { cell, set: &id.set, identified: Some(identified), fixed: Vec::new() };
         diagnose(&input, &DiagnoseOptions::default()).unwrap()
     };

@@ -52,7 +52,7 @@ fn identifies_exactly_the_thesis_31() {
     let mut want: Vec<String> = THESIS_31.iter().map(|s| s.to_string()).collect();
     want.sort();
     assert_eq!(got, want);
-    let reasons: Vec<&Status> = id.status.iter().filter(|s| *s != "identified").collect();
+    let reasons: Vec<&Status> = id.status.iter().filter(|s| **s != Status::Identified).collect();
     assert_eq!(reasons.len(), 12, "{reasons:#?}");
     for needle in [
         "d2: dependent on d3 (parallel axes 2–3)",
@@ -60,7 +60,7 @@ fn identifies_exactly_the_thesis_31() {
         "tool_a: orientation not measured",
         "alpha0: dependent on base_c (redundant with the base pose)",
     ] {
-        assert!(reasons.iter().any(|r| r.as_str() == needle), "missing '{needle}' in {reasons:#?}");
+        assert!(reasons.iter().any(|r| r.to_string() == needle), "missing '{needle}' in {reasons:#?}");
     }
 }
 
@@ -71,7 +71,7 @@ fn noise_free_identification_is_exact() {
     let s = sim(2, Noise::none());
     let id = identify(&s.cell, &IdentifyOptions::default()).unwrap();
     for (i, p) in id.set.layout.params().iter().enumerate() {
-        if id.status[i] != "identified" {
+        if id.status[i] != Status::Identified {
             continue;
         }
         let truth = s.truth.set.value(*p).unwrap();

@@ -160,7 +160,7 @@ fn position_only_fit_reports_what_it_cannot_identify() {
 /// model to 1e-9).
 #[test]
 fn an_undetermined_compliance_is_held_and_said() {
-    use robocal::identify::{COMPLIANCE_SIGNIFICANCE, Identification, Status};
+    use robocal::identify::{COMPLIANCE_SIGNIFICANCE, FixedReason, Identification, Status};
     use robocal::kinematics::{JointTerm, Param};
     let cell = import_cell(&[(series("D"), Purpose::Identification)], &Ur10Options::default()).unwrap().cell;
     let base = IdentifyOptions { fixed: vec!["tool_z".into(), "d6".into()], ..Default::default() };
@@ -172,8 +172,12 @@ fn an_undetermined_compliance_is_held_and_said() {
     let mut names = Vec::new();
     for j in 0..6 {
         match compliance(&held, j) {
-            (v, _, Status::Fixed(why)) if why.contains("not determined by these data") => {
+            (v, _, Status::Fixed(why @ FixedReason::ComplianceInsignificant { change, std, sigmas, .. })) => {
                 assert_eq!(v, 0.0, "c{} held at its start", j + 1);
+                assert_eq!(sigmas, COMPLIANCE_SIGNIFICANCE);
+                assert!(change.abs() < sigmas * std, "{why}");
+                let why = why.to_string();
+                assert!(why.contains("not determined by these data"), "{why}");
                 assert!(why.contains(&format!("below {COMPLIANCE_SIGNIFICANCE} σ")), "{why}");
                 names.push(format!("c{}", j + 1));
             }

@@ -381,7 +381,7 @@ impl Identification {
             values: set.values.iter().enumerate().map(|(i, v)| file(i, *v)).collect(),
             nominal: set.nominal.iter().enumerate().map(|(i, v)| file(i, *v)).collect(),
             std: id.std.iter().enumerate().map(|(i, s)| s.map(|s| file(i, s))).collect(),
-            status: id.status.iter().map(|s| s.as_str().to_string()).collect(),
+            status: id.status.iter().map(|s| s.to_string()).collect(),
             tools,
             free: id.free_names,
             iterations: id.iterations,

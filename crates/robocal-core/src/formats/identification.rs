@@ -64,7 +64,7 @@ pub fn fit_measurements(id: &Identification) -> Value {
 pub fn identification_doc(id: &Identification, sessions: &[String], selection: Option<Value>) -> ParameterSetDoc {
     let mut doc = ParameterSetDoc::new(id.set.clone());
     doc.std = id.std.clone();
-    doc.status = id.status.iter().map(|s| Some(s.as_str().to_string())).collect();
+    doc.status = id.status.iter().map(|s| Some(s.to_string())).collect();
     let q = &id.quality;
     let m = q.std.len();
     let tools: Vec<Value> = id
@@ -120,4 +120,69 @@ pub fn identification_doc(id: &Identification, sessions: &[String], selection: O
         super::rounding::round_json(q);
     }
     doc
+}
+
+/// The text of a reason, as the parameter-set files and the wire carry it in `status` (which is
+/// `identified` for the others): the parameter's name, then why, with the figures in mm, degrees
+/// and kg.
+impl std::fmt::Display for crate::identify::FixedReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        use crate::identify::{FixedReason::*, ModelTerm, Structure};
+        let start = |at_start: &bool| if *at_start { "its start value" } else { "nominal" };
+        match self {
+            ByUser { name, at_start } => write!(f, "{name}: fixed by the user (at {})", start(at_start)),
+            NotInOnly { name, at_start } => write!(f, "{name}: fixed at {}, not in `only`", start(at_start)),
+            NotInModel { name, term: ModelTerm::Beta } => write!(f, "{name}: fixed, the model has no β (-beta)"),
+            NotInModel { name, term: ModelTerm::Compliance } => {
+                write!(f, "{name}: fixed, the model has no compliance (-compliance)")
+            }
+            DeclaredTcp { name } => write!(f, "{name}: fixed, the session declares its TCP (measured, e.g. on a CMM)"),
+            NoGravityTorque { name, axis } => write!(f, "{name}: no gravity torque on axis {axis}"),
+            NoApproachDirection { name, axis } => write!(f, "{name}: no approach direction logged for axis {axis}"),
+            NoTemperatureChange { name } => write!(f, "{name}: no temperature change in the data"),
+            TcpOnLastAxis { name, axis } => {
+                write!(f, "{name}: no effect, the TCP lies on axis {axis} and orientation is not measured")
+            }
+            OrientationNotMeasured { name } => write!(f, "{name}: orientation not measured"),
+            NoEffect { name } => write!(f, "{name}: no effect on the measured quantities"),
+            Dependent { name, on, structure } => {
+                write!(f, "{name}: dependent on {}", on.join(", "))?;
+                match structure {
+                    Some(Structure::ParallelAxes { lo, hi }) => write!(f, " (parallel axes {lo}–{hi})"),
+                    Some(Structure::Base) => write!(f, " (redundant with the base pose)"),
+                    Some(Structure::Joint { joint }) => write!(f, " (redundant with joint-{joint} parameters)"),
+                    None => Ok(()),
+                }
+            }
+            Undetermined { name, std, bound, angle: true } => write!(
+                f,
+                "{name}: not determined by these data (its standard deviation would be at least {:.3}°, beyond {:.0}°)",
+                std / DEG,
+                bound / DEG
+            ),
+            Undetermined { name, std, bound, angle: false } => write!(
+                f,
+                "{name}: not determined by these data (its standard deviation would be at least {:.3} mm, beyond {:.0} mm)",
+                std / MM,
+                bound / MM
+            ),
+            PayloadInsignificant { mass_kg, std_kg, sigmas } => write!(
+                f,
+                "payload not determined by these data ({mass_kg:.3} ± {std_kg:.3} kg, below {sigmas} σ): held at the declared 0 kg"
+            ),
+            PayloadUnsettled { error } => write!(
+                f,
+                "payload not determined by these data (the fit with it does not settle: {error}): held at the declared 0 kg"
+            ),
+            ComplianceInsignificant { name, change, std, t, sigmas, held_at } => write!(
+                f,
+                "{name} not determined by these data ({:+.3e} ± {:.3e} deg/(N·m) from its start, {} σ, below {sigmas} σ): held at {} deg/(N·m)",
+                change.to_degrees(),
+                std.to_degrees(),
+                if t.is_finite() { format!("{t:.1}") } else { "undefined".into() },
+                if *held_at == 0.0 { "0".to_string() } else { format!("{:.3e}", held_at.to_degrees()) },
+            ),
+            NotInProblem => write!(f, "fixed: not a parameter of this identification"),
+        }
+    }
 }

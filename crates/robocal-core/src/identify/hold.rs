@@ -18,6 +18,7 @@
 //! model refitted, and the test repeated, since holding one sharpens the others. Each held
 //! compliance says so in its status, with the estimate and σ that decided it.
 
+use super::fixed::FixedReason;
 use super::identifiability::Status;
 use super::problem::{GlobalParam, Problem};
 use super::quality::Quality;
@@ -92,18 +93,17 @@ pub(super) fn hold_undetermined(
             (Undetermined::Compliance(..), Err(_)) => return Ok(q),
         };
         status[g] = Status::Fixed(match next {
-            Undetermined::Payload(_, _, m) => format!(
-                "payload not determined by these data ({m:.3} ± {:.3} kg, below {PAYLOAD_SIGNIFICANCE} σ): held at the declared 0 kg",
-                q.std[c]
-            ),
-            Undetermined::Compliance(_, _, t) => format!(
-                "{} not determined by these data ({:+.3e} ± {:.3e} deg/(N·m) from its start, {} σ, below {COMPLIANCE_SIGNIFICANCE} σ): held at {} deg/(N·m)",
-                f.problem.name(g),
-                (fit.x[g] - f.x0[g]).to_degrees(),
-                q.std[c].to_degrees(),
-                if t.is_finite() { format!("{t:.1}") } else { "undefined".into() },
-                if f.x0[g] == 0.0 { "0".to_string() } else { format!("{:.3e}", f.x0[g].to_degrees()) },
-            ),
+            Undetermined::Payload(_, _, m) => {
+                FixedReason::PayloadInsignificant { mass_kg: m, std_kg: q.std[c], sigmas: PAYLOAD_SIGNIFICANCE }
+            }
+            Undetermined::Compliance(_, _, t) => FixedReason::ComplianceInsignificant {
+                name: f.problem.name(g),
+                change: fit.x[g] - f.x0[g],
+                std: q.std[c],
+                t,
+                sigmas: COMPLIANCE_SIGNIFICANCE,
+                held_at: f.x0[g],
+            },
         });
         *fit = refit;
         *free = held;

@@ -12,6 +12,7 @@
 use faer::Mat;
 use std::collections::HashMap;
 
+use super::fixed::{FixedReason, Structure};
 use super::problem::{GlobalParam, Problem};
 use crate::kinematics::{JointTerm, Param};
 
@@ -19,16 +20,7 @@ use crate::kinematics::{JointTerm, Param};
 #[derive(Clone, Debug, PartialEq)]
 pub enum Status {
     Identified,
-    Fixed(String),
-}
-
-impl Status {
-    pub fn label(&self) -> String {
-        match self {
-            Status::Identified => "identified".into(),
-            Status::Fixed(r) => r.clone(),
-        }
-    }
+    Fixed(FixedReason),
 }
 
 /// A column whose component outside the kept span is below this (unit-norm columns) is dependent.
@@ -114,7 +106,7 @@ fn undetermined_bound(problem: &Problem, g: usize) -> Option<(f64, bool)> {
 
 /// Decide the free parameters. `fixed` holds user- or model-fixed parameters with their reason.
 /// `jac` is the Jacobian at the starting point with one column per global parameter.
-pub fn select(problem: &Problem, jac: &Mat<f64>, fixed: &HashMap<usize, String>) -> (Vec<usize>, Vec<Status>) {
+pub fn select(problem: &Problem, jac: &Mat<f64>, fixed: &HashMap<usize, FixedReason>) -> (Vec<usize>, Vec<Status>) {
     select_given_noise(problem, jac, fixed, None)
 }
 
@@ -129,7 +121,7 @@ pub fn select(problem: &Problem, jac: &Mat<f64>, fixed: &HashMap<usize, String>)
 pub fn select_given_noise(
     problem: &Problem,
     jac: &Mat<f64>,
-    fixed: &HashMap<usize, String>,
+    fixed: &HashMap<usize, FixedReason>,
     sigma: Option<f64>,
 ) -> (Vec<usize>, Vec<Status>) {
     let n = problem.n_params();
@@ -182,15 +174,8 @@ pub fn select_given_noise(
         if let (Some(sigma), Some((bound, is_angle))) = (sigma, undetermined_bound(problem, g)) {
             let sd = sigma / (rest * norm);
             if sd > bound {
-                let name = problem.name(g);
-                let (sd, bound) = if is_angle {
-                    (format!("{:.3}°", sd.to_degrees()), format!("{:.0}°", bound.to_degrees()))
-                } else {
-                    (format!("{:.3} mm", sd * 1e3), format!("{:.0} mm", bound * 1e3))
-                };
-                status[g] = Status::Fixed(format!(
-                    "{name}: not determined by these data (its standard deviation would be at least {sd}, beyond {bound})"
-                ));
+                status[g] =
+                    Status::Fixed(FixedReason::Undetermined { name: problem.name(g), std: sd, bound, angle: is_angle });
                 continue;
             }
         }
@@ -217,30 +202,29 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 }
 
 /// Why a parameter has no effect on these measurements.
-fn no_effect_reason(problem: &Problem, g: usize) -> String {
+fn no_effect_reason(problem: &Problem, g: usize) -> FixedReason {
     let name = problem.name(g);
     match problem.params[g] {
         GlobalParam::Robot(i) => match problem.layout.params()[i] {
             Param::Joint(j, JointTerm::Compliance) | Param::Joint(j, JointTerm::ComplianceCubic) => {
-                format!("{name}: no gravity torque on axis {}", j + 1)
+                FixedReason::NoGravityTorque { name, axis: j + 1 }
             }
-            Param::Joint(j, JointTerm::Backlash) => format!("{name}: no approach direction logged for axis {}", j + 1),
-            Param::Thermal => format!("{name}: no temperature change in the data"),
+            Param::Joint(j, JointTerm::Backlash) => FixedReason::NoApproachDirection { name, axis: j + 1 },
+            Param::Thermal => FixedReason::NoTemperatureChange { name },
             Param::Theta(j) if j + 1 == problem.model.dof() && !problem.tools.iter().any(|t| t.has_orientation) => {
-                format!("{name}: no effect, the TCP lies on axis {} and orientation is not measured", j + 1)
+                FixedReason::TcpOnLastAxis { name, axis: j + 1 }
             }
-            _ => format!("{name}: no effect on the measured quantities"),
+            _ => FixedReason::NoEffect { name },
         },
         GlobalParam::Tool { tool, k } if k >= 3 && !problem.tools[tool].has_orientation => {
-            format!("{name}: orientation not measured")
+            FixedReason::OrientationNotMeasured { name }
         }
-        GlobalParam::Tool { .. } => format!("{name}: no effect on the measured quantities"),
+        GlobalParam::Tool { .. } => FixedReason::NoEffect { name },
     }
 }
 
 /// Which kept parameters a dependent one is a combination of, with the structural reason.
-fn dependence_reason(problem: &Problem, jac: &Mat<f64>, g: usize, kept: &[usize]) -> String {
-    let name = problem.name(g);
+fn dependence_reason(problem: &Problem, jac: &Mat<f64>, g: usize, kept: &[usize]) -> FixedReason {
     // Least squares of the (unit) column on the kept (unit) columns: the largest coefficients.
     let rows = jac.nrows();
     let unit = |c: usize| {
@@ -264,16 +248,15 @@ fn dependence_reason(problem: &Problem, jac: &Mat<f64>, g: usize, kept: &[usize]
     let mut terms: Vec<(f64, usize)> = kept.iter().enumerate().map(|(j, &c)| (coef[(j, 0)].abs(), c)).collect();
     terms.sort_by(|x, y| y.0.total_cmp(&x.0));
     let top = terms.first().map(|t| t.0).unwrap_or(0.0);
-    let names: Vec<String> = terms.iter().take(4).filter(|t| t.0 > 0.05 * top).map(|t| problem.name(t.1)).collect();
-    let why = structural_reason(
-        problem,
-        g,
-        &terms.iter().take(4).filter(|t| t.0 > 0.05 * top).map(|t| t.1).collect::<Vec<_>>(),
-    );
-    format!("{name}: dependent on {}{why}", names.join(", "))
+    let on: Vec<usize> = terms.iter().take(4).filter(|t| t.0 > 0.05 * top).map(|t| t.1).collect();
+    FixedReason::Dependent {
+        name: problem.name(g),
+        on: on.iter().map(|&h| problem.name(h)).collect(),
+        structure: structure(problem, g, &on),
+    }
 }
 
-fn structural_reason(problem: &Problem, g: usize, on: &[usize]) -> String {
+fn structure(problem: &Problem, g: usize, on: &[usize]) -> Option<Structure> {
     let robot = |h: usize| match problem.params[h] {
         GlobalParam::Robot(i) => Some(problem.layout.params()[i]),
         _ => None,
@@ -288,25 +271,23 @@ fn structural_reason(problem: &Problem, g: usize, on: &[usize]) -> String {
                 if let Some(Param::D(k)) = robot(h) {
                     let (lo, hi) = (j.min(k), j.max(k));
                     if hi == lo + 1 && parallel(lo) {
-                        return format!(" (parallel axes {}–{})", lo + 1, hi + 1);
+                        return Some(Structure::ParallelAxes { lo: lo + 1, hi: hi + 1 });
                     }
                 }
             }
-            if j == 0 { " (redundant with the base pose)".into() } else { String::new() }
+            (j == 0).then_some(Structure::Base)
         }
-        (_, Some(Param::Alpha(0) | Param::A(0) | Param::Theta(0))) => " (redundant with the base pose)".into(),
+        (_, Some(Param::Alpha(0) | Param::A(0) | Param::Theta(0))) => Some(Structure::Base),
         (GlobalParam::Tool { .. }, _) => {
             let last = problem.model.dof() - 1;
-            if on.iter().any(|&h| {
-                matches!(robot(h), Some(Param::A(j) | Param::Alpha(j)) if j == last)
-                    || matches!(robot(h), Some(Param::D(j) | Param::Theta(j)) if j == last)
-            }) {
-                format!(" (redundant with joint-{} parameters)", last + 1)
-            } else {
-                String::new()
-            }
+            on.iter()
+                .any(|&h| {
+                    matches!(robot(h), Some(Param::A(j) | Param::Alpha(j)) if j == last)
+                        || matches!(robot(h), Some(Param::D(j) | Param::Theta(j)) if j == last)
+                })
+                .then_some(Structure::Joint { joint: last + 1 })
         }
-        _ => String::new(),
+        _ => None,
     }
 }
 
@@ -355,7 +336,7 @@ mod tests {
         assert_eq!(free, thesis);
         let fixed: HashMap<String, String> = (0..problem.n_params())
             .filter_map(|g| match &p.status[g] {
-                Status::Fixed(why) => Some((problem.name(g), why.clone())),
+                Status::Fixed(why) => Some((problem.name(g), why.to_string())),
                 Status::Identified => None,
             })
             .collect();
@@ -397,14 +378,16 @@ mod tests {
             jac[(r, g("d2"))] = -3.0 * jac[(r, g("d3"))];
             jac[(r, g("theta1"))] = 0.5 * jac[(r, g("base_c"))] + 2.0 * jac[(r, g("base_a"))];
         }
-        let fixed: HashMap<usize, String> = [(g("a4"), "a4: fixed by the user".to_string())].into();
+        let by_user = FixedReason::ByUser { name: "a4".into(), at_start: false };
+        let fixed: HashMap<usize, FixedReason> = [(g("a4"), by_user.clone())].into();
         let (free, status) = select(&problem, &jac, &fixed);
-        let label = |name: &str| status[g(name)].label();
+        let label = |name: &str| status[g(name)].to_string();
         assert_eq!(label("c1"), "c1: no gravity torque on axis 1");
         assert_eq!(label("c2"), "c2: no gravity torque on axis 2");
         assert_eq!(label("d2"), "d2: dependent on d3 (parallel axes 2–3)");
         assert_eq!(label("theta1"), "theta1: dependent on base_a, base_c (redundant with the base pose)");
-        assert_eq!(label("a4"), "a4: fixed by the user");
+        assert_eq!(status[g("a4")], Status::Fixed(by_user));
+        assert_eq!(label("a4"), "a4: fixed by the user (at nominal)");
         assert_eq!(free.len(), n - 5);
         assert!(free.windows(2).all(|w| w[0] < w[1]), "ascending");
         for name in ["base_a", "base_c", "d3", "c3", "tool_c"] {

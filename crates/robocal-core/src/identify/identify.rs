@@ -8,7 +8,7 @@ use super::noise::NoiseModel;
 use super::prepare::{Prepared, prepare, row_sigmas};
 use super::problem::{GlobalParam, Problem};
 use super::solver::{self, Fit, SolveError};
-use super::{IdentifyError, IdentifyOptions, Quality, Status, Worst, identifiability};
+use super::{FixedReason, IdentifyError, IdentifyOptions, Quality, Status, Worst, identifiability};
 use crate::cell::Cell;
 use crate::kinematics::{Param, ParameterSet, Tool};
 
@@ -109,12 +109,16 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
         // and the refit would wander in their valley until its iteration limit.
         let mut judged = fixed.clone();
         for &g in &held_where_stopped {
-            judged.insert(g, status[g].label());
+            if let Status::Fixed(why) = &status[g] {
+                judged.insert(g, why.clone());
+            }
         }
         if !tcp_unknown {
             let mass = payload_mass(&problem);
             for g in (0..problem.n_params()).filter(|g| !free.contains(g) && Some(*g) != mass) {
-                judged.entry(g).or_insert_with(|| status[g].label());
+                if let Status::Fixed(why) = &status[g] {
+                    judged.entry(g).or_insert_with(|| why.clone());
+                }
             }
         }
         // With the statistical test too (σ from the residual here): a TCP the fit leaves a few µm
@@ -134,9 +138,7 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
                     if without != free {
                         fit = solver::solve(&problem, &without, &fit.x, &opts.solver)?;
                     }
-                    again_status[g] = Status::Fixed(format!(
-                        "payload not determined by these data (the fit with it does not settle: {e}): held at the declared 0 kg"
-                    ));
+                    again_status[g] = Status::Fixed(FixedReason::PayloadUnsettled { error: e.to_string() });
                     (free, status) = (without, again_status);
                 }
                 Err(e) => return Err(e.into()),
@@ -225,7 +227,7 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
     for (c, &g) in free.iter().enumerate() {
         std_g[g] = Some(quality.std[c]);
     }
-    let label = |g: usize| status[g].label();
+    let label = |g: usize| status[g].to_string();
     let tools: Vec<ToolResult> = problem
         .tools
         .iter()
@@ -248,7 +250,7 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
     set.nominal = problem.layout.nominal_values(&cell.model, &problem.tools[0].tool, &base);
     set.values = problem.layout_values(&fit.x, 0);
     let mut std = vec![None; set.layout.len()];
-    let mut st = vec![Status::Fixed(String::new()); set.layout.len()];
+    let mut st = vec![Status::Fixed(FixedReason::NotInProblem); set.layout.len()];
     for (g, p) in problem.params.iter().enumerate() {
         let i = match *p {
             GlobalParam::Robot(i) => Some(i),
@@ -304,7 +306,7 @@ fn judge_where_it_stopped(
     x0: &[f64],
     free: &[usize],
     start: &[Status],
-    fixed: &std::collections::HashMap<usize, String>,
+    fixed: &std::collections::HashMap<usize, FixedReason>,
     solver_opts: &solver::SolverOptions,
     error: SolveError,
 ) -> Result<(Fit, Vec<usize>, Vec<Status>, String), IdentifyError> {
@@ -325,7 +327,9 @@ fn judge_where_it_stopped(
     // has no effect at the start, is judged at the solution below, as after a converged fit).
     let mut judged = fixed.clone();
     for g in (0..problem.n_params()).filter(|g| !free.contains(g)) {
-        judged.entry(g).or_insert_with(|| start[g].label());
+        if let Status::Fixed(why) = &start[g] {
+            judged.entry(g).or_insert_with(|| why.clone());
+        }
     }
     let (again, status) = identifiability::select_given_noise(problem, &j, &judged, Some(sigma));
     if again.is_empty() || again == free {

@@ -14,6 +14,7 @@ pub mod solver;
 pub mod study;
 
 mod error;
+mod fixed;
 mod hold;
 #[allow(clippy::module_inception)] // the fit itself: `identify::identify`, as issue 28 names the parts
 mod identify;
@@ -22,6 +23,7 @@ mod pool;
 mod prepare;
 
 pub use error::{IdentifyError, Worst, outliers_message};
+pub use fixed::{FixedReason, ModelTerm, Structure};
 pub use hold::{COMPLIANCE_SIGNIFICANCE, PAYLOAD_SIGNIFICANCE};
 pub use identifiability::Status;
 pub use identify::{Identification, ToolResult, WORST_REPORTED, identify};
@@ -35,30 +37,12 @@ pub use problem::{GlobalParam, MeasurementSelection, Prior, Problem, ProblemErro
 pub use quality::Quality;
 pub use solver::{Fit, SolveError, SolverOptions};
 
-impl Status {
-    /// `identified`, or the reason the parameter is fixed: the text files and the wire carry.
-    pub fn as_str(&self) -> &str {
-        match self {
-            Status::Identified => "identified",
-            Status::Fixed(reason) => reason,
-        }
-    }
-}
-
 impl std::fmt::Display for Status {
+    /// `identified`, or the reason the parameter is fixed: the text the files and the wire carry.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-impl PartialEq<str> for Status {
-    fn eq(&self, other: &str) -> bool {
-        self.as_str() == other
-    }
-}
-
-impl PartialEq<&str> for Status {
-    fn eq(&self, other: &&str) -> bool {
-        self.as_str() == *other
+        match self {
+            Status::Identified => f.write_str("identified"),
+            Status::Fixed(reason) => reason.fmt(f),
+        }
     }
 }

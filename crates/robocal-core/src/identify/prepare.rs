@@ -8,7 +8,9 @@ use faer::Mat;
 use super::base::{Registration, estimate_base_of, register_base_and_tcps};
 use super::noise::NoiseModel;
 use super::problem::{GlobalParam, Prior, Problem, tool_blocks};
-use super::{Anchor, IdentifyError, IdentifyOptions, ModelOptions, Status, identifiability, map_knots};
+use super::{
+    Anchor, FixedReason, IdentifyError, IdentifyOptions, ModelOptions, ModelTerm, Status, identifiability, map_knots,
+};
 use crate::cell::Cell;
 use crate::kinematics::{JointTerm, Param, ParamLayout};
 
@@ -22,7 +24,7 @@ pub struct Prepared {
     pub base: [f64; 6],
     /// Parameters fixed by the options and the sessions (global index → reason), before
     /// identifiability.
-    pub fixed: HashMap<usize, String>,
+    pub fixed: HashMap<usize, FixedReason>,
     /// The payload is unknown (every tool declares 0 kg) and identified as `tool_mass`.
     pub payload_unknown: bool,
 }
@@ -158,7 +160,7 @@ fn start_values(
 
 /// Parameters fixed by the model options, the sessions' declarations, `only` and the user
 /// (global index → reason), after checking that every free-TCP session is one of the problem's.
-fn fixed_parameters(problem: &Problem, opts: &IdentifyOptions) -> Result<HashMap<usize, String>, IdentifyError> {
+fn fixed_parameters(problem: &Problem, opts: &IdentifyOptions) -> Result<HashMap<usize, FixedReason>, IdentifyError> {
     let mut fixed = fixed_by_model(problem, opts);
     if !opts.only.is_empty() {
         fix_all_but_only(problem, opts, &mut fixed)?;
@@ -167,8 +169,7 @@ fn fixed_parameters(problem: &Problem, opts: &IdentifyOptions) -> Result<HashMap
         let g = (0..problem.n_params())
             .find(|&g| &problem.name(g) == f)
             .ok_or_else(|| IdentifyError::item("fix", i, format!("'{f}' is not a parameter of this problem")))?;
-        let at = if opts.start.is_some() { "at its start value" } else { "at nominal" };
-        fixed.insert(g, format!("{f}: fixed by the user ({at})"));
+        fixed.insert(g, FixedReason::ByUser { name: f.clone(), at_start: opts.start.is_some() });
     }
     for (i, s) in opts.free_tcp.iter().enumerate() {
         if !problem.tools.iter().any(|b| b.sessions.contains(s)) {
@@ -180,19 +181,19 @@ fn fixed_parameters(problem: &Problem, opts: &IdentifyOptions) -> Result<HashMap
 
 /// β and compliances the model leaves out, and the TCP components a session declares (unless
 /// its TCP is freed).
-fn fixed_by_model(problem: &Problem, opts: &IdentifyOptions) -> HashMap<usize, String> {
-    let mut fixed: HashMap<usize, String> = HashMap::new();
+fn fixed_by_model(problem: &Problem, opts: &IdentifyOptions) -> HashMap<usize, FixedReason> {
+    let mut fixed: HashMap<usize, FixedReason> = HashMap::new();
     for (g, gp) in problem.params.iter().enumerate() {
         let name = problem.name(g);
         match *gp {
             GlobalParam::Robot(i) => match problem.layout.params()[i] {
                 p @ Param::Beta(_) if !opts.model.beta && !opts.model.extra.contains(&p) => {
-                    fixed.insert(g, format!("{name}: fixed, the model has no β (-beta)"));
+                    fixed.insert(g, FixedReason::NotInModel { name, term: ModelTerm::Beta });
                 }
                 p @ Param::Joint(_, JointTerm::Compliance)
                     if !opts.model.compliance && !opts.model.extra.contains(&p) =>
                 {
-                    fixed.insert(g, format!("{name}: fixed, the model has no compliance (-compliance)"));
+                    fixed.insert(g, FixedReason::NotInModel { name, term: ModelTerm::Compliance });
                 }
                 _ => {}
             },
@@ -200,7 +201,7 @@ fn fixed_by_model(problem: &Problem, opts: &IdentifyOptions) -> HashMap<usize, S
                 let b = &problem.tools[tool];
                 let freed = b.sessions.iter().any(|s| opts.free_tcp.contains(s));
                 if !b.identify_tcp && !freed && (k < 3 || b.has_orientation) {
-                    fixed.insert(g, format!("{name}: fixed, the session declares its TCP (measured, e.g. on a CMM)"));
+                    fixed.insert(g, FixedReason::DeclaredTcp { name });
                 }
             }
         }
@@ -213,7 +214,7 @@ fn fixed_by_model(problem: &Problem, opts: &IdentifyOptions) -> HashMap<usize, S
 fn fix_all_but_only(
     problem: &Problem,
     opts: &IdentifyOptions,
-    fixed: &mut HashMap<usize, String>,
+    fixed: &mut HashMap<usize, FixedReason>,
 ) -> Result<(), IdentifyError> {
     let mut keep = vec![false; problem.n_params()];
     for (i, item) in opts.only.iter().enumerate() {
@@ -235,9 +236,8 @@ fn fix_all_but_only(
     }
     for (g, k) in keep.iter().enumerate() {
         if !k {
-            let name = problem.name(g);
-            let at = if opts.start.is_some() { "its start value" } else { "nominal" };
-            fixed.entry(g).or_insert_with(|| format!("{name}: fixed at {at}, not in `only`"));
+            let at_start = opts.start.is_some();
+            fixed.entry(g).or_insert_with(|| FixedReason::NotInOnly { name: problem.name(g), at_start });
         }
     }
     Ok(())
@@ -249,7 +249,7 @@ fn start_unknown_tcps(
     problem: &Problem,
     registration: &Registration,
     from_start: &[bool],
-    fixed: &HashMap<usize, String>,
+    fixed: &HashMap<usize, FixedReason>,
     x0: &mut [f64],
 ) {
     for (g, gp) in problem.params.iter().enumerate() {
@@ -268,7 +268,7 @@ fn start_unknown_tcps(
 fn identifiable(
     problem: &mut Problem,
     x0: &[f64],
-    fixed: &HashMap<usize, String>,
+    fixed: &HashMap<usize, FixedReason>,
     map_smoothing: f64,
 ) -> Result<(Vec<usize>, Vec<Status>), IdentifyError> {
     let all: Vec<usize> = (0..problem.n_params()).collect();
