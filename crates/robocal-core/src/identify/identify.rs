@@ -99,10 +99,7 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
     // no effect there and is judged at the solution too.
     let tcp_unknown = problem.tools.iter().any(|b| b.identify_tcp && b.tool.tcp[..3] == [0.0; 3]);
     if payload_unknown || tcp_unknown {
-        let all: Vec<usize> = (0..problem.n_params()).collect();
-        let mut j = Mat::<f64>::zeros(problem.n_rows, all.len());
-        let mut r = vec![0.0; problem.n_rows];
-        problem.linearise(&fit.x, &all, &mut j, &mut r);
+        let (j, r) = problem.linearise_all(&fit.x);
         // Judged again for the payload alone, every other parameter keeps the start's judgement:
         // a TCP guessed on axis 6 that the fit leaves a few µm off it (noise) would otherwise free
         // the parameters its exact position made dependent (a5 on θ5, d5 on α5 for the IRB 120),
@@ -316,10 +313,7 @@ fn judge_where_it_stopped(
     if last.iter().any(|v| !v.is_finite()) {
         return Err(error.into());
     }
-    let all: Vec<usize> = (0..problem.n_params()).collect();
-    let mut j = Mat::<f64>::zeros(problem.n_rows, all.len());
-    let mut r = vec![0.0; problem.n_rows];
-    problem.linearise(&last, &all, &mut j, &mut r);
+    let (j, r) = problem.linearise_all(&last);
     let Some(sigma) = residual_sigma(&r, problem.n_rows, free.len()) else {
         return Err(error.into());
     };

@@ -271,16 +271,11 @@ fn identifiable(
     fixed: &HashMap<usize, FixedReason>,
     map_smoothing: f64,
 ) -> Result<(Vec<usize>, Vec<Status>), IdentifyError> {
-    let all: Vec<usize> = (0..problem.n_params()).collect();
-    let mut j0 = Mat::<f64>::zeros(problem.n_rows, all.len());
-    let mut r0 = vec![0.0; problem.n_rows];
-    problem.linearise(x0, &all, &mut j0, &mut r0);
+    let (mut j0, _) = problem.linearise_all(x0);
     let priors = map_priors(problem, &j0, map_smoothing)?;
     if !priors.is_empty() {
         problem.add_priors(priors);
-        j0 = Mat::<f64>::zeros(problem.n_rows, all.len());
-        r0 = vec![0.0; problem.n_rows];
-        problem.linearise(x0, &all, &mut j0, &mut r0);
+        j0 = problem.linearise_all(x0).0;
     }
     let (free, status) = identifiability::select(problem, &j0, fixed);
     if free.is_empty() {

@@ -531,6 +531,16 @@ impl Problem {
         }
     }
 
+    /// Jacobian of every parameter (column g = global index g) and the residual at `x`: what the
+    /// identifiability sweep and the priors judge.
+    pub fn linearise_all(&self, x: &[f64]) -> (Mat<f64>, Vec<f64>) {
+        let all: Vec<usize> = (0..self.n_params()).collect();
+        let mut jac = Mat::<f64>::zeros(self.n_rows, all.len());
+        let mut res = vec![0.0; self.n_rows];
+        self.linearise(x, &all, &mut jac, &mut res);
+        (jac, res)
+    }
+
     /// Residual and Jacobian of the free parameters (`free[c]` = global index of column c) at `x`.
     /// ∂(residual)/∂ρ = −∂(model)/∂ρ; we return J = ∂(model)/∂ρ so that Δρ solves J·Δρ ≈ r.
     pub fn linearise(&self, x: &[f64], free: &[usize], jac: &mut Mat<f64>, res: &mut [f64]) {
