@@ -17,7 +17,7 @@ use crate::kinematics::{JointTerm, Param};
 /// what the accepted effect predicts there and the held-out residual after it — binned.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Evidence {
-    /// The effect's label ([`Candidate::label`]).
+    /// The effect's label ([`super::library::Candidate::label`]).
     pub effect: String,
     /// The joint whose angle it corrects (0-based).
     pub joint: usize,

@@ -66,7 +66,26 @@ impl ParameterSetDoc {
         Self { set, std: vec![None; n], status: vec![None; n], quality: None }
     }
 
-    /// Parse and validate parameter-set JSON text.
+    /// Parse and validate parameter-set JSON text (mm and degrees, as the files carry them).
+    ///
+    /// ```
+    /// use robocal_core::formats::ParameterSetDoc;
+    /// use robocal_core::kinematics::Param;
+    /// use robocal_core::kinematics::model::irb120;
+    /// use robocal_core::kinematics::{ParameterSet, Tool};
+    ///
+    /// let mut set = ParameterSet::nominal(irb120(), Tool::flange(), [0.0; 6]);
+    /// let a2 = set.layout.index_of(Param::A(2)).unwrap();
+    /// set.values[a2] += 0.15e-3; // 0.15 mm longer than the table
+    /// let text = ParameterSetDoc::new(set.clone()).to_json_pretty();
+    /// assert!(text.contains("\"name\": \"a2\"") && text.contains("270.15"), "in mm: {text}");
+    /// let back = ParameterSetDoc::from_json(&text)?;
+    /// assert!((back.set.values[a2] - set.values[a2]).abs() < 1e-12);
+    ///
+    /// let err = ParameterSetDoc::from_json(&text.replace("270.15", "-1e400")).unwrap_err();
+    /// assert!(err.path.starts_with("parameters["), "the field at fault: {err}");
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
     pub fn from_json(text: &str) -> Result<Self, DomainError> {
         from_json::<ParameterSetFile>(text)?.to_doc()
     }

@@ -555,6 +555,31 @@ impl Chain {
     ///
     /// Writes column-major: entry (r, c) goes to `out[c * ld + r]`, so a caller can fill a block of
     /// a tall stacked matrix directly. Returns the TCP frame.
+    ///
+    /// Exact, not differenced: against a central difference of the forward kinematics,
+    ///
+    /// ```
+    /// use robocal_core::kinematics::model::irb120;
+    /// use robocal_core::kinematics::{Chain, JointState, ParameterSet, Rows, Tool};
+    ///
+    /// let set = ParameterSet::nominal(irb120(), Tool::flange(), [0.0; 6]);
+    /// let s = JointState::new(&[0.3, -0.4, 0.5, 0.2, 0.9, -0.1]);
+    /// let n = set.layout.len();
+    /// let mut jac = vec![0.0; 3 * n];
+    /// set.chain().jacobian_into(&s, &set.layout, Rows::Position, &mut jac, 3);
+    /// let h = 1e-6;
+    /// for c in 0..n {
+    ///     let at = |d: f64| {
+    ///         let mut v = set.values.clone();
+    ///         v[c] += d;
+    ///         Chain::new(&set.model, &set.layout, &v).fk(&s).t
+    ///     };
+    ///     let fd = (at(h) - at(-h)) / (2.0 * h);
+    ///     for r in 0..3 {
+    ///         assert!((jac[c * 3 + r] - fd[r]).abs() < 1e-7, "{} row {r}", set.layout.params()[c]);
+    ///     }
+    /// }
+    /// ```
     pub fn jacobian_into(&self, s: &JointState, layout: &ParamLayout, rows: Rows, out: &mut [f64], ld: usize) -> Frame {
         self.jacobian_columns_into(s, layout, rows, (0..layout.len()).map(|i| (i, i)), out, ld)
     }

@@ -229,6 +229,30 @@ impl AnalyticIk {
     }
 
     /// All eight branches; each entry is that branch's solution or why it has none.
+    ///
+    /// ```
+    /// use robocal_core::kinematics::{AnalyticIk, Frame, IkError, JointState, ParameterSet, Tool};
+    /// use robocal_core::kinematics::model::irb120;
+    ///
+    /// let set = ParameterSet::nominal(irb120(), Tool::flange(), [0.0; 6]);
+    /// let chain = set.chain();
+    /// let target: Frame = chain.fk(&JointState::new(&[0.3, 0.2, 0.1, 0.5, 0.8, -0.4]));
+    /// let ik = AnalyticIk::new(&set.model, chain.base(), chain.tool())?;
+    /// let mut reached = 0;
+    /// for (branch, q) in ik.solve_all(&target) {
+    ///     match q {
+    ///         Ok(q) => {
+    ///             let (dt, dr) = chain.fk(&JointState::new(&q)).distance(&target);
+    ///             assert!(dt < 1e-9 && dr < 1e-9, "cfx {}: {dt} m, {dr} rad", branch.cfx());
+    ///             reached += 1;
+    ///         }
+    ///         // The other branches put a joint beyond the IRB 120's limits, and say which.
+    ///         Err(e) => assert!(matches!(e, IkError::JointLimit { .. }), "cfx {}: {e}", branch.cfx()),
+    ///     }
+    /// }
+    /// assert!(reached >= 2, "the branch the pose came from, and its wrist flip");
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
     pub fn solve_all(&self, target: &Frame) -> [(Branch, Result<[f64; 6], IkError>); 8] {
         Branch::ALL.map(|b| (b, self.solve(target, b)))
     }

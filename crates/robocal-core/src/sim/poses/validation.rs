@@ -70,7 +70,7 @@ impl PlanningCell {
     }
 
     /// Whether the beam from nest `nest` to the tracker clears every placed part (from
-    /// [`CollisionModel::place`]) — the beam as a segment of zero radius — and the plate.
+    /// [`crate::sim::collision::CollisionModel::place`]) — the beam as a segment of zero radius — and the plate.
     pub fn line_of_sight(&self, trace: &Trace, placed: &[Capsule], nest: usize) -> bool {
         let (p, _) = self.nest_in_world(trace, nest);
         let t = self.tracker;
