@@ -427,29 +427,7 @@ pub fn diagnose_with_progress(
     if opts.folds < 2 {
         return Err(DiagnoseError::Option(format!("folds must be at least 2, got {}", opts.folds)));
     }
-    let names = |purpose: Purpose, given: &[String]| -> Result<Vec<String>, DiagnoseError> {
-        if given.is_empty() {
-            return Ok(cell.sessions_for(purpose).map(|s| s.name.clone()).collect());
-        }
-        for g in given {
-            if cell.session(g).is_none() {
-                return Err(DiagnoseError::Option(format!("no session named '{g}' in the cell")));
-            }
-        }
-        Ok(given.to_vec())
-    };
-    let identification = names(Purpose::Identification, &opts.identification)?;
-    let validation = match &opts.validation {
-        None => names(Purpose::Validation, &[])?,
-        Some(v) if v.is_empty() => Vec::new(),
-        Some(v) => names(Purpose::Validation, v)?,
-    };
-    if identification.is_empty() {
-        return Err(DiagnoseError::Option("the cell has no identification session".into()));
-    }
-    if let Some(s) = identification.iter().find(|s| validation.contains(s)) {
-        return Err(DiagnoseError::Option(format!("session '{s}' is named for both identification and validation")));
-    }
+    let (identification, validation) = diagnosed_sessions(cell, opts)?;
     let mut sessions = identification.clone();
     sessions.extend(validation.iter().cloned());
 
@@ -458,105 +436,48 @@ pub fn diagnose_with_progress(
     let mut work = cell.clone();
     let derived = order::fill_approach(&mut work, &sessions);
 
-    let start = start_options(input, opts, sessions.clone());
+    // 1. The current model, fitted on every diagnosed session.
     let t0 = std::time::Instant::now();
-    let stage0 = stage::Stage::fit(&work, start)?;
+    let stage0 = stage::Stage::fit(&work, start_options(input, opts, sessions.clone()))?;
     search::timing("stage 0", t0);
+    // 2. The folds and the noise floor.
     progress(0.1, "estimating the noise floor");
     let t0 = std::time::Instant::now();
     let start_note = stage0.fit.as_ref().err().cloned();
-    let pr = &stage0.problem;
     let tested_sessions = if validation.is_empty() { &identification } else { &validation };
-    let tested: Vec<bool> = pr.obs.iter().map(|o| tested_sessions.contains(&pr.session_names[o.session])).collect();
-    let joints: Vec<Vec<f64>> = pr.obs.iter().map(|o| o.state.q[..pr.model.dof()].to_vec()).collect();
-    let folds = Folds::new(&joints, &tested, opts.folds, opts.seed);
-    if folds.n_poses < 2 * opts.folds {
-        return Err(DiagnoseError::Option(format!(
-            "{} tested poses are too few for {}-fold cross-validation",
-            folds.n_poses, opts.folds
-        )));
-    }
-    let tested_obs: Vec<usize> = (0..pr.obs.len()).filter(|&o| tested[o]).collect();
-    let fl = floor::floor(&stage0, &work, &tested_obs, &opts.noise, opts.seed);
-
-    // Calibration positions and the zone centre.
-    let id_obs: Vec<usize> =
-        (0..pr.obs.len()).filter(|&o| identification.contains(&pr.session_names[pr.obs[o].session])).collect();
-    let calib: Vec<Vector3<f64>> = id_obs.iter().map(|&o| pr.target_position(&pr.obs[o])).collect();
-    let calib_joints: Vec<Vec<f64>> = id_obs.iter().map(|&o| joints[o].clone()).collect();
-    let zone = match &cell.artefact {
-        Some(a) => a.triangle.centroid(),
-        None => calib.iter().sum::<Vector3<f64>>() / calib.len().max(1) as f64,
-    };
-    let base = input.set.chain().base().t;
-
+    let tested = Tested::of(&stage0, &work, tested_sessions, &identification, opts)?;
     search::timing("folds + floor", t0);
+    // 3. The search: candidates screened, cross-validated and refitted, round by round.
     progress(0.2, "screening and cross-validating candidate effects");
     let t0 = std::time::Instant::now();
     let search_opts = SearchOptions { threads: opts.threads.max(opts.search.threads), ..opts.search.clone() };
-    let mut s = search::search(&work, stage0, &folds, fl.rms * fl.rms, &search_opts)?;
+    let mut s = search::search(&work, stage0, &tested.folds, tested.floor.rms * tested.floor.rms, &search_opts)?;
     if let Some(reason) = derived.unavailable_reason() {
         for u in s.unavailable.iter_mut().filter(|u| u.kind == Kind::Backlash) {
             u.reason = reason.clone();
         }
     }
     search::timing("search", t0);
+    // 4. Where the start model misses, and the decomposition of its error.
     progress(0.85, "locating the residual error");
     let t0 = std::time::Instant::now();
-    let voxel = if opts.voxel_size > 0.0 {
-        opts.voxel_size
-    } else {
-        let pts: Vec<Vector3<f64>> = tested_obs.iter().map(|&o| pr_target(&s.stages[0], o)).collect();
-        auto_voxel(&pts)
-    };
-    let location =
-        locate::locate(&s.stages[0], &s.baselines[0], &fl, &calib, &calib_joints, zone, base, voxel, opts.fdr);
-
-    // Decomposition. One model, one figure: the held-out errors of the models refitted in full on
-    // the folds where that worked (always, unless a fold's refit failed: then the linearised
-    // folds', and a note says so).
+    let location = tested.locate(&s, cell, input.set.chain().base().t, opts);
+    // One model, one figure: the held-out errors of the models refitted in full on the folds where
+    // that worked (always, unless a fold's refit failed: then the linearised folds', and a note
+    // says so).
     let figures: Vec<&cv::Heldout> = s.baselines.iter().zip(&s.refits).map(|(b, r)| r.as_ref().unwrap_or(b)).collect();
     let refit_note = s.refits.iter().find_map(|r| r.as_ref().err()).map(|e| {
         format!("a model could not be refitted on the folds ({e}): its held-out figures are the linearised folds'")
     });
-    let heldout = ErrorStats::of(&figures[0].norms()).ok_or_else(|| DiagnoseError::Option("no tested pose".into()))?;
-    let calibrated = if validation.is_empty() {
-        None
-    } else {
-        validate(input.set, cell, &validation, Reference::Measured).ok().map(|r| r.calibrated.position)
-    };
-    let decomposition = Decomposition {
-        extrapolation_gap: calibrated.map(|c| c.mean - heldout.mean),
-        unmodelled_gap: heldout.mean - fl.mean,
-        calibrated,
-        heldout,
-        floor: fl,
-    };
-
+    let decomposition = decompose(input, &validation, &figures, tested.floor)?;
     let evidence = evidence(&s, &figures);
-    // Shrink.
-    let mut shrink = Vec::new();
-    for (k, b) in figures.iter().enumerate() {
-        let stats = ErrorStats::of(&b.norms()).ok_or_else(|| DiagnoseError::Option("no tested pose".into()))?;
-        let closure = (k > 0).then(|| {
-            let gap = decomposition.heldout.mean - decomposition.floor.mean;
-            if gap > 0.0 { (decomposition.heldout.mean - stats.mean) / gap } else { 0.0 }
-        });
-        shrink.push(ShrinkEntry { model: s.accepted[..k].iter().map(|c| c.label()).collect(), stats, closure });
-    }
-
+    let shrink = shrink_table(&s, &figures, &decomposition)?;
     search::timing("where + decomposition", t0);
+    // 5. The verdict, the accepted model refitted on all the data, and its transfer.
     let t0 = std::time::Instant::now();
     let verdict = verdict(&s, &decomposition);
     let model = s.stages.last().expect("a stage").options.clone();
-    let accepted = if s.accepted.is_empty() {
-        None
-    } else {
-        let mut o = model.clone();
-        o.anchor = None;
-        o.start = Some(s.stages.last().expect("a stage").set.clone());
-        identify(&work, &o).ok().or_else(|| s.stages.last().and_then(|st| st.fit.as_ref().ok().cloned()))
-    };
+    let accepted = accepted_identification(&s, &work, &model);
     search::timing("verdict + accepted", t0);
     if !opts.transfer.is_empty() {
         progress(0.95, "transfer to other sessions");
@@ -565,59 +486,7 @@ pub fn diagnose_with_progress(
     let approach = derived.source.filter(|_| backlash_screened);
     let approach_notes =
         if backlash_screened || derived.refused().next().is_some() { derived.notes() } else { Vec::new() };
-    // Transfer of the starting and the final model.
-    let mut transfer = Vec::new();
-    let ranges = joint_ranges(&work, &identification);
-    for t in &opts.transfer {
-        if cell.session(t).is_none() {
-            return Err(DiagnoseError::Option(format!("transfer: no session named '{t}' in the cell")));
-        }
-        let start_model = start_options(input, opts, Vec::new());
-        let mut models = vec![("start".to_string(), start_model.model.clone(), input.set.clone())];
-        // Every intermediate model too (the start with the first k effects, as fitted in the
-        // search): which terms carry to another session and which do not. Reported, never used to
-        // choose the model (that would select on the session being tested).
-        for k in 1..=s.accepted.len() {
-            let st = &s.stages[k];
-            let labels: Vec<String> = s.accepted[..k].iter().map(|c| c.label()).collect();
-            models.push((format!("start + {}", labels.join(" + ")), st.options.model.clone(), st.set.clone()));
-        }
-        if !s.accepted.is_empty() {
-            let fin = accepted
-                .as_ref()
-                .map(|id| id.set.clone())
-                .unwrap_or_else(|| s.stages.last().expect("a stage").set.clone());
-            models.push(("final".to_string(), model.model.clone(), fin));
-        }
-        for (name, m, set) in models {
-            let mut o = IdentifyOptions {
-                model: m,
-                start: Some(set),
-                only: vec!["base".into(), "tool".into()],
-                fixed: opts.transfer_fixed.clone(),
-                kappa_limit: opts.transfer_kappa_limit,
-                rotation_weight: opts.rotation_weight,
-                ..unrefused()
-            };
-            o.selection.sessions = vec![t.clone()];
-            let r = identify(&work, &o).map_err(|e| e.to_string()).and_then(|id| {
-                let k = id.quality.kappa_scaled;
-                validate(&id.set, &work, std::slice::from_ref(t), Reference::Measured).map_err(|e| e.to_string()).map(
-                    |r| {
-                        let split = ranges.as_deref().map(|g| range_split(&work, g, &r.residuals));
-                        (r.calibrated.position, k, split)
-                    },
-                )
-            });
-            transfer.push(Transfer {
-                session: t.clone(),
-                model: name,
-                kappa_scaled: r.as_ref().ok().map(|x| x.1),
-                range: r.as_ref().ok().and_then(|x| x.2.clone()),
-                errors: r.map(|x| x.0),
-            });
-        }
-    }
+    let transfer = transfers(input, opts, &work, &identification, &s, &model, accepted.as_ref())?;
     Ok(Diagnosis {
         verdict,
         decomposition,
@@ -641,6 +510,220 @@ pub fn diagnose_with_progress(
         transfer,
         evidence,
     })
+}
+
+/// The identification and validation sessions a diagnosis uses: those named, or the cell's of each
+/// purpose (an empty validation list: cross-validate on the identification sessions).
+fn diagnosed_sessions(cell: &Cell, opts: &DiagnoseOptions) -> Result<(Vec<String>, Vec<String>), DiagnoseError> {
+    let names = |purpose: Purpose, given: &[String]| -> Result<Vec<String>, DiagnoseError> {
+        if given.is_empty() {
+            return Ok(cell.sessions_for(purpose).map(|s| s.name.clone()).collect());
+        }
+        for g in given {
+            if cell.session(g).is_none() {
+                return Err(DiagnoseError::Option(format!("no session named '{g}' in the cell")));
+            }
+        }
+        Ok(given.to_vec())
+    };
+    let identification = names(Purpose::Identification, &opts.identification)?;
+    let validation = match &opts.validation {
+        None => names(Purpose::Validation, &[])?,
+        Some(v) if v.is_empty() => Vec::new(),
+        Some(v) => names(Purpose::Validation, v)?,
+    };
+    if identification.is_empty() {
+        return Err(DiagnoseError::Option("the cell has no identification session".into()));
+    }
+    if let Some(s) = identification.iter().find(|s| validation.contains(s)) {
+        return Err(DiagnoseError::Option(format!("session '{s}' is named for both identification and validation")));
+    }
+    Ok((identification, validation))
+}
+
+/// The tested poses of a diagnosis: their folds, the noise floor on them, and the calibration
+/// positions and zone the location step measures distances from.
+struct Tested {
+    folds: Folds,
+    floor: Floor,
+    obs: Vec<usize>,
+    calib: Vec<Vector3<f64>>,
+    calib_joints: Vec<Vec<f64>>,
+}
+
+impl Tested {
+    fn of(
+        stage0: &stage::Stage,
+        work: &Cell,
+        tested_sessions: &[String],
+        identification: &[String],
+        opts: &DiagnoseOptions,
+    ) -> Result<Tested, DiagnoseError> {
+        let pr = &stage0.problem;
+        let tested: Vec<bool> = pr.obs.iter().map(|o| tested_sessions.contains(&pr.session_names[o.session])).collect();
+        let joints: Vec<Vec<f64>> = pr.obs.iter().map(|o| o.state.q[..pr.model.dof()].to_vec()).collect();
+        let folds = Folds::new(&joints, &tested, opts.folds, opts.seed);
+        if folds.n_poses < 2 * opts.folds {
+            return Err(DiagnoseError::Option(format!(
+                "{} tested poses are too few for {}-fold cross-validation",
+                folds.n_poses, opts.folds
+            )));
+        }
+        let obs: Vec<usize> = (0..pr.obs.len()).filter(|&o| tested[o]).collect();
+        let floor = floor::floor(stage0, work, &obs, &opts.noise, opts.seed);
+        let id_obs: Vec<usize> =
+            (0..pr.obs.len()).filter(|&o| identification.contains(&pr.session_names[pr.obs[o].session])).collect();
+        let calib: Vec<Vector3<f64>> = id_obs.iter().map(|&o| pr.target_position(&pr.obs[o])).collect();
+        let calib_joints: Vec<Vec<f64>> = id_obs.iter().map(|&o| joints[o].clone()).collect();
+        Ok(Tested { folds, floor, obs, calib, calib_joints })
+    }
+
+    /// Where the start model misses: binned in voxels (the option's size, or one chosen from the
+    /// tested positions), against the distance from the calibration zone (the artefact's centre,
+    /// or the calibration positions' centroid) and the base.
+    fn locate(&self, s: &search::Search, cell: &Cell, base: Vector3<f64>, opts: &DiagnoseOptions) -> Where {
+        let zone = match &cell.artefact {
+            Some(a) => a.triangle.centroid(),
+            None => self.calib.iter().sum::<Vector3<f64>>() / self.calib.len().max(1) as f64,
+        };
+        let voxel = if opts.voxel_size > 0.0 {
+            opts.voxel_size
+        } else {
+            let pts: Vec<Vector3<f64>> = self.obs.iter().map(|&o| pr_target(&s.stages[0], o)).collect();
+            auto_voxel(&pts)
+        };
+        locate::locate(
+            &s.stages[0],
+            &s.baselines[0],
+            &self.floor,
+            &self.calib,
+            &self.calib_joints,
+            zone,
+            base,
+            voxel,
+            opts.fdr,
+        )
+    }
+}
+
+/// The start model's error split: the floor (what no model removes), the unmodelled gap (held
+/// out, above the floor) and, with validation sessions, the extrapolation gap (validation against
+/// held out).
+fn decompose(
+    input: &Input<'_>,
+    validation: &[String],
+    figures: &[&cv::Heldout],
+    floor: Floor,
+) -> Result<Decomposition, DiagnoseError> {
+    let heldout = ErrorStats::of(&figures[0].norms()).ok_or_else(|| DiagnoseError::Option("no tested pose".into()))?;
+    let calibrated = if validation.is_empty() {
+        None
+    } else {
+        validate(input.set, input.cell, validation, Reference::Measured).ok().map(|r| r.calibrated.position)
+    };
+    Ok(Decomposition {
+        extrapolation_gap: calibrated.map(|c| c.mean - heldout.mean),
+        unmodelled_gap: heldout.mean - floor.mean,
+        calibrated,
+        heldout,
+        floor,
+    })
+}
+
+/// The held-out figures of the start model and of each model the search accepted (the start with
+/// its first k effects), with the share of the gap above the floor each closes.
+fn shrink_table(
+    s: &search::Search,
+    figures: &[&cv::Heldout],
+    decomposition: &Decomposition,
+) -> Result<Vec<ShrinkEntry>, DiagnoseError> {
+    let mut shrink = Vec::new();
+    for (k, b) in figures.iter().enumerate() {
+        let stats = ErrorStats::of(&b.norms()).ok_or_else(|| DiagnoseError::Option("no tested pose".into()))?;
+        let closure = (k > 0).then(|| {
+            let gap = decomposition.heldout.mean - decomposition.floor.mean;
+            if gap > 0.0 { (decomposition.heldout.mean - stats.mean) / gap } else { 0.0 }
+        });
+        shrink.push(ShrinkEntry { model: s.accepted[..k].iter().map(|c| c.label()).collect(), stats, closure });
+    }
+    Ok(shrink)
+}
+
+/// The model with every accepted effect, identified on all the diagnosed data from where the search
+/// left it (no anchors); the search's last fit when that refit fails; `None` without an effect.
+fn accepted_identification(s: &search::Search, work: &Cell, model: &IdentifyOptions) -> Option<Identification> {
+    if s.accepted.is_empty() {
+        return None;
+    }
+    let mut o = model.clone();
+    o.anchor = None;
+    o.start = Some(s.stages.last().expect("a stage").set.clone());
+    identify(work, &o).ok().or_else(|| s.stages.last().and_then(|st| st.fit.as_ref().ok().cloned()))
+}
+
+/// The start model, each intermediate model of the search and the final one carried to each
+/// transfer session (base and tool refitted there), with their errors and how many of its poses
+/// lie inside the identified joint ranges.
+fn transfers(
+    input: &Input<'_>,
+    opts: &DiagnoseOptions,
+    work: &Cell,
+    identification: &[String],
+    s: &search::Search,
+    model: &IdentifyOptions,
+    accepted: Option<&Identification>,
+) -> Result<Vec<Transfer>, DiagnoseError> {
+    let mut transfer = Vec::new();
+    let ranges = joint_ranges(work, identification);
+    for t in &opts.transfer {
+        if input.cell.session(t).is_none() {
+            return Err(DiagnoseError::Option(format!("transfer: no session named '{t}' in the cell")));
+        }
+        let start_model = start_options(input, opts, Vec::new());
+        let mut models = vec![("start".to_string(), start_model.model.clone(), input.set.clone())];
+        // Every intermediate model too (the start with the first k effects, as fitted in the
+        // search): which terms carry to another session and which do not. Reported, never used to
+        // choose the model (that would select on the session being tested).
+        for k in 1..=s.accepted.len() {
+            let st = &s.stages[k];
+            let labels: Vec<String> = s.accepted[..k].iter().map(|c| c.label()).collect();
+            models.push((format!("start + {}", labels.join(" + ")), st.options.model.clone(), st.set.clone()));
+        }
+        if !s.accepted.is_empty() {
+            let fin =
+                accepted.map(|id| id.set.clone()).unwrap_or_else(|| s.stages.last().expect("a stage").set.clone());
+            models.push(("final".to_string(), model.model.clone(), fin));
+        }
+        for (name, m, set) in models {
+            let mut o = IdentifyOptions {
+                model: m,
+                start: Some(set),
+                only: vec!["base".into(), "tool".into()],
+                fixed: opts.transfer_fixed.clone(),
+                kappa_limit: opts.transfer_kappa_limit,
+                rotation_weight: opts.rotation_weight,
+                ..unrefused()
+            };
+            o.selection.sessions = vec![t.clone()];
+            let r = identify(work, &o).map_err(|e| e.to_string()).and_then(|id| {
+                let k = id.quality.kappa_scaled;
+                validate(&id.set, work, std::slice::from_ref(t), Reference::Measured).map_err(|e| e.to_string()).map(
+                    |r| {
+                        let split = ranges.as_deref().map(|g| range_split(work, g, &r.residuals));
+                        (r.calibrated.position, k, split)
+                    },
+                )
+            });
+            transfer.push(Transfer {
+                session: t.clone(),
+                model: name,
+                kappa_scaled: r.as_ref().ok().map(|x| x.1),
+                range: r.as_ref().ok().and_then(|x| x.2.clone()),
+                errors: r.map(|x| x.0),
+            });
+        }
+    }
+    Ok(transfer)
 }
 
 /// The held-out figures of the starting model with further parameters added (an oracle: the
