@@ -49,7 +49,6 @@ fn candidate_name(c: &CandidateRef) -> String {
 /// The diagnosis's sections.
 pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
     let mut s = String::new();
-    let v = &d.verdict;
     s.push_str(&format!(
         "<p class=\"meta\">Identification sessions: {}; tested poses: {} ({}-fold grouped cross-validation).</p>",
         esc(&d.sessions.identification.join(", ")),
@@ -60,6 +59,27 @@ pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
         }),
         d.sessions.folds
     ));
+    verdict_section(&mut s, d);
+    decomposition_section(&mut s, d);
+    candidates_section(&mut s, d);
+    where_section(&mut s, d);
+    evidence_section(&mut s, d);
+    shrink_section(&mut s, d);
+    transfer_section(&mut s, d);
+    if !d.notes.is_empty() {
+        s.push_str("<h3>Notes</h3><ul>");
+        for n in &d.notes {
+            s.push_str(&format!("<li>{}</li>", esc(n)));
+        }
+        s.push_str("</ul>");
+    }
+    s
+}
+
+/// The verdict, its named effects (estimate, σ, held-out before → after, gap closed), what
+/// remains, the experiment that would separate it, and the final model.
+fn verdict_section(s: &mut String, d: &DiagnosisOut) {
+    let v = &d.verdict;
     s.push_str("<h2>Verdict</h2>");
     s.push_str(&format!("<p><strong>{}</strong>: {}</p>", v.status, esc(&v.summary)));
     if !v.effects.is_empty() {
@@ -106,7 +126,10 @@ pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
         s.push_str(&format!("<p class=\"note\">Experiment that would separate it: {}</p>", esc(x)));
     }
     s.push_str(&format!("<p>Final model: <code>{}</code></p>", esc(&d.model)));
+}
 
+/// The starting model's error split into the floor, the explained and the unexplained part.
+fn decomposition_section(s: &mut String, d: &DiagnosisOut) {
     s.push_str("<h2>Decomposition of the error</h2>");
     let dec = &d.decomposition;
     let rows = decomposition_rows(d);
@@ -151,7 +174,11 @@ pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
         mm(dec.floor.instrument_sigma_mm),
         mm(dec.floor.prediction_rms_mm)
     ));
+}
 
+/// The screened candidates: the most significant of each round and every one checked on held-out
+/// poses, the full list folded, and those these data cannot test.
+fn candidates_section(s: &mut String, d: &DiagnosisOut) {
     s.push_str("<h2>Candidates</h2>");
     // The top CANDIDATES_SHOWN of each round by Holm-corrected p, and every one the held-out
     // check evaluated; the full list folded below.
@@ -220,7 +247,11 @@ pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
         let rows: Vec<Vec<String>> = d.unavailable.iter().map(|u| vec![esc(&u.name), esc(&u.reason)]).collect();
         s.push_str(&table("Candidates these data cannot test", &["candidate", "why"], &rows, &[false, false]));
     }
+}
 
+/// Where the starting model misses: binned profiles, the signed error per axis, the voxels above
+/// the floor.
+fn where_section(s: &mut String, d: &DiagnosisOut) {
     s.push_str("<h2>Where the model misses</h2>");
     let w = &d.location;
     let panels: Vec<Panel> = w
@@ -241,7 +272,7 @@ pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
             ),
             x_desc: format!("{} ({})", a.variable, a.unit),
             points: a.profile.iter().map(|b| (b.at, b.mean_mm)).collect(),
-            reference: Some(dec.floor.mean_mm),
+            reference: Some(d.decomposition.floor.mean_mm),
         })
         .collect();
     if panels.is_empty() {
@@ -299,7 +330,10 @@ pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
             &[false, true, true, true, true, true],
         ));
     }
+}
 
+/// The evidence for each named effect, one figure each.
+fn evidence_section(s: &mut String, d: &DiagnosisOut) {
     if !d.evidence.is_empty() {
         s.push_str("<h2>The evidence for each named effect</h2>");
         s.push_str(
@@ -316,7 +350,10 @@ pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
             s.push_str(&evidence_figure(e));
         }
     }
+}
 
+/// How far the held-out error shrinks, model by model.
+fn shrink_section(s: &mut String, d: &DiagnosisOut) {
     s.push_str("<h2>How far the error shrinks</h2>");
     let rows: Vec<Vec<String>> = d
         .shrink
@@ -339,6 +376,10 @@ pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
         &rows,
         &[false, true, true, true, true, true, true],
     ));
+}
+
+/// The models carried to other sessions, inside and outside the identified joint ranges.
+fn transfer_section(s: &mut String, d: &DiagnosisOut) {
     if !d.transfer.is_empty() {
         let rows: Vec<Vec<String>> = d
             .transfer
@@ -382,14 +423,6 @@ pub fn diagnosis_sections(d: &DiagnosisOut) -> String {
              extrapolated, and its error there tests that extrapolation.</p>\n",
         );
     }
-    if !d.notes.is_empty() {
-        s.push_str("<h3>Notes</h3><ul>");
-        for n in &d.notes {
-            s.push_str(&format!("<li>{}</li>", esc(n)));
-        }
-        s.push_str("</ul>");
-    }
-    s
 }
 
 /// The diagnosis report page.
