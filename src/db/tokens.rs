@@ -7,8 +7,11 @@ use sha2::{Digest, Sha256};
 
 use super::paging::{self, Page};
 
-/// What a token may do.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+/// What a token may do; on the wire, its lower-case name (`measure`).
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
+)]
+#[serde(rename_all = "snake_case")]
 pub enum Scope {
     /// Create robots, artefacts and sessions; append measurements.
     Measure,

@@ -21,20 +21,8 @@ pub struct NewToken {
     #[schema(min_length = 1, max_length = 200, pattern = "^[^\\u0000]*[^\\s\\u0000][^\\u0000]*$")]
     pub name: String,
     /// Any of `measure`, `calibrate`, `compensate`, `read`, `admin` (repeats count once).
-    #[schema(min_items = 1, value_type = Vec<ScopeName>)]
-    pub scopes: Vec<String>,
-}
-
-/// A token's scope (the schema of [`Scope`]'s names).
-#[derive(ToSchema)]
-#[schema(rename_all = "snake_case")]
-#[allow(dead_code)] // a schema only: scopes are parsed by `Scope::parse`
-pub enum ScopeName {
-    Measure,
-    Calibrate,
-    Compensate,
-    Read,
-    Admin,
+    #[schema(min_items = 1)]
+    pub scopes: Vec<Scope>,
 }
 
 /// A token (never its secret, except once at creation).
@@ -42,7 +30,7 @@ pub enum ScopeName {
 pub struct TokenOut {
     pub id: String,
     pub name: String,
-    pub scopes: Vec<String>,
+    pub scopes: Vec<Scope>,
     pub created_at: String,
     pub revoked_at: Option<String>,
     /// The secret: only in the answer to its creation. Send it as `Authorization: Bearer <token>`.
@@ -54,7 +42,7 @@ pub fn token_out(t: &TokenRow, secret: Option<String>) -> TokenOut {
     TokenOut {
         id: t.id.clone(),
         name: t.name.clone(),
-        scopes: t.scopes().iter().map(|s| s.as_str().to_string()).collect(),
+        scopes: t.scopes(),
         created_at: t.created_at.clone(),
         revoked_at: t.revoked_at.clone(),
         token: secret,
@@ -74,22 +62,13 @@ pub async fn create(
     JsonBody(body): JsonBody<NewToken>,
 ) -> Result<(StatusCode, Json<TokenOut>), ApiError> {
     let name = limits::name(&body.name, "name").map_err(|e| ApiError::domain(e, ""))?;
-    let mut scopes: Vec<Scope> = Vec::new();
-    for (i, s) in body.scopes.iter().enumerate() {
-        let sc = Scope::parse(s).ok_or_else(|| {
-            ApiError::invalid(
-                format!("scopes[{i}]"),
-                format!("'{s}' is not a scope (measure, calibrate, compensate, read, admin)"),
-            )
-        })?;
-        if !scopes.contains(&sc) {
-            scopes.push(sc);
-        }
-    }
+    // An unknown name is refused where the body is read, with its path (`scopes[0]`).
+    let mut scopes = body.scopes;
+    scopes.sort();
+    scopes.dedup();
     if scopes.is_empty() {
         return Err(ApiError::invalid("scopes", "give at least one scope"));
     }
-    scopes.sort();
     let (row, secret) = tokens::create(&state.pool, name, &scopes).await?;
     Ok((StatusCode::CREATED, Json(token_out(&row, Some(secret)))))
 }
