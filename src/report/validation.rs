@@ -314,11 +314,19 @@ pub fn validation_sections(v: &ValidationDoc) -> String {
     };
     let cal: Vec<f64> = res.iter().map(|r| r.error_norm_mm).collect();
     let nom: Vec<f64> = res.iter().map(|r| r.nominal_error_norm_mm).collect();
+    distribution_section(&mut s, v, res, &cal, &nom);
+    distance_section(&mut s, v, res, &cal, &nom);
+    positions_section(&mut s, v, res, &cal);
+    s
+}
+
+/// The distributions of the position errors: histogram, CDFs, Q–Q, per axis.
+fn distribution_section(s: &mut String, v: &ValidationDoc, res: &[Residual], cal: &[f64], nom: &[f64]) {
     s.push_str("<h2>Distribution of the position errors</h2>");
     // Each model on its own scale: the nominal model's errors are a hundred times the calibrated
     // one's, and on one axis the calibrated curve would be a flat line at zero.
-    let [hist, cdf, qq] = plot::distribution_svgs("|e|", "mm", &cal, None);
-    let [_, nominal_cdf, _] = plot::distribution_svgs("|e| of the nominal model", "mm", &nom, None);
+    let [hist, cdf, qq] = plot::distribution_svgs("|e|", "mm", cal, None);
+    let [_, nominal_cdf, _] = plot::distribution_svgs("|e| of the nominal model", "mm", nom, None);
     s.push_str(&figure(&hist, "Calibrated |e| with the normal of the same mean and σ (cf. Fig. 5.17)."));
     s.push_str(&figure(&cdf, "Empirical CDF of the calibrated |e| (solid) with its fitted normal (dashed)."));
     s.push_str(&figure(
@@ -336,7 +344,10 @@ pub fn validation_sections(v: &ValidationDoc) -> String {
             v.calibrated.per_axis.z.shapiro_p.map_or("—".into(), p_value)
         ),
     ));
+}
 
+/// |e| of each model against the distance to the base and to the calibration zone.
+fn distance_section(s: &mut String, v: &ValidationDoc, res: &[Residual], cal: &[f64], nom: &[f64]) {
     s.push_str("<h2>Error against distance</h2>");
     let line = |f: &Option<Fit>| f.as_ref().map(|f| (f.slope_mm_per_mm, f.intercept_mm));
     let r2 = |f: &Option<Fit>| f.as_ref().map_or("—".into(), |f| fixed(f.r2, 3));
@@ -374,12 +385,16 @@ pub fn validation_sections(v: &ValidationDoc) -> String {
             "5.16",
         );
     }
+}
+
+/// Where the validation poses are, shaded by their calibrated |e|.
+fn positions_section(s: &mut String, v: &ValidationDoc, res: &[Residual], cal: &[f64]) {
     let positions: Option<Vec<[f64; 3]>> = res.iter().map(|r| r.position_mm).collect();
     if let Some(p) = positions {
         s.push_str("<h2>Where the validation poses are</h2>");
         let (lo, hi) = cal.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(*x), b.max(*x)));
         s.push_str(&figure(
-            &plot::projections_svg(&p, &cal, v.balls_mm.as_ref()),
+            &plot::projections_svg(&p, cal, v.balls_mm.as_ref()),
             &format!(
                 "Measured positions in {{W}}, darker and larger for a larger calibrated |e| ({} mm to {} mm); \
                  × the artefact's balls, dashed their triangle (the calibration zone) (cf. Fig. 5.11–5.14).",
@@ -388,7 +403,6 @@ pub fn validation_sections(v: &ValidationDoc) -> String {
             ),
         ));
     }
-    s
 }
 
 /// The whole validation report page.
