@@ -124,51 +124,16 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
     // with a guess stays judged at its guess (the UR10 probe: θ6 has no effect there). An
     // unknown payload acts through the compliances, which are zero at the start: its mass has
     // no effect there and is judged at the solution too.
-    let tcp_unknown = problem.tools.iter().any(|b| b.identify_tcp && b.tool.tcp[..3] == [0.0; 3]);
-    if payload_unknown || tcp_unknown {
-        let (j, r) = problem.linearise_all(&fit.x);
-        // Judged again for the payload alone, every other parameter keeps the start's judgement:
-        // a TCP guessed on axis 6 that the fit leaves a few µm off it (noise) would otherwise free
-        // the parameters its exact position made dependent (a5 on θ5, d5 on α5 for the IRB 120),
-        // and the refit would wander in their valley until its iteration limit.
-        let mut judged = fixed.clone();
-        for &g in &held_where_stopped {
-            if let Status::Fixed(why) = &status[g] {
-                judged.insert(g, why.clone());
-            }
-        }
-        if !tcp_unknown {
-            let mass = payload_mass(&problem);
-            for g in (0..problem.n_params()).filter(|g| !free.contains(g) && Some(*g) != mass) {
-                if let Status::Fixed(why) = &status[g] {
-                    judged.entry(g).or_insert_with(|| why.clone());
-                }
-            }
-        }
-        // With the statistical test too (σ from the residual here): a TCP the fit leaves a few µm
-        // off the last axis keeps a5 and d5 formally independent of θ5 and α5, with standard
-        // deviations of some 180 mm (an SMR in a nest on the flange's axis, no guess).
-        let sigma = residual_sigma(&r, problem.n_rows, free.len());
-        let (again, mut again_status) = identifiability::select_given_noise(&problem, &j, &judged, sigma);
-        if again != free && !again.is_empty() {
-            let mass = payload_unknown.then(|| payload_mass(&problem)).flatten().filter(|g| again.contains(g));
-            match solver::solve(&problem, &again, &fit.x, &opts.solver) {
-                Ok(f) => (fit, free, status) = (f, again, again_status),
-                // An unknown payload whose fit crawls (a valley with the compliances) is not
-                // determined by these data: the fit without it stands, and says so.
-                Err(e @ SolveError::IterationLimit { .. }) if mass.is_some() => {
-                    let g = mass.expect("checked");
-                    let without: Vec<usize> = again.iter().copied().filter(|&c| c != g).collect();
-                    if without != free {
-                        fit = solver::solve(&problem, &without, &fit.x, &opts.solver)?;
-                    }
-                    again_status[g] = Status::Fixed(FixedReason::PayloadUnsettled { error: e.to_string() });
-                    (free, status) = (without, again_status);
-                }
-                Err(e) => return Err(e.into()),
-            }
-        }
-    }
+    rejudge_at_solution(
+        &problem,
+        opts,
+        payload_unknown,
+        &fixed,
+        &held_where_stopped,
+        &mut fit,
+        &mut free,
+        &mut status,
+    )?;
     let rows: Vec<(usize, usize)> = problem.obs.iter().map(|o| (o.row, o.rows)).collect();
     // The pose of each measurement, for standard deviations that hold when the readings of one
     // stop share an error (several reflectors, a turn no term explains): the larger of the classic
@@ -188,28 +153,191 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
     };
     let mut quality = super::hold::hold_undetermined(&f, &mut fit, &mut free, &mut status)?;
     if opts.noise.is_some() {
-        // Weighted rows: the RMS of the measurement residuals in metres, from the rows divided
-        // by their weights (and the robust weights, which the fit's residual carries too).
         quality.weighted = true;
-        let sum: f64 = problem
-            .obs
-            .iter()
-            .zip(&fit.weights)
-            .map(|(o, hw)| {
-                let hw = hw.sqrt();
-                (0..o.rows)
-                    .map(|k| {
-                        let w = o.weight[k] * hw;
-                        (fit.residual[o.row + k] / w).powi(2)
-                    })
-                    .sum::<f64>()
-            })
-            .sum();
-        quality.rms_residual = (sum / problem.obs.len().max(1) as f64).sqrt();
+        quality.rms_residual = weighted_rms(&problem, &fit);
     }
+    let worst = judge_fit(&problem, cell, opts, &fit, &free, &mut quality)?;
+
+    // The parameter set of the first tool, and every tool's result.
+    let mut std_g = vec![None; problem.n_params()];
+    for (c, &g) in free.iter().enumerate() {
+        std_g[g] = Some(quality.std[c]);
+    }
+    let tools = tool_results(&problem, &fit, &std_g, &status);
+    let (set, std, st) = layout_results(cell, &problem, base, &fit, &std_g, &status);
+    let downweighted = problem
+        .obs
+        .iter()
+        .zip(&fit.weights)
+        .filter(|(_, w)| **w < 1.0)
+        .map(|(o, w)| (problem.session_names[o.session].clone(), o.index, *w))
+        .collect();
+    Ok(Identification {
+        worst,
+        set,
+        std,
+        status: st,
+        tools,
+        free_names: free.iter().map(|&g| problem.name(g)).collect(),
+        iterations: fit.iterations,
+        downweighted,
+        quality,
+        x: fit.x,
+        notes,
+        problem,
+        free,
+    })
+}
+
+/// Identifiability judged again at the solution, when the start could not judge it: an unknown
+/// TCP (no guess) or an unknown payload. Refits from the solution when the choice changed; a
+/// payload whose refit does not settle is held, and said so.
+#[allow(clippy::too_many_arguments)]
+fn rejudge_at_solution(
+    problem: &Problem,
+    opts: &IdentifyOptions,
+    payload_unknown: bool,
+    fixed: &std::collections::HashMap<usize, FixedReason>,
+    held_where_stopped: &[usize],
+    fit: &mut Fit,
+    free: &mut Vec<usize>,
+    status: &mut Vec<Status>,
+) -> Result<(), IdentifyError> {
+    let tcp_unknown = problem.tools.iter().any(|b| b.identify_tcp && b.tool.tcp[..3] == [0.0; 3]);
+    if !(payload_unknown || tcp_unknown) {
+        return Ok(());
+    }
+    let (j, r) = problem.linearise_all(&fit.x);
+    // Judged again for the payload alone, every other parameter keeps the start's judgement:
+    // a TCP guessed on axis 6 that the fit leaves a few µm off it (noise) would otherwise free
+    // the parameters its exact position made dependent (a5 on θ5, d5 on α5 for the IRB 120),
+    // and the refit would wander in their valley until its iteration limit.
+    let mut judged = fixed.clone();
+    for &g in held_where_stopped {
+        if let Status::Fixed(why) = &status[g] {
+            judged.insert(g, why.clone());
+        }
+    }
+    if !tcp_unknown {
+        let mass = payload_mass(problem);
+        for g in (0..problem.n_params()).filter(|g| !free.contains(g) && Some(*g) != mass) {
+            if let Status::Fixed(why) = &status[g] {
+                judged.entry(g).or_insert_with(|| why.clone());
+            }
+        }
+    }
+    // With the statistical test too (σ from the residual here): a TCP the fit leaves a few µm
+    // off the last axis keeps a5 and d5 formally independent of θ5 and α5, with standard
+    // deviations of some 180 mm (an SMR in a nest on the flange's axis, no guess).
+    let sigma = residual_sigma(&r, problem.n_rows, free.len());
+    let (again, mut again_status) = identifiability::select_given_noise(problem, &j, &judged, sigma);
+    if again != *free && !again.is_empty() {
+        let mass = payload_unknown.then(|| payload_mass(problem)).flatten().filter(|g| again.contains(g));
+        match solver::solve(problem, &again, &fit.x, &opts.solver) {
+            Ok(f) => (*fit, *free, *status) = (f, again, again_status),
+            // An unknown payload whose fit crawls (a valley with the compliances) is not
+            // determined by these data: the fit without it stands, and says so.
+            Err(e @ SolveError::IterationLimit { .. }) if mass.is_some() => {
+                let g = mass.expect("checked");
+                let without: Vec<usize> = again.iter().copied().filter(|&c| c != g).collect();
+                if without != *free {
+                    *fit = solver::solve(problem, &without, &fit.x, &opts.solver)?;
+                }
+                again_status[g] = Status::Fixed(FixedReason::PayloadUnsettled { error: e.to_string() });
+                (*free, *status) = (without, again_status);
+            }
+            Err(e) => return Err(e.into()),
+        }
+    }
+    Ok(())
+}
+
+/// Every tool's TCP as fitted, with its standard deviations and statuses.
+fn tool_results(problem: &Problem, fit: &Fit, std_g: &[Option<f64>], status: &[Status]) -> Vec<ToolResult> {
+    let label = |g: usize| status[g].to_string();
+    problem
+        .tools
+        .iter()
+        .enumerate()
+        .map(|(t, b)| {
+            let off =
+                problem.params.iter().position(|p| *p == GlobalParam::Tool { tool: t, k: 0 }).expect("tool block");
+            let mut tool = b.tool.clone();
+            tool.tcp.copy_from_slice(&fit.x[off..off + 6]);
+            ToolResult {
+                sessions: b.sessions.clone(),
+                tool,
+                std: std::array::from_fn(|k| std_g[off + k]),
+                status: std::array::from_fn(|k| label(off + k)),
+            }
+        })
+        .collect()
+}
+
+/// The parameter set of the first tool (values, nominal values), with each layout entry's standard
+/// deviation and status.
+fn layout_results(
+    cell: &Cell,
+    problem: &Problem,
+    base: [f64; 6],
+    fit: &Fit,
+    std_g: &[Option<f64>],
+    status: &[Status],
+) -> (ParameterSet, Vec<Option<f64>>, Vec<Status>) {
+    let mut set = ParameterSet::nominal(cell.model.clone(), problem.tools[0].tool.clone(), base);
+    set.layout = problem.layout.clone();
+    set.nominal = problem.layout.nominal_values(&cell.model, &problem.tools[0].tool, &base);
+    set.values = problem.layout_values(&fit.x, 0);
+    let mut std = vec![None; set.layout.len()];
+    let mut st = vec![Status::Fixed(FixedReason::NotInProblem); set.layout.len()];
+    for (g, p) in problem.params.iter().enumerate() {
+        let i = match *p {
+            GlobalParam::Robot(i) => Some(i),
+            GlobalParam::Tool { tool: 0, k } => set.layout.index_of(Param::Tool(k)),
+            _ => None,
+        };
+        if let Some(i) = i {
+            std[i] = std_g[g];
+            st[i] = status[g].clone();
+        }
+    }
+    (set, std, st)
+}
+
+/// Weighted rows: the RMS of the measurement residuals in metres, from the rows divided by their
+/// weights (and the robust weights, which the fit's residual carries too).
+fn weighted_rms(problem: &Problem, fit: &Fit) -> f64 {
+    let sum: f64 = problem
+        .obs
+        .iter()
+        .zip(&fit.weights)
+        .map(|(o, hw)| {
+            let hw = hw.sqrt();
+            (0..o.rows)
+                .map(|k| {
+                    let w = o.weight[k] * hw;
+                    (fit.residual[o.row + k] / w).powi(2)
+                })
+                .sum::<f64>()
+        })
+        .sum();
+    (sum / problem.obs.len().max(1) as f64).sqrt()
+}
+
+/// Whether the model describes the data (its residual against the noise the instrument predicts,
+/// no gross outlier) and whether the fit is determined (rank, conditioning); the quality report
+/// gets the expected RMS and the ratio. The worst measurements, in units of their σ.
+fn judge_fit(
+    problem: &Problem,
+    cell: &Cell,
+    opts: &IdentifyOptions,
+    fit: &Fit,
+    free: &[usize],
+    quality: &mut Quality,
+) -> Result<Vec<Worst>, IdentifyError> {
     // Does the model describe the data? The residual against the noise the instrument predicts.
     let noise = opts.noise.clone().unwrap_or_default();
-    let fitness = Fitness::of(&problem, cell, &noise, &fit, opts.outlier_factor);
+    let fitness = Fitness::of(problem, cell, &noise, fit, opts.outlier_factor);
     quality.expected_rms = fitness.expected_rms;
     quality.residual_ratio = fitness.ratio;
     if fitness.ratio > opts.residual_ratio_limit {
@@ -245,69 +373,7 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
             combination: combination(),
         });
     }
-
-    // The parameter set of the first tool, and every tool's result.
-    let mut std_g = vec![None; problem.n_params()];
-    for (c, &g) in free.iter().enumerate() {
-        std_g[g] = Some(quality.std[c]);
-    }
-    let label = |g: usize| status[g].to_string();
-    let tools: Vec<ToolResult> = problem
-        .tools
-        .iter()
-        .enumerate()
-        .map(|(t, b)| {
-            let off =
-                problem.params.iter().position(|p| *p == GlobalParam::Tool { tool: t, k: 0 }).expect("tool block");
-            let mut tool = b.tool.clone();
-            tool.tcp.copy_from_slice(&fit.x[off..off + 6]);
-            ToolResult {
-                sessions: b.sessions.clone(),
-                tool,
-                std: std::array::from_fn(|k| std_g[off + k]),
-                status: std::array::from_fn(|k| label(off + k)),
-            }
-        })
-        .collect();
-    let mut set = ParameterSet::nominal(cell.model.clone(), problem.tools[0].tool.clone(), base);
-    set.layout = problem.layout.clone();
-    set.nominal = problem.layout.nominal_values(&cell.model, &problem.tools[0].tool, &base);
-    set.values = problem.layout_values(&fit.x, 0);
-    let mut std = vec![None; set.layout.len()];
-    let mut st = vec![Status::Fixed(FixedReason::NotInProblem); set.layout.len()];
-    for (g, p) in problem.params.iter().enumerate() {
-        let i = match *p {
-            GlobalParam::Robot(i) => Some(i),
-            GlobalParam::Tool { tool: 0, k } => set.layout.index_of(Param::Tool(k)),
-            _ => None,
-        };
-        if let Some(i) = i {
-            std[i] = std_g[g];
-            st[i] = status[g].clone();
-        }
-    }
-    let downweighted = problem
-        .obs
-        .iter()
-        .zip(&fit.weights)
-        .filter(|(_, w)| **w < 1.0)
-        .map(|(o, w)| (problem.session_names[o.session].clone(), o.index, *w))
-        .collect();
-    Ok(Identification {
-        worst: fitness.worst,
-        set,
-        std,
-        status: st,
-        tools,
-        free_names: free.iter().map(|&g| problem.name(g)).collect(),
-        iterations: fit.iterations,
-        downweighted,
-        quality,
-        x: fit.x,
-        notes,
-        problem,
-        free,
-    })
+    Ok(fitness.worst)
 }
 
 /// The residual's standard deviation per row, √(Σr²/(n − m)), when finite.
