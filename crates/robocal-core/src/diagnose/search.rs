@@ -437,29 +437,24 @@ pub(crate) fn timing(what: &str, t: std::time::Instant) {
     }
 }
 
-fn run_round(
-    cell: &Cell,
+/// Screening of one round: every library candidate realised and scored, the frequency scan of each
+/// joint, Holm over the family, and what the current model absorbs of each significant one.
+#[allow(clippy::type_complexity)]
+fn screen(
     stage: &Stage,
-    base: &Heldout,
-    folds: &Folds,
-    floor_ms: f64,
+    basis: &Basis<'_>,
+    g: &Mat<f64>,
+    mut cands: Vec<Candidate>,
     opts: &SearchOptions,
-) -> (Round, Vec<Unavailable>, Option<Chosen>) {
+) -> (Vec<Screened>, Vec<(Mat<f64>, Option<Mat<f64>>)>) {
     let pr = &stage.problem;
-    let approach = pr.obs.iter().any(|o| o.state.approach.iter().any(|&a| a != 0.0));
-    let free = stage.free_layout();
-    let ctx = context(cell, stage, &free, opts, approach);
-    let (mut cands, missing) = candidates(&ctx);
-    let rp = Basis::project(stage.q.as_ref(), &stage.r);
-    let basis = Basis { q: stage.q.as_ref(), r: &rp, rss: stage.rss, n: stage.n_obs_rows(), p: stage.p() };
-
     let t0 = std::time::Instant::now();
-    // Screening of the library.
+    // The library.
     let mut screened: Vec<Screened> = Vec::new();
     let mut columns: Vec<(Mat<f64>, Option<Mat<f64>>)> = Vec::new();
     for mut c in cands.drain(..) {
         let (cols, pen) = realise(stage, &mut c, opts);
-        let sc = score(&basis, cols.as_ref(), pen.as_ref());
+        let sc = score(basis, cols.as_ref(), pen.as_ref());
         screened.push(Screened {
             candidate: c,
             score: sc,
@@ -472,9 +467,8 @@ fn run_round(
     timing("screen library", t0);
     let t0 = std::time::Instant::now();
     // The frequency scan, one test per joint.
-    let g = stage.joint_columns();
     for j in 0..pr.model.dof() {
-        if let Some((c, cols)) = scan_joint(stage, &basis, &g, j, &screened) {
+        if let Some((c, cols)) = scan_joint(stage, basis, g, j, &screened) {
             screened.push(c);
             columns.push((cols, None));
         }
@@ -493,7 +487,29 @@ fn run_round(
             s.absorbed_by = absorber.absorbed_by(cols);
         }
     }
+    timing("holm + absorbed", t0);
+    (screened, columns)
+}
 
+fn run_round(
+    cell: &Cell,
+    stage: &Stage,
+    base: &Heldout,
+    folds: &Folds,
+    floor_ms: f64,
+    opts: &SearchOptions,
+) -> (Round, Vec<Unavailable>, Option<Chosen>) {
+    let pr = &stage.problem;
+    let approach = pr.obs.iter().any(|o| o.state.approach.iter().any(|&a| a != 0.0));
+    let free = stage.free_layout();
+    let ctx = context(cell, stage, &free, opts, approach);
+    let (cands, missing) = candidates(&ctx);
+    let rp = Basis::project(stage.q.as_ref(), &stage.r);
+    let basis = Basis { q: stage.q.as_ref(), r: &rp, rss: stage.rss, n: stage.n_obs_rows(), p: stage.p() };
+
+    let g = stage.joint_columns();
+    let (screened, columns) = screen(stage, &basis, &g, cands, opts);
+    let t0 = std::time::Instant::now();
     // Confirmation of the best few by screening.
     let mut order: Vec<usize> = (0..screened.len()).filter(|&i| screened[i].significant).collect();
     order.sort_by(|&a, &b| screened[b].score.bic_gain.total_cmp(&screened[a].score.bic_gain));
@@ -520,7 +536,7 @@ fn run_round(
         })
         .collect();
 
-    timing("absorbed + confirm", t0);
+    timing("confirm", t0);
     let t0 = std::time::Instant::now();
     // The smoother.
     let sm = smoother_columns(stage, &g);
@@ -533,99 +549,12 @@ fn run_round(
     let t0 = std::time::Instant::now();
     // Decide.
     let confirmed: Vec<&Evaluated> = evaluated.iter().filter(|e| e.confirmed).collect();
-    let mut smoother_vs_best = None;
-    let mut share_of_best = None;
-    let mut closure_of_best = None;
-    let decision = if confirmed.is_empty() {
-        if smoother_ok { Decision::Unknown { best: None } } else { Decision::Nothing }
+    let (decision, smoother_vs_best, share_of_best, closure_of_best) = if confirmed.is_empty() {
+        (if smoother_ok { Decision::Unknown { best: None } } else { Decision::Nothing }, None, None, None)
     } else {
-        let best = choose(&confirmed, &screened, opts);
-        let sb = paired(&best.heldout, &smoother_heldout);
-        smoother_vs_best = Some(sb.clone());
-        // The candidate's share of what a smooth function of the configuration explains beyond
-        // the model (on the same folds). Only a candidate inside the smoother's span (given the
-        // smoother it adds nothing: encompassing test at `confirm_p`) can be a partial
-        // explanation of a structure that lies outside the library; one outside the span (a
-        // backlash, a thermal term) is an effect of its own whatever the smoother also finds.
-        let within = {
-            let rp = Basis::project(stage.q.as_ref(), &stage.r);
-            encompassing(stage, &rp, &unabsorbed(stage, &sm), &columns[best.index].0) > opts.confirm_p.log10()
-        };
-        let (bc, bp) = &columns[best.index];
-        let joint_cols = Mat::<f64>::from_fn(stage.n_rows(), bc.ncols() + sm.ncols(), |r, c| {
-            if c < bc.ncols() { bc[(r, c)] } else { sm[(r, c - bc.ncols())] }
-        });
-        let joint_pen = Mat::<f64>::from_fn(joint_cols.ncols(), joint_cols.ncols(), |i, k| {
-            let m = bc.ncols();
-            match (i < m, k < m) {
-                (true, true) => bp.as_ref().map_or(0.0, |p| p[(i, k)]),
-                (false, false) => sm_pen[(i - m, k - m)],
-                _ => 0.0,
-            }
-        });
-        let joint = cvb.heldout(Some((&joint_cols, Some(&joint_pen))));
-        let gain = |h: &Heldout| rms2(base) - rms2(h);
-        let explainable = gain(&best.heldout).max(gain(&joint)).max(gain(&smoother_heldout));
-        let share = if explainable > 0.0 { (gain(&best.heldout) / explainable).clamp(0.0, 1.0) } else { 1.0 };
-        share_of_best = Some((share, within));
-        // A name inside the smoother's span must close most of the gap to the floor, and the
-        // smoother must not predict significantly better: otherwise it is one of the smooth
-        // function's forms taking a share of something else — a partial explanation, or, for a
-        // sliver, none.
-        let rms = |h: &Heldout| rms2(h).sqrt();
-        let closure = {
-            let gap = rms(base) - floor_ms.sqrt();
-            if gap > 0.0 { (rms(base) - rms(&best.heldout)) / gap } else { 1.0 }
-        };
-        closure_of_best = Some(closure);
-        let smoother_better = smoother_ok
-            && sb.p.is_some_and(|p| p < opts.confirm_p)
-            && sb.gain_rms > opts.min_gain.max(0.05 * best.vs_model.gain_rms);
-        if within && (smoother_better || closure < opts.name_closure) && share < opts.partial_share {
-            Decision::Unknown { best: Some(best.index) }
-        } else if within && (smoother_better || closure < opts.name_closure) {
-            let sg = smoother.gain_rms.max(paired(base, &joint).gain_rms);
-            Decision::Partial { best: best.index, share, smoother_gain_rms: sg }
-        } else if screened[best.index].candidate.kind == Kind::ToolMass && payloads(stage) < 2 {
-            // A payload error acts through the compliances: with one payload it changes every
-            // holding torque in proportion to what the compliances already scale, and what is
-            // left to tell them apart is the nominal link masses' share of the torques — a detail
-            // of the model, not of the data. It takes a second payload to separate them.
-            Decision::NotSeparable {
-                best: best.index,
-                lookalike: None,
-                canonical: None,
-                reason: "with a single payload in the data, a payload error and the joint compliances are look-alikes"
-                    .into(),
-            }
-        } else if screened[best.index].score.rho < opts.rho_min && best.vs_model.gain_rms < 0.25 * floor_ms.sqrt() {
-            // Mostly absorbed, and what is left to tell it by is a signature smaller than the
-            // noise at a pose: the name would rest on details of the model (the nominal masses
-            // behind the holding torques, say) that a look-alike could reproduce. A large effect
-            // with a small ρ (a cubic compliance next to the linear one) is still named: its
-            // unabsorbed part alone stands far above the floor.
-            Decision::NotSeparable {
-                best: best.index,
-                lookalike: None,
-                canonical: None,
-                reason: "absorbed by the current model".into(),
-            }
-        } else {
-            match lookalike(best, &confirmed, &screened, &columns, stage, opts) {
-                Some((other, corr, beyond)) => Decision::NotSeparable {
-                    best: best.index,
-                    lookalike: Some(other),
-                    canonical: Some(corr),
-                    reason: format!(
-                        "given {}, {} adds nothing these data can show (p = {:.2e})",
-                        screened[other].candidate.label(),
-                        screened[best.index].candidate.label(),
-                        10f64.powf(beyond)
-                    ),
-                },
-                None => Decision::Accept(best.index),
-            }
-        }
+        let sm = Smoother { cols: &sm, pen: &sm_pen, heldout: &smoother_heldout, vs_model: &smoother, ok: smoother_ok };
+        let d = decide(stage, base, floor_ms, &cvb, &confirmed, &screened, &columns, &sm, opts);
+        (d.decision, Some(d.smoother_vs_best), Some(d.share), Some(d.closure))
     };
     timing("decide", t0);
     let chosen = match decision {
@@ -647,6 +576,126 @@ fn run_round(
         missing,
         chosen,
     )
+}
+
+/// The smoother of a round: its columns and ridge, its held-out figures and their comparison with
+/// the model, and whether it predicts significantly better.
+struct Smoother<'a> {
+    cols: &'a Mat<f64>,
+    pen: &'a Mat<f64>,
+    heldout: &'a Heldout,
+    vs_model: &'a Paired,
+    ok: bool,
+}
+
+/// What the round decides about its best confirmed candidate, with the figures it rests on.
+struct Decided {
+    decision: Decision,
+    smoother_vs_best: Paired,
+    share: (f64, bool),
+    closure: f64,
+}
+
+/// The decision on a round whose held-out check confirmed some candidates: the best (the simplest
+/// among the nearly best), named only when it stands apart from the smoother, from a payload it
+/// cannot be told from, from what the model absorbs and from its look-alikes.
+#[allow(clippy::too_many_arguments)]
+fn decide(
+    stage: &Stage,
+    base: &Heldout,
+    floor_ms: f64,
+    cvb: &CvBase<'_>,
+    confirmed: &[&Evaluated],
+    screened: &[Screened],
+    columns: &[(Mat<f64>, Option<Mat<f64>>)],
+    sm: &Smoother<'_>,
+    opts: &SearchOptions,
+) -> Decided {
+    let best = choose(confirmed, screened, opts);
+    let sb = paired(&best.heldout, sm.heldout);
+    // The candidate's share of what a smooth function of the configuration explains beyond
+    // the model (on the same folds). Only a candidate inside the smoother's span (given the
+    // smoother it adds nothing: encompassing test at `confirm_p`) can be a partial
+    // explanation of a structure that lies outside the library; one outside the span (a
+    // backlash, a thermal term) is an effect of its own whatever the smoother also finds.
+    let within = {
+        let rp = Basis::project(stage.q.as_ref(), &stage.r);
+        encompassing(stage, &rp, &unabsorbed(stage, sm.cols), &columns[best.index].0) > opts.confirm_p.log10()
+    };
+    let (bc, bp) = &columns[best.index];
+    let joint_cols = Mat::<f64>::from_fn(stage.n_rows(), bc.ncols() + sm.cols.ncols(), |r, c| {
+        if c < bc.ncols() { bc[(r, c)] } else { sm.cols[(r, c - bc.ncols())] }
+    });
+    let joint_pen = Mat::<f64>::from_fn(joint_cols.ncols(), joint_cols.ncols(), |i, k| {
+        let m = bc.ncols();
+        match (i < m, k < m) {
+            (true, true) => bp.as_ref().map_or(0.0, |p| p[(i, k)]),
+            (false, false) => sm.pen[(i - m, k - m)],
+            _ => 0.0,
+        }
+    });
+    let joint = cvb.heldout(Some((&joint_cols, Some(&joint_pen))));
+    let gain = |h: &Heldout| rms2(base) - rms2(h);
+    let explainable = gain(&best.heldout).max(gain(&joint)).max(gain(sm.heldout));
+    let share = if explainable > 0.0 { (gain(&best.heldout) / explainable).clamp(0.0, 1.0) } else { 1.0 };
+    // A name inside the smoother's span must close most of the gap to the floor, and the
+    // smoother must not predict significantly better: otherwise it is one of the smooth
+    // function's forms taking a share of something else — a partial explanation, or, for a
+    // sliver, none.
+    let rms = |h: &Heldout| rms2(h).sqrt();
+    let closure = {
+        let gap = rms(base) - floor_ms.sqrt();
+        if gap > 0.0 { (rms(base) - rms(&best.heldout)) / gap } else { 1.0 }
+    };
+    let smoother_better = sm.ok
+        && sb.p.is_some_and(|p| p < opts.confirm_p)
+        && sb.gain_rms > opts.min_gain.max(0.05 * best.vs_model.gain_rms);
+    let decision = if within && (smoother_better || closure < opts.name_closure) && share < opts.partial_share {
+        Decision::Unknown { best: Some(best.index) }
+    } else if within && (smoother_better || closure < opts.name_closure) {
+        let sg = sm.vs_model.gain_rms.max(paired(base, &joint).gain_rms);
+        Decision::Partial { best: best.index, share, smoother_gain_rms: sg }
+    } else if screened[best.index].candidate.kind == Kind::ToolMass && payloads(stage) < 2 {
+        // A payload error acts through the compliances: with one payload it changes every
+        // holding torque in proportion to what the compliances already scale, and what is
+        // left to tell them apart is the nominal link masses' share of the torques — a detail
+        // of the model, not of the data. It takes a second payload to separate them.
+        Decision::NotSeparable {
+            best: best.index,
+            lookalike: None,
+            canonical: None,
+            reason: "with a single payload in the data, a payload error and the joint compliances are look-alikes"
+                .into(),
+        }
+    } else if screened[best.index].score.rho < opts.rho_min && best.vs_model.gain_rms < 0.25 * floor_ms.sqrt() {
+        // Mostly absorbed, and what is left to tell it by is a signature smaller than the
+        // noise at a pose: the name would rest on details of the model (the nominal masses
+        // behind the holding torques, say) that a look-alike could reproduce. A large effect
+        // with a small ρ (a cubic compliance next to the linear one) is still named: its
+        // unabsorbed part alone stands far above the floor.
+        Decision::NotSeparable {
+            best: best.index,
+            lookalike: None,
+            canonical: None,
+            reason: "absorbed by the current model".into(),
+        }
+    } else {
+        match lookalike(best, confirmed, screened, columns, stage, opts) {
+            Some((other, corr, beyond)) => Decision::NotSeparable {
+                best: best.index,
+                lookalike: Some(other),
+                canonical: Some(corr),
+                reason: format!(
+                    "given {}, {} adds nothing these data can show (p = {:.2e})",
+                    screened[other].candidate.label(),
+                    screened[best.index].candidate.label(),
+                    10f64.powf(beyond)
+                ),
+            },
+            None => Decision::Accept(best.index),
+        }
+    };
+    Decided { decision, smoother_vs_best: sb, share: (share, within), closure }
 }
 
 /// The scan of joint j: the best quarter-cycle frequency by F, its p-value times the effective
