@@ -71,9 +71,6 @@ macro_rules! text_enum {
 text_enum!(
     super::jobs::JobKind,
     super::jobs::JobState,
-    crate::domain::cell::PurposeSpec,
-    crate::domain::cell::InstrumentSpec,
-    crate::domain::cell::OrderSpec,
 );
 
 #[cfg(test)]

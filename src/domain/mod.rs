@@ -3,9 +3,6 @@
 //! Parse, don't validate: every `to_*` conversion returns a checked SI value or a [`DomainError`]
 //! naming the field path and the reason.
 
-pub mod cell;
-pub mod diagnosis;
-pub mod diagnosis_spec;
 pub mod drift;
 pub mod export;
 pub mod history;
@@ -15,13 +12,12 @@ pub mod origin;
 pub mod pose;
 pub mod program;
 pub mod truth;
-pub mod validation;
 
 // The formats of robots, tools and parameter sets, and the error type of every format, live in
 // the core (`robocal_core::formats`) so that its users read the same files; re-exported here
 // under their old paths.
 pub use pose::{Choice, CompensationResult, PoseOut, PoseSpec, Target, TargetSpec};
-pub use robocal_core::formats::validity;
+pub use robocal_core::formats::{cell, diagnosis, diagnosis_spec, validation, validity};
 pub use robocal_core::formats::{
     DomainError, field_path, finite, from_json, from_value, joints_deg, limits, param_set, robot, rounding, to_deg,
     vec3_mm, with_article,

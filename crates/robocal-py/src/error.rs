@@ -32,6 +32,14 @@ pyo3::create_exception!(
      message is the core's, with its advice; `kind` names the case."
 );
 
+pyo3::create_exception!(
+    robocal,
+    DiagnosisError,
+    pyo3::exceptions::PyException,
+    "The diagnosis cannot run on these data: a session it is asked for is missing, the cell has no \
+     identification session, too few poses for the folds. The message says which."
+);
+
 /// Why a call has no answer.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Error {
@@ -44,6 +52,8 @@ pub enum Error {
     /// An identification refused: `kind` (`rank_deficient`, `ill_conditioned`, …) and the core's
     /// message.
     Identification { kind: &'static str, message: String },
+    /// A diagnosis refused before any fit: the core's message.
+    Diagnosis { message: String },
 }
 
 impl Error {
@@ -68,6 +78,7 @@ impl From<Error> for PyErr {
                 err
             }),
             Error::Unsupported(why) => PyNotImplementedError::new_err(why),
+            Error::Diagnosis { message } => DiagnosisError::new_err(message),
             Error::Identification { kind, message } => Python::attach(|py| {
                 let err = IdentificationError::new_err(message);
                 set_attr(py, &err, "kind", kind);

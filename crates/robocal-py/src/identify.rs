@@ -228,7 +228,7 @@ fn cell(
 
 /// The core's refusal as a Python exception: a refused option is an input error of the argument
 /// that carried it, the rest `IdentificationError` with its kind.
-fn identify_error(e: IdentifyError) -> Error {
+pub(crate) fn identify_error(e: IdentifyError) -> Error {
     let message = e.to_string();
     let kind = match &e {
         IdentifyError::Option { field: Some(_), .. } => {
@@ -354,7 +354,7 @@ pub fn identify(
 }
 
 impl Identification {
-    fn of(id: robocal_core::identify::Identification, doc: robocal_core::formats::ParameterSetDoc) -> Identification {
+    pub(crate) fn of(id: robocal_core::identify::Identification, doc: robocal_core::formats::ParameterSetDoc) -> Identification {
         let set = id.set;
         let params = set.layout.params();
         let file = |i: usize, v: f64| v / params[i].unit().to_si();

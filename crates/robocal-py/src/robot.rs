@@ -14,7 +14,7 @@ use robocal_core::formats::{ParameterSetDoc, to_deg};
 use robocal_core::kinematics::frame::{quaternion_from_rot, rot_from_quaternion};
 use robocal_core::kinematics::{
     AnalyticIk, Branch, Chain, Compensated, Compensator, Frame, GravityModel, IkError, JointState, ParameterSet,
-    Preset, Seed, Tool,
+    Preset, RobotModel, Seed, Tool,
 };
 use robocal_core::units::{DEG, MM};
 
@@ -67,7 +67,12 @@ impl Joints {
 
 impl Robot {
     fn new(preset: Preset, tool: Tool) -> Robot {
-        let set = ParameterSet::nominal(preset.model(), tool, [0.0; 6]);
+        Robot::nominal_model(preset.model(), tool)
+    }
+
+    /// A nominal model (a preset's or a cell file's custom robot) with its tool, base at {W}.
+    pub(crate) fn nominal_model(model: RobotModel, tool: Tool) -> Robot {
+        let set = ParameterSet::nominal(model, tool, [0.0; 6]);
         let chain = set.nominal_chain();
         let closed_form = AnalyticIk::new(&set.model, chain.base(), chain.tool()).ok();
         let comp = Compensator::new(&set);
@@ -309,13 +314,13 @@ impl Robot {
         Ok(Robot::new(preset, tool))
     }
 
-    /// Names of the built-in robots.
     /// The calibrated model of a parameter-set file (`ParameterSet.load(path).robot()`).
     #[staticmethod]
     fn from_file(path: std::path::PathBuf) -> PyResult<Robot> {
         crate::param_set::PyParameterSet::load(path)?.robot()
     }
 
+    /// Names of the built-in robots.
     #[staticmethod]
     fn presets() -> Vec<&'static str> {
         Preset::ALL.iter().map(|p| p.name()).collect()

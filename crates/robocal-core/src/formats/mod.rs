@@ -1,15 +1,20 @@
-//! The file formats a user of the core needs — robots and tools, parameter sets — in millimetres
+//! The file formats a user of the core needs — robots and tools, parameter sets, cells, and the
+//! validation and diagnosis documents the CLI, the service and the Python package write — in millimetres
 //! and degrees with the unit in each field's name, parsed once into the core's SI types, and the
 //! error every format reports: the path of the field at fault and why. The service's `domain`
 //! module re-exports these beside its wire formats. With the `openapi` feature the formats also
 //! derive their OpenAPI schemas (utoipa), which the service publishes.
 
+pub mod cell;
+pub mod diagnosis;
+pub mod diagnosis_spec;
 pub mod identification;
 pub mod identify_options;
 pub mod limits;
 pub mod param_set;
 pub mod robot;
 pub mod rounding;
+pub mod validation;
 pub mod validity;
 
 use std::fmt;

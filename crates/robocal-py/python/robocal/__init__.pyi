@@ -46,6 +46,12 @@ class IdentificationError(Exception):
 
     kind: str
 
+class DiagnosisError(Exception):
+    """The diagnosis cannot run on these data: a session it is asked for is missing (its name is in
+    the message), the cell has no identification session, a session is named for both purposes,
+    or there are too few poses for the folds. An identification that fails on the pooled data is
+    ``IdentificationError`` instead."""
+
 class Robot:
     """A robot's kinematic model. From ``Robot.preset``: the nominal model (the controller's), at
     20 °C, with no compliance. From ``Identification.robot()``: the calibrated parameter set
@@ -403,3 +409,236 @@ def identify(
     for bad shapes, non-finite numbers, joints beyond limits, unknown options; IdentificationError
     when the data cannot answer.
     """
+
+
+class Cell:
+    """A cell file: the robot's nominal model, an optional base guess, the artefact and the
+    measuring sessions (identification or validation; TriCal ball contacts or laser-tracker
+    positions), in mm and degrees. The format ``robocal simulate`` and ``robocal import`` write
+    and the service's ``GET /v1/robots/{id}/cell`` answers."""
+
+    @staticmethod
+    def load(path: str | os.PathLike[str]) -> Cell:
+        """Read and check a cell file. Raises InputError naming the field inside the file
+        (``sessions[0] "trical-1" measurements[12].ball``), OSError when it cannot be read."""
+
+    @staticmethod
+    def from_json(text: str) -> Cell:
+        """Parse and check a cell file's text."""
+
+    def to_json(self) -> str:
+        """The cell file's text. The cell keeps SI values: a number comes back within 1e-12
+        relative of the one read, not always the same decimal."""
+
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Write ``to_json()`` to ``path``."""
+
+    @property
+    def robot(self) -> Robot:
+        """The cell's nominal robot (preset or custom table), TCP at the flange."""
+
+    @property
+    def sessions(self) -> list[dict[str, Any]]:
+        """The sessions in file order, as the file writes them without their measurements, plus
+        ``n_measurements``: ``name``, ``purpose``, ``instrument``, ``tool`` …"""
+
+def identify_cell(
+    cell: Cell,
+    *,
+    sessions: Sequence[str] | None = None,
+    start: ParameterSet | None = None,
+    model: str = "",
+    fix: Sequence[str] | None = None,
+    only: Sequence[str] | None = None,
+    weighted: bool = False,
+    kappa_limit: float | None = None,
+    huber: float | None = None,
+    residual_ratio_limit: float | None = None,
+    exclude: Sequence[tuple[str, int]] | None = None,
+) -> Identification:
+    """``robocal identify`` on a cell: the parameters from its identification sessions (all of
+    them, or ``sessions``), with the tools, payloads and base guess the cell declares. ``start``:
+    start from a parameter set instead of the nominal model (``--start``). The other options as
+    in ``identify`` and the CLI's flags. The parameter set (``parameter_set``) is the file the CLI
+    writes for the same cell file, byte for byte. Raises InputError (``sessions[1]``, ``model``,
+    ``fix``…) or IdentificationError, as ``identify`` does. Runs without the GIL."""
+
+class Validation:
+    """A parameter set's position errors on a cell's sessions against the measured positions:
+    the document ``robocal validate --json`` prints. Figures in mm."""
+
+    @property
+    def held_out(self) -> bool:
+        """Whether the figures are held out: the set was fitted on none of the validated sessions
+        (as its file records), and one is a validation session. Only a held-out validation vouches
+        for the set."""
+
+    @property
+    def held_out_statement(self) -> str:
+        """The same in words, naming the in-sample sessions when there are any."""
+
+    @property
+    def sessions(self) -> list[str]: ...
+    @property
+    def n(self) -> int:
+        """Measurements validated."""
+
+    @property
+    def mean_mm(self) -> float:
+        """Mean position error of the calibrated model (the document's value, at 1e-4 mm)."""
+
+    @property
+    def rms_mm(self) -> float: ...
+    @property
+    def p95_mm(self) -> float: ...
+    @property
+    def max_mm(self) -> float: ...
+    @property
+    def nominal(self) -> dict[str, Any]:
+        """The nominal model's figures on the same measurements (``mean_mm`` …)."""
+
+    @property
+    def per_session(self) -> list[dict[str, Any]]:
+        """Each session's figures, calibrated and nominal."""
+
+    @property
+    def error_mm(self) -> npt.NDArray[np.float64]:
+        """Measured minus calibrated model, {W}, mm: (N, 3), rows as ``residual_index``."""
+
+    @property
+    def nominal_error_mm(self) -> npt.NDArray[np.float64]:
+        """Measured minus nominal model, {W}, mm: (N, 3)."""
+
+    @property
+    def position_mm(self) -> npt.NDArray[np.float64]:
+        """The measured positions, {W}, mm: (N, 3)."""
+
+    @property
+    def residual_index(self) -> list[tuple[str, int]]:
+        """``(session, index)`` of each row (0-based index into the session's measurements)."""
+
+    def as_dict(self) -> dict[str, Any]:
+        """The whole document as plain Python."""
+
+    def to_json(self) -> str:
+        """The document ``robocal validate --json`` prints (``--residuals`` when asked)."""
+
+def validate(
+    parameter_set: ParameterSet,
+    cell: Cell,
+    *,
+    sessions: Sequence[str] | None = None,
+    residuals: bool = False,
+) -> Validation:
+    """``robocal validate --json``: the set's errors on the cell's validation sessions (or
+    ``sessions``), with the held-out uncertainty model when the validation is held out;
+    ``residuals=True`` puts each measurement's residual in the document too (the arrays are
+    always there). Raises InputError: ``sessions`` (unknown, repeated, none to validate),
+    ``parameter_set`` (another robot), ``cell``. Runs without the GIL."""
+
+class Diagnosis:
+    """The sim-to-real diagnosis: the document ``robocal diagnose`` prints, read as plain Python.
+    Lengths in mm, angles in degrees, as every field's name says."""
+
+    @property
+    def status(self) -> str:
+        """``"named"``, ``"partial"``, ``"none"``, ``"not_separable"`` or ``"unknown_effect"``."""
+
+    @property
+    def summary(self) -> str: ...
+    @property
+    def model(self) -> str:
+        """The final model as ``identify``'s ``model`` option (``"+beta,-compliance,+cyc3_h2"``)."""
+
+    @property
+    def verdict(self) -> dict[str, Any]:
+        """Status, summary, the named effects (or the suspects) with estimate, σ and unit, the
+        look-alike and what absorbs it, the separating experiment and what remains."""
+
+    @property
+    def decomposition(self) -> dict[str, Any]:
+        """The held-out error of the starting model, the noise floor, and the gaps."""
+
+    @property
+    def location(self) -> dict[str, Any]:
+        """Where the model misses (the document's ``where``): per axis, against each joint, by
+        workspace voxel."""
+
+    @property
+    def candidates(self) -> list[dict[str, Any]]:
+        """Every candidate of every round: score statistic, Holm p-value, separability, and the
+        held-out figures of the confirmed ones."""
+
+    @property
+    def shrink(self) -> list[dict[str, Any]]:
+        """From the starting model to the last accepted one: each model's held-out figures."""
+
+    @property
+    def shrink_mean_mm(self) -> npt.NDArray[np.float64]:
+        """The held-out mean of each model of ``shrink``, mm."""
+
+    @property
+    def rounds(self) -> list[dict[str, Any]]: ...
+    @property
+    def unavailable(self) -> list[dict[str, Any]]:
+        """Candidates these data cannot test, and why."""
+
+    @property
+    def evidence(self) -> list[dict[str, Any]]:
+        """Each named joint effect's held-out residual against its own variable, binned, beside
+        what the effect predicts."""
+
+    @property
+    def transfer(self) -> list[dict[str, Any]]:
+        """The starting and final models carried to the ``transfer`` sessions."""
+
+    @property
+    def sessions(self) -> dict[str, Any]:
+        """The identification and validation sessions, what the folds test, how many folds."""
+
+    @property
+    def notes(self) -> list[str]: ...
+    def accepted(self) -> ParameterSet | None:
+        """The extended model's parameter set, fitted on the identification and validation
+        sessions together (what ``diagnose --accept`` writes); ``None`` when nothing is named.
+        Validating it on those sessions is in-sample, and ``validate`` says so."""
+
+    def as_dict(self) -> dict[str, Any]:
+        """The whole document as plain Python."""
+
+    def to_json(self) -> str:
+        """The document ``robocal diagnose`` prints, byte for byte."""
+
+def diagnose(
+    parameter_set: ParameterSet,
+    cell: Cell,
+    *,
+    identification: Sequence[str] | None = None,
+    validation: Sequence[str] | None = None,
+    folds: int = 5,
+    seed: int = 1,
+    trical_um: float | None = None,
+    tracker_um: float | None = None,
+    tracker_um_per_m: float | None = None,
+    repeatability_um: float | None = None,
+    rotation_mrad: float | None = None,
+    alpha: float | None = None,
+    confirm_p: float | None = None,
+    map_step_deg: int = 0,
+    voxel_mm: float | None = None,
+    transfer: Sequence[str] | None = None,
+    transfer_kappa_limit: float = 1e4,
+    transfer_fix: Sequence[str] | None = None,
+    threads: int | None = None,
+) -> Diagnosis:
+    """``robocal diagnose``: where and why the set's model still misses. The model the set was
+    identified with is refitted on the ``identification`` sessions (default: all of them) and
+    tested on the ``validation`` sessions (default: all; ``[]``: the identification sessions are
+    cross-validated in ``folds`` groups); candidate effects are screened, confirmed on held-out
+    poses by the refitted model, and named only when their figures agree. The instrument model
+    (``trical_um``, ``tracker_um`` + ``tracker_um_per_m``, ``repeatability_um``,
+    ``rotation_mrad``), ``alpha``, ``confirm_p``, ``map_step_deg`` and ``voxel_mm`` default as
+    in the CLI; ``transfer`` names sessions of other set-ups to carry the models to. ``threads``
+    (default: every core) does not change the answer. Raises InputError naming the argument
+    (``folds``, ``alpha``, ``tracker_um``, ``threads``…), DiagnosisError, or IdentificationError
+    when the refit fails. Runs without the GIL."""

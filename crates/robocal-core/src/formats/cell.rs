@@ -37,7 +37,8 @@ use crate::metrology::{ArtefactError, BallTriangle};
 use crate::units::{DEG, MM};
 
 /// A pose vector in file units.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct PoseXyzAbc {
     pub x_mm: f64,
@@ -76,24 +77,27 @@ impl PoseXyzAbc {
     }
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct Distances {
-    #[schema(exclusive_minimum = 0)]
+    #[cfg_attr(feature = "openapi", schema(exclusive_minimum = 0))]
     pub d12: f64,
-    #[schema(exclusive_minimum = 0)]
+    #[cfg_attr(feature = "openapi", schema(exclusive_minimum = 0))]
     pub d13: f64,
-    #[schema(exclusive_minimum = 0)]
+    #[cfg_attr(feature = "openapi", schema(exclusive_minimum = 0))]
     pub d23: f64,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum ArtefactKind {
     BallTriangle,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct ArtefactSpec {
     pub kind: ArtefactKind,
@@ -153,9 +157,9 @@ impl ArtefactSpec {
 
 // What a session is for, as files, the wire and the store spell it: `identification`,
 // `validation`. (A plain comment: a doc comment would change the OpenAPI schema.)
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema, sqlx::Type)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
-#[sqlx(rename_all = "snake_case")]
 pub enum PurposeSpec {
     Identification,
     Validation,
@@ -183,9 +187,9 @@ impl PurposeSpec {
 
 // The instrument of a session, as files, the wire and the store spell it: `trical`,
 // `laser_tracker`. (A plain comment: a doc comment would change the OpenAPI schema.)
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema, sqlx::Type)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
-#[sqlx(rename_all = "snake_case")]
 pub enum InstrumentSpec {
     Trical,
     LaserTracker,
@@ -205,14 +209,22 @@ impl InstrumentSpec {
             Instrument::LaserTracker => InstrumentSpec::LaserTracker,
         }
     }
+
+    /// The name files, the wire and the store use.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            InstrumentSpec::Trical => "trical",
+            InstrumentSpec::LaserTracker => "laser_tracker",
+        }
+    }
 }
 
 // Whether a session's measurements are listed in measuring order, as files, the wire and the
 // store spell it: `measured`, `shuffled`, `resampled`, `unknown`. (A plain comment: a doc comment
 // would change the OpenAPI schema of every type that uses it.)
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema, sqlx::Type)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
-#[sqlx(rename_all = "snake_case")]
 pub enum OrderSpec {
     Measured,
     Shuffled,
@@ -243,19 +255,46 @@ impl OrderSpec {
     pub fn is_unknown(&self) -> bool {
         *self == OrderSpec::Unknown
     }
+
+    /// The name files, the wire and the store use.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            OrderSpec::Measured => "measured",
+            OrderSpec::Shuffled => "shuffled",
+            OrderSpec::Resampled => "resampled",
+            OrderSpec::Unknown => "unknown",
+        }
+    }
 }
 
-#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize, utoipa::ToSchema)]
+/// The three session enums read back from their stored names (a database column, a form field):
+/// the serde spelling, an unknown name an error naming the type.
+macro_rules! from_name {
+    ($($t:ident),*) => {$(
+        impl TryFrom<String> for $t {
+            type Error = String;
+
+            fn try_from(s: String) -> Result<Self, String> {
+                serde_json::from_value(Value::String(s.clone())).map_err(|_| format!("'{s}' is not a {}", stringify!($t)))
+            }
+        }
+    )*};
+}
+
+from_name!(PurposeSpec, InstrumentSpec, OrderSpec);
+
+#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct MeasurementSpec {
     pub joints_deg: Vec<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ball: Option<usize>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[schema(min_items = 3, max_items = 3)]
+    #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub position_mm: Option<[f64; 3]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[schema(min_items = 3, max_items = 3)]
+    #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub rotation_deg: Option<[f64; 3]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub temperature_c: Option<f64>,
@@ -269,17 +308,17 @@ pub struct MeasurementSpec {
     pub approach: Option<Vec<i8>>,
     /// TriCal indicator readings after centring, mm.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[schema(min_items = 3, max_items = 3)]
+    #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub indicators_mm: Option<[f64; 3]>,
     /// The instrument's standard uncertainty of this position, 1σ along X, Y, Z of {W}, mm (e.g.
     /// what a laser tracker reports with each reading). Without it the instrument model applies.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[schema(min_items = 3, max_items = 3)]
+    #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub sigma_mm: Option<[f64; 3]>,
     /// The same for the orientation of a full pose, 1σ about X, Y, Z of {W}, deg; needs
     /// `rotation_deg` and `sigma_mm`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[schema(min_items = 3, max_items = 3)]
+    #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub sigma_rotation_deg: Option<[f64; 3]>,
 }
 
@@ -576,6 +615,26 @@ fn measurement_spec(m: &Measurement) -> MeasurementSpec {
 mod tests {
     use super::*;
     use serde_json::json;
+
+    /// The names the store binds (`as_str`) are the serde names it reads back (`TryFrom<String>`),
+    /// for every variant; an unknown name is refused naming the type.
+    #[test]
+    fn stored_names_round_trip() {
+        fn check<T: Serialize + TryFrom<String, Error = String> + PartialEq + std::fmt::Debug + Copy>(
+            all: &[T],
+            name: impl Fn(T) -> &'static str,
+        ) {
+            for &v in all {
+                assert_eq!(serde_json::to_value(v).unwrap(), Value::String(name(v).to_string()));
+                assert_eq!(T::try_from(name(v).to_string()), Ok(v));
+            }
+        }
+        check(&[PurposeSpec::Identification, PurposeSpec::Validation], PurposeSpec::as_str);
+        check(&[InstrumentSpec::Trical, InstrumentSpec::LaserTracker], InstrumentSpec::as_str);
+        use OrderSpec::*;
+        check(&[Measured, Shuffled, Resampled, Unknown], OrderSpec::as_str);
+        assert_eq!(OrderSpec::try_from("sorted".to_string()), Err("'sorted' is not a OrderSpec".to_string()));
+    }
 
     fn good() -> Value {
         json!({

@@ -3,7 +3,6 @@
 //! (and `rounds`, `unavailable`, `model`, `sessions`, `notes`).
 
 use serde::{Deserialize, Serialize};
-use utoipa::ToSchema;
 
 use super::ParameterSetDoc;
 pub use super::diagnosis_spec::{DiagnoseSpec, NoiseSpec, input_of};
@@ -17,7 +16,8 @@ use crate::kinematics::{Param, Unit};
 use crate::units::{DEG, MM, OUT_DEG, round_to};
 use crate::validate::stats::ErrorStats;
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct DiagnosisOut {
     pub verdict: VerdictOut,
     pub decomposition: DecompositionOut,
@@ -45,7 +45,8 @@ pub struct DiagnosisOut {
 }
 
 /// The evidence for one named joint effect (see [`DiagnosisOut::evidence`]).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct EvidenceOut {
     /// The effect's label, as in `verdict.effects`.
     pub effect: String,
@@ -66,7 +67,8 @@ pub struct EvidenceOut {
 }
 
 /// One bin of an evidence plot: angles at the effect's joint, deg.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct EvidenceBinOut {
     /// The bin's centre on the x axis (the variable's unit).
     pub at: f64,
@@ -82,7 +84,8 @@ pub struct EvidenceBinOut {
     pub after_deg: f64,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct TransferOut {
     pub session: String,
     /// `start`, `start + <effect> + …` (an intermediate model of the search, with the first
@@ -100,7 +103,8 @@ pub struct TransferOut {
 }
 
 /// A transfer's errors inside and outside the identification sessions' joint ranges.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct JointRangeSplitOut {
     /// Per joint, the identification sessions' [min, max], deg.
     pub identified_range_deg: Vec<[f64; 2]>,
@@ -114,7 +118,8 @@ pub struct JointRangeSplitOut {
     pub outside: Option<StatsOut>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct SessionsOut {
     pub identification: Vec<String>,
     pub validation: Vec<String>,
@@ -123,7 +128,8 @@ pub struct SessionsOut {
     pub folds: usize,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct VerdictOut {
     pub status: Status,
     pub summary: String,
@@ -142,13 +148,15 @@ pub struct VerdictOut {
     pub approach_source: Option<String>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct RemainingOut {
     pub status: Status,
     pub summary: String,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct AbsorbedOut {
     pub parameter: String,
     /// Share of the candidate the parameter absorbs.
@@ -156,7 +164,8 @@ pub struct AbsorbedOut {
 }
 
 /// Which candidate: kind and place.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct CandidateRef {
     /// hayati_beta, compliance, compliance_cubic, cyclic, joint_map, backlash, thermal, coupling,
     /// tool_mass, base, tool.
@@ -177,7 +186,8 @@ pub struct CandidateRef {
     pub step_deg: Option<u8>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct EffectOut {
     #[serde(flatten)]
     pub which: CandidateRef,
@@ -197,7 +207,8 @@ pub struct EffectOut {
     pub separability: f64,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct ParamOut {
     pub name: String,
     pub estimate: f64,
@@ -207,14 +218,16 @@ pub struct ParamOut {
 
 /// Error magnitudes over `n` poses: the validation report's figures (mean, median, std, RMS, p95,
 /// max in mm) with their count.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct StatsOut {
     pub n: usize,
     #[serde(flatten)]
     pub figures: ErrorFigures,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct FloorOut {
     pub mean_mm: f64,
     pub rms_mm: f64,
@@ -225,7 +238,8 @@ pub struct FloorOut {
     pub prediction_rms_mm: f64,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct DecompositionOut {
     /// The parameter set as given, on the validation poses (no refit).
     pub calibrated: Option<StatsOut>,
@@ -239,21 +253,24 @@ pub struct DecompositionOut {
     pub unmodelled_gap_mm: f64,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct AxisOut {
     pub mean_mm: f64,
     pub std_mm: f64,
     pub shapiro_p: Option<f64>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct PerAxisOut {
     pub x: AxisOut,
     pub y: AxisOut,
     pub z: AxisOut,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct BinOut {
     /// Bin centre in the variable's unit.
     pub at: f64,
@@ -261,7 +278,8 @@ pub struct BinOut {
     pub n: usize,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct AgainstOut {
     /// distance_to_base, distance_to_zone, distance_to_nearest_calibration,
     /// joint_distance_to_nearest_calibration, q1…, tau1…, sigma_pred.
@@ -276,7 +294,8 @@ pub struct AgainstOut {
     pub profile: Vec<BinOut>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct VoxelOut {
     pub centre_mm: [f64; 3],
     pub n: usize,
@@ -287,7 +306,8 @@ pub struct VoxelOut {
     pub q: f64,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct VoxelsOut {
     pub size_mm: f64,
     pub tested: usize,
@@ -295,7 +315,8 @@ pub struct VoxelsOut {
     pub above_floor: Vec<VoxelOut>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct WhereOut {
     /// The residuals used: held-out errors of the starting model at the tested poses.
     pub n: usize,
@@ -304,7 +325,8 @@ pub struct WhereOut {
     pub voxels: VoxelsOut,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct HeldoutOut {
     pub gain_mean_mm: f64,
     pub gain_rms_mm: f64,
@@ -314,7 +336,8 @@ pub struct HeldoutOut {
     pub confirmed: bool,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct CandidateOut {
     /// Search round (1-based).
     pub round: usize,
@@ -335,7 +358,8 @@ pub struct CandidateOut {
     pub absorbed_by: Vec<AbsorbedOut>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct ShrinkOut {
     /// `start`, then `start + …` with each accepted effect.
     pub model: String,
@@ -349,7 +373,8 @@ pub struct ShrinkOut {
     pub gap_closure: Option<f64>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct RoundOut {
     pub round: usize,
     /// `accept`, `nothing`, `not_separable`, `unknown_effect`, `partial` (the best candidate explains a
@@ -365,7 +390,8 @@ pub struct RoundOut {
     pub reason: Option<String>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct UnavailableOut {
     pub name: String,
     pub reason: String,

@@ -2,7 +2,6 @@
 //! both into the library's options, and the diagnosis's input from a parameter-set document.
 
 use serde::{Deserialize, Serialize};
-use utoipa::ToSchema;
 
 use super::{DomainError, ParameterSetDoc};
 use crate::diagnose::{DiagnoseOptions, Input, SearchOptions};
@@ -18,23 +17,24 @@ fn one() -> u64 {
 
 /// The instrument model, 1σ per axis (defaults: the thesis's error budget and the tracker the
 /// virtual cell simulates).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields, default)]
 pub struct NoiseSpec {
     /// A TriCal ball measurement, µm (1e-6 … 1e6).
-    #[schema(minimum = 1e-6, maximum = 1e6)]
+    #[cfg_attr(feature = "openapi", schema(minimum = 1e-6, maximum = 1e6))]
     pub trical_um: f64,
     /// A laser-tracker reading: constant part, µm (1e-6 … 1e6)…
-    #[schema(minimum = 1e-6, maximum = 1e6)]
+    #[cfg_attr(feature = "openapi", schema(minimum = 1e-6, maximum = 1e6))]
     pub tracker_um: f64,
     /// …plus this per metre from the {W} origin, µm/m (0 … 1e6).
-    #[schema(minimum = 0, maximum = 1e6)]
+    #[cfg_attr(feature = "openapi", schema(minimum = 0, maximum = 1e6))]
     pub tracker_um_per_m: f64,
     /// The robot's positional repeatability RP (ISO 9283), µm (0 … 1e6).
-    #[schema(minimum = 0, maximum = 1e6)]
+    #[cfg_attr(feature = "openapi", schema(minimum = 0, maximum = 1e6))]
     pub repeatability_um: f64,
     /// A measured orientation, mrad (1e-6 … 1e3).
-    #[schema(minimum = 1e-6, maximum = 1e3)]
+    #[cfg_attr(feature = "openapi", schema(minimum = 1e-6, maximum = 1e3))]
     pub rotation_mrad: f64,
 }
 
@@ -94,7 +94,8 @@ impl NoiseSpec {
 }
 
 /// A diagnosis as requested. Every field has a default.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct DiagnoseSpec {
     /// Identification sessions (names); default: every identification session.
@@ -106,7 +107,7 @@ pub struct DiagnoseSpec {
     pub validation: Option<Vec<String>>,
     /// Folds of the grouped cross-validation (≥ 2).
     #[serde(default = "five")]
-    #[schema(minimum = 2, maximum = 20)]
+    #[cfg_attr(feature = "openapi", schema(minimum = 2, maximum = 20))]
     pub folds: usize,
     #[serde(default = "one")]
     pub seed: u64,
@@ -114,19 +115,19 @@ pub struct DiagnoseSpec {
     pub noise: NoiseSpec,
     /// Family-wise error rate of the screening (Holm).
     #[serde(default = "alpha")]
-    #[schema(exclusive_minimum = 0, exclusive_maximum = 0.5)]
+    #[cfg_attr(feature = "openapi", schema(exclusive_minimum = 0, exclusive_maximum = 0.5))]
     pub alpha: f64,
     /// Level of the held-out confirmation.
     #[serde(default = "confirm")]
-    #[schema(exclusive_minimum = 0, exclusive_maximum = 0.5)]
+    #[cfg_attr(feature = "openapi", schema(exclusive_minimum = 0, exclusive_maximum = 0.5))]
     pub confirm_p: f64,
     /// Knot spacing of joint correction tables, deg (0: about 60 knots over each joint's range).
     #[serde(default)]
-    #[schema(maximum = 90)]
+    #[cfg_attr(feature = "openapi", schema(maximum = 90))]
     pub map_step_deg: u8,
     /// Edge of the workspace voxels, mm (0: automatic, about ten tested positions per voxel).
     #[serde(default)]
-    #[schema(minimum = 0)]
+    #[cfg_attr(feature = "openapi", schema(minimum = 0))]
     pub voxel_mm: f64,
 }
 

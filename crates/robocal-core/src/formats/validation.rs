@@ -6,7 +6,6 @@
 //! one row per measurement.
 
 use serde::{Deserialize, Serialize};
-use utoipa::ToSchema;
 
 use crate::units::{MM, MRAD};
 use crate::validate::normality::ShapiroWilk;
@@ -102,7 +101,8 @@ pub struct ModelErrorsOut {
 }
 
 /// Position error magnitudes, mm.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct ErrorFigures {
     pub mean_mm: f64,
     pub median_mm: f64,
