@@ -194,7 +194,12 @@ pub(super) fn serve(a: ServeArgs) -> Result<String, CliError> {
     opts.config.cors = cors;
     opts.config.job_lease = job_lease;
     let rt = runtime()?;
-    let served = rt.block_on(serve(opts, None, shutdown_signal()));
+    // The signal handlers are installed now, inside the runtime, before the server answers.
+    let shutdown = {
+        let _in_runtime = rt.enter();
+        shutdown_signal()
+    };
+    let served = rt.block_on(serve(opts, None, shutdown));
     // A solver thread still running (its job was put back in the queue at the deadline) is not
     // waited for: the process exits and the thread with it.
     rt.shutdown_timeout(std::time::Duration::from_millis(200));

@@ -17,7 +17,7 @@ use super::{now, time_text};
 
 /// What a job does; stored (and served) as `pose_plan`, `identification`, `validation`,
 /// `diagnosis`, `iso9283`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, sqlx::Type, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, sqlx::Type, Serialize, Deserialize, utoipa::ToSchema)]
 #[sqlx(rename_all = "snake_case")]
 #[serde(rename_all = "snake_case")]
 pub enum JobKind {
@@ -49,7 +49,7 @@ impl fmt::Display for JobKind {
 
 /// Where a job is; stored (and served) as `queued`, `running`, `succeeded`, `failed`,
 /// `cancelled`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, sqlx::Type, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, sqlx::Type, Serialize, Deserialize, utoipa::ToSchema)]
 #[sqlx(rename_all = "snake_case")]
 #[serde(rename_all = "snake_case")]
 pub enum JobState {

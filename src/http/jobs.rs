@@ -22,11 +22,8 @@ use crate::jobs::{JobContext, JobError};
 pub struct JobOut {
     pub id: String,
     /// `pose_plan`, `identification`, `validation`, `diagnosis` or `iso9283`.
-    #[schema(value_type = String)]
     pub kind: JobKind,
     pub robot_id: String,
-    /// `queued`, `running`, `succeeded`, `failed` or `cancelled`.
-    #[schema(value_type = String)]
     pub state: JobState,
     /// 0–1, updated about once a second while the job runs.
     pub progress: f64,
@@ -141,20 +138,8 @@ pub async fn submit(
 pub struct JobQuery {
     pub robot_id: Option<String>,
     /// `queued`, `running`, `succeeded`, `failed` or `cancelled`.
-    #[param(value_type = Option<JobStateName>, inline)]
+    #[param(value_type = Option<JobState>)]
     pub state: Option<String>,
-}
-
-/// A job's state, as the `state` filter names it (the schema of [`JobState`]'s names).
-#[derive(ToSchema)]
-#[schema(rename_all = "snake_case")]
-#[allow(dead_code)] // a schema only: the filter is parsed by `JobState::parse`
-pub enum JobStateName {
-    Queued,
-    Running,
-    Succeeded,
-    Failed,
-    Cancelled,
 }
 
 /// List jobs, newest first, a page at a time.

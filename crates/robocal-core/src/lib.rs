@@ -12,11 +12,10 @@
 //! finds the joints that put the calibrated robot's TCP on a target.
 //!
 //! ```
-//! use robocal_core::identify::{IdentifyOptions, identify};
-//! use robocal_core::kinematics::compensate::{Compensator, Seed};
-//! use robocal_core::kinematics::{Frame, JointState};
 //! use robocal_core::sim::simulate::{SimulateOptions, simulate};
-//! use robocal_core::validate::report::{Reference, validate, validation_sessions};
+//! use robocal_core::{
+//!     Compensator, Frame, IdentifyOptions, JointState, Reference, Seed, identify, validate, validation_sessions,
+//! };
 //!
 //! let sim = simulate(&SimulateOptions { seed: 1, ..Default::default() })?;
 //! let id = identify(&sim.cell, &IdentifyOptions::default())?;
@@ -38,6 +37,36 @@
 //! assert!(uncompensated > 1e-4 && compensated < 1e-6, "{uncompensated} m, then {compensated} m");
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
+//!
+//! # The API
+//!
+//! What a user needs is re-exported here, at the crate's root: the robot model ([`RobotModel`],
+//! [`Preset`], [`Tool`]), the parameter set and its chain ([`ParameterSet`], [`Chain`]: forward
+//! kinematics and the exact Jacobian; [`AnalyticIk`] and [`Compensator`]: inverse kinematics and
+//! fake targets), the cell and its file ([`Cell`], [`parse_cell`], [`cell_to_json`]), the
+//! parameter-set file ([`ParameterSetDoc`]), [`identify()`] with [`IdentifyOptions`], [`validate()`],
+//! and [`diagnose()`] with [`DiagnoseOptions`]. The modules hold the rest: the formats' wire types,
+//! the solver's pieces, the simulator.
+//!
+//! A cell file read, written and read back keeps its sessions and measurements:
+//!
+//! ```
+//! use robocal_core::sim::simulate::{SimulateOptions, simulate};
+//! use robocal_core::{cell_to_json, parse_cell};
+//!
+//! let sim = simulate(&SimulateOptions { seed: 2, id_per_ball: 10, validation: 20, ..Default::default() })?;
+//! let text = cell_to_json(&sim.cell);
+//! let cell = parse_cell(&text)?;
+//! assert_eq!(cell.sessions.len(), sim.cell.sessions.len());
+//! for (a, b) in cell.sessions.iter().zip(&sim.cell.sessions) {
+//!     assert_eq!((&a.name, a.measurements.len()), (&b.name, b.measurements.len()));
+//! }
+//! // A bad field is named by its path in the file.
+//! let err = parse_cell(&text.replacen("\"purpose\": \"identification\"", "\"purpose\": \"fitting\"", 1))
+//!     .unwrap_err();
+//! assert!(err.path.starts_with("sessions[0]"), "{err}");
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 // Numeric kernels index several parallel per-joint arrays with one joint index; iterator zips of
 // four arrays read worse than the formulas they implement.
@@ -52,3 +81,13 @@ pub mod metrology;
 pub mod sim;
 pub mod units;
 pub mod validate;
+
+pub use cell::{Cell, Measurement, Purpose, Session};
+pub use diagnose::{DiagnoseError, DiagnoseOptions, Diagnosis, diagnose};
+pub use formats::cell::{cell_to_json, parse_cell};
+pub use formats::{DomainError, ParameterSetDoc};
+pub use identify::{Identification, IdentifyError, IdentifyOptions, identify};
+pub use kinematics::{
+    AnalyticIk, Chain, Compensated, Compensator, Frame, JointState, ParameterSet, Preset, RobotModel, Seed, Tool,
+};
+pub use validate::report::{Reference, ValidateError, ValidationReport, validate, validation_sessions};
