@@ -263,6 +263,40 @@ impl Robot {
         Err(Error::Unreachable { reasons })
     }
 
+    /// `pose_mm` of shape (4, 4) or (N, 4, 4) as targets: `None` or `Some(N)`, and each pose
+    /// checked (its field `pose_mm[i]` in a batch).
+    fn targets(d: &Dense) -> Result<(Option<usize>, Vec<Frame>), Error> {
+        let n = match d.shape.as_slice() {
+            [4, 4] => None,
+            [n, 4, 4] => Some(*n),
+            s => {
+                return Err(Error::input("pose_mm", format!("expected shape (4, 4) or (N, 4, 4), got {}", shape_text(s))));
+            }
+        };
+        let field = |i: usize| n.map_or_else(|| "pose_mm".to_string(), |_| format!("pose_mm[{i}]"));
+        let targets = d
+            .data
+            .chunks_exact(16)
+            .enumerate()
+            .map(|(i, m)| Robot::pose(&Dense { shape: vec![4, 4], data: m.to_vec() }, &field(i)))
+            .collect::<Result<_, _>>()?;
+        Ok((n, targets))
+    }
+
+    /// An error of pose `i` of a batch names it: `pose_mm[i]` in the field or in each reason.
+    fn in_batch(n: Option<usize>, i: usize, e: Error) -> Error {
+        match (n, e) {
+            (None, e) => e,
+            (Some(_), Error::Unreachable { reasons }) => {
+                Error::Unreachable { reasons: reasons.into_iter().map(|r| format!("pose_mm[{i}]: {r}")).collect() }
+            }
+            (Some(_), Error::Input { field, reason }) => {
+                Error::Input { field: field.replacen("pose_mm", &format!("pose_mm[{i}]"), 1), reason }
+            }
+            (Some(_), e) => e,
+        }
+    }
+
     fn ik_error(label: String, e: IkError) -> Error {
         match e {
             IkError::InvalidTarget(why) => Error::input("pose_mm", why),
@@ -419,8 +453,10 @@ impl Robot {
         int_array(py, &j.shape(&[4]), data)
     }
 
-    /// Joints (deg) that put the TCP on `pose_mm` (4, 4): in configuration `branch` (cfx 0–7),
-    /// near `seed_joints_deg`, or (neither given) the lowest cfx that reaches it.
+    /// Joints (deg) that put the TCP on `pose_mm` ((4, 4), or (N, 4, 4) for a batch solved
+    /// without the GIL): in configuration `branch` (cfx 0–7), near `seed_joints_deg` ((dof,) for
+    /// every pose, or (N, dof) one per pose), or (neither given) the lowest cfx that reaches it.
+    /// (dof,) or (N, dof); a pose no requested configuration reaches raises, naming `pose_mm[i]`.
     #[pyo3(signature = (pose_mm, branch=None, seed_joints_deg=None))]
     fn ik<'py>(
         &self,
@@ -429,10 +465,51 @@ impl Robot {
         branch: Option<i64>,
         seed_joints_deg: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Array<'py>> {
-        let target = Robot::pose(&dense(pose_mm, "pose_mm")?, "pose_mm")?;
-        let (seed, branch) = self.choice(branch, seed_joints_deg)?;
-        let c = py.detach(|| self.reach(&target, seed.as_deref(), branch))?;
-        array(py, &[self.dof()], to_deg(c.joints()))
+        let (n, targets) = Robot::targets(&dense(pose_mm, "pose_mm")?)?;
+        let dof = self.dof();
+        // Per-pose seeds in a batch: (N, dof), checked here; one seed or none: `choice`.
+        let (seeds, shared_seed, branch) = match seed_joints_deg {
+            Some(s) if n.is_some() => {
+                let j = self.joints(&dense(s, "seed_joints_deg")?, "seed_joints_deg")?;
+                match j.n {
+                    Some(m) if m != targets.len() => {
+                        return Err(Error::input(
+                            "seed_joints_deg",
+                            format!("expected ({dof},) or ({}, {dof}) (one per pose), got {m} rows", targets.len()),
+                        )
+                        .into());
+                    }
+                    Some(_) => {
+                        if branch.is_some() {
+                            return Err(Error::input("branch", "give a branch or seed_joints_deg, not both").into());
+                        }
+                        (Some(j.q), None, None)
+                    }
+                    None => {
+                        let (seed, b) = self.choice(branch, seed_joints_deg)?;
+                        (None, seed, b)
+                    }
+                }
+            }
+            _ => {
+                let (seed, b) = self.choice(branch, seed_joints_deg)?;
+                (None, seed, b)
+            }
+        };
+        let joints = py.detach(|| -> Result<Vec<f64>, Error> {
+            let mut out = Vec::with_capacity(dof * targets.len());
+            for (i, target) in targets.iter().enumerate() {
+                let seed = match &seeds {
+                    Some(all) => Some(&all[i * dof..(i + 1) * dof]),
+                    None => shared_seed.as_deref(),
+                };
+                let c = self.reach(target, seed, branch).map_err(|e| Robot::in_batch(n, i, e))?;
+                out.extend(to_deg(c.joints()));
+            }
+            Ok(out)
+        })?;
+        let shape: Vec<usize> = n.into_iter().chain([dof]).collect();
+        array(py, &shape, joints)
     }
 
     /// Compensated ("fake") targets: the joints that put the *calibrated* robot's TCP on each pose
@@ -460,24 +537,9 @@ impl Robot {
             ))
             .into());
         }
-        let d = dense(pose_mm, "pose_mm")?;
-        let (n, per) = match d.shape.as_slice() {
-            [4, 4] => (None, 16),
-            [n, 4, 4] => (Some(*n), 16),
-            s => {
-                return Err(Error::input(
-                    "pose_mm",
-                    format!("expected shape (4, 4) or (N, 4, 4), got {}", shape_text(s)),
-                )
-                .into());
-            }
-        };
-        let mut targets = Vec::with_capacity(n.unwrap_or(1));
+        let (n, targets) = Robot::targets(&dense(pose_mm, "pose_mm")?)?;
         // The argument's name for target i: `pose_mm` for one (4, 4), `pose_mm[i]` in a batch.
         let field = |i: usize| n.map_or_else(|| "pose_mm".to_string(), |_| format!("pose_mm[{i}]"));
-        for (i, m) in d.data.chunks_exact(per).enumerate() {
-            targets.push(Robot::pose(&Dense { shape: vec![4, 4], data: m.to_vec() }, &field(i))?);
-        }
         let count = targets.len();
         let per_target: Vec<i64> = match &branch {
             None if seed_joints_deg.is_none() => {
@@ -515,17 +577,7 @@ impl Robot {
             let mut joints = Vec::with_capacity(dof * targets.len());
             let mut fake = Vec::with_capacity(16 * targets.len());
             for (i, target) in targets.iter().enumerate() {
-                let label = |e: Error| match (n, e) {
-                    (None, e) => e,
-                    (Some(_), Error::Unreachable { reasons }) => Error::Unreachable {
-                        reasons: reasons.into_iter().map(|r| format!("pose_mm[{i}]: {r}")).collect(),
-                    },
-                    (Some(_), Error::Input { field, reason }) => {
-                        Error::Input { field: field.replacen("pose_mm", &format!("pose_mm[{i}]"), 1), reason }
-                    }
-                    (Some(_), e) => e,
-                };
-                let c = self.reach(target, seed.as_deref(), branches[i]).map_err(label)?;
+                let c = self.reach(target, seed.as_deref(), branches[i]).map_err(|e| Robot::in_batch(n, i, e))?;
                 if let Some(why) = self.envelope.as_ref().and_then(|e| e.outside(c.joints()))
                     && !allow_outside_envelope
                 {

@@ -281,6 +281,57 @@ def test_ur10_ik_from_a_seed(ur10):
         ur10.ik_all(target)
 
 
+def test_batched_ik_is_each_pose_solved_alone(irb120, ur10):
+    rng = np.random.default_rng(5)
+    q = rng.uniform([-150, -80, -100, -150, 20, -300], [150, 80, 50, 150, 110, 300], size=(40, 6))
+    targets = irb120.fk(q)
+    batch = irb120.ik(targets)  # the lowest cfx reaching each
+    assert batch.shape == (40, 6)
+    for i in range(40):
+        np.testing.assert_array_equal(batch[i], irb120.ik(targets[i]))
+    # One branch for every pose (those in that configuration: the others it may not reach).
+    cfx = irb120.confdata(q)[:, 3]
+    for b in sorted(set(cfx.tolist()))[:3]:
+        some = targets[cfx == b]
+        batch = irb120.ik(some, branch=b)
+        for i in range(len(some)):
+            np.testing.assert_array_equal(batch[i], irb120.ik(some[i], branch=b))
+    # Each pose in its own configuration: the joints come back (principal values).
+    own = np.array([irb120.ik(t, branch=int(c)) for t, c in zip(targets, cfx)])
+    np.testing.assert_allclose(wrap_deg(own - q), 0, rtol=0, atol=1e-7)
+    # One seed per pose (a robot without a closed form needs them): each converges to its own q.
+    uq = rng.uniform([-150, -150, 20, -150, 20, -150], [150, -30, 140, 150, 160, 150], size=(12, 6))
+    np.testing.assert_allclose(ur10.ik(ur10.fk(uq), seed_joints_deg=uq + 2.0), uq, rtol=0, atol=1e-7)
+    # One seed for all: the same as each alone.
+    shared = ur10.ik(ur10.fk(uq[:3]), seed_joints_deg=uq[0] + 2.0)
+    for i in range(3):
+        np.testing.assert_array_equal(shared[i], ur10.ik(ur10.fk(uq[i]), seed_joints_deg=uq[0] + 2.0))
+    assert irb120.ik(np.zeros((0, 4, 4))).shape == (0, 6)
+
+
+def test_batched_ik_names_the_pose_at_fault(irb120):
+    targets = irb120.fk(POSES[:3])
+    far = targets.copy()
+    far[2, 0, 3] = 2000.0
+    with pytest.raises(UnreachableError) as e:
+        irb120.ik(far)
+    assert e.value.reasons and all(r.startswith("pose_mm[2]: ") for r in e.value.reasons)
+    skew = targets.copy()
+    skew[1, 0, 0] += 0.01
+    with pytest.raises(InputError) as e:
+        irb120.ik(skew)
+    assert e.value.field == "pose_mm[1]"
+    with pytest.raises(InputError) as e:
+        irb120.ik(targets, seed_joints_deg=np.zeros((2, 6)))
+    assert e.value.field == "seed_joints_deg"
+    with pytest.raises(InputError) as e:
+        irb120.ik(targets, branch=1, seed_joints_deg=np.array(POSES[:3]))
+    assert e.value.field == "branch"
+    with pytest.raises(InputError) as e:
+        irb120.ik(np.zeros((3, 3, 3)))
+    assert e.value.field == "pose_mm"
+
+
 def test_unreachable_raises(irb120):
     far = np.eye(4)
     far[:3, 3] = [2000.0, 0.0, 300.0]  # the IRB 120 reaches about 580 mm

@@ -148,20 +148,23 @@ class Robot:
         branch: int | None = None,
         seed_joints_deg: ArrayLike | None = None,
     ) -> npt.NDArray[np.float64]:
-        """Inverse kinematics of one pose: joints in degrees, shape (dof,).
+        """Inverse kinematics: joints in degrees, shape (dof,) for one pose, (N, dof) for N.
 
         ``pose_mm``: a (4, 4) homogeneous transform of the TCP in the world frame, translation in
-        mm, last row (0, 0, 0, 1); its rotation block must be orthonormal within 1e-6 (it is then
-        projected onto the nearest rotation).
+        mm, last row (0, 0, 0, 1), or (N, 4, 4) of them (solved without the GIL, each pose as if
+        alone); its rotation block must be orthonormal within 1e-6 (it is then projected onto the
+        nearest rotation).
 
         ``branch``: ABB's cfx, 0-7 (bit 2: wrist centre behind axis 1, bit 1: behind the lower
-        arm, bit 0: axis 5 negative), principal joint values. ``seed_joints_deg``: solve from these
-        joints instead, staying on their configuration (robots without a closed form need it).
-        Neither: the lowest cfx that reaches the target. Solved as ``robocal ik`` solves it
-        (closed form, then Newton to 1e-8 mm / 1e-4 µrad).
+        arm, bit 0: axis 5 negative), principal joint values, for every pose. ``seed_joints_deg``:
+        solve from these joints instead, staying on their configuration (robots without a closed
+        form need it): (dof,) for every pose, or (N, dof) one per pose. Neither: the lowest cfx
+        that reaches each target. Solved as ``robocal ik`` solves it (closed form, then Newton to
+        1e-8 mm / 1e-4 µrad).
 
-        Raises UnreachableError when no requested configuration reaches the target within the
-        joint limits; InputError for a bad pose, branch or seed.
+        Raises UnreachableError when no requested configuration reaches a target within the
+        joint limits (in a batch, each reason starts ``pose_mm[i]: ``); InputError for a bad pose
+        (``pose_mm[i]`` in a batch), branch or seed. Never a nearby answer.
         """
 
     def ik_all(self, pose_mm: ArrayLike) -> npt.NDArray[np.float64]:
