@@ -20,14 +20,14 @@ use robocal_core::diagnose::DiagnoseError;
 use robocal_core::formats::cell::{cell_to_json, parse_cell};
 use robocal_core::formats::diagnosis::{DiagnoseSpec, DiagnosisOut, NoiseSpec, accepted_doc, diagnosis_out, input_of};
 use robocal_core::formats::identification::run_identification;
-use robocal_core::formats::identify_options::{IdentifySpec, MeasurementRef, kappa_limit as checked_kappa_limit};
+use robocal_core::formats::identify_options::kappa_limit as checked_kappa_limit;
 use robocal_core::formats::validation::{ValidationOut, fit_data, report_to_json_with};
 use robocal_core::formats::validity::HeldOutUncertainty;
 use robocal_core::formats::{DomainError, ParameterSetDoc};
 use robocal_core::validate::report::{Reference, ValidateError, validate_fitted, validation_sessions};
 
 use crate::error::Error;
-use crate::identify::{Identification, identify_error};
+use crate::identify::{Identification, Options, identify_error};
 use crate::param_set::PyParameterSet;
 use crate::robot::Robot;
 
@@ -136,27 +136,9 @@ pub fn identify_cell(
     residual_ratio_limit: Option<f64>,
     exclude: Option<Vec<(String, usize)>>,
 ) -> PyResult<Identification> {
-    let defaults = IdentifySpec::default();
-    let spec = IdentifySpec {
-        model: model.to_string(),
-        fix: fix.unwrap_or_default(),
-        only: only.unwrap_or_default(),
-        weighted,
-        kappa_limit: kappa_limit.unwrap_or(defaults.kappa_limit),
-        huber,
-        residual_ratio_limit: residual_ratio_limit.unwrap_or(defaults.residual_ratio_limit),
-        exclude: exclude
-            .unwrap_or_default()
-            .into_iter()
-            .map(|(session, index)| MeasurementRef { session, index })
-            .collect(),
-        ..defaults
-    };
     let cell = &cell.cell;
-    let mut opts = spec.to_options(cell.model.dof()).map_err(|e| {
-        let field = e.path.strip_suffix(".session").unwrap_or(&e.path).to_string();
-        Error::input(field, e.reason)
-    })?;
+    let mut opts = Options { model, fix, only, weighted, kappa_limit, huber, residual_ratio_limit, exclude }
+        .checked(cell.model.dof())?;
     if let Some(s) = start {
         opts.start = Some(s.doc.set.clone());
     }

@@ -253,6 +253,47 @@ pub(crate) fn identify_error(e: IdentifyError) -> Error {
     Error::Identification { kind, message }
 }
 
+/// The identification's keyword arguments shared by `identify` and `identify_cell`, one per CLI
+/// flag.
+pub(crate) struct Options<'a> {
+    pub model: &'a str,
+    pub fix: Option<Vec<String>>,
+    pub only: Option<Vec<String>>,
+    pub weighted: bool,
+    pub kappa_limit: Option<f64>,
+    pub huber: Option<f64>,
+    pub residual_ratio_limit: Option<f64>,
+    pub exclude: Option<Vec<(String, usize)>>,
+}
+
+impl Options<'_> {
+    /// The options checked as every front end checks them (`IdentifySpec::to_options`, in the
+    /// core); its errors already name the keyword argument, except an exclusion's session.
+    pub(crate) fn checked(self, dof: usize) -> Result<robocal_core::identify::IdentifyOptions, Error> {
+        let defaults = IdentifySpec::default();
+        let spec = IdentifySpec {
+            model: self.model.to_string(),
+            fix: self.fix.unwrap_or_default(),
+            only: self.only.unwrap_or_default(),
+            weighted: self.weighted,
+            kappa_limit: self.kappa_limit.unwrap_or(defaults.kappa_limit),
+            huber: self.huber,
+            residual_ratio_limit: self.residual_ratio_limit.unwrap_or(defaults.residual_ratio_limit),
+            exclude: self
+                .exclude
+                .unwrap_or_default()
+                .into_iter()
+                .map(|(session, index)| MeasurementRef { session, index })
+                .collect(),
+            ..defaults
+        };
+        spec.to_options(dof).map_err(|e| {
+            let field = e.path.strip_suffix(".session").unwrap_or(&e.path).to_string();
+            Error::input(field, e.reason)
+        })
+    }
+}
+
 /// Identify the robot's parameters from joint readings and measured TCP positions.
 #[pyfunction]
 #[pyo3(signature = (
@@ -324,28 +365,8 @@ pub fn identify(
             n
         }
     };
-    // The options checked as every front end checks them (`IdentifySpec::to_options`, in the
-    // core); its errors already name the keyword argument, except an exclusion's session.
-    let defaults = IdentifySpec::default();
-    let spec = IdentifySpec {
-        model: model.to_string(),
-        fix: fix.unwrap_or_default(),
-        only: only.unwrap_or_default(),
-        weighted,
-        kappa_limit: kappa_limit.unwrap_or(defaults.kappa_limit),
-        huber,
-        residual_ratio_limit: residual_ratio_limit.unwrap_or(defaults.residual_ratio_limit),
-        exclude: exclude
-            .unwrap_or_default()
-            .into_iter()
-            .map(|(session, index)| MeasurementRef { session, index })
-            .collect(),
-        ..defaults
-    };
-    let opts = spec.to_options(robot.set().dof()).map_err(|e| {
-        let field = e.path.strip_suffix(".session").unwrap_or(&e.path).to_string();
-        Error::input(field, e.reason)
-    })?;
+    let opts = Options { model, fix, only, weighted, kappa_limit, huber, residual_ratio_limit, exclude }
+        .checked(robot.set().dof())?;
     let cell = cell(robot, &d, &tcps, identify_tcp, base_guess, &names);
     let (id, doc) = py
         .detach(|| robocal_core::formats::identification::run_identification(&cell, opts, None, &|| ()))
