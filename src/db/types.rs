@@ -68,10 +68,7 @@ macro_rules! text_enum {
     )*};
 }
 
-text_enum!(
-    super::jobs::JobKind,
-    super::jobs::JobState,
-);
+text_enum!(super::jobs::JobKind, super::jobs::JobState,);
 
 #[cfg(test)]
 mod tests {

@@ -17,12 +17,12 @@ pub mod truth;
 // the core (`robocal_core::formats`) so that its users read the same files; re-exported here
 // under their old paths.
 pub use pose::{Choice, CompensationResult, PoseOut, PoseSpec, Target, TargetSpec};
-pub use robocal_core::formats::{cell, diagnosis, diagnosis_spec, validation, validity};
 pub use robocal_core::formats::{
     DomainError, field_path, finite, from_json, from_value, joints_deg, limits, param_set, robot, rounding, to_deg,
     vec3_mm, with_article,
 };
 pub use robocal_core::formats::{JointSpec, RobotSpec, ToolSpec};
+pub use robocal_core::formats::{cell, diagnosis, diagnosis_spec, validation, validity};
 /// An identification's run and its parameter-set document, and its options as given (checked
 /// once, for every front end), under their old path.
 pub mod identification {

@@ -10,11 +10,14 @@ use crate::metrology::BallTriangle;
 /// What a session is for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Purpose {
+    /// Measurements to identify the parameters from (the default identification selection).
     Identification,
+    /// Measurements to score an identified parameter set on (the default validation selection).
     Validation,
 }
 
 impl Purpose {
+    /// The name cell files use: `identification` or `validation`.
     pub fn as_str(self) -> &'static str {
         match self {
             Purpose::Identification => "identification",
@@ -33,6 +36,7 @@ pub enum Instrument {
 }
 
 impl Instrument {
+    /// The name cell files use: `trical` or `laser_tracker`.
     pub fn as_str(self) -> &'static str {
         match self {
             Instrument::TriCal => "trical",
@@ -72,6 +76,7 @@ pub enum MeasuringOrder {
 }
 
 impl MeasuringOrder {
+    /// The name cell files use: `measured`, `shuffled`, `resampled` or `unknown`.
     pub fn as_str(self) -> &'static str {
         match self {
             MeasuringOrder::Measured => "measured",
@@ -87,8 +92,12 @@ impl MeasuringOrder {
 pub struct Measurement {
     /// Joint readings, rad.
     pub q: Vec<f64>,
+    /// What the instrument observed at `q`.
     pub observation: Observation,
+    /// Robot temperature, °C; `None`: the reference temperature (20 °C) is assumed.
     pub temperature_c: Option<f64>,
+    /// Time stamp of the reading, s, any origin (epoch seconds fit); gives the measuring order
+    /// where the list does not ([`order`]).
     pub time_s: Option<f64>,
     /// Place in the measuring order of the session's run (measurements at one stop share it).
     pub sequence: Option<u64>,
@@ -114,9 +123,13 @@ pub struct Sigma {
 /// A set of measurements taken with one tool.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Session {
+    /// Name, unique within the cell: selections and fit records refer to the session by it.
     pub name: String,
+    /// What the session is for.
     pub purpose: Purpose,
+    /// The instrument that measured it.
     pub instrument: Instrument,
+    /// The tool carried: TCP in the flange frame (m, rad), payload mass (kg), centre of mass (m).
     pub tool: Tool,
     /// The TCP in `tool` is only a guess (e.g. a reflector nest never measured): identify it.
     pub identify_tcp: bool,
@@ -125,6 +138,7 @@ pub struct Session {
     /// whose TCP is identified has a TCP of its own, and sessions with the same declared tool
     /// share it.
     pub target: Option<String>,
+    /// The measurements, in list (file) order.
     pub measurements: Vec<Measurement>,
     /// Whether `measurements` are listed in measuring order.
     pub order: MeasuringOrder,
@@ -133,6 +147,7 @@ pub struct Session {
 /// The artefact: three balls on a plate.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Artefact {
+    /// The ball centres in {W}, m, from the measured centre distances.
     pub triangle: BallTriangle,
     /// Ball diameter, m.
     pub ball_diameter: f64,
@@ -141,14 +156,19 @@ pub struct Artefact {
 /// One robot cell's data.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Cell {
+    /// The robot's nominal model.
     pub model: RobotModel,
     /// T_0^W as χ (m, rad), when known approximately.
     pub base_guess: Option<[f64; 6]>,
+    /// The artefact that defines {W}; `None` when the cell has none (tracker-only cells, whose
+    /// {W} is the instrument's frame).
     pub artefact: Option<Artefact>,
+    /// The sessions, in file order.
     pub sessions: Vec<Session>,
 }
 
 impl Cell {
+    /// The session named `name`, if any.
     pub fn session(&self, name: &str) -> Option<&Session> {
         self.sessions.iter().find(|s| s.name == name)
     }

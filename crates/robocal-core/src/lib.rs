@@ -71,13 +71,21 @@
 // Numeric kernels index several parallel per-joint arrays with one joint index; iterator zips of
 // four arrays read worse than the formulas they implement.
 #![allow(clippy::needless_range_loop)]
+#![warn(missing_docs)]
 
 pub mod cell;
+// Every public item is documented (`missing_docs` below) except in these four modules, whose
+// items are being documented module by module (issue 28): the lint is allowed on each until it is
+// done, so a new undocumented item anywhere else fails the build.
+#[allow(missing_docs)]
 pub mod diagnose;
+#[allow(missing_docs)]
 pub mod formats;
+#[allow(missing_docs)]
 pub mod identify;
 pub mod kinematics;
 pub mod metrology;
+#[allow(missing_docs)]
 pub mod sim;
 pub mod units;
 pub mod validate;

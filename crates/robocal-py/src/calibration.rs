@@ -318,15 +318,14 @@ pub fn validate(
         Some(s) if !s.is_empty() => s,
         _ => validation_sessions(cell),
     };
-    let (report, uncertainty) = py
-        .detach(|| {
-            let fit = fit_data(doc, &[]);
-            let report = validate_fitted(&doc.set, cell, &sessions, Reference::Measured, Some(&fit))
-                .map_err(|e| validate_error(e, named))?;
-            let uncertainty = HeldOutUncertainty::of_report(doc, cell, &report)
-                .map_err(|e| Error::input(format!("parameter_set.{}", e.path), e.reason))?;
-            Ok::<_, Error>((report, uncertainty))
-        })?;
+    let (report, uncertainty) = py.detach(|| {
+        let fit = fit_data(doc, &[]);
+        let report = validate_fitted(&doc.set, cell, &sessions, Reference::Measured, Some(&fit))
+            .map_err(|e| validate_error(e, named))?;
+        let uncertainty = HeldOutUncertainty::of_report(doc, cell, &report)
+            .map_err(|e| Error::input(format!("parameter_set.{}", e.path), e.reason))?;
+        Ok::<_, Error>((report, uncertainty))
+    })?;
     let json = report_to_json_with(&report, uncertainty, residuals);
     // The residual arrays always: the document carries them only when asked.
     let out = ValidationOut::from_report(&report, true);

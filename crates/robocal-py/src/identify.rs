@@ -375,7 +375,10 @@ pub fn identify(
 }
 
 impl Identification {
-    pub(crate) fn of(id: robocal_core::identify::Identification, doc: robocal_core::formats::ParameterSetDoc) -> Identification {
+    pub(crate) fn of(
+        id: robocal_core::identify::Identification,
+        doc: robocal_core::formats::ParameterSetDoc,
+    ) -> Identification {
         let set = id.set;
         let params = set.layout.params();
         let file = |i: usize, v: f64| v / params[i].unit().to_si();

@@ -270,7 +270,10 @@ impl Robot {
             [4, 4] => None,
             [n, 4, 4] => Some(*n),
             s => {
-                return Err(Error::input("pose_mm", format!("expected shape (4, 4) or (N, 4, 4), got {}", shape_text(s))));
+                return Err(Error::input(
+                    "pose_mm",
+                    format!("expected shape (4, 4) or (N, 4, 4), got {}", shape_text(s)),
+                ));
             }
         };
         let field = |i: usize| n.map_or_else(|| "pose_mm".to_string(), |_| format!("pose_mm[{i}]"));

@@ -41,6 +41,7 @@ pub enum ApproachSource {
 }
 
 impl ApproachSource {
+    /// The name diagnosis reports use: `logged`, `time_order`, `sequence_order` or `file_order`.
     pub fn as_str(self) -> &'static str {
         match self {
             ApproachSource::Logged => "logged",

@@ -46,6 +46,8 @@ impl JointState {
         s
     }
 
+    /// A state from joint readings q (rad) and holding torques τ (N·m); approach unknown,
+    /// reference temperature.
     pub fn with_torques(q: &[f64], tau: &[f64]) -> Self {
         let mut s = Self::new(q);
         s.tau[..tau.len()].copy_from_slice(tau);
@@ -56,7 +58,9 @@ impl JointState {
 /// Rows of the Jacobian to produce: TCP position only (3), or position and orientation (6).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Rows {
+    /// TCP position x, y, z in {W}.
     Position = 3,
+    /// TCP position, then orientation as a rotation vector in {W}.
     Pose = 6,
 }
 
@@ -155,6 +159,7 @@ impl Trace {
         Frame::new(self.link_r[j], self.o[j])
     }
 
+    /// Number of joints n.
     pub fn dof(&self) -> usize {
         self.n
     }
@@ -249,14 +254,17 @@ impl Chain {
         chain
     }
 
+    /// Number of joints n.
     pub fn dof(&self) -> usize {
         self.n
     }
 
+    /// Base frame T_0^W: {0} in the world/instrument frame {W}.
     pub fn base(&self) -> &Frame {
         &self.base
     }
 
+    /// Tool frame T_T^6: the TCP {T} in the flange frame.
     pub fn tool(&self) -> &Frame {
         &self.tool
     }

@@ -32,12 +32,15 @@ pub enum Seed<'a> {
 pub struct Compensated {
     /// Joints to command, rad.
     pub q: [f64; MAX_JOINTS],
+    /// Number of joints: the entries of `q` in use.
     pub dof: usize,
     /// Nominal FK of `q`: the pose to program on the controller.
     pub fake_pose: Frame,
     /// Calibrated-model residual at `q`: position (m) and rotation (rad).
     pub residual_position: f64,
+    /// …and the rotation residual (geodesic angle), rad.
     pub residual_rotation: f64,
+    /// Newton/Levenberg–Marquardt steps the numerical solve took.
     pub iterations: usize,
     /// Configuration branch of the solution on the calibrated model (the requested one) when the
     /// robot has a closed-form family.
@@ -49,6 +52,7 @@ pub struct Compensated {
 }
 
 impl Compensated {
+    /// The joints to command, rad: the first `dof` entries of `q`.
     pub fn joints(&self) -> &[f64] {
         &self.q[..self.dof]
     }
@@ -71,6 +75,7 @@ pub struct Compensator {
 }
 
 impl Compensator {
+    /// Prepare `set` with the default solver options ([`IkOptions::default`]).
     pub fn new(set: &ParameterSet) -> Self {
         Self::with_options(set, IkOptions::default())
     }
@@ -80,6 +85,8 @@ impl Compensator {
         &self.limits
     }
 
+    /// Prepare `set` with the given solver options. Branch seeding needs the nominal model to be
+    /// in the closed-form family (see [`Self::has_closed_form`]).
     pub fn with_options(set: &ParameterSet, opts: IkOptions) -> Self {
         let calibrated = set.chain();
         let nominal = set.nominal_chain();
@@ -103,14 +110,18 @@ impl Compensator {
         self.seed_ik.is_some()
     }
 
+    /// The chain at the calibrated (current) parameter values.
     pub fn calibrated_chain(&self) -> &Chain {
         &self.calibrated
     }
 
+    /// The chain at the nominal values: the controller's model.
     pub fn nominal_chain(&self) -> &Chain {
         &self.nominal
     }
 
+    /// The holding-torque model used for the compliance terms (nominal geometry, the set's tool
+    /// payload plus any identified `tool_mass`).
     pub fn gravity(&self) -> &GravityModel {
         &self.gravity
     }

@@ -9,7 +9,9 @@ use nalgebra::{Matrix3, Rotation3, Vector3};
 /// A rigid transform: `p_parent = r · p_child + t`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Frame {
+    /// Rotation: the child frame's axes as columns in the parent frame.
     pub r: Matrix3<f64>,
+    /// Origin of the child frame in the parent frame, m.
     pub t: Vector3<f64>,
 }
 
@@ -20,10 +22,12 @@ impl Default for Frame {
 }
 
 impl Frame {
+    /// The identity transform.
     pub fn identity() -> Self {
         Self { r: Matrix3::identity(), t: Vector3::zeros() }
     }
 
+    /// From a rotation matrix (not checked to be orthonormal) and a translation, m.
     pub fn new(r: Matrix3<f64>, t: Vector3<f64>) -> Self {
         Self { r, t }
     }
@@ -39,15 +43,18 @@ impl Frame {
         [self.t.x, self.t.y, self.t.z, a, b, c]
     }
 
+    /// `self · other`: with `self` = T_B^A and `other` = T_C^B, returns T_C^A.
     pub fn compose(&self, other: &Frame) -> Frame {
         Frame { r: self.r * other.r, t: self.r * other.t + self.t }
     }
 
+    /// The inverse transform: T_A^B from T_B^A.
     pub fn inverse(&self) -> Frame {
         let rt = self.r.transpose();
         Frame { r: rt, t: -(rt * self.t) }
     }
 
+    /// A point given in the child frame, expressed in the parent frame: `r · p + t`.
     pub fn transform_point(&self, p: &Vector3<f64>) -> Vector3<f64> {
         self.r * p + self.t
     }

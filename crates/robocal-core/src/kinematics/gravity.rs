@@ -75,6 +75,7 @@ impl GravityModel {
         g
     }
 
+    /// Number of joints.
     pub fn dof(&self) -> usize {
         self.n
     }

@@ -34,17 +34,21 @@ use super::model::RobotModel;
 pub struct Branch(u8);
 
 impl Branch {
+    /// The eight branches, cfx 0 to 7.
     pub const ALL: [Branch; 8] =
         [Branch(0), Branch(1), Branch(2), Branch(3), Branch(4), Branch(5), Branch(6), Branch(7)];
 
+    /// The branch with ABB's `cfx`; `None` unless 0..=7.
     pub fn new(cfx: u8) -> Option<Branch> {
         (cfx < 8).then_some(Branch(cfx))
     }
 
+    /// From its three choices: wrist centre behind axis 1, behind the lower arm, axis 5 negative.
     pub fn from_flags(shoulder_back: bool, elbow_behind: bool, wrist_negative: bool) -> Branch {
         Branch(4 * shoulder_back as u8 + 2 * elbow_behind as u8 + wrist_negative as u8)
     }
 
+    /// ABB's `cfx`, 0..=7.
     pub fn cfx(self) -> u8 {
         self.0
     }
@@ -81,9 +85,13 @@ impl fmt::Display for Branch {
 /// ABB's configuration data: quadrants of axes 1, 4, 6 and the branch.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Confdata {
+    /// Quadrant of axis 1 (see [`quadrant`]).
     pub cf1: i32,
+    /// Quadrant of axis 4.
     pub cf4: i32,
+    /// Quadrant of axis 6.
     pub cf6: i32,
+    /// Configuration branch.
     pub cfx: Branch,
 }
 
@@ -120,20 +128,51 @@ impl fmt::Display for Singularity {
 /// Why an inverse kinematics request has no answer. Messages use mm and degrees.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum IkError {
+    /// Beyond the arm's reach: the wrist centre outside the span of the closed form, or the
+    /// numerical solver stuck at a local minimum of the pose error (how close it got).
     #[error("target out of reach: {0}")]
     Unreachable(String),
+    /// The target lies on a singularity (or the numerical solve met a singular Jacobian).
     #[error("target at a {0}")]
     Singular(Singularity),
+    /// The solution puts a joint outside its limits.
     #[error("joint {joint} would be at {value_deg:.4}°, outside its limits [{lower_deg:.1}°, {upper_deg:.1}°]")]
-    JointLimit { joint: usize, value_deg: f64, lower_deg: f64, upper_deg: f64 },
+    JointLimit {
+        /// Joint number, 1-based.
+        joint: usize,
+        /// The joint's value in the solution, deg.
+        value_deg: f64,
+        /// Lower limit, deg.
+        lower_deg: f64,
+        /// Upper limit, deg.
+        upper_deg: f64,
+    },
+    /// No solution in the quadrants the requested configuration data asks for.
     #[error("no solution in the requested configuration: {0}")]
     Configuration(String),
+    /// The numerical solver used up its iterations; the residual is of the best iterate.
     #[error("did not converge in {iterations} iterations (residual {residual_mm:.3e} mm, {residual_urad:.3e} µrad)")]
-    NotConverged { iterations: usize, residual_mm: f64, residual_urad: f64 },
+    NotConverged {
+        /// Steps taken.
+        iterations: usize,
+        /// Position error of the best iterate, mm.
+        residual_mm: f64,
+        /// Rotation error of the best iterate, µrad.
+        residual_urad: f64,
+    },
+    /// The numerical solution is on another configuration branch than the one requested.
     #[error("solution left the seed's configuration branch (cfx {expected} became cfx {got})")]
-    BranchChanged { expected: u8, got: u8 },
+    BranchChanged {
+        /// The requested `cfx`.
+        expected: u8,
+        /// The solution's `cfx` on the calibrated model.
+        got: u8,
+    },
+    /// No closed-form IK: the model is not of the ABB family, or a branch or confdata seed was
+    /// given for a robot without one.
     #[error("analytic inverse kinematics is not available for this robot: {0}")]
     Unsupported(String),
+    /// A non-finite target pose, or a seed without one finite value per joint.
     #[error("invalid target: {0}")]
     InvalidTarget(String),
 }

@@ -20,6 +20,7 @@ pub struct IkOptions {
     pub tol_position: f64,
     /// …and the rotation error at most this (rad).
     pub tol_rotation: f64,
+    /// Most steps before giving up with [`IkError::NotConverged`].
     pub max_iterations: usize,
     /// Largest joint step per iteration (rad); larger Newton steps are scaled down.
     pub max_step: f64,
@@ -37,8 +38,11 @@ impl Default for IkOptions {
 /// A converged numerical solution.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct IkSolution {
+    /// Joint readings, rad; entries beyond `dof` are zero.
     pub q: [f64; MAX_JOINTS],
+    /// Number of joints: the entries of `q` in use.
     pub dof: usize,
+    /// Newton/Levenberg–Marquardt steps taken.
     pub iterations: usize,
     /// Final position error, m.
     pub residual_position: f64,
@@ -47,6 +51,7 @@ pub struct IkSolution {
 }
 
 impl IkSolution {
+    /// The solution's joints, rad: the first `dof` entries of `q`.
     pub fn joints(&self) -> &[f64] {
         &self.q[..self.dof]
     }

@@ -44,6 +44,7 @@ pub struct RobotModel {
     pub name: String,
     /// `Some(preset)` when the model is a built-in preset, so files can refer to it by name.
     pub preset: Option<Preset>,
+    /// Rows of the modified DH table, joint 1 first (1 to [`MAX_JOINTS`]).
     pub links: Vec<Link>,
     /// Gravity acceleration expressed in the base frame {0}, m/s².
     pub gravity: Vector3<f64>,
@@ -70,13 +71,17 @@ impl Tool {
 /// Built-in robot models.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Preset {
+    /// ABB IRB 120 ([`irb120`]), name `irb120`.
     Irb120,
+    /// Universal Robots UR10, CB3 ([`ur10`]), name `ur10`.
     Ur10,
 }
 
 impl Preset {
+    /// Every preset.
     pub const ALL: [Preset; 2] = [Preset::Irb120, Preset::Ur10];
 
+    /// The name files use for the preset.
     pub fn name(self) -> &'static str {
         match self {
             Preset::Irb120 => "irb120",
@@ -84,10 +89,12 @@ impl Preset {
         }
     }
 
+    /// The preset of a name; `None` for an unknown name.
     pub fn from_name(name: &str) -> Option<Preset> {
         Preset::ALL.into_iter().find(|p| p.name() == name)
     }
 
+    /// The preset's nominal model.
     pub fn model(self) -> RobotModel {
         match self {
             Preset::Irb120 => irb120(),
@@ -99,15 +106,26 @@ impl Preset {
 /// Why a robot model is not usable.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ModelError {
+    /// The number of joints is not between 1 and [`MAX_JOINTS`].
     #[error("a robot needs between 1 and {MAX_JOINTS} joints, got {0}")]
     JointCount(usize),
+    /// A bad value in one joint's row.
     #[error("joints[{joint}].{field}: {reason}")]
-    Field { joint: usize, field: &'static str, reason: String },
+    Field {
+        /// Joint index, 0-based.
+        joint: usize,
+        /// The offending field of [`Link`] (`alpha`, `d`, `limits` …).
+        field: &'static str,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// The gravity vector is not finite.
     #[error("gravity: {0}")]
     Gravity(String),
 }
 
 impl RobotModel {
+    /// Number of joints.
     pub fn dof(&self) -> usize {
         self.links.len()
     }
@@ -192,12 +210,19 @@ pub fn irb120() -> RobotModel {
 /// with the link's centre of mass in its standard-DH frame (at the distal end of the link).
 #[derive(Clone, Debug, PartialEq)]
 pub struct StandardDhRow {
+    /// Joint zero offset (θ_i = q_i + theta), rad.
     pub theta: f64,
+    /// d_i, m.
     pub d: f64,
+    /// a_i, m.
     pub a: f64,
+    /// α_i, rad.
     pub alpha: f64,
+    /// Lower and upper joint limits of q_i, rad.
     pub limits: [f64; 2],
+    /// Link mass, kg.
     pub mass: f64,
+    /// Centre of mass in the standard-DH link frame i, m.
     pub com: Vector3<f64>,
 }
 

@@ -7,12 +7,16 @@ use super::gravity::GravityModel;
 use super::model::{RobotModel, Tool};
 use super::params::{Param, ParamLayout};
 
+/// A robot model, its declared tool, and the nominal and current value of every parameter of its
+/// layout (SI units).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ParameterSet {
+    /// The nominal robot structure.
     pub model: RobotModel,
     /// The tool as declared (its TCP is the nominal of `tool_x` … `tool_c`; its payload drives the
     /// gravity torques).
     pub tool: Tool,
+    /// The parameters, in the order of `nominal` and `values`.
     pub layout: ParamLayout,
     /// Nominal value of each parameter (SI).
     pub nominal: Vec<f64>,
@@ -28,14 +32,17 @@ impl ParameterSet {
         Self { values: nominal.clone(), nominal, layout, model, tool }
     }
 
+    /// Number of joints.
     pub fn dof(&self) -> usize {
         self.model.dof()
     }
 
+    /// Current value of `p` (SI); `None` when the layout has no such parameter.
     pub fn value(&self, p: Param) -> Option<f64> {
         self.layout.index_of(p).map(|i| self.values[i])
     }
 
+    /// Nominal value of `p` (SI); `None` when the layout has no such parameter.
     pub fn nominal_value(&self, p: Param) -> Option<f64> {
         self.layout.index_of(p).map(|i| self.nominal[i])
     }

@@ -26,30 +26,50 @@ pub enum JointTerm {
     ComplianceCubic,
     /// Cyclic error of harmonic h (eccentricity h = 1, 2; gear mesh e.g. 17):
     /// φ = sin(h·q_j), or cos(h·q_j) when `cosine`.
-    Cyclic { harmonic: u8, cosine: bool },
+    Cyclic {
+        /// Harmonic h, cycles per revolution (1–255).
+        harmonic: u8,
+        /// cos instead of sin.
+        cosine: bool,
+    },
     /// Backlash: φ = the logged approach direction of joint j (−1, 0, +1).
     Backlash,
     /// Coupling from another joint: φ = q_from (e.g. axis 5 → 6 on a wrist with coupled gears).
-    Coupling { from: usize },
+    Coupling {
+        /// The driving joint, 0-based.
+        from: usize,
+    },
     /// A periodic error at a frequency that is not a whole harmonic (transmission and encoder
     /// errors of gear stages whose ratio is not an integer): `quarters`/4 cycles per revolution,
     /// φ = sin(f·q_j), or cos when `cosine`. Whole frequencies are [`JointTerm::Cyclic`]; build
     /// either with [`JointTerm::cyclic`].
-    Periodic { quarters: u16, cosine: bool },
+    Periodic {
+        /// Frequency f in quarter cycles per revolution (f = `quarters`/4).
+        quarters: u16,
+        /// cos instead of sin.
+        cosine: bool,
+    },
     /// One knot of a per-joint correction table (a lookup table interpolated linearly): knot k sits
     /// at q_j = k·step, and φ is its hat function — 1 at the knot, falling linearly to 0 at the
     /// neighbouring knots. The table's first and last knots hold their value beyond the table
     /// (constant extrapolation), which the chain works out from the knots present (see
     /// [`MapEdge`]). A smooth, regularised table captures non-periodic transmission errors that
     /// a few harmonics miss.
-    Map { step_deg: u8, knot: i16 },
+    Map {
+        /// Knot spacing of the table, deg.
+        step_deg: u8,
+        /// Knot index k (may be negative): the knot sits at q_j = k·`step_deg`.
+        knot: i16,
+    },
 }
 
 /// Where a [`JointTerm::Map`] knot sits in its table: the first and last knots extend their value
 /// beyond the table.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct MapEdge {
+    /// Lowest knot of its table: holds its value below the table.
     pub first: bool,
+    /// Highest knot of its table: holds its value above the table.
     pub last: bool,
 }
 
@@ -116,8 +136,11 @@ pub const REFERENCE_TEMPERATURE_C: f64 = 20.0;
 /// File/wire unit of a parameter.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Unit {
+    /// Millimetres: link lengths and base/tool translations.
     Mm,
+    /// Degrees: angles, and the joint-angle terms other than compliance and coupling.
     Deg,
+    /// deg/(N·m), for linear compliance.
     DegPerNm,
     /// deg/(N·m)³, for cubic compliance.
     DegPerNm3,
@@ -125,10 +148,12 @@ pub enum Unit {
     Ratio,
     /// Parts per million per kelvin (µm/(m·K)).
     PpmPerK,
+    /// Kilograms, for the payload mass error.
     Kg,
 }
 
 impl Unit {
+    /// The canonical spelling, as written to files.
     pub fn as_str(self) -> &'static str {
         match self {
             Unit::Mm => "mm",
@@ -167,6 +192,7 @@ impl Unit {
 }
 
 impl Param {
+    /// The file unit of this parameter (SI inside the solver, see [`Unit::to_si`]).
     pub fn unit(self) -> Unit {
         match self {
             Param::A(_) | Param::D(_) => Unit::Mm,
@@ -379,14 +405,17 @@ impl ParamLayout {
         Self { params, dof: n, parallel }
     }
 
+    /// Number of parameters: the Jacobian's columns.
     pub fn len(&self) -> usize {
         self.params.len()
     }
 
+    /// Whether the layout has no parameters.
     pub fn is_empty(&self) -> bool {
         self.params.is_empty()
     }
 
+    /// Number of joints of the robot.
     pub fn dof(&self) -> usize {
         self.dof
     }
@@ -397,10 +426,12 @@ impl ParamLayout {
         (0..self.dof).filter(|&j| self.parallel & (1 << j) != 0).collect()
     }
 
+    /// The parameters in column order.
     pub fn params(&self) -> &[Param] {
         &self.params
     }
 
+    /// Column of `p`; `None` when the layout does not have it.
     pub fn index_of(&self, p: Param) -> Option<usize> {
         self.params.iter().position(|&x| x == p)
     }

@@ -6,10 +6,19 @@ use nalgebra::Vector3;
 /// Why three distances do not make an artefact.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ArtefactError {
+    /// A distance is not a finite positive number.
     #[error("{field}: {reason}")]
-    Distance { field: &'static str, reason: String },
+    Distance {
+        /// The distance at fault: `d12`, `d13` or `d23`.
+        field: &'static str,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// One distance exceeds the sum of the other two (the message names it, in mm).
     #[error("impossible triangle: {0}")]
     Impossible(String),
+    /// The balls are (nearly) collinear: ball 3 lies within [`MIN_HEIGHT_RATIO`]·d12 of the line
+    /// through balls 1 and 2.
     #[error("degenerate triangle: {0}")]
     Degenerate(String),
 }
@@ -21,13 +30,20 @@ pub const MIN_HEIGHT_RATIO: f64 = 0.01;
 /// Three ball centres in {W}, from the three measured centre distances (m).
 #[derive(Clone, Debug, PartialEq)]
 pub struct BallTriangle {
+    /// Centre distance of balls 1 and 2, m.
     pub d12: f64,
+    /// Centre distance of balls 1 and 3, m.
     pub d13: f64,
+    /// Centre distance of balls 2 and 3, m.
     pub d23: f64,
     centres: [Vector3<f64>; 3],
 }
 
 impl BallTriangle {
+    /// The triangle of three centre distances (m), placed in {W} as the module says
+    /// (eq. 4.6–4.7). Refuses a distance that is not finite or not positive, one longer than the
+    /// sum of the other two, and ball 3 within [`MIN_HEIGHT_RATIO`]·d12 of the line through balls
+    /// 1 and 2.
     pub fn from_distances(d12: f64, d13: f64, d23: f64) -> Result<Self, ArtefactError> {
         for (field, d) in [("d12", d12), ("d13", d13), ("d23", d23)] {
             if !d.is_finite() {
@@ -69,6 +85,7 @@ impl BallTriangle {
         (1..=3).contains(&k).then(|| self.centres[k - 1])
     }
 
+    /// The centres of balls 1, 2, 3 in {W}, m.
     pub fn centres(&self) -> &[Vector3<f64>; 3] {
         &self.centres
     }

@@ -8,12 +8,17 @@ use nalgebra::{Matrix3, Vector3};
 
 use crate::kinematics::Frame;
 
+/// Why point pairs give no rigid transform.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RegistrationError {
+    /// Fewer than 3 point pairs (the count given).
     #[error("registration needs at least 3 point pairs, got {0}")]
     TooFew(usize),
+    /// The points are (nearly) collinear: the cross-covariance's second singular value is at most
+    /// 1e-12 of the first, so the rotation about their line is undetermined.
     #[error("the points are (nearly) collinear: the rotation about their line is undetermined")]
     Degenerate,
+    /// Point pair i (0-based) has a NaN or infinite coordinate.
     #[error("non-finite coordinates in point pair {0}")]
     NonFinite(usize),
 }

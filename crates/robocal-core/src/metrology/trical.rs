@@ -10,10 +10,32 @@ use nalgebra::Vector3;
 /// Why readings or a geometry give no ball position.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum TriCalError {
+    /// A geometry value or reading is not a number it may be (radii: finite and positive; centre
+    /// and readings: finite).
     #[error("{field}: {reason}")]
-    Field { field: &'static str, reason: String },
+    Field {
+        /// The value at fault: `ball_radius`, `tip_radius`, `zero_centre`, or reading `dx`, `dy`
+        /// or `dz`.
+        field: &'static str,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// An indicator's axis does not meet the sphere of radius r_ball + r_tip about the ball
+    /// centre: its tip cannot touch the ball.
     #[error("indicator {indicator} cannot touch a ball centred at ({x:.4}, {y:.4}, {z:.4}) mm")]
-    NoContact { indicator: usize, x: f64, y: f64, z: f64 },
+    NoContact {
+        /// The indicator, 1-based (1, 2, 3 measure along X, Y, Z of the TriCal frame).
+        indicator: usize,
+        /// The ball centre's X in the TriCal frame, mm.
+        x: f64,
+        /// The ball centre's Y in the TriCal frame, mm.
+        y: f64,
+        /// The ball centre's Z in the TriCal frame, mm.
+        z: f64,
+    },
+    /// Readings (dx, dy, dz), mm, that no ball of the given radius can produce: the displaced tip
+    /// centres are (nearly) coincident or collinear, or too far apart to lie at r_ball + r_tip
+    /// from one centre.
     #[error("readings ({0:.4}, {1:.4}, {2:.4}) mm are inconsistent with the ball and tip radii")]
     Inconsistent(f64, f64, f64),
 }
@@ -38,6 +60,8 @@ impl Default for TriCal {
 }
 
 impl TriCal {
+    /// A TriCal of these radii (m) and zero-position ball centre (TriCal frame, m). Refuses radii
+    /// that are not finite and positive, a non-finite centre, and a centre some tip cannot touch.
     pub fn new(ball_radius: f64, tip_radius: f64, zero_centre: Vector3<f64>) -> Result<Self, TriCalError> {
         for (field, v) in [("ball_radius", ball_radius), ("tip_radius", tip_radius)] {
             if !v.is_finite() || v <= 0.0 {

@@ -18,20 +18,29 @@ pub const MAX_N: usize = 5000;
 /// The W statistic, its p-value under the normality hypothesis, and the sample size.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ShapiroWilk {
+    /// Shapiro–Wilk W ≤ 1: the squared correlation of the ordered sample with Royston's
+    /// coefficients; close to 1 for a normal sample.
     pub w: f64,
+    /// Royston's p-value: the probability, for a normal sample of this size, of a W this small or
+    /// smaller. A small p is evidence against normality.
     pub p_value: f64,
+    /// Sample size.
     pub n: usize,
 }
 
 /// Why a sample cannot be tested.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum NormalityError {
+    /// Fewer than 3 values (the count given).
     #[error("the Shapiro–Wilk test needs at least 3 values, got {0}")]
     TooFew(usize),
+    /// More than [`MAX_N`] values (the count given).
     #[error("Royston's Shapiro–Wilk p-value is defined for at most {MAX_N} values, got {0}")]
     TooMany(usize),
+    /// Value i (0-based) is NaN or infinite.
     #[error("value {0} of the sample is not a finite number")]
     NotFinite(usize),
+    /// All values are equal: W is 0/0.
     #[error("all values of the sample are equal: W is undefined")]
     ZeroRange,
 }

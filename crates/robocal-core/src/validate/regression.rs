@@ -8,12 +8,15 @@ use statrs::distribution::{ContinuousCDF, StudentsT};
 /// Least-squares line y ≈ slope·x + intercept through n points.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LinearFit {
+    /// Slope, y units per x unit.
     pub slope: f64,
+    /// Intercept: y at x = 0, y units.
     pub intercept: f64,
     /// Pearson correlation coefficient.
     pub r: f64,
     /// Coefficient of determination, r².
     pub r2: f64,
+    /// Number of points.
     pub n: usize,
     /// Standard error of the slope (residual variance with n − 2 degrees of freedom).
     pub slope_stderr: f64,

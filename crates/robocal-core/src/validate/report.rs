@@ -50,10 +50,13 @@ pub enum Reference<'a> {
 /// Statistics of the signed error along one axis of {W}, m.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AxisStats {
+    /// Mean signed error.
     pub mean: f64,
     /// Sample standard deviation (n − 1).
     pub std: f64,
+    /// Smallest (most negative) signed error.
     pub min: f64,
+    /// Largest signed error.
     pub max: f64,
     /// `None` for fewer than 3 or more than 5000 values, or all equal.
     pub shapiro: Option<ShapiroWilk>,
@@ -81,6 +84,7 @@ pub struct ModelErrors {
 /// One measurement's errors.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Residual {
+    /// The measurement's session, by name.
     pub session: String,
     /// Index of the measurement within its session (0-based).
     pub index: usize,
@@ -90,6 +94,7 @@ pub struct Residual {
     pub nominal_error: Vector3<f64>,
     /// Angle of R_ref·R_modelᵀ, rad (pose observations against the measured reference only).
     pub orientation_error: Option<f64>,
+    /// The same for the nominal model, rad.
     pub nominal_orientation_error: Option<f64>,
     /// The reference position, {W}, m.
     pub position: Vector3<f64>,
@@ -107,7 +112,9 @@ pub struct Region {
     pub joints: Vec<[f64; 2]>,
     /// The positions' box: lower and upper corners, m.
     pub lo: Vector3<f64>,
+    /// Upper corner of the box, {W}, m (`lo` is the lower).
     pub hi: Vector3<f64>,
+    /// Number of (joints, position) points, one per measurement.
     pub n: usize,
 }
 
@@ -191,7 +198,9 @@ pub struct ValidationReport {
     pub purposes: Vec<Purpose>,
     /// Scored against the truth (`true`) or against the measurements.
     pub against_truth: bool,
+    /// The calibrated model's errors (the set's parameters) over all selected measurements.
     pub calibrated: ModelErrors,
+    /// The nominal model's errors (the set's nominal values) over the same measurements.
     pub nominal: ModelErrors,
     /// The same per selected session that holds measurements, in selection order (several
     /// reflectors, or identification and validation sessions, scored apart).
@@ -210,36 +219,89 @@ pub struct ValidationReport {
 /// One session's share of a validation: both models' errors over its measurements.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SessionErrors {
+    /// The session, by name.
     pub session: String,
+    /// Its purpose.
     pub purpose: Purpose,
+    /// The calibrated model's errors over the session's measurements.
     pub calibrated: ModelErrors,
+    /// The nominal model's errors over the same measurements.
     pub nominal: ModelErrors,
 }
 
+/// Why a validation cannot be made. Measurement indices are 0-based within their session.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ValidateError {
+    /// The selection is empty.
     #[error("no session selected for validation")]
     NoSession,
+    /// The cell has no session of this name.
     #[error("unknown session '{0}'")]
     UnknownSession(String),
+    /// This session is named twice in the selection.
     #[error("session '{0}' is selected twice")]
     DuplicateSession(String),
+    /// The selected sessions hold no measurement.
     #[error("the selected sessions hold no measurement")]
     NoMeasurement,
+    /// The set is for another robot: a different number of joints, or a different preset.
     #[error(
         "the parameter set is for robot '{set}' ({set_dof} joints), the cell's robot is '{cell}' ({cell_dof} joints)"
     )]
-    RobotMismatch { set: String, set_dof: usize, cell: String, cell_dof: usize },
+    RobotMismatch {
+        /// The set's robot, by name.
+        set: String,
+        /// The set's number of joints.
+        set_dof: usize,
+        /// The cell's robot, by name.
+        cell: String,
+        /// The cell's number of joints.
+        cell_dof: usize,
+    },
+    /// A measurement's joint readings do not match the robot's number of joints.
     #[error("measurement {index} of session '{session}' has {got} joint values, the robot has {dof}")]
-    JointCount { session: String, index: usize, got: usize, dof: usize },
+    JointCount {
+        /// The session, by name.
+        session: String,
+        /// The measurement.
+        index: usize,
+        /// Joint readings it has.
+        got: usize,
+        /// Joints the robot has.
+        dof: usize,
+    },
+    /// A measurement observes a ball the cell's artefact does not have, or the cell has none.
     #[error("measurement {index} of session '{session}' observes ball {ball}, which the cell's artefact does not have")]
-    NoBall { session: String, index: usize, ball: usize },
+    NoBall {
+        /// The session, by name.
+        session: String,
+        /// The measurement.
+        index: usize,
+        /// The ball, 1-based.
+        ball: usize,
+    },
+    /// Against the truth: the run's truth has no session of this name.
     #[error("the truth has no session '{0}'")]
     TruthMissing(String),
+    /// Against the truth: the truth and the cell differ in a session's number of measurements.
     #[error("the truth of session '{session}' has {truth} measurements, the cell has {cell}")]
-    TruthCount { session: String, truth: usize, cell: usize },
+    TruthCount {
+        /// The session, by name.
+        session: String,
+        /// Measurements in the truth.
+        truth: usize,
+        /// Measurements in the cell.
+        cell: usize,
+    },
+    /// A measurement's error, or a length the statistics need (|error|, distance to the base), is
+    /// not finite; when a sum over the errors overflows, the measurement of largest |error|.
     #[error("measurement {index} of session '{session}' gives a non-finite error")]
-    NotFinite { session: String, index: usize },
+    NotFinite {
+        /// The session, by name.
+        session: String,
+        /// The measurement.
+        index: usize,
+    },
 }
 
 /// The names of the cell's validation sessions, in file order: the default selection.

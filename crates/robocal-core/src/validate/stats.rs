@@ -1,14 +1,22 @@
 //! Summary statistics of error magnitudes.
 
-/// Mean, median, sample standard deviation, RMS, 95th percentile and maximum of a sample.
+/// Mean, median, sample standard deviation, RMS, 95th percentile and maximum of a sample, all in
+/// the sample's unit (m for position error magnitudes, rad for orientation errors).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ErrorStats {
+    /// Number of values.
     pub n: usize,
+    /// Arithmetic mean.
     pub mean: f64,
+    /// Median: the 0.5 quantile ([`quantile`]).
     pub median: f64,
+    /// Sample standard deviation (divisor n − 1); 0 for a single value.
     pub std: f64,
+    /// Root mean square, √(Σ xᵢ² / n).
     pub rms: f64,
+    /// 95th percentile: the 0.95 quantile ([`quantile`], linear interpolation).
     pub p95: f64,
+    /// Largest value.
     pub max: f64,
 }
 
