@@ -26,6 +26,7 @@ use crate::cell::poses::group_poses;
 /// Which observations are tested in which fold.
 #[derive(Clone, Debug)]
 pub struct Folds {
+    /// Number of folds K.
     pub k: usize,
     /// Per observation of the stage's problem: the fold its pose is tested in, or `None` when it
     /// is always trained on.
@@ -109,6 +110,8 @@ pub struct CvBase<'a> {
 }
 
 impl<'a> CvBase<'a> {
+    /// The model's column-scaled Jacobian, Gram matrix and right side at `stage`, and each fold's
+    /// share of them on its test rows, for `folds`.
     pub fn new(stage: &'a Stage, folds: &Folds) -> CvBase<'a> {
         let pr = &stage.problem;
         let p = stage.p();
@@ -242,6 +245,9 @@ pub struct Paired {
 /// least one pose once there are 20).
 pub const CORE_TRIM: f64 = 0.01;
 
+/// The paired comparison of `better` with `base` on the same held-out poses (both from the same
+/// [`Folds`]): the one-sided Wilcoxon signed-rank test on the per-pose differences of summed squared
+/// position errors, base − better, and the gains, m.
 pub fn paired(base: &Heldout, better: &Heldout) -> Paired {
     let d: Vec<f64> = base.pose_sq.iter().zip(&better.pose_sq).map(|(a, b)| a - b).collect();
     let rms = |h: &Heldout| {

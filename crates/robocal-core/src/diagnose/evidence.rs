@@ -23,13 +23,14 @@ pub struct Evidence {
     pub joint: usize,
     /// What the x axis is.
     pub variable: EvidenceVariable,
+    /// The bins, in increasing order of the x variable.
     pub bins: Vec<EvidenceBin>,
-    /// 1 − Σ after² / Σ before² over the poses' residual angles: the share of the held-out
+    /// 1 − Σ after² / Σ before² over the measurements' residual angles: the share of the held-out
     /// residual at this joint that the model with the effect removes. The term alone need not
     /// match the residual before it: the model before absorbs what its own parameters can of
     /// the effect (a joint offset, a link length), and the model after refits those too.
     pub explained: Option<f64>,
-    /// The poses used.
+    /// The tested measurements used (a stop read on several reflectors counts once per reading).
     pub n: usize,
 }
 
@@ -52,9 +53,12 @@ pub enum EvidenceVariable {
 pub struct EvidenceBin {
     /// The bin's centre on the x axis (rad, a direction, N·m).
     pub at: f64,
+    /// Tested observations in the bin.
     pub n: usize,
     /// Mean and standard error of the before-residual angle.
     pub before: f64,
+    /// Standard error of that mean, s/√n (s the sample standard deviation, divisor n − 1; 0 for one
+    /// observation), rad.
     pub before_sem: f64,
     /// Mean of what the effect predicts.
     pub predicted: f64,
@@ -62,7 +66,7 @@ pub struct EvidenceBin {
     pub after: f64,
 }
 
-/// Evidence bins along a continuous variable: at most this many, each with at least 5 poses.
+/// Evidence bins along a continuous variable: at most this many, each with at least 5 measurements.
 const EVIDENCE_BINS: usize = 24;
 
 /// The evidence of each accepted joint effect (see [`Evidence`]); effects on no joint angle
@@ -177,11 +181,11 @@ pub(super) fn evidence(s: &search::Search, figures: &[&cv::Heldout]) -> Vec<Evid
     out
 }
 
-/// One pose of an evidence plot: (x, before angle, predicted angle, after angle).
+/// One measurement of an evidence plot: (x, before angle, predicted angle, after angle).
 type EvidencePoint = (f64, f64, f64, f64);
 
 /// Bins of (x, before, predicted, after): one per distinct value of a discrete variable, else up
-/// to [`EVIDENCE_BINS`] of equal counts (at least 5 poses each).
+/// to [`EVIDENCE_BINS`] of equal counts (at least 5 measurements each).
 fn evidence_bins(pts: &mut [EvidencePoint], discrete: bool) -> Vec<EvidenceBin> {
     pts.sort_by(|a, b| a.0.total_cmp(&b.0));
     let groups: Vec<&[EvidencePoint]> = if discrete {

@@ -20,8 +20,12 @@ use crate::validate::stats::quantile;
 /// The floor's distribution of |e| over the tested observations.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Floor {
+    /// Mean of |e| under the floor, m: Monte Carlo, 256 draws from each tested position's 3-D
+    /// Gaussian (its floor covariance).
     pub mean: f64,
+    /// RMS of |e| under the floor, m: √(mean trace of the floor covariances), exact (not sampled).
     pub rms: f64,
+    /// 95th percentile of |e| under the floor (of the Monte Carlo draws), m.
     pub p95: f64,
     /// Mean instrument-and-repeatability σ per axis, m.
     pub instrument_sigma: f64,

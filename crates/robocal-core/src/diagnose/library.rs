@@ -21,20 +21,37 @@ use crate::kinematics::{JointTerm, Param};
 /// What kind of physics a candidate stands for (the verdict's `name`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Kind {
+    /// Hayati β of a row whose axis is nominally parallel to the previous one.
     HayatiBeta,
+    /// Linear gear compliance, Δθ_j = c_j·τ_j with τ_j the gravity holding torque: one joint, or
+    /// every joint the model lacks (the group).
     Compliance,
+    /// Cubic compliance, Δθ_j = d_j·τ_j³.
     ComplianceCubic,
+    /// A periodic error of one joint, sin and cos of f·q_j: the harmonics f = 1, 2, or the frequency
+    /// scan's best, in quarter cycles from 1/4 to 40 cycles per revolution.
     Cyclic,
+    /// A correction table of one joint's angle over its reading, knots a few degrees apart,
+    /// smoothness-regularised.
     JointMap,
+    /// Backlash, Δθ_j = b_j·(direction of joint j's last move), −1, 0 or +1: one joint, or every
+    /// joint.
     Backlash,
+    /// Thermal growth: every link length scaled by 1 + α·(T − 20 °C).
     Thermal,
+    /// A coupling between joints, Δθ_k = ε·q_j.
     Coupling,
+    /// An error δm of the declared payload mass, kg, acting through the compliances.
     ToolMass,
+    /// A re-registration of the base, T_0^W: the base parameters the model holds fixed, freed.
     Base,
+    /// A tool's TCP identified: its declared (fixed) TCP freed. The candidate's `joint` holds the
+    /// tool's index.
     Tool,
 }
 
 impl Kind {
+    /// The kind's snake_case name, as in the verdict and in files (`hayati_beta`, `joint_map`, …).
     pub fn name(self) -> &'static str {
         match self {
             Kind::HayatiBeta => "hayati_beta",
@@ -62,6 +79,7 @@ impl Kind {
 /// One candidate effect.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Candidate {
+    /// What kind of effect it is.
     pub kind: Kind,
     /// The joint it acts on (0-based): the joint whose angle it corrects, the Hayati row, the
     /// coupling's destination.
@@ -122,9 +140,11 @@ impl Candidate {
 
 /// What the library needs to know about the data and the current model.
 pub struct Context<'a> {
+    /// Joints of the robot.
     pub dof: usize,
     /// The layout's parameters and, per layout entry, whether the current model fits it.
     pub layout: &'a [Param],
+    /// Per entry of `layout`: whether the current model fits it.
     pub free: &'a [bool],
     /// Rows whose axis is nominally parallel to the previous one.
     pub parallel_rows: Vec<usize>,
@@ -132,11 +152,15 @@ pub struct Context<'a> {
     pub torque_range: Vec<f64>,
     /// Per joint: the range of the readings, rad.
     pub joint_range: Vec<f64>,
+    /// Whether any observation has a non-zero approach direction (logged, or derived from the
+    /// measuring order): backlash needs it.
     pub approach_available: bool,
     /// Temperatures logged for every measurement, and their spread, °C.
     pub temperature_range: Option<f64>,
     /// Fixed base parameters (global indices) and fixed TCP blocks (per tool: global indices).
     pub fixed_base: Vec<usize>,
+    /// Per tool: the global indices of its TCP components the model holds fixed (x, y, z, and the
+    /// orientation when poses are measured).
     pub fixed_tools: Vec<Vec<usize>>,
     /// Knot spacing for tables, degrees (0: automatic).
     pub map_step_deg: u8,
@@ -170,7 +194,9 @@ impl Context<'_> {
 /// knows what was not looked for).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Unavailable {
+    /// The kind not tested.
     pub kind: Kind,
+    /// Why, in a clause for the report.
     pub reason: String,
 }
 

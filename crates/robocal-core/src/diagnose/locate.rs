@@ -19,15 +19,23 @@ use crate::validate::regression::{LinearFit, linear_fit};
 /// Signed error statistics along one axis of {W}, m.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Axis {
+    /// Mean of the signed error along the axis, m.
     pub mean: f64,
+    /// Sample standard deviation of the signed error (divisor n − 1), m.
     pub std: f64,
+    /// Shapiro–Wilk p-value of the signed errors (H0: normal); `None` when the test refuses the
+    /// sample ([`shapiro_wilk`]).
     pub shapiro_p: Option<f64>,
 }
 
 /// |e| against one variable: the regression and a binned profile.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Against {
+    /// The variable's name: `distance_to_base`, `distance_to_zone`, `distance_to_nearest_calibration`
+    /// (m), `joint_distance_to_nearest_calibration` (RMS over the joints, rad), `q1`… (rad), `tau1`…
+    /// (N·m) or `sigma_pred` (m).
     pub variable: String,
+    /// Least-squares line of |e| (m) on the variable; `None` when it cannot be fitted ([`linear_fit`]).
     pub fit: Option<LinearFit>,
     /// (bin centre, mean |e|, count) over equal-count bins.
     pub profile: Vec<(f64, f64, usize)>,
@@ -38,24 +46,35 @@ pub struct Against {
 pub struct Voxel {
     /// Centre in {W}, m.
     pub centre: Vector3<f64>,
+    /// Tested positions in the voxel (at least [`MIN_VOXEL`]).
     pub n: usize,
+    /// Mean |e| of its positions, m.
     pub mean_error: f64,
+    /// Mean over its positions of the floor's mean |e|, m: at each, the Maxwell mean 2σ·√(2/π) of the
+    /// floor's average σ per axis.
     pub floor_mean: f64,
+    /// p-value of H0 "the errors in this voxel are the floor's": T = Σ eᵢᵀΣᵢ⁻¹eᵢ against χ²(3n),
+    /// uncorrected.
     pub p: f64,
     /// Benjamini–Hochberg q-value.
     pub q: f64,
 }
 
+/// Where the starting model misses: its held-out errors per axis and against each variable, and
+/// the workspace voxels whose error stands above the floor.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Where {
     /// The residuals used: held-out errors of the starting model at the tested poses.
     pub n: usize,
+    /// Signed error statistics along x, y and z of {W}.
     pub per_axis: [Axis; 3],
+    /// |e| against each variable, in the order of [`Against::variable`]'s list.
     pub against: Vec<Against>,
     /// Voxel edge, m.
     pub voxel_size: f64,
     /// Voxels tested, and those above the floor at the FDR level.
     pub voxels_tested: usize,
+    /// The voxels above the floor (Benjamini–Hochberg q below `fdr`), largest mean error first.
     pub voxels: Vec<Voxel>,
 }
 

@@ -58,14 +58,20 @@ pub struct DiagnoseOptions {
     /// Validation sessions (`None`: every validation session of the cell; empty, or none in the
     /// cell: cross-validate on the identification sessions).
     pub validation: Option<Vec<String>>,
+    /// The instrument model: the weights of the pooled fits (the instrument's σ, not the readings'
+    /// own) and the noise floor.
     pub noise: NoiseModel,
+    /// K of the grouped K-fold cross-validation (at least 2, with at least 2K tested poses).
     pub folds: usize,
+    /// Seed of the folds' random assignment of poses and of the floor's Monte Carlo.
     pub seed: u64,
     /// κ limit of the pooled fits (scaled columns).
     pub kappa_limit: f64,
     /// m per rad for orientation rows.
     pub rotation_weight: f64,
+    /// Weak prior on the geometry of the pooled fits, towards the parameter set's values.
     pub anchor: Anchor,
+    /// Thresholds and sizes of the search.
     pub search: SearchOptions,
     /// Edge of the workspace voxels, m (0: about ten tested positions per voxel on average over
     /// the positions' bounding box).
@@ -108,7 +114,9 @@ impl Default for DiagnoseOptions {
 /// What is diagnosed: a cell's measurements and a calibrated parameter set.
 #[derive(Clone, Debug)]
 pub struct Input<'a> {
+    /// The cell: robot model, sessions and measurements.
     pub cell: &'a Cell,
+    /// The calibrated parameter set: the starting model's structure and values.
     pub set: &'a ParameterSet,
     /// Per layout entry of `set`: whether its identification fitted it. `None`: a parameter is
     /// taken as fitted when its value differs from its nominal.
@@ -117,10 +125,17 @@ pub struct Input<'a> {
     pub fixed: Vec<String>,
 }
 
+/// Why a diagnosis was refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum DiagnoseError {
+    /// The options do not fit the cell or its data (the message says how): an unknown session, a
+    /// session named for both identification and validation, no identification session, fewer
+    /// than 2 folds, fewer than 2 tested poses per fold.
     #[error("{0}")]
     Option(String),
+    /// The starting model cannot be set up on the pooled data (measurements, registration, an
+    /// option, too few rows). A fit that diverges or is refused for its conditioning is not an
+    /// error: the model is then linearised at the parameter set ([`Diagnosis::start_note`]).
     #[error("the current model on the pooled data: {0}")]
     Identify(#[from] IdentifyError),
 }
@@ -151,6 +166,7 @@ impl std::fmt::Display for Status {
 }
 
 impl Status {
+    /// The snake_case name, as on the wire and in files.
     pub fn as_str(self) -> &'static str {
         match self {
             Status::Named => "named",
@@ -165,37 +181,58 @@ impl Status {
 /// One parameter of an effect: value and standard deviation, SI.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ParamEstimate {
+    /// The parameter.
     pub param: Param,
+    /// Its value, SI.
     pub value: f64,
+    /// Its standard deviation from the instrument-weighted fit of the model that accepted the effect,
+    /// √[(JᵀWJ)⁻¹], SI; `None` for a suspect (its value is then the screening's linear estimate) and
+    /// for a parameter that model holds fixed.
     pub std: Option<f64>,
 }
 
 /// A named (or suspected) effect.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Effect {
+    /// The candidate it stands for.
     pub candidate: Candidate,
     /// Its size in `unit` (SI): cyclic amplitude, backlash half-play, compliance, α, kg, …
     pub estimate: Option<f64>,
+    /// Standard deviation of `estimate`, SI; `None` where it is not known (a suspect, a table).
     pub std: Option<f64>,
+    /// The file unit of `estimate` (the values here are SI: [`Unit::to_si`]).
     pub unit: Unit,
+    /// Its parameters: as fitted in the model that accepted it, or the screening's linear estimates
+    /// for a suspect.
     pub parameters: Vec<ParamEstimate>,
     /// Held-out gain when added: mean and RMS of |e|, m.
     pub gain_mean: f64,
+    /// For a named effect, both gains are those of the model refitted in full on the folds against
+    /// the model before it; for a suspect, the linearised confirmation's (0 when it was not
+    /// cross-validated).
     pub gain_rms: f64,
     /// Confirmation p-value (one-sided Wilcoxon) and the screening's Holm-corrected log10 p.
     pub confirm_p: Option<f64>,
+    /// log10 of the screening's Holm-corrected p (F form of the score test).
     pub screen_log10_p: f64,
+    /// Separability ρ = ‖J̃_k‖_F/‖J_k‖_F: the share of its columns the model before it cannot absorb
+    /// (0: absorbed; 1: orthogonal to the model).
     pub separability: f64,
 }
 
+/// The conclusion of a diagnosis: its status, the named effects or the suspects, and why.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Verdict {
+    /// What the diagnosis concludes.
     pub status: Status,
     /// Named effects, most important (first accepted) first; for `not_separable`, the suspects.
     pub effects: Vec<Effect>,
+    /// The verdict in a sentence or two, for the report.
     pub summary: String,
     /// A look-alike that the data cannot tell from the best (not_separable).
     pub lookalike: Option<Candidate>,
+    /// The largest canonical correlation between the unabsorbed columns of the best and of the
+    /// look-alike (not_separable with a look-alike).
     pub canonical_correlation: Option<f64>,
     /// Model parameters absorbing the suspect (name, share).
     pub absorbed_by: Vec<(String, f64)>,
@@ -210,11 +247,15 @@ pub struct Verdict {
 pub struct ShrinkEntry {
     /// The effects added to the starting model so far (labels).
     pub model: Vec<String>,
+    /// Held-out |e| statistics of the model, m: refitted in full on the folds (the linearised folds'
+    /// where that refit failed).
     pub stats: ErrorStats,
     /// (E_start − E)/(E_start − E_floor) on the mean; `None` for the starting model.
     pub closure: Option<f64>,
 }
 
+/// The starting model's error split into the noise floor, the extrapolation gap and the
+/// unmodelled gap (means of |e|, m).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Decomposition {
     /// The parameter set as given, on the validation poses (no refit); `None` without validation.
@@ -222,6 +263,7 @@ pub struct Decomposition {
     /// The starting model cross-validated with the identification data and part of the
     /// validation poses.
     pub heldout: ErrorStats,
+    /// The noise floor at the tested positions.
     pub floor: Floor,
     /// calibrated − held-out, on the mean (what coverage explains).
     pub extrapolation_gap: Option<f64>,
@@ -231,26 +273,39 @@ pub struct Decomposition {
 
 /// The whole diagnosis.
 pub struct Diagnosis {
+    /// The verdict.
     pub verdict: Verdict,
+    /// The starting model's error decomposed.
     pub decomposition: Decomposition,
+    /// Where the starting model misses.
     pub location: Where,
+    /// The rounds of the search, in order.
     pub rounds: Vec<Round>,
+    /// Held-out figures of the starting model and of each model the search accepted, in acceptance
+    /// order.
     pub shrink: Vec<ShrinkEntry>,
+    /// The weakest source of the approach directions backlash was screened with; `None` when it was
+    /// not screened or no session has directions.
     pub approach: Option<ApproachSource>,
     /// Where the directions came from, said in sentences (derived from the order, not logged;
     /// sessions whose order is lost), when backlash was looked for.
     pub approach_notes: Vec<String>,
+    /// Candidates these data cannot test, with the reason.
     pub unavailable: Vec<Unavailable>,
     /// Why the starting model could not be fitted on the pooled data (it was linearised at the
     /// parameter set instead), if so.
     pub start_note: Option<String>,
+    /// The identification sessions used.
     pub identification: Vec<String>,
+    /// The validation sessions used (empty: cross-validated on the identification sessions).
     pub validation: Vec<String>,
     /// The options of the final model (the starting model plus the accepted effects).
     pub model: IdentifyOptions,
     /// The final model fitted on the pooled data without anchors: what accepting produces.
     pub accepted: Option<Identification>,
+    /// K of the cross-validation.
     pub folds: usize,
+    /// Joints of the robot.
     pub dof: usize,
     /// Rows of the robot whose axis is parallel to the previous one (where β belongs).
     pub parallel_rows: usize,
@@ -263,9 +318,12 @@ pub struct Diagnosis {
 /// A model carried to another session, base and tools refitted there.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Transfer {
+    /// The transfer session.
     pub session: String,
     /// `start`, `start + <effect> + …` (the intermediate models of the search) or `final`.
     pub model: String,
+    /// Position |e| statistics of the model on the session, its base and tools refitted there, m; or
+    /// why that refit or its validation failed.
     pub errors: Result<ErrorStats, String>,
     /// κ of the column-scaled Jacobian of the base-and-tools refit.
     pub kappa_scaled: Option<f64>,
@@ -283,7 +341,9 @@ pub struct RangeSplit {
     pub joints: Vec<[f64; 2]>,
     /// Poses inside every range / all poses.
     pub inside_share: f64,
+    /// |e| statistics of the positions inside every range, m; `None` when there is none.
     pub inside: Option<ErrorStats>,
+    /// |e| statistics of the positions outside a range, m; `None` when there is none.
     pub outside: Option<ErrorStats>,
     /// Per joint, the share of the transfer's poses outside that joint's range.
     pub outside_share_per_joint: Vec<f64>,

@@ -28,6 +28,8 @@ pub struct Score {
     pub s: f64,
     /// Degrees of freedom (rank of J̃_k, or effective for a regularised candidate).
     pub dof: f64,
+    /// F = (S/d)/((RSS − S)/(n − p − d)): the residual variance estimated after removing the
+    /// candidate's share; 0 without a testable direction.
     pub f: f64,
     /// log10 of the uncorrected p-value (times the scan's multiplicity for a scanned frequency).
     pub log10_p: f64,
@@ -45,9 +47,11 @@ pub struct Basis<'a> {
     pub q: MatRef<'a, f64>,
     /// Weighted residual, projected orthogonally to Q.
     pub r: &'a [f64],
+    /// Weighted residual sum of squares of the measurement rows.
     pub rss: f64,
     /// Measurement rows and the model's free parameters.
     pub n: usize,
+    /// Parameters the residual was fitted with: p of n − p − d.
     pub p: usize,
 }
 

@@ -21,9 +21,11 @@
 //!   term inside the same joint's table) — the simpler one is kept unless the richer predicts
 //!   significantly better (paired test at `confirm_p`).
 //! - **Look-alikes**: a confirmed candidate of another effect whose unabsorbed columns have a
-//!   canonical correlation above `lookalike_corr` with the best's, or that predicts within 10 % as
-//!   well without being significantly worse (paired test at 0.05): the data cannot tell the two
-//!   apart → `not_separable` with both names and the experiment that would.
+//!   canonical correlation above `lookalike_corr` with the best's, or whose held-out RMS gain is
+//!   at least [`LOOKALIKE_GAIN_SHARE`] of the best's, and beyond which the best's own columns add
+//!   nothing significant (the encompassing score test at `confirm_p`; a correlation above
+//!   0.999999 is the same columns): the data cannot tell the two apart → `not_separable` with
+//!   both names and the experiment that would.
 //! - **Absorption**: separability ρ below `rho_min` → `not_separable`: the current model takes
 //!   most of the effect; the parameters that absorb it are named.
 //! - **Unknown effect and partial explanations**: a flexible joint-space smoother (every joint's
@@ -57,6 +59,10 @@ use crate::kinematics::{JointTerm, Param};
 mod decide;
 use decide::{Smoother, decide};
 
+/// Share of the best candidate's held-out RMS gain from which a confirmed candidate of another
+/// effect is examined as its look-alike, whatever their correlation.
+pub const LOOKALIKE_GAIN_SHARE: f64 = 0.8;
+
 /// Thresholds and sizes of the search.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SearchOptions {
@@ -70,7 +76,12 @@ pub struct SearchOptions {
     pub top: usize,
     /// Effects accepted at most.
     pub max_effects: usize,
+    /// Separability ρ below which the best confirmed candidate is `not_separable` (absorbed by the
+    /// current model), unless its held-out RMS gain reaches a quarter of the floor's RMS.
     pub rho_min: f64,
+    /// Canonical correlation of the unabsorbed columns above which a confirmed candidate of
+    /// another effect is examined as a look-alike of the best (DIAGNOSIS §1); the encompassing
+    /// score test then decides.
     pub lookalike_corr: f64,
     /// Knot spacing of tables, degrees (0: about 60 knots over each joint's range).
     pub map_step_deg: u8,
@@ -104,7 +115,7 @@ impl Default for SearchOptions {
             top: 6,
             max_effects: 5,
             rho_min: 0.05,
-            lookalike_corr: 0.95,
+            lookalike_corr: 0.9,
             map_step_deg: 0,
             map_smoothing: crate::identify::DEFAULT_MAP_SMOOTHING,
             min_rel_gain: 0.05,
@@ -118,12 +129,17 @@ impl Default for SearchOptions {
 /// A candidate with its screening statistics.
 #[derive(Clone, Debug)]
 pub struct Screened {
+    /// The candidate, realised (a table's knots laid over the pooled readings).
     pub candidate: Candidate,
+    /// Its score test on the round's model.
     pub score: Score,
     /// Holm-corrected log10 p.
     pub log10_p_holm: f64,
+    /// Whether the Holm-corrected p is below `alpha` (and the candidate has a testable direction).
     pub significant: bool,
-    /// The model parameters that absorb most of the candidate (name, share of ‖QᵀJ_k‖).
+    /// The model parameters that absorb most of the candidate: name and share ‖B_i‖ / Σ‖B‖ of the
+    /// coefficients of its columns' regression on the model's (B = J⁺J_k, unit-scaled columns); at
+    /// most three, each above 5 %.
     pub absorbed_by: Vec<(String, f64)>,
 }
 
@@ -132,10 +148,15 @@ pub struct Screened {
 pub struct Evaluated {
     /// Index into the round's `screened`.
     pub index: usize,
+    /// Held-out errors of the model plus the candidate, on the linearised folds.
     pub heldout: Heldout,
+    /// Against the model alone on the same folds (H1: the candidate lowers a pose's squared error).
     pub vs_model: Paired,
     /// Share of the held-out variance above the floor it explains.
     pub share: f64,
+    /// Whether it confirms: Wilcoxon p below `confirm_p`/m, m the candidates cross-validated this
+    /// round (Bonferroni); RMS gain above `min_gain`; mean gain at least `min_rel_gain` of the
+    /// model's held-out mean.
     pub confirmed: bool,
 }
 
@@ -148,25 +169,65 @@ pub enum Decision {
     Nothing,
     /// The best candidate's evidence cannot be told from the current model or from another
     /// candidate.
-    NotSeparable { best: usize, lookalike: Option<usize>, canonical: Option<f64>, reason: String },
+    NotSeparable {
+        /// The best confirmed candidate (index into `screened`).
+        best: usize,
+        /// The look-alike it cannot be told from (index into `screened`); `None` when the model
+        /// absorbs it, or when it is a payload error with a single payload in the data.
+        lookalike: Option<usize>,
+        /// The largest canonical correlation between the two candidates' unabsorbed columns;
+        /// `None` without a look-alike.
+        canonical: Option<f64>,
+        /// Why, in a sentence.
+        reason: String,
+    },
     /// Structure no candidate explains (the smoother predicts it, better than any name).
-    Unknown { best: Option<usize> },
+    Unknown {
+        /// The best confirmed candidate, when it lies in the smoother's span, is not named, and
+        /// explains less than `partial_share` of what the smoother does; `None` when no candidate
+        /// confirmed.
+        best: Option<usize>,
+    },
     /// The best candidate, one of the smoother's own forms, explains only `share` of what the
     /// smoother explains beyond the model: a partial explanation, the rest unexplained. It is
     /// not added to the model.
-    Partial { best: usize, share: f64, smoother_gain_rms: f64 },
+    Partial {
+        /// The candidate (index into `screened`).
+        best: usize,
+        /// Its held-out gain in mean squared |e| over the largest of its own, the smoother's and
+        /// that of the model with both, in [0, 1].
+        share: f64,
+        /// Held-out RMS gain of the smoother over the model, or of the candidate and the smoother
+        /// together when larger, m.
+        smoother_gain_rms: f64,
+    },
     /// The best candidate was confirmed on the linearised folds, but the model refitted in full
     /// on the same folds does not reproduce the gain: it is not named, and the model stays as it
     /// was (one model, one figure).
-    Refuted { best: usize, linear: Paired, refit: Option<Paired>, reason: String },
+    Refuted {
+        /// The candidate (index into `screened`).
+        best: usize,
+        /// Its confirmation on the linearised folds, against the model.
+        linear: Paired,
+        /// The model with it refitted in full on the folds, against the model before it refitted
+        /// the same way; `None` when a fit or a refit failed.
+        refit: Option<Paired>,
+        /// Why the acceptance is withdrawn.
+        reason: String,
+    },
 }
 
 /// One round of the search.
 #[derive(Clone, Debug)]
 pub struct Round {
+    /// Every candidate screened: the library's, then the frequency scan's.
     pub screened: Vec<Screened>,
+    /// The significant candidates cross-validated on held-out poses, confirmed or not, highest BIC
+    /// gain first (at most `top`).
     pub evaluated: Vec<Evaluated>,
+    /// The smoother against the model on the same folds (H1: the smoother is better).
     pub smoother: Paired,
+    /// The smoother's held-out errors (the model plus its ridge-penalised columns).
     pub smoother_heldout: Heldout,
     /// The smoother against the best confirmed candidate (H1: the smoother is better).
     pub smoother_vs_best: Option<Paired>,
@@ -179,6 +240,7 @@ pub struct Round {
     /// The accepted candidate's model refitted in full on the folds, against the model before
     /// it refitted the same way.
     pub refit: Option<Paired>,
+    /// What the round decided.
     pub decision: Decision,
 }
 
@@ -191,8 +253,12 @@ pub struct Search {
     /// Held-out errors of each stage's model refitted in full on the same folds: the figures of
     /// the models that are reported ([`super::refit`]).
     pub refits: Vec<Result<Heldout, String>>,
+    /// The rounds, in order: every round but the last accepted an effect (the last too when
+    /// `max_effects` was reached).
     pub rounds: Vec<Round>,
+    /// The accepted candidates, in acceptance order: stage k + 1 adds the k-th (0-based).
     pub accepted: Vec<Candidate>,
+    /// Library candidates these data cannot test (from the first round).
     pub unavailable: Vec<Unavailable>,
 }
 

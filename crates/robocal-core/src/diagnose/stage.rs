@@ -13,7 +13,9 @@ use crate::kinematics::{Chain, Param, ParameterSet, Rows};
 
 /// A fitted model and its linearisation.
 pub struct Stage {
+    /// The model's identification options.
     pub options: IdentifyOptions,
+    /// The identification problem on the pooled data: observations, rows and global parameters.
     pub problem: Problem,
     /// The linearisation point (global parameters, SI).
     pub x: Vec<f64>,
@@ -215,10 +217,12 @@ impl Stage {
         globals.iter().map(|g| self.free.iter().position(|f| f == g).map(|c| cov[(c, c)].max(0.0).sqrt())).collect()
     }
 
+    /// Rows of J and r: the measurement rows, then the prior rows.
     pub fn n_rows(&self) -> usize {
         self.problem.n_rows
     }
 
+    /// Measurement rows (3 per position, 6 per pose).
     pub fn n_obs_rows(&self) -> usize {
         self.problem.n_obs_rows
     }

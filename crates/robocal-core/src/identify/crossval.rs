@@ -43,7 +43,9 @@ use crate::validate::stats::ErrorStats;
 /// A model to evaluate: a name for the reports and its identification options.
 #[derive(Clone, Debug)]
 pub struct Variant {
+    /// Its name in the reports (`before` for the reference).
     pub name: String,
+    /// Its identification options; each split sets the sessions and the measurements it fits.
     pub options: IdentifyOptions,
 }
 
@@ -86,7 +88,9 @@ pub struct CrossvalOptions {
     pub variants: Vec<Variant>,
     /// Options of the "before" reference (rotation weight, solver; `only` is set to base + tools).
     pub before: IdentifyOptions,
+    /// Seed of the k-fold shuffle; each few-poses draw derives its own seed from it.
     pub seed: u64,
+    /// Scoped worker threads (0 counts as 1; never more than the jobs).
     pub threads: usize,
 }
 
@@ -108,8 +112,11 @@ pub struct HeldOut {
 /// One session's share of a test set's errors.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SessionHeldOut {
+    /// The session's name.
     pub session: String,
+    /// |position error| of its test measurements, m.
     pub position: ErrorStats,
+    /// Their orientation error, rad, when the session observed full poses.
     pub orientation: Option<ErrorStats>,
 }
 
@@ -196,10 +203,12 @@ struct Scored {
 /// k-fold cross-validation of one variant.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FoldsResult {
+    /// The variant's name.
     pub variant: String,
     /// The pooled held-out errors (each measurement predicted by the fold that did not see it),
     /// with their per-session breakdown; `None` when a fold failed.
     pub pooled: Option<HeldOut>,
+    /// Per fold, in fold order: its held-out errors, or why there are none (a refused fit).
     pub per_fold: Vec<Result<HeldOut, String>>,
     /// Parameters identified in the first fold (the others agree unless the data are marginal).
     pub identified: usize,
@@ -212,7 +221,9 @@ pub struct FoldsResult {
 /// One identification size of the few-poses scheme, one variant.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SizeResult {
+    /// The variant's name.
     pub variant: String,
+    /// Poses identified on.
     pub n: usize,
     /// Per draw: the errors on the disjoint test half, or why the fit was refused.
     pub draws: Vec<Result<HeldOut, String>>,
@@ -239,8 +250,11 @@ impl SizeResult {
 /// The whole-session model of one variant on another session, base and tools refitted there.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TransferResult {
+    /// The variant's name.
     pub variant: String,
+    /// The session transferred to.
     pub session: String,
+    /// The errors there, or why the whole-session fit or the refit was refused.
     pub errors: Result<HeldOut, String>,
     /// κ of the column-scaled Jacobian of the base-and-tools refit.
     pub kappa_scaled: Option<f64>,
@@ -251,14 +265,18 @@ pub struct TransferResult {
 pub struct Crossval {
     /// The split sessions.
     pub sessions: Vec<String>,
+    /// Measurements of the split sessions.
     pub measurements: usize,
     /// Distinct configurations among them (the unit of every split).
     pub poses: usize,
     /// Per fold of the k-fold scheme, the measurements it held out: (session, index), sessions in
     /// the options' order, indices increasing.
     pub kfold_test: Vec<Vec<(String, usize)>>,
+    /// The k-fold results, one per variant, the "before" reference first (empty when skipped).
     pub folds: Vec<FoldsResult>,
+    /// The few-poses results, per variant (the reference first), then per size in the options' order.
     pub sizes: Vec<SizeResult>,
+    /// The transfer results, per variant (the reference first), then per transfer session.
     pub transfer: Vec<TransferResult>,
     /// What the run derived and did not read (the backlash terms' approach directions from the
     /// measuring order, or why they could not be), one sentence each.

@@ -4,40 +4,108 @@ use super::problem::ProblemError;
 use super::solver::SolveError;
 use crate::metrology::registration::RegistrationError;
 
+/// Why an identification is refused (also a DETMAX pool, a study or a cross-validation).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum IdentifyError {
+    /// The measurements do not form a problem (selection, artefact).
     #[error("{0}")]
     Problem(#[from] ProblemError),
+    /// The starting base T_0^W (and the unknown TCPs) could not be registered from the measurements.
     #[error("base estimate: {0}")]
     Registration(#[from] RegistrationError),
     /// An option refused: the option's name, spelled as the identification's own field (`fix`,
     /// `only`, `folds`), the item of a list option that was refused, and why. Each front end
     /// writes the field its way: `--fix` on the command line, `fix[2]` in a request.
     #[error("{}", option_message(*field, *index, reason))]
-    Option { field: Option<&'static str>, index: Option<usize>, reason: String },
+    Option {
+        /// The option's field name; `None` when no single option is to blame.
+        field: Option<&'static str>,
+        /// The refused item of a list option, 0-based.
+        index: Option<usize>,
+        /// Why it is refused.
+        reason: String,
+    },
+    /// The start parameter set ([`super::IdentifyOptions::start`]) is for another robot: another
+    /// joint count, or another built-in preset.
     #[error(
         "the start parameter set is for robot '{set}' ({set_dof} joints), not for the cell's robot '{cell}' ({cell_dof} joints)"
     )]
-    StartRobot { set: String, set_dof: usize, cell: String, cell_dof: usize },
+    StartRobot {
+        /// The start set's robot name.
+        set: String,
+        /// Its joint count.
+        set_dof: usize,
+        /// The cell's robot name.
+        cell: String,
+        /// Its joint count.
+        cell_dof: usize,
+    },
+    /// The measurement rows plus the priors' rows do not exceed the free parameters.
     #[error("{rows} residual rows cannot determine {params} parameters")]
-    Underdetermined { rows: usize, params: usize },
+    Underdetermined {
+        /// Measurement rows (3 per position, 6 per full pose; the priors' rows not counted).
+        rows: usize,
+        /// Free parameters.
+        params: usize,
+    },
+    /// A rank-deficient fit: κ of the column-scaled Jacobian at the solution above 10¹⁰, or a zero
+    /// singular value of J.
     #[error(
         "rank-deficient fit: these data do not separate {combination}: hold one of them at a known value, or measure poses that separate them"
     )]
-    RankDeficient { combination: String },
+    RankDeficient {
+        /// The weakest direction: the right singular vector of the scaled Jacobian's smallest singular
+        /// value, its coefficients above 0.1 in magnitude, largest first (at most four), written
+        /// `+0.71·a2 -0.70·d3`.
+        combination: String,
+    },
+    /// κ of the column-scaled Jacobian at the solution exceeds [`super::IdentifyOptions::kappa_limit`].
     #[error(
         "ill-conditioned fit: κ of the scaled Jacobian = {kappa:.1} exceeds the limit {limit:.0}; the weakest combination is {combination}: hold one of its parameters at a known value (the one known best, e.g. a TCP measured apart; a parameter equivalent to it may then take its place and need holding too), or measure poses that change that combination"
     )]
-    IllConditioned { kappa: f64, limit: f64, combination: String },
+    IllConditioned {
+        /// κ = σ_max/σ_min of the Jacobian with unit-norm columns.
+        kappa: f64,
+        /// The limit it exceeds.
+        limit: f64,
+        /// The weakest direction: the right singular vector of the scaled Jacobian's smallest singular
+        /// value, its coefficients above 0.1 in magnitude, largest first (at most four), written
+        /// `+0.71·a2 -0.70·d3`.
+        combination: String,
+    },
+    /// The solver did not converge.
     #[error("{0}")]
     Solve(#[from] SolveError),
+    /// The residual is too large for the noise the instrument predicts: ρ = `rms`/`expected` exceeds
+    /// [`super::IdentifyOptions::residual_ratio_limit`].
     #[error(
         "residual RMS {} mm against an expected ~{} mm ({ratio:.0} times, above the limit of {limit:.0}): the model does not describe these data (check the TCPs, the sessions' frames, outliers); largest residuals: {}",
         mm(*rms), mm(*expected), worst_list(worst)
     )]
-    Misfit { rms: f64, expected: f64, ratio: f64, limit: f64, worst: Vec<Worst> },
+    Misfit {
+        /// RMS over the measurements (outliers left out) of |residual|, m (rotation rows as
+        /// rotation_weight·angle).
+        rms: f64,
+        /// RMS of the noise the instrument predicts for the same measurements, √(mean Σ σ²), m.
+        expected: f64,
+        /// ρ = `rms`/`expected` (≈ 1 for a right model).
+        ratio: f64,
+        /// The limit ρ exceeds.
+        limit: f64,
+        /// The largest residuals in units of their σ, largest first (at most [`super::WORST_REPORTED`]).
+        worst: Vec<Worst>,
+    },
+    /// Gross outliers the robust loss did not down-weight: measurements whose z (the RMS over their
+    /// rows of e/√(σ² + τ²), τ² the spread the model leaves beyond the instrument) exceeds `factor`
+    /// times the larger of the median z and 1.
     #[error("{}", outliers_message(outliers, *factor, "exclude", "huber"))]
-    Outliers { outliers: Vec<Worst>, factor: f64 },
+    Outliers {
+        /// The outlier measurements, largest z first.
+        outliers: Vec<Worst>,
+        /// [`super::IdentifyOptions::outlier_factor`]: the multiple of the median z beyond which a
+        /// measurement is an outlier.
+        factor: f64,
+    },
 }
 
 impl IdentifyError {
@@ -80,6 +148,7 @@ impl IdentifyError {}
 /// A measurement with a large residual.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Worst {
+    /// The session's name.
     pub session: String,
     /// 0-based index in the session.
     pub index: usize,

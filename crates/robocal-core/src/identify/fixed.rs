@@ -7,37 +7,122 @@
 #[derive(Clone, Debug, PartialEq)]
 pub enum FixedReason {
     /// Named in the options' `fixed` list; held at the start set's value (`at_start`) or nominal.
-    ByUser { name: String, at_start: bool },
+    ByUser {
+        /// The parameter's name.
+        name: String,
+        /// Held at the start set's value (`true`) or at nominal.
+        at_start: bool,
+    },
     /// Not named by the options' `only` list (nor a group it names).
-    NotInOnly { name: String, at_start: bool },
+    NotInOnly {
+        /// The parameter's name.
+        name: String,
+        /// Held at the start set's value (`true`) or at nominal.
+        at_start: bool,
+    },
     /// A term the model leaves out.
-    NotInModel { name: String, term: ModelTerm },
+    NotInModel {
+        /// The parameter's name.
+        name: String,
+        /// The term left out.
+        term: ModelTerm,
+    },
     /// A TCP component the session declares (measured, e.g. on a CMM).
-    DeclaredTcp { name: String },
+    DeclaredTcp {
+        /// The parameter's name.
+        name: String,
+    },
     /// A compliance of an axis gravity does not load.
-    NoGravityTorque { name: String, axis: usize },
+    NoGravityTorque {
+        /// The parameter's name.
+        name: String,
+        /// The axis, 1-based.
+        axis: usize,
+    },
     /// A direction-of-motion term of an axis whose approach direction is not in the data.
-    NoApproachDirection { name: String, axis: usize },
+    NoApproachDirection {
+        /// The parameter's name.
+        name: String,
+        /// The axis, 1-based.
+        axis: usize,
+    },
     /// A thermal term without a temperature change in the data.
-    NoTemperatureChange { name: String },
+    NoTemperatureChange {
+        /// The parameter's name.
+        name: String,
+    },
     /// The last joint's offset when the TCP lies on its axis and orientation is not measured.
-    TcpOnLastAxis { name: String, axis: usize },
+    TcpOnLastAxis {
+        /// The parameter's name.
+        name: String,
+        /// The last axis, 1-based.
+        axis: usize,
+    },
     /// A tool orientation component when orientation is not measured.
-    OrientationNotMeasured { name: String },
+    OrientationNotMeasured {
+        /// The parameter's name.
+        name: String,
+    },
     /// A column the measurements do not see at all.
-    NoEffect { name: String },
+    NoEffect {
+        /// The parameter's name.
+        name: String,
+    },
     /// A combination of parameters kept before it, with the structural reason when there is one.
-    Dependent { name: String, on: Vec<String>, structure: Option<Structure> },
+    Dependent {
+        /// The parameter's name.
+        name: String,
+        /// The names of the parameters kept before it that span its column.
+        on: Vec<String>,
+        /// Why, when the structure says so.
+        structure: Option<Structure>,
+    },
     /// Independent, but the data's residual would leave it a standard deviation above `bound`
     /// (metres, or radians when `angle`).
-    Undetermined { name: String, std: f64, bound: f64, angle: bool },
+    Undetermined {
+        /// The parameter's name.
+        name: String,
+        /// The least its standard deviation could be, σ/lever: σ the residual's standard deviation
+        /// per row, lever the norm of its Jacobian column's component outside the span of the
+        /// parameters kept before it (m, or rad when `angle`).
+        std: f64,
+        /// The limit `std` exceeds: [`super::identifiability::UNDETERMINED_LENGTH_M`] or
+        /// [`super::identifiability::UNDETERMINED_ANGLE_RAD`].
+        bound: f64,
+        /// The parameter is an angle: `std` and `bound` in rad, not m.
+        angle: bool,
+    },
     /// An unknown payload whose mass is not significant: `mass_kg ± std_kg`, below `sigmas` σ.
-    PayloadInsignificant { mass_kg: f64, std_kg: f64, sigmas: f64 },
+    PayloadInsignificant {
+        /// The fitted payload mass, kg.
+        mass_kg: f64,
+        /// Its standard deviation, kg.
+        std_kg: f64,
+        /// The multiple of `std_kg` the mass must exceed ([`super::PAYLOAD_SIGNIFICANCE`]).
+        sigmas: f64,
+    },
     /// An unknown payload whose fit does not settle (the solver's message).
-    PayloadUnsettled { error: String },
+    PayloadUnsettled {
+        /// The solver's refusal of the fit with the payload.
+        error: String,
+    },
     /// A compliance whose change from its start is not significant (rad/(N·m)): `change ± std`,
     /// `t` σ (not finite when undefined), below `sigmas` σ, held at `held_at`.
-    ComplianceInsignificant { name: String, change: f64, std: f64, t: f64, sigmas: f64, held_at: f64 },
+    ComplianceInsignificant {
+        /// The parameter's name.
+        name: String,
+        /// Fitted value minus start value, rad/(N·m).
+        change: f64,
+        /// Its standard deviation (as reported: the larger of the classic and the cluster-robust),
+        /// rad/(N·m).
+        std: f64,
+        /// |`change`|/`std` (a NaN ratio counts as 0).
+        t: f64,
+        /// The multiple of `std` the change must exceed ([`super::COMPLIANCE_SIGNIFICANCE`]).
+        sigmas: f64,
+        /// The start value it is held at, rad/(N·m).
+        held_at: f64,
+    },
     /// A layout entry no parameter of the identification problem maps to.
     NotInProblem,
 }
@@ -45,7 +130,10 @@ pub enum FixedReason {
 /// A model term switched off in the options.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ModelTerm {
+    /// Hayati's β of the joints whose axis is (nearly) parallel to the previous one
+    /// ([`super::ModelOptions::beta`]).
     Beta,
+    /// The joints' linear gear compliance ([`super::ModelOptions::compliance`]).
     Compliance,
 }
 
@@ -53,11 +141,19 @@ pub enum ModelTerm {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Structure {
     /// Axes `lo`–`hi` (1-based) are parallel.
-    ParallelAxes { lo: usize, hi: usize },
+    ParallelAxes {
+        /// The first of them.
+        lo: usize,
+        /// The last of them.
+        hi: usize,
+    },
     /// A joint-1 parameter, redundant with the base pose.
     Base,
     /// Redundant with the parameters of joint `joint` (1-based).
-    Joint { joint: usize },
+    Joint {
+        /// The joint, 1-based.
+        joint: usize,
+    },
 }
 
 impl FixedReason {

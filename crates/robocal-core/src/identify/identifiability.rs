@@ -19,7 +19,9 @@ use crate::kinematics::{JointTerm, Param};
 /// Identified, or why not.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Status {
+    /// Free in the fit: estimated, with a standard deviation.
     Identified,
+    /// Held at its start value (or nominal), and why.
     Fixed(FixedReason),
 }
 

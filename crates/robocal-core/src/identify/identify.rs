@@ -15,10 +15,13 @@ use crate::kinematics::{Param, ParameterSet, Tool};
 /// An identified tool (beyond the parameter set's own).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ToolResult {
+    /// The sessions measured with it (one tool block of the problem).
     pub sessions: Vec<String>,
+    /// The tool, its TCP as fitted: x, y, z (m) and a, b, c (rad, ZY'X'') of T_T^6.
     pub tool: Tool,
     /// Standard deviation of each TCP component when identified (SI).
     pub std: [Option<f64>; 6],
+    /// Per TCP component: `identified`, or why it is held ([`Status`] as text).
     pub status: [String; 6],
 }
 
@@ -33,17 +36,22 @@ pub struct Identification {
     pub status: Vec<Status>,
     /// Every tool of the problem (the first is `set.tool`).
     pub tools: Vec<ToolResult>,
+    /// Conditioning (κ SI and scaled), O1–O5, σ̂ and the covariance of the free parameters.
     pub quality: Quality,
     /// Names of the free parameters, in the covariance's order.
     pub free_names: Vec<String>,
+    /// Solver iterations of the final fit.
     pub iterations: usize,
     /// Observations down-weighted by the robust loss: (session, index, weight).
     pub downweighted: Vec<(String, usize, f64)>,
     /// The measurements with the largest residuals against their expected noise, largest first
     /// (at most [`WORST_REPORTED`]).
     pub worst: Vec<Worst>,
+    /// The problem solved: measurements, global parameters, priors.
     pub problem: Problem,
+    /// The free parameters' global indices (into `problem.params`), in the covariance's order.
     pub free: Vec<usize>,
+    /// The global parameter vector at the solution (SI): robot parameters, then six per tool block.
     pub x: Vec<f64>,
     /// What was derived rather than given, in sentences (e.g. approach directions taken from the
     /// measuring order).
@@ -470,8 +478,8 @@ impl Fitness {
     /// why it is a large factor, not a χ² test: real robots leave unmodelled effects far above
     /// a tracker's noise). Outliers: each row's variance is its σ² plus τ², the spread the model
     /// leaves beyond the instrument (from the medians); per measurement z = RMS of e/√(σ² + τ²)
-    /// over its rows. One whose z exceeds [`OUTLIER_FACTOR`] times the median z (and 10) is an
-    /// outlier, unless the Huber loss down-weighted it. (Without τ, where the model's misses
+    /// over its rows. One whose z exceeds [`OUTLIER_FACTOR`] times the larger of the median z and
+    /// 1 is an outlier, unless the Huber loss down-weighted it. (Without τ, where the model's misses
     /// dominate, a reading with a small σ would look like an outlier for an ordinary residual.) Outliers are left out of ρ, so that one bad line reads as an outlier,
     /// not as a model that does not fit.
     fn of(problem: &Problem, cell: &Cell, noise: &NoiseModel, fit: &Fit, outlier_factor: f64) -> Fitness {

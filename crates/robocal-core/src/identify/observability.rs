@@ -23,14 +23,21 @@ use nalgebra::DMatrix;
 /// One of the five observability indices.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Index {
+    /// (σ_1·σ_2·…·σ_m)^{1/m}/√n (Menq 1988): the singular values' geometric mean over √n, n the
+    /// configurations.
     O1,
+    /// σ_min/σ_max = 1/κ(J) (Driels & Pathre 1990).
     O2,
+    /// σ_min (Nahvi 1994).
     O3,
+    /// σ_min²/σ_max (Nahvi & Hollerbach 1996).
     O4,
+    /// 1/Σ 1/σ_i² = 1/tr((JᵀJ)⁻¹) (Sun & Hollerbach 2008).
     O5,
 }
 
 impl Index {
+    /// The five, in order.
     pub const ALL: [Index; 5] = [Index::O1, Index::O2, Index::O3, Index::O4, Index::O5];
 
     /// "O1" … "O5", either case.
@@ -45,6 +52,7 @@ impl Index {
         }
     }
 
+    /// "O1" … "O5".
     pub fn name(self) -> &'static str {
         match self {
             Index::O1 => "O1",
@@ -77,14 +85,20 @@ impl FromStr for Index {
 /// All five indices of one Jacobian.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Observability {
+    /// O1 = (σ_1·…·σ_m)^{1/m}/√n.
     pub o1: f64,
+    /// O2 = σ_min/σ_max.
     pub o2: f64,
+    /// O3 = σ_min.
     pub o3: f64,
+    /// O4 = σ_min²/σ_max.
     pub o4: f64,
+    /// O5 = 1/Σ 1/σ_i².
     pub o5: f64,
 }
 
 impl Observability {
+    /// The value of `index`.
     pub fn get(&self, index: Index) -> f64 {
         match index {
             Index::O1 => self.o1,

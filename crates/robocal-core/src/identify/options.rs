@@ -124,7 +124,9 @@ pub fn map_knots(j: usize, step_deg: u8, qs: impl Iterator<Item = f64>) -> Vec<P
 /// Everything an identification can be told.
 #[derive(Clone, Debug)]
 pub struct IdentifyOptions {
+    /// Which measurements the fit uses.
     pub selection: MeasurementSelection,
+    /// Which model is fitted: its optional blocks and effect terms.
     pub model: ModelOptions,
     /// Parameters held at their nominal values (names, e.g. `a2`, `tool_x`, `tool2_y`).
     pub fixed: Vec<String>,
@@ -134,6 +136,7 @@ pub struct IdentifyOptions {
     /// depends on the units chosen for each column — compliance in rad/(N·m) multiplies its
     /// column by the torques — and is reported beside it for comparison.
     pub kappa_limit: f64,
+    /// The least-squares solver's settings.
     pub solver: SolverOptions,
     /// Metres per radian for orientation residual rows.
     pub rotation_weight: f64,

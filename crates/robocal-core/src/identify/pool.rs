@@ -21,6 +21,9 @@ pub struct DetmaxPool {
 }
 
 impl DetmaxPool {
+    /// The pool of `cell` under `opts`: every measurement of the chosen sessions (the options'
+    /// `subset` ignored), as its block on the parameters free at the starting point. Refused for the
+    /// reasons an identification's preparation is.
     pub fn new(cell: &Cell, opts: &IdentifyOptions) -> Result<DetmaxPool, IdentifyError> {
         let mut pool_opts = opts.clone();
         pool_opts.selection.subset.clear();
@@ -119,6 +122,7 @@ impl DetmaxPool {
         self.blocks.len()
     }
 
+    /// Whether the pool has no candidate.
     pub fn is_empty(&self) -> bool {
         self.blocks.is_empty()
     }

@@ -16,9 +16,14 @@ use crate::kinematics::{JointTerm, Param, ParamLayout};
 
 /// A problem ready to solve: its starting point, free parameters and every parameter's status.
 pub struct Prepared {
+    /// The problem to solve (the correction tables' regularisation rows among its priors).
     pub problem: Problem,
+    /// The starting point: the global parameter vector (SI) with the base, the start set's values
+    /// (or nominal) and the registered unknown TCPs.
     pub x0: Vec<f64>,
+    /// Global indices of the parameters identifiable at the start, ascending.
     pub free: Vec<usize>,
+    /// Per global parameter: identified, or fixed and why.
     pub status: Vec<Status>,
     /// T_0^W the fit starts from (the cell's guess, or a registration).
     pub base: [f64; 6],

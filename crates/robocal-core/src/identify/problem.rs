@@ -32,12 +32,18 @@ pub enum GlobalParam {
     /// A robot parameter: index into the problem's [`ParamLayout`].
     Robot(usize),
     /// Component k of tool t's T_T^6.
-    Tool { tool: usize, k: usize },
+    Tool {
+        /// The tool block: index into [`Problem::tools`].
+        tool: usize,
+        /// The component: 0–2 x, y, z (m), 3–5 a, b, c (rad, ZY'X'').
+        k: usize,
+    },
 }
 
 /// A distinct tool and the sessions that used it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ToolBlock {
+    /// The tool as its first session declares it (TCP guess or value, payload).
     pub tool: Tool,
     /// Names of the sessions measured with it.
     pub sessions: Vec<String>,
@@ -64,12 +70,16 @@ enum Target {
 pub struct Obs {
     /// Index of the session in the cell and of the measurement in it.
     pub session: usize,
+    /// Index of the measurement in its session (0-based).
     pub index: usize,
+    /// Its tool block: index into [`Problem::tools`].
     pub tool: usize,
+    /// The joint readings (rad), holding torques (N·m), approach directions and temperature.
     pub state: JointState,
     target: Target,
     /// First row in the stacked residual.
     pub row: usize,
+    /// Its rows: 3 for a ball or a position, 6 for a full pose.
     pub rows: usize,
     /// Row multipliers (1/σ in a common unit) of the position rows (X, Y, Z of {W}) and of the
     /// rotation rows: 1 unless the caller weights the problem by an instrument model
@@ -95,7 +105,10 @@ impl Obs {
 /// value. Appended after the measurement rows.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Prior {
+    /// (global index, coefficient) pairs.
     pub terms: Vec<(usize, f64)>,
+    /// The value Σ coef·x is drawn to: the row's residual is `target` − Σ coef·x (the coefficients
+    /// carry its weight).
     pub target: f64,
 }
 
@@ -164,18 +177,24 @@ impl MeasurementSelection {
     }
 }
 
+/// Why the selected measurements cannot form a problem.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ProblemError {
+    /// No session of that name.
     #[error("no session named '{0}' in the cell")]
     UnknownSession(String),
-    #[error(
-        "session '{0}' is a validation session; identify with identification sessions (or name it explicitly among the sessions to identify on)"
-    )]
-    WrongPurpose(String),
+    /// A measurement index beyond its session.
     #[error("measurement {index} of session '{session}' does not exist")]
-    UnknownMeasurement { session: String, index: usize },
+    UnknownMeasurement {
+        /// The session's name.
+        session: String,
+        /// The measurement's index (0-based).
+        index: usize,
+    },
+    /// The selection leaves no measurement.
     #[error("no measurements to identify from")]
     Empty,
+    /// A ball measurement in a cell without an artefact.
     #[error("a ball measurement needs the cell's artefact")]
     NoArtefact,
 }
@@ -234,17 +253,25 @@ pub fn tool_blocks(cell: &Cell, picks: &[(usize, usize)]) -> (Vec<ToolBlock>, Ve
 /// The identification problem of a cell.
 #[derive(Clone, Debug)]
 pub struct Problem {
+    /// The robot model.
     pub model: RobotModel,
+    /// The robot parameter layout (the full layout plus any effect terms); its tool entries are not
+    /// global parameters: each tool block has its own six.
     pub layout: ParamLayout,
+    /// The tool blocks, in order of first appearance; the first is the parameter set's tool.
     pub tools: Vec<ToolBlock>,
+    /// The global parameter vector's entries: the layout's robot parameters in order, then six per
+    /// tool block.
     pub params: Vec<GlobalParam>,
     /// Nominal value of every global parameter (SI).
     pub nominal: Vec<f64>,
+    /// The measurements, in selection order.
     pub obs: Vec<Obs>,
     /// Rows of the stacked system: the measurement rows, then one per prior.
     pub n_rows: usize,
     /// Rows of the measurements alone.
     pub n_obs_rows: usize,
+    /// Linear pseudo-observations, their rows after the measurement rows.
     pub priors: Vec<Prior>,
     /// m per rad for rotation residual rows.
     pub rotation_weight: f64,
@@ -357,6 +384,7 @@ impl Problem {
         })
     }
 
+    /// Length of the global parameter vector.
     pub fn n_params(&self) -> usize {
         self.params.len()
     }

@@ -25,7 +25,11 @@ pub struct Quality {
     pub rms_residual: f64,
     /// Parameter covariance (free parameters, SI).
     pub covariance: Mat<f64>,
+    /// Standard deviations of the free parameters (SI), in the fit's column order: the classic
+    /// σ̂²(JᵀJ)⁻¹ ones, or after [`Quality::make_robust`] the larger of those and the cluster-robust
+    /// ones.
     pub std: Vec<f64>,
+    /// Correlations of the free parameters (the classic ones, also after [`Quality::make_robust`]).
     pub correlation: Mat<f64>,
     /// σ̂²(JᵀJ)⁻¹'s standard deviations, before [`Quality::make_robust`] (equal to `std` until then).
     pub std_classic: Vec<f64>,
@@ -33,7 +37,9 @@ pub struct Quality {
     pub robust: bool,
     /// The direction of the smallest singular value of the scaled Jacobian: (column, coefficient).
     pub weakest: Vec<(usize, f64)>,
+    /// Rows N of J: the measurement rows, then the prior rows.
     pub n_rows: usize,
+    /// Configurations n of O1's normalisation (an identification passes its measurement count).
     pub n_configs: usize,
     /// The rows were weighted by an instrument model: `sigma` is then the ratio of the residual
     /// to the instrument's σ (1 when the model and the instrument model are right), not metres.
@@ -46,6 +52,10 @@ pub struct Quality {
 }
 
 impl Quality {
+    /// The quality of a converged fit: the SVDs of its Jacobian in SI units and with unit-norm
+    /// columns, O1–O5 for `n_configs`, σ̂ and the classic covariance. `obs_rows` gives each
+    /// measurement's (first row, rows) for `rms_residual`; `weighted`, `expected_rms` and
+    /// `residual_ratio` are left for the identification to set.
     pub fn of(fit: &Fit, n_configs: usize, obs_rows: &[(usize, usize)]) -> Quality {
         let j = &fit.jacobian;
         let (n, m) = (j.nrows(), j.ncols());

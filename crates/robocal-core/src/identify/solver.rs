@@ -17,8 +17,10 @@ use faer::linalg::solvers::{DenseSolveCore, Solve, SolveLstsq};
 
 use super::problem::Problem;
 
+/// Settings of [`solve`]: iteration limit, convergence tests, robust loss.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SolverOptions {
+    /// Iterations before [`SolveError::IterationLimit`].
     pub max_iterations: usize,
     /// Converged when the largest scaled step component is at most this (m).
     pub step_tol: f64,
@@ -40,22 +42,30 @@ impl Default for SolverOptions {
     }
 }
 
+/// Why a fit did not converge.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SolveError {
+    /// The cost or a step became non-finite, or no damped step (λ up to 10¹⁰) lowers the cost.
     #[error("diverged at iteration {iteration}: {reason}")]
     Diverged {
+        /// The iteration it happened at.
         iteration: usize,
+        /// What happened.
         reason: String,
         /// The last accepted iterate (global parameter vector), where the fit stopped.
         last: Vec<f64>,
     },
+    /// `max_iterations` reached without meeting a convergence test.
     #[error(
         "no convergence in {iterations} iterations (last scaled step {step_m:.3e} m, relative cost change {cost_change:.3e}; the step still moves {} by {:.2} of its standard deviation): {}",
         moving.first().map_or("no parameter", |m| m.0.as_str()), moving.first().map_or(0.0, |m| m.1), advice(moving)
     )]
     IterationLimit {
+        /// The iterations made (`max_iterations`).
         iterations: usize,
+        /// The last step: its largest scaled component, m (compared with `step_tol`).
         step_m: f64,
+        /// The last step's relative cost decrease (compared with `cost_tol`).
         cost_change: f64,
         /// The free parameters the last Gauss–Newton step moved most, in units of their own
         /// standard deviation (name, |step|/σ), largest first (at most 4).
@@ -82,12 +92,15 @@ fn advice(moving: &[(String, f64)]) -> String {
 pub struct Fit {
     /// Global parameter vector.
     pub x: Vec<f64>,
+    /// Iterations made.
     pub iterations: usize,
     /// Final (weighted) residual and Jacobian of the free parameters, unscaled (SI).
     pub residual: Vec<f64>,
+    /// (rows of the stacked system) × (free parameters, in the order of [`solve`]'s `free`).
     pub jacobian: Mat<f64>,
     /// Robust weight of each observation (1 = full weight).
     pub weights: Vec<f64>,
+    /// Σ r² of the final weighted residual, robust weights included.
     pub cost: f64,
 }
 

@@ -41,15 +41,21 @@ pub struct StudyOptions {
 /// One identification of the study.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StudyRun {
+    /// Set size: identification measurements.
     pub n: usize,
+    /// Index of the set among its size's, 0-based.
     pub set: usize,
+    /// DETMAX's seed: `seed + 1000·n + set` (wrapping).
     pub seed: u64,
     /// Validation position error of the calibrated model, m: mean, standard deviation, maximum.
     pub mean: f64,
+    /// Their standard deviation, m.
     pub std: f64,
+    /// Their maximum, m.
     pub max: f64,
     /// κ in SI units and O1 of the identification.
     pub kappa: f64,
+    /// O1 of the identification (SI units).
     pub o1: f64,
     /// Why there is no result (a refused fit: rank deficiency, κ above the limit, divergence).
     pub error: Option<String>,
@@ -61,21 +67,30 @@ pub type Quartiles = [f64; 5];
 /// The summary of one set size.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StudyRow {
+    /// Set size.
     pub n: usize,
     /// Identifications that produced a parameter set.
     pub succeeded: usize,
     /// Identifications refused, with their reasons.
     pub failed: usize,
+    /// Quartiles of the runs' validation mean position errors, m (NaN when no run succeeded).
     pub mean: Quartiles,
+    /// Quartiles of their standard deviations, m.
     pub std: Quartiles,
+    /// Quartiles of their maxima, m.
     pub max: Quartiles,
 }
 
+/// The result of a study.
 #[derive(Clone, Debug)]
 pub struct Study {
+    /// Candidates in the DETMAX pool (measurements of the pool's sessions).
     pub pool: usize,
+    /// The sessions validated on.
     pub validation: Vec<String>,
+    /// One summary per set size, in the options' order.
     pub rows: Vec<StudyRow>,
+    /// Every identification: sizes in the options' order, sets in order within each.
     pub runs: Vec<StudyRun>,
 }
 

@@ -189,8 +189,8 @@ fn lookalike(
         }
         let ta = unabsorbed(stage, &columns[e.index].0);
         let corr = canonical_correlation(tb.as_ref(), ta.as_ref());
-        let close = e.vs_model.gain_rms >= 0.8 * best.vs_model.gain_rms;
-        if corr <= 0.9 && !close {
+        let close = e.vs_model.gain_rms >= super::LOOKALIKE_GAIN_SHARE * best.vs_model.gain_rms;
+        if corr <= opts.lookalike_corr && !close {
             continue;
         }
         let beyond = encompassing(stage, &rp, &ta, &columns[best.index].0);

@@ -109,11 +109,14 @@ const SINGULAR_PIVOT: f64 = 1e-12;
 /// One candidate's rows of the identification Jacobian: `rows` × m, row-major.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Block {
+    /// Rows r_i: 3 for a position measurement, 6 for a full pose.
     pub rows: usize,
+    /// The r_i × m entries, row-major.
     pub data: Vec<f64>,
 }
 
 impl Block {
+    /// A block of `rows` rows from its row-major entries (unchecked: the search checks the shape).
     pub fn new(rows: usize, data: Vec<f64>) -> Self {
         Self { rows, data }
     }
@@ -132,6 +135,7 @@ impl Block {
     }
 }
 
+/// Settings of a selection ([`detmax`], [`detmax_prediction`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DetmaxOptions {
     /// Configurations to select.
@@ -157,12 +161,15 @@ impl DetmaxOptions {
     }
 }
 
+/// A selection and how the search went.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DetmaxResult {
     /// The selected candidates, ascending pool indices.
     pub selected: Vec<usize>,
     /// The index of the random start and of the selection, in the units of the blocks as given.
     pub index_initial: f64,
+    /// The index of the selection. For [`detmax_prediction`], both are
+    /// [`Workspace::prediction_rms`] instead (lower is better).
     pub index_final: f64,
     /// Accepted exchanges (one addition and one removal each).
     pub exchanges: usize,
@@ -177,26 +184,77 @@ pub struct DetmaxResult {
 /// Why no selection.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 pub enum DetmaxError {
+    /// m = 0.
     #[error("no parameters: m must be at least 1")]
     NoParameters,
+    /// A block whose entries are not `rows` × m.
     #[error("block {block}: {rows} rows × {m} columns need {expected} values, got {got}")]
-    BlockShape { block: usize, rows: usize, m: usize, expected: usize, got: usize },
+    BlockShape {
+        /// The block's index in the pool (or workspace), 0-based.
+        block: usize,
+        /// Its rows.
+        rows: usize,
+        /// Parameter columns.
+        m: usize,
+        /// `rows` × m.
+        expected: usize,
+        /// Entries it holds.
+        got: usize,
+    },
+    /// A block with no rows.
     #[error("block {block} has no rows")]
-    EmptyBlock { block: usize },
+    EmptyBlock {
+        /// The block's index in the pool (or workspace), 0-based.
+        block: usize,
+    },
+    /// A block with a NaN or infinite entry.
     #[error("block {block} has a non-finite entry")]
-    NonFinite { block: usize },
+    NonFinite {
+        /// The block's index in the pool (or workspace), 0-based.
+        block: usize,
+    },
+    /// n is not smaller than the pool.
     #[error("n = {n} must be smaller than the pool's {pool} candidates")]
-    TooMany { n: usize, pool: usize },
+    TooMany {
+        /// Configurations asked for.
+        n: usize,
+        /// Candidates in the pool.
+        pool: usize,
+    },
+    /// Even the n candidates with the most rows give fewer rows than parameters.
     #[error("n = {n} configurations give at most {rows} rows for {m} parameters: the fit is underdetermined")]
-    Underdetermined { n: usize, rows: usize, m: usize },
+    Underdetermined {
+        /// Configurations asked for.
+        n: usize,
+        /// Rows of the n largest blocks together.
+        rows: usize,
+        /// Parameter columns.
+        m: usize,
+    },
+    /// A parameter column that is zero in every candidate.
     #[error("parameter column {column} is zero in every candidate: no selection can identify it")]
-    ZeroColumn { column: usize },
+    ZeroColumn {
+        /// The column, 0-based.
+        column: usize,
+    },
+    /// The whole pool's scaled information matrix fails the Cholesky factorisation (a pivot at most
+    /// 10⁻¹² of its diagonal entry).
     #[error("the whole pool's information matrix is singular: no selection identifies all {m} parameters")]
-    PoolRankDeficient { m: usize },
+    PoolRankDeficient {
+        /// Parameter columns.
+        m: usize,
+    },
+    /// No workspace block has a nonzero entry ([`Workspace::new`]).
     #[error("the workspace's blocks are all zero: no prediction variance to minimise")]
     EmptyWorkspace,
+    /// The workspace's parameter columns differ from the pool's.
     #[error("the workspace has {workspace} parameter columns, the pool {m}")]
-    WorkspaceColumns { workspace: usize, m: usize },
+    WorkspaceColumns {
+        /// The workspace's columns.
+        workspace: usize,
+        /// The pool's.
+        m: usize,
+    },
 }
 
 /// Where the calibrated model will be used, for the prediction criterion
@@ -242,6 +300,7 @@ impl Workspace {
         Ok(Self { m, rows, info })
     }
 
+    /// Rows of the workspace's blocks together: [`Self::prediction_rms`] is a mean over them.
     pub fn rows(&self) -> usize {
         self.rows
     }
