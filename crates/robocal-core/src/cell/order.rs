@@ -52,7 +52,7 @@ impl ApproachSource {
     }
 
     /// Derived from the measuring order rather than logged.
-    pub fn is_derived(self) -> bool {
+    pub(crate) fn is_derived(self) -> bool {
         self != ApproachSource::Logged
     }
 }
@@ -86,7 +86,7 @@ impl Approach {
     }
 
     /// Why no direction is known, when none is: the refusals, or the lack of any order.
-    pub fn unavailable_reason(&self) -> Option<String> {
+    pub(crate) fn unavailable_reason(&self) -> Option<String> {
         if self.source.is_some() {
             return None;
         }

@@ -11,7 +11,7 @@ const PER_RAD: f64 = 1e6;
 
 /// The pose of each configuration in `joints` — 0, 1, … in the order of first appearance — and
 /// the number of poses. Readings are compared rounded to 1 µrad.
-pub fn group_poses<'a>(joints: impl IntoIterator<Item = &'a [f64]>) -> (Vec<usize>, usize) {
+pub(crate) fn group_poses<'a>(joints: impl IntoIterator<Item = &'a [f64]>) -> (Vec<usize>, usize) {
     let mut seen: HashMap<Vec<i64>, usize> = HashMap::new();
     let mut pose_of = Vec::new();
     for q in joints {

@@ -75,7 +75,7 @@ impl Heldout {
     }
 
     /// Mean squared position error per pose, m².
-    pub fn mse(&self) -> f64 {
+    pub(crate) fn mse(&self) -> f64 {
         self.pose_sq.iter().sum::<f64>() / self.pose_sq.len().max(1) as f64
     }
 }

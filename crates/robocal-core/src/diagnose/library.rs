@@ -15,7 +15,6 @@
 //! | `base` | T_0^W re-registration | base parameters the model holds fixed |
 //! | `tool` | a tool's TCP (x, y, z, and orientation when poses are measured) | a declared (fixed) TCP |
 
-use crate::identify::{GlobalParam, Status};
 use crate::kinematics::{JointTerm, Param};
 
 /// What kind of physics a candidate stands for (the verdict's `name`).
@@ -130,7 +129,7 @@ impl Candidate {
     }
 
     /// Same physical effect at the same place (for de-duplicating a scan that lands on h1/h2).
-    pub fn same_effect(&self, other: &Candidate) -> bool {
+    pub(crate) fn same_effect(&self, other: &Candidate) -> bool {
         self.kind == other.kind
             && self.joint == other.joint
             && self.from == other.from
@@ -181,7 +180,7 @@ impl Context<'_> {
 
     /// Knot spacing of joint j's table: the requested one, or about 60 knots over the readings'
     /// range, 2° to 10° apart.
-    pub fn step_for(&self, j: usize) -> u8 {
+    pub(crate) fn step_for(&self, j: usize) -> u8 {
         if self.map_step_deg > 0 {
             return self.map_step_deg;
         }
@@ -333,24 +332,13 @@ pub fn candidates(ctx: &Context<'_>) -> (Vec<Candidate>, Vec<Unavailable>) {
 }
 
 /// The frequencies of the scan for one joint, quarter cycles: 1/4 … 40 cycles per revolution.
-pub fn scan_quarters() -> impl Iterator<Item = u16> {
+pub(crate) fn scan_quarters() -> impl Iterator<Item = u16> {
     1..=160u16
 }
 
 /// The effective number of independent frequencies a scan over `range` rad of a joint tests:
 /// two frequencies closer than one cycle over the range are nearly the same regressor
 /// (DIAGNOSIS §2: ≈ range in revolutions × highest frequency), at least 1.
-pub fn scan_multiplicity(range: f64) -> f64 {
+pub(crate) fn scan_multiplicity(range: f64) -> f64 {
     (range / std::f64::consts::TAU * 40.0).max(1.0)
-}
-
-/// Which global parameters of the problem are free (identified), per layout entry.
-pub fn free_layout(params: &[GlobalParam], status: &[Status], layout_len: usize) -> Vec<bool> {
-    let mut free = vec![false; layout_len];
-    for (g, p) in params.iter().enumerate() {
-        if let GlobalParam::Robot(i) = *p {
-            free[i] = status[g] == Status::Identified;
-        }
-    }
-    free
 }

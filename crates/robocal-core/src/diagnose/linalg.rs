@@ -8,27 +8,27 @@ use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatRef, Par, Side};
 
 /// AᵀB.
-pub fn at_b(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Mat<f64> {
+pub(crate) fn at_b(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Mat<f64> {
     let mut out = Mat::<f64>::zeros(a.ncols(), b.ncols());
     matmul(out.as_mut(), Accum::Replace, a.transpose(), b, 1.0, Par::Seq);
     out
 }
 
 /// A·B.
-pub fn a_b(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Mat<f64> {
+pub(crate) fn a_b(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Mat<f64> {
     let mut out = Mat::<f64>::zeros(a.nrows(), b.ncols());
     matmul(out.as_mut(), Accum::Replace, a, b, 1.0, Par::Seq);
     out
 }
 
 /// Aᵀv.
-pub fn at_v(a: MatRef<'_, f64>, v: &[f64]) -> Vec<f64> {
+pub(crate) fn at_v(a: MatRef<'_, f64>, v: &[f64]) -> Vec<f64> {
     (0..a.ncols()).map(|c| (0..a.nrows()).map(|r| a[(r, c)] * v[r]).sum()).collect()
 }
 
 /// A symmetric positive semi-definite matrix's eigenpairs above `rel_tol`·λ_max: the basis of a
 /// pseudo-inverse. Returns (eigenvalues, eigenvectors as columns).
-pub fn psd_eigen(g: &Mat<f64>, rel_tol: f64) -> (Vec<f64>, Mat<f64>) {
+pub(crate) fn psd_eigen(g: &Mat<f64>, rel_tol: f64) -> (Vec<f64>, Mat<f64>) {
     let m = g.nrows();
     if m == 0 {
         return (Vec::new(), Mat::zeros(0, 0));
@@ -45,7 +45,7 @@ pub fn psd_eigen(g: &Mat<f64>, rel_tol: f64) -> (Vec<f64>, Mat<f64>) {
 
 /// x = G⁺·b for a symmetric positive semi-definite G (directions below `rel_tol`·λ_max dropped).
 /// Tries Cholesky first (the common, full-rank case), falls back to the eigen pseudo-inverse.
-pub fn psd_solve(g: &Mat<f64>, b: &[f64], rel_tol: f64) -> Vec<f64> {
+pub(crate) fn psd_solve(g: &Mat<f64>, b: &[f64], rel_tol: f64) -> Vec<f64> {
     let m = g.nrows();
     if let Ok(llt) = g.llt(Side::Lower) {
         // Cholesky succeeds on nearly singular matrices too; accept it only when the smallest
@@ -76,7 +76,7 @@ pub fn psd_solve(g: &Mat<f64>, b: &[f64], rel_tol: f64) -> Vec<f64> {
 }
 
 /// An orthonormal basis of A's column space (thin SVD, directions below `rel_tol`·σ_max dropped).
-pub fn orthonormal_basis(a: MatRef<'_, f64>, rel_tol: f64) -> Mat<f64> {
+pub(crate) fn orthonormal_basis(a: MatRef<'_, f64>, rel_tol: f64) -> Mat<f64> {
     let svd = a.thin_svd().expect("SVD");
     let s = svd.S().column_vector();
     let u = svd.U();
@@ -88,7 +88,7 @@ pub fn orthonormal_basis(a: MatRef<'_, f64>, rel_tol: f64) -> Mat<f64> {
 
 /// The largest canonical correlation between the column spaces of A and B (the cosine of the
 /// smallest principal angle): 1 when a direction of one lies in the other.
-pub fn canonical_correlation(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> f64 {
+pub(crate) fn canonical_correlation(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> f64 {
     let (ua, ub) = (orthonormal_basis(a, 1e-9), orthonormal_basis(b, 1e-9));
     if ua.ncols() == 0 || ub.ncols() == 0 {
         return 0.0;

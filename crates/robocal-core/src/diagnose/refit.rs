@@ -49,7 +49,7 @@ fn start_cell(work: &Cell, stage: &Stage) -> Cell {
 /// Held-out errors of the stage's model refitted in full on each fold (threads: folds run on up
 /// to this many scoped threads; the result does not depend on it). `Err` names the fold whose
 /// refit failed and why.
-pub fn refit_heldout(work: &Cell, stage: &Stage, folds: &Folds, threads: usize) -> Result<Heldout, String> {
+pub(crate) fn refit_heldout(work: &Cell, stage: &Stage, folds: &Folds, threads: usize) -> Result<Heldout, String> {
     let pr = &stage.problem;
     let cell = start_cell(work, stage);
     let fold_ids: Vec<usize> = (0..folds.k).collect();
@@ -106,7 +106,8 @@ pub fn refit_heldout(work: &Cell, stage: &Stage, folds: &Folds, threads: usize) 
 
 /// Whether the model refitted in full on the folds reproduces a gain confirmed on the linearised
 /// folds ([`refit_disagrees`] says why not).
-pub fn refit_confirms(linear: &Paired, refit: &Paired, opts: &SearchOptions) -> bool {
+#[cfg(test)]
+pub(crate) fn refit_confirms(linear: &Paired, refit: &Paired, opts: &SearchOptions) -> bool {
     refit_disagrees(linear, refit, opts).is_none()
 }
 

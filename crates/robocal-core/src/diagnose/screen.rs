@@ -88,7 +88,13 @@ pub fn score(basis: &Basis<'_>, c: MatRef<'_, f64>, penalty: Option<&Mat<f64>>) 
 
 /// The score test from the candidate's Gram matrices: G₀ = J_kᵀJ_k, G = J̃_kᵀJ̃_k (after
 /// projecting off the model) and J_kᵀr̃.
-pub fn score_gram(basis: &Basis<'_>, g0: &Mat<f64>, g: &Mat<f64>, gr: &[f64], penalty: Option<&Mat<f64>>) -> Score {
+pub(crate) fn score_gram(
+    basis: &Basis<'_>,
+    g0: &Mat<f64>,
+    g: &Mat<f64>,
+    gr: &[f64],
+    penalty: Option<&Mat<f64>>,
+) -> Score {
     let m = g0.nrows();
     let tr0: f64 = (0..m).map(|i| g0[(i, i)]).sum();
     let tr: f64 = (0..m).map(|i| g[(i, i)].max(0.0)).sum();
@@ -140,7 +146,7 @@ pub fn score_gram(basis: &Basis<'_>, g0: &Mat<f64>, g: &Mat<f64>, gr: &[f64], pe
 /// The smoothness penalty of a correction table with `m` consecutive knots whose (weighted)
 /// columns are `c`: λ² Σ (second differences)² + (mean row)², with λ² = η·mean‖c_k‖² — the
 /// rows `identify::map_priors` adds to an identification, as a matrix.
-pub fn table_penalty(c: MatRef<'_, f64>, eta: f64) -> Mat<f64> {
+pub(crate) fn table_penalty(c: MatRef<'_, f64>, eta: f64) -> Mat<f64> {
     let m = c.ncols();
     let mean: f64 = (0..m).map(|k| (0..c.nrows()).map(|r| c[(r, k)].powi(2)).sum::<f64>()).sum::<f64>() / m as f64;
     let lam2 = eta * mean;

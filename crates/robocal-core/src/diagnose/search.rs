@@ -374,7 +374,7 @@ fn rms2(h: &Heldout) -> f64 {
 }
 
 /// The model options with a candidate added.
-pub fn extend_options(options: &IdentifyOptions, stage: &Stage, cand: &Candidate) -> IdentifyOptions {
+pub(crate) fn extend_options(options: &IdentifyOptions, stage: &Stage, cand: &Candidate) -> IdentifyOptions {
     let mut o = options.clone();
     for p in &cand.params {
         if !o.model.extra.contains(p) {
@@ -467,7 +467,7 @@ fn context<'a>(cell: &Cell, stage: &'a Stage, free: &'a [bool], opts: &SearchOpt
 /// The smoother's columns: every joint's angle corrected by a linear function of every holding
 /// torque, every reading and every reading squared (weighted, n_rows × 3n²). Not a name: a
 /// generic stand-in for "a smooth function of the configuration".
-pub fn smoother_columns(stage: &Stage, g: &Mat<f64>) -> Mat<f64> {
+pub(crate) fn smoother_columns(stage: &Stage, g: &Mat<f64>) -> Mat<f64> {
     let pr = &stage.problem;
     let n = pr.model.dof();
     let mut out = Mat::<f64>::zeros(stage.n_rows(), 3 * n * n);

@@ -212,7 +212,7 @@ impl Stage {
 
     /// Standard deviations of free global parameters from this stage's weighted Jacobian,
     /// √[(JᵀJ)⁻¹]_gg (the instrument model's σ, priors included); `None` for a fixed one.
-    pub fn stds_of(&self, globals: &[usize]) -> Vec<Option<f64>> {
+    pub(crate) fn stds_of(&self, globals: &[usize]) -> Vec<Option<f64>> {
         let cov = super::floor::covariance(self);
         globals.iter().map(|g| self.free.iter().position(|f| f == g).map(|c| cov[(c, c)].max(0.0).sqrt())).collect()
     }
@@ -278,18 +278,18 @@ impl Stage {
 
     /// ∂(TCP)/∂θ_j of every joint, weighted (n_rows × dof): a joint-angle term's column is this
     /// column times its basis function, row by row.
-    pub fn joint_columns(&self) -> Mat<f64> {
+    pub(crate) fn joint_columns(&self) -> Mat<f64> {
         let dof = self.problem.model.dof();
         self.columns(&(0..dof).map(Param::Theta).collect::<Vec<_>>())
     }
 
     /// Whether a global parameter is free in this model.
-    pub fn is_free(&self, g: usize) -> bool {
+    pub(crate) fn is_free(&self, g: usize) -> bool {
         self.free.contains(&g)
     }
 
     /// Per layout entry: whether the model fits it.
-    pub fn free_layout(&self) -> Vec<bool> {
+    pub(crate) fn free_layout(&self) -> Vec<bool> {
         let pr = &self.problem;
         let mut free = vec![false; pr.layout.len()];
         for &g in &self.free {

@@ -13,7 +13,7 @@ use statrs::function::gamma::ln_gamma;
 /// log10 of the upper tail P(F(d1, d2) > f). Below f64's range, the χ²(d1) tail of d1·f (the
 /// limit d2 → ∞, which is where such tails occur: thousands of residual rows) by its asymptotic
 /// series.
-pub fn f_log10_sf(f: f64, d1: f64, d2: f64) -> f64 {
+pub(crate) fn f_log10_sf(f: f64, d1: f64, d2: f64) -> f64 {
     if f.is_nan() || d1.is_nan() || f <= 0.0 || d1 <= 0.0 {
         return 0.0;
     }
@@ -29,7 +29,7 @@ pub fn f_log10_sf(f: f64, d1: f64, d2: f64) -> f64 {
 /// log10 of the upper tail P(χ²(k) > x), with the asymptotic expansion of the regularised upper
 /// incomplete gamma Γ(a, y)/Γ(a) ≈ y^(a−1)·e^(−y)/Γ(a)·(1 + (a−1)/y + (a−1)(a−2)/y² + …) where the
 /// direct value underflows.
-pub fn chi2_log10_sf(x: f64, k: f64) -> f64 {
+pub(crate) fn chi2_log10_sf(x: f64, k: f64) -> f64 {
     if x.is_nan() || k.is_nan() || x <= 0.0 || k <= 0.0 {
         return 0.0;
     }
@@ -54,7 +54,7 @@ pub fn chi2_log10_sf(x: f64, k: f64) -> f64 {
 
 /// Holm's step-down adjusted p-values (family-wise error control), in the input's order. Input
 /// and output as log10 p so that tails below f64's range keep their order.
-pub fn holm_log10(log10_p: &[f64]) -> Vec<f64> {
+pub(crate) fn holm_log10(log10_p: &[f64]) -> Vec<f64> {
     let m = log10_p.len();
     let mut order: Vec<usize> = (0..m).collect();
     order.sort_by(|&a, &b| log10_p[a].total_cmp(&log10_p[b]));
@@ -69,7 +69,7 @@ pub fn holm_log10(log10_p: &[f64]) -> Vec<f64> {
 }
 
 /// Benjamini–Hochberg adjusted p-values (q-values; false-discovery-rate control), input order.
-pub fn benjamini_hochberg(p: &[f64]) -> Vec<f64> {
+pub(crate) fn benjamini_hochberg(p: &[f64]) -> Vec<f64> {
     let m = p.len();
     let mut order: Vec<usize> = (0..m).collect();
     order.sort_by(|&a, &b| p[a].total_cmp(&p[b]));
@@ -86,7 +86,7 @@ pub fn benjamini_hochberg(p: &[f64]) -> Vec<f64> {
 /// against H1: they tend to be positive. Normal approximation with continuity and tie
 /// corrections (zero differences dropped, Pratt's variant not used); `None` below 10 non-zero
 /// pairs, where the approximation is poor and a held-out gain would not be trusted anyway.
-pub fn wilcoxon_greater(d: &[f64]) -> Option<f64> {
+pub(crate) fn wilcoxon_greater(d: &[f64]) -> Option<f64> {
     let mut nz: Vec<f64> = d.iter().copied().filter(|v| *v != 0.0 && v.is_finite()).collect();
     let n = nz.len();
     if n < 10 {

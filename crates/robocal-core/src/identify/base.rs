@@ -26,7 +26,7 @@ pub fn estimate_base(cell: &Cell) -> Result<([f64; 6], f64), RegistrationError> 
 /// As [`estimate_base`] on the given measurements only, (session index, measurement index): the
 /// ones an identification uses. Sessions measured in different instrument frames (a tracker
 /// moved between days) must not be registered together.
-pub fn estimate_base_of(cell: &Cell, picks: &[(usize, usize)]) -> Result<([f64; 6], f64), RegistrationError> {
+pub(crate) fn estimate_base_of(cell: &Cell, picks: &[(usize, usize)]) -> Result<([f64; 6], f64), RegistrationError> {
     let (model, observed) = point_pairs(cell, picks);
     register_base(&model, &observed)
 }

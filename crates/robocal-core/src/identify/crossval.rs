@@ -283,13 +283,6 @@ pub struct Crossval {
     pub notes: Vec<String>,
 }
 
-/// A cell holding one session with the given measurements of `session` (the artefact, model and
-/// base guess kept). A proper subset is marked [`MeasuringOrder::Resampled`]: its consecutive
-/// measurements are not consecutive stops.
-pub fn subset_cell(cell: &Cell, session: &Session, indices: &[usize]) -> Cell {
-    subsets_cell(cell, &[(session, indices.to_vec())])
-}
-
 /// A cell holding, for each (session, indices), that session with those measurements (sessions
 /// left without any are dropped); proper subsets are marked resampled.
 fn subsets_cell(cell: &Cell, parts: &[(&Session, Vec<usize>)]) -> Cell {
@@ -412,7 +405,7 @@ impl Split<'_> {
 /// that TCP, so that each held-out measurement is predicted with its own target's TCP. Sessions
 /// whose declared tools are equal (several reflectors imported with the flange as their guess)
 /// are otherwise all predicted with the parameter set's one tool — the first reflector's.
-pub fn with_identified_tools(cell: &mut Cell, id: &super::Identification) {
+pub(crate) fn with_identified_tools(cell: &mut Cell, id: &super::Identification) {
     for s in &mut cell.sessions {
         if let Some(t) = id.tools.iter().find(|t| t.sessions.contains(&s.name)) {
             s.tool.tcp = t.tool.tcp;

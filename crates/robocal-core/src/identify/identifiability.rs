@@ -34,7 +34,7 @@ pub const DEPENDENCE_TOL: f64 = 1e-7;
 /// metre, so its direction carries relative errors of 1e-16 m / 4e-10 m — above
 /// [`DEPENDENCE_TOL`] — and unit scaling would let it pass as independent of the tool's x and y.
 /// At 1e-8 of the typical column, a parameter would need κ ≥ 1e8 to be identified anyway.
-pub const ZERO_COLUMN: f64 = 1e-8;
+pub(crate) const ZERO_COLUMN: f64 = 1e-8;
 
 /// Priority class of a global parameter (lower = kept first).
 fn priority(problem: &Problem, g: usize) -> (u8, i64) {

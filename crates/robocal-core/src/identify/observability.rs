@@ -18,6 +18,7 @@
 use std::fmt;
 use std::str::FromStr;
 
+#[cfg(test)]
 use nalgebra::DMatrix;
 
 /// One of the five observability indices.
@@ -141,7 +142,8 @@ pub fn observability(singular_values: &[f64], n_configs: usize) -> Observability
 }
 
 /// One index from the singular values; see [`observability`].
-pub fn index_value(index: Index, singular_values: &[f64], n_configs: usize) -> f64 {
+#[cfg(test)]
+pub(crate) fn index_value(index: Index, singular_values: &[f64], n_configs: usize) -> f64 {
     observability(singular_values, n_configs).get(index)
 }
 
@@ -149,7 +151,8 @@ pub fn index_value(index: Index, singular_values: &[f64], n_configs: usize) -> f
 /// eigenvalues are σ_i². Rounding can make the smallest eigenvalues of a singular JᵀJ slightly
 /// negative; they are clamped to 0. Accuracy: σ_min comes out with an absolute error of about
 /// ε·σ_max²/σ_min, so prefer the singular values of J itself for badly conditioned problems.
-pub fn from_information(information: &DMatrix<f64>, n_configs: usize) -> Observability {
+#[cfg(test)]
+pub(crate) fn from_information(information: &DMatrix<f64>, n_configs: usize) -> Observability {
     assert!(information.is_square(), "the information matrix must be square");
     let sv: Vec<f64> =
         information.clone().symmetric_eigenvalues().iter().map(|&l| if l > 0.0 { l.sqrt() } else { 0.0 }).collect();
@@ -158,7 +161,7 @@ pub fn from_information(information: &DMatrix<f64>, n_configs: usize) -> Observa
 
 /// The indices of a Jacobian (rows × m, any number of rows) by faer's SVD, padding the singular
 /// values with zeros when it has fewer rows than columns.
-pub fn of_jacobian(jacobian: faer::MatRef<'_, f64>, n_configs: usize) -> Observability {
+pub(crate) fn of_jacobian(jacobian: faer::MatRef<'_, f64>, n_configs: usize) -> Observability {
     let m = jacobian.ncols();
     let mut sv = if jacobian.nrows() == 0 || m == 0 {
         Vec::new()

@@ -140,7 +140,7 @@ impl DetmaxPool {
 
     /// As [`Self::select`] with every DETMAX option (e.g. `polish: false`, the thesis's DETMAX
     /// alone, whose random starts end in different local optima).
-    pub fn select_with(
+    pub(crate) fn select_with(
         &self,
         o: &detmax::DetmaxOptions,
     ) -> Result<(Vec<(String, usize)>, serde_json::Value), IdentifyError> {

@@ -91,7 +91,7 @@ pub struct Obs {
 
 impl Obs {
     /// The measured TCP position in {W} (m): the point, the ball centre, or the pose's origin.
-    pub fn measured_position(&self) -> Vector3<f64> {
+    pub(crate) fn measured_position(&self) -> Vector3<f64> {
         match &self.target {
             Target::Point(p) => *p,
             Target::Ball { centre, .. } => *centre,
@@ -385,7 +385,7 @@ impl Problem {
     }
 
     /// Length of the global parameter vector.
-    pub fn n_params(&self) -> usize {
+    pub(crate) fn n_params(&self) -> usize {
         self.params.len()
     }
 
@@ -447,22 +447,9 @@ impl Problem {
     }
 
     /// Append prior rows (Σ coef·x ≈ 0 on global parameters).
-    pub fn add_priors(&mut self, priors: Vec<Prior>) {
+    pub(crate) fn add_priors(&mut self, priors: Vec<Prior>) {
         self.n_rows += priors.len();
         self.priors.extend(priors);
-    }
-
-    /// Keep only the observations for which `keep(obs)` holds (rows renumbered, priors kept): a
-    /// training set of a cross-validation fold without rebuilding the problem.
-    pub fn retain_obs(&mut self, keep: impl Fn(&Obs) -> bool) {
-        self.obs.retain(|o| keep(o));
-        let mut row = 0;
-        for o in &mut self.obs {
-            o.row = row;
-            row += o.rows;
-        }
-        self.n_obs_rows = row;
-        self.n_rows = row + self.priors.len();
     }
 
     fn write_priors(&self, x: &[f64], out: &mut [f64]) {
@@ -472,7 +459,7 @@ impl Problem {
     }
 
     /// Global index of a robot parameter, if present.
-    pub fn robot_index(&self, p: Param) -> Option<usize> {
+    pub(crate) fn robot_index(&self, p: Param) -> Option<usize> {
         let li = self.layout.index_of(p)?;
         self.params.iter().position(|g| *g == GlobalParam::Robot(li))
     }
@@ -490,7 +477,7 @@ impl Problem {
     }
 
     /// The layout-ordered robot values with tool `t`'s block in the tool slots.
-    pub fn layout_values(&self, x: &[f64], t: usize) -> Vec<f64> {
+    pub(crate) fn layout_values(&self, x: &[f64], t: usize) -> Vec<f64> {
         let mut v = vec![0.0; self.layout.len()];
         for (g, p) in self.params.iter().enumerate() {
             match *p {
@@ -561,7 +548,7 @@ impl Problem {
 
     /// Jacobian of every parameter (column g = global index g) and the residual at `x`: what the
     /// identifiability sweep and the priors judge.
-    pub fn linearise_all(&self, x: &[f64]) -> (Mat<f64>, Vec<f64>) {
+    pub(crate) fn linearise_all(&self, x: &[f64]) -> (Mat<f64>, Vec<f64>) {
         let all: Vec<usize> = (0..self.n_params()).collect();
         let mut jac = Mat::<f64>::zeros(self.n_rows, all.len());
         let mut res = vec![0.0; self.n_rows];

@@ -150,7 +150,7 @@ pub struct Trace {
 
 impl Trace {
     /// Joint axis j and a point on it, in {W}.
-    pub fn joint_axis(&self, j: usize) -> (Vector3<f64>, Vector3<f64>) {
+    pub(crate) fn joint_axis(&self, j: usize) -> (Vector3<f64>, Vector3<f64>) {
         (self.z[j], self.o[j])
     }
 
@@ -270,7 +270,7 @@ impl Chain {
     }
 
     /// Base pose vector χ (m, rad).
-    pub fn base_pose(&self) -> [f64; 6] {
+    pub(crate) fn base_pose(&self) -> [f64; 6] {
         self.base_chi
     }
 
@@ -282,11 +282,6 @@ impl Chain {
     /// Compliance c_j, rad/(N·m).
     pub fn compliance(&self) -> &[f64] {
         &self.compliance[..self.n]
-    }
-
-    /// Joint zero offset of joint j, rad.
-    pub fn theta_offset(&self, j: usize) -> f64 {
-        self.rows[j].theta
     }
 
     /// The same chain with another base and tool.
@@ -365,15 +360,9 @@ impl Chain {
         out
     }
 
-    /// The joint-angle error the effect terms add to joint j at a state (compliance included),
-    /// rad: θ_j − q_j − offset_j.
-    pub fn joint_correction(&self, s: &JointState, j: usize) -> f64 {
-        self.joint_angles(s)[j] - s.q[j] - self.rows[j].theta
-    }
-
     /// ∂θ_i/∂q_k (row i, column k): the identity plus what the joint terms add. `dtau` is
     /// ∂τ/∂q (only read when a term depends on the torques).
-    pub fn angle_jacobian(
+    pub(crate) fn angle_jacobian(
         &self,
         s: &JointState,
         dtau: &[[f64; MAX_JOINTS]; MAX_JOINTS],
@@ -417,14 +406,14 @@ impl Chain {
     }
 
     /// Whether θ depends on the gravity torques (so callers must supply τ and, for IK, ∂τ/∂q).
-    pub fn uses_torques(&self) -> bool {
+    pub(crate) fn uses_torques(&self) -> bool {
         self.compliance.iter().any(|&c| c != 0.0)
             || self.terms.iter().any(|&(_, t, v, _)| t == JointTerm::ComplianceCubic && v != 0.0)
     }
 
     /// Length scale 1 + α·(T − 20 °C) of a state.
     #[inline]
-    pub fn length_scale(&self, s: &JointState) -> f64 {
+    pub(crate) fn length_scale(&self, s: &JointState) -> f64 {
         1.0 + self.thermal * (s.temperature_c - REFERENCE_TEMPERATURE_C)
     }
 
@@ -433,20 +422,14 @@ impl Chain {
         self.fk_theta_scaled(&self.joint_angles(s), self.length_scale(s))
     }
 
-    /// TCP pose from DH joint angles θ (offsets and deflections already applied), at the
-    /// reference temperature.
-    pub fn fk_theta(&self, theta: &[f64; MAX_JOINTS]) -> Frame {
-        self.fk_theta_scaled(theta, 1.0)
-    }
-
     /// TCP pose from DH joint angles with every link length scaled by `scale`.
-    pub fn fk_theta_scaled(&self, theta: &[f64; MAX_JOINTS], scale: f64) -> Frame {
+    pub(crate) fn fk_theta_scaled(&self, theta: &[f64; MAX_JOINTS], scale: f64) -> Frame {
         self.fk_sincos_scaled(&sincos(theta, self.n), scale)
     }
 
     /// T_T^W at a configuration whose readings' (sin, cos) the caller keeps (see
     /// [`Self::joint_sincos`]).
-    pub fn fk_cached(&self, s: &JointState, q_sc: &[(f64, f64); MAX_JOINTS]) -> Frame {
+    pub(crate) fn fk_cached(&self, s: &JointState, q_sc: &[(f64, f64); MAX_JOINTS]) -> Frame {
         self.fk_sincos_scaled(&self.joint_sincos(s, q_sc), self.length_scale(s))
     }
 
@@ -474,7 +457,7 @@ impl Chain {
     /// that row's Rx(α)·Tx(a) — at the distal end of the previous link, in its axes — before the
     /// row's β and joint rotation. The simulator uses it for effects no model parameter can
     /// express (a link bending under load).
-    pub fn fk_deformed(&self, s: &JointState, deformations: &[(usize, Frame)]) -> Frame {
+    pub(crate) fn fk_deformed(&self, s: &JointState, deformations: &[(usize, Frame)]) -> Frame {
         let theta = self.joint_angles(s);
         let scale = self.length_scale(s);
         let mut f = self.base;
@@ -612,7 +595,7 @@ impl Chain {
     /// [`Self::jacobian_columns_into`] at a state whose readings' (sin, cos) the caller keeps
     /// (see [`Self::joint_sincos`]).
     #[allow(clippy::too_many_arguments)]
-    pub fn jacobian_columns_cached(
+    pub(crate) fn jacobian_columns_cached(
         &self,
         s: &JointState,
         q_sc: &[(f64, f64); MAX_JOINTS],

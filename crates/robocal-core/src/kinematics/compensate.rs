@@ -87,7 +87,7 @@ impl Compensator {
 
     /// Prepare `set` with the given solver options. Branch seeding needs the nominal model to be
     /// in the closed-form family (see [`Self::has_closed_form`]).
-    pub fn with_options(set: &ParameterSet, opts: IkOptions) -> Self {
+    pub(crate) fn with_options(set: &ParameterSet, opts: IkOptions) -> Self {
         let calibrated = set.chain();
         let nominal = set.nominal_chain();
         let seed_ik = AnalyticIk::new(&set.model, calibrated.base(), calibrated.tool()).ok();
@@ -193,11 +193,6 @@ impl Compensator {
     /// Robots), for robots with or without a closed form.
     pub fn nominal_ik(&self, target: &Frame, seed: &[f64]) -> Result<IkSolution, IkError> {
         ik_numeric::solve(&self.nominal, &self.gravity, target, seed, &self.opts)
-    }
-
-    /// The nominal model's configuration data of joints `q`, when the robot has a closed form.
-    pub fn nominal_confdata(&self, q: &[f64]) -> Option<Confdata> {
-        self.nominal_ik.as_ref().map(|ik| ik.confdata(q))
     }
 
     /// Compensate a nominal joint target: the desired pose is where the *nominal* model puts the

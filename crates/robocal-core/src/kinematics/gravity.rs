@@ -10,7 +10,9 @@
 use nalgebra::{Matrix3, Vector3};
 
 use super::chain::Chain;
-use super::frame::{rot_x, rot_y, rot_z};
+#[cfg(test)]
+use super::frame::rot_z;
+use super::frame::{rot_x, rot_y};
 use super::model::{MAX_JOINTS, RobotModel, Tool};
 use super::params::ParamLayout;
 
@@ -163,7 +165,8 @@ impl GravityModel {
 
     /// Potential energy V(q) = Σ m_k (−g)·c_k, J (used by the tests as an independent identity:
     /// τ = ∂V/∂q).
-    pub fn potential_energy(&self, q: &[f64]) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn potential_energy(&self, q: &[f64]) -> f64 {
         let mut rot = Matrix3::identity();
         let mut o = Vector3::zeros();
         let mut v = 0.0;

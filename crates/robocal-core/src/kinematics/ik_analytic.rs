@@ -26,7 +26,9 @@ use std::fmt;
 use nalgebra::Vector3;
 
 use super::chain::{Chain, JointState};
-use super::frame::{Frame, rot_x, rot_z, rotation_vector, wrap_pi};
+#[cfg(test)]
+use super::frame::rotation_vector;
+use super::frame::{Frame, rot_x, rot_z, wrap_pi};
 use super::model::RobotModel;
 
 /// Configuration branch: ABB's `cfx`, 0..=7.
@@ -459,7 +461,8 @@ impl AnalyticIk {
 }
 
 /// Pose error between two frames: (position distance m, rotation angle rad).
-pub fn pose_error(a: &Frame, b: &Frame) -> (f64, f64) {
+#[cfg(test)]
+pub(crate) fn pose_error(a: &Frame, b: &Frame) -> (f64, f64) {
     ((a.t - b.t).norm(), rotation_vector(&(a.r * b.r.transpose())).norm())
 }
 

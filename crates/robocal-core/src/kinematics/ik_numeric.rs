@@ -80,7 +80,7 @@ pub fn solve(
 
 /// [`solve`] under given conditions: the approach directions and temperature of `conditions`
 /// apply to every iterate (its joints and torques are ignored).
-pub fn solve_in(
+pub(crate) fn solve_in(
     chain: &Chain,
     gravity: &GravityModel,
     target: &Frame,

@@ -13,7 +13,7 @@ use crate::units::{DEG, MM};
 pub const MAX_JOINTS: usize = 8;
 
 /// Standard gravity magnitude, m/s².
-pub const STANDARD_GRAVITY: f64 = 9.80665;
+pub(crate) const STANDARD_GRAVITY: f64 = 9.80665;
 
 /// One row of the modified DH table (link `i`, joint `i`):
 /// `T_i^{i−1} = Rx(α_{i−1}) · Tx(a_{i−1}) · [Ry(β_{i−1})] · Rz(θ_i) · Tz(d_i)` with θ_i = q_i + theta.
@@ -209,7 +209,7 @@ pub fn irb120() -> RobotModel {
 /// One row of a standard (distal) DH table: `Rz(θ_i) · Tz(d_i) · Tx(a_i) · Rx(α_i)`,
 /// with the link's centre of mass in its standard-DH frame (at the distal end of the link).
 #[derive(Clone, Debug, PartialEq)]
-pub struct StandardDhRow {
+pub(crate) struct StandardDhRow {
     /// Joint zero offset (θ_i = q_i + theta), rad.
     pub theta: f64,
     /// d_i, m.
@@ -235,7 +235,7 @@ pub struct StandardDhRow {
 /// standard flange: returned as a pose χ so that tools can be re-expressed exactly. Each centre of
 /// mass moves from the standard frame i (distal) to the modified frame i (proximal):
 /// `p_mod = Tx(a_i) · Rx(α_i) · p_std`. `beta_joints` lists (0-based) joints to give a Hayati β.
-pub fn modified_from_standard(rows: &[StandardDhRow], beta_joints: &[usize]) -> (Vec<Link>, [f64; 6]) {
+pub(crate) fn modified_from_standard(rows: &[StandardDhRow], beta_joints: &[usize]) -> (Vec<Link>, [f64; 6]) {
     let mut links = Vec::with_capacity(rows.len());
     for (i, row) in rows.iter().enumerate() {
         let (alpha, a) = if i == 0 { (0.0, 0.0) } else { (rows[i - 1].alpha, rows[i - 1].a) };
@@ -259,7 +259,7 @@ pub fn modified_from_standard(rows: &[StandardDhRow], beta_joints: &[usize]) -> 
 /// The UR10 (CB3) standard DH table of `../shared/datasets/ur10-ipa/README.md`, with link masses
 /// and centres of mass from Universal Robots' published dynamics parameters ("DH parameters for
 /// calculations of kinematics and dynamics", CB3 UR10), expressed in the standard-DH link frames.
-pub fn ur10_standard_dh() -> Vec<StandardDhRow> {
+pub(crate) fn ur10_standard_dh() -> Vec<StandardDhRow> {
     let half_pi = std::f64::consts::FRAC_PI_2;
     // (d mm, a mm, α rad, mass kg, CoM m)
     let rows: [(f64, f64, f64, f64, [f64; 3]); 6] = [

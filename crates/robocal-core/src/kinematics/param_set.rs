@@ -43,7 +43,8 @@ impl ParameterSet {
     }
 
     /// Nominal value of `p` (SI); `None` when the layout has no such parameter.
-    pub fn nominal_value(&self, p: Param) -> Option<f64> {
+    #[cfg(test)]
+    pub(crate) fn nominal_value(&self, p: Param) -> Option<f64> {
         self.layout.index_of(p).map(|i| self.nominal[i])
     }
 

@@ -15,7 +15,7 @@ use std::fmt;
 use super::model::{RobotModel, Tool};
 
 /// The six components of a pose vector χ = (x, y, z, a, b, c).
-pub const POSE_COMPONENTS: [&str; 6] = ["x", "y", "z", "a", "b", "c"];
+pub(crate) const POSE_COMPONENTS: [&str; 6] = ["x", "y", "z", "a", "b", "c"];
 
 /// What a joint-angle parameter multiplies: Δθ_j = value · φ(sample).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -92,14 +92,6 @@ impl JointTerm {
             _ => None,
         }
     }
-
-    /// The knot's angle of a map term, rad.
-    pub fn knot_angle(self) -> Option<f64> {
-        match self {
-            JointTerm::Map { step_deg, knot } => Some(knot as f64 * step_deg as f64 * crate::units::DEG),
-            _ => None,
-        }
-    }
 }
 
 /// One scalar parameter of the model. Joint indices are 0-based internally; names are Craig's.
@@ -131,7 +123,7 @@ pub enum Param {
 }
 
 /// Reference temperature of the nominal link lengths (ISO 1), °C.
-pub const REFERENCE_TEMPERATURE_C: f64 = 20.0;
+pub(crate) const REFERENCE_TEMPERATURE_C: f64 = 20.0;
 
 /// File/wire unit of a parameter.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -422,7 +414,7 @@ impl ParamLayout {
 
     /// Rows j whose joint axis is nominally parallel to the previous joint's: where a Hayati β
     /// belongs (`beta{j}`).
-    pub fn parallel_rows(&self) -> Vec<usize> {
+    pub(crate) fn parallel_rows(&self) -> Vec<usize> {
         (0..self.dof).filter(|&j| self.parallel & (1 << j) != 0).collect()
     }
 
@@ -456,7 +448,7 @@ impl ParamLayout {
 
     /// The nominal value of every parameter: the model's table, zero compliance, the given base
     /// pose and the tool's declared TCP (SI units).
-    pub fn nominal_values(&self, model: &RobotModel, tool: &Tool, base: &[f64; 6]) -> Vec<f64> {
+    pub(crate) fn nominal_values(&self, model: &RobotModel, tool: &Tool, base: &[f64; 6]) -> Vec<f64> {
         self.params
             .iter()
             .map(|p| match *p {

@@ -44,7 +44,7 @@ impl BallTriangle {
     /// (eq. 4.6–4.7). Refuses a distance that is not finite or not positive, one longer than the
     /// sum of the other two, and ball 3 within [`MIN_HEIGHT_RATIO`]·d12 of the line through balls
     /// 1 and 2.
-    pub fn from_distances(d12: f64, d13: f64, d23: f64) -> Result<Self, ArtefactError> {
+    pub(crate) fn from_distances(d12: f64, d13: f64, d23: f64) -> Result<Self, ArtefactError> {
         for (field, d) in [("d12", d12), ("d13", d13), ("d23", d23)] {
             if !d.is_finite() {
                 return Err(ArtefactError::Distance { field, reason: "must be a finite number".into() });

@@ -61,7 +61,10 @@ pub fn register(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> Result<(Frame, f64), 
 /// the base at identity, onto the observed ones (ball centres or measured positions), as χ
 /// (m, rad), and its RMS residual (m). Assembling the pairs from a cell's measurements is the
 /// caller's job (`identify::base`).
-pub fn register_base(model: &[Vector3<f64>], observed: &[Vector3<f64>]) -> Result<([f64; 6], f64), RegistrationError> {
+pub(crate) fn register_base(
+    model: &[Vector3<f64>],
+    observed: &[Vector3<f64>],
+) -> Result<([f64; 6], f64), RegistrationError> {
     let (f, rms) = register(model, observed)?;
     Ok((f.to_xyzabc(), rms))
 }

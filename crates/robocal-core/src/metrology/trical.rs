@@ -82,7 +82,7 @@ impl TriCal {
 
     /// Tip-centre coordinates along their axes when the ball is centred at `c` (eq. 2.8–2.10:
     /// the outer intersection of each axis with the sphere of radius R about `c`).
-    pub fn tips_for(&self, c: &Vector3<f64>) -> Result<[f64; 3], TriCalError> {
+    pub(crate) fn tips_for(&self, c: &Vector3<f64>) -> Result<[f64; 3], TriCalError> {
         let r2 = self.radius().powi(2);
         let mut out = [0.0; 3];
         for k in 0..3 {

@@ -161,22 +161,13 @@ impl FitData {
         FitData::default()
     }
 
-    /// Fitted on these sessions (every measurement of each).
-    pub fn of_sessions<S: AsRef<str>>(sessions: &[S]) -> FitData {
-        FitData {
-            recorded: true,
-            sessions: sessions.iter().map(|s| s.as_ref().to_string()).collect(),
-            measurements: BTreeMap::new(),
-        }
-    }
-
     /// Whether the set was fitted on (some of) this session's measurements.
-    pub fn has_session(&self, name: &str) -> bool {
+    pub(crate) fn has_session(&self, name: &str) -> bool {
         self.sessions.iter().any(|s| s == name)
     }
 
     /// Whether the fit used measurement `index` of session `name`.
-    pub fn has_measurement(&self, name: &str, index: usize) -> bool {
+    pub(crate) fn has_measurement(&self, name: &str, index: usize) -> bool {
         self.has_session(name) && self.measurements.get(name).is_none_or(|ix| ix.binary_search(&index).is_ok())
     }
 }
