@@ -1,8 +1,10 @@
 //! Capsule collision model of the robot, its tool and the cell (used by [`super::poses`]).
 //!
-//! Every body is a capsule — the set of points within `radius` of a segment — so every test
-//! reduces to an exact segment–segment distance (the primitives are in [`super::geometry`] and
-//! re-exported here). Robot parts are fixed in link frames and placed
+//! Every body is a capsule — the set of points within `radius` of a segment — so a test between
+//! two parts reduces to an exact segment–segment distance, one against the table to the heights
+//! of the segment's ends, and one against the plate to a golden-section search of the prism's
+//! signed distance along the segment (the primitives are in [`super::geometry`] and re-exported
+//! here). Robot parts are fixed in link frames and placed
 //! by the chain's forward-kinematics [`Trace`], so they follow whatever parameter set the chain was
 //! compiled at. The cell contributes two obstacles: the table (the robot's mounting plane, a
 //! half-space) and the artefact's plate with its stand (a vertical prism).
@@ -65,6 +67,7 @@ impl fmt::Display for Part {
 /// What a part ran into.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Against {
+    /// Another part of the robot or its tool.
     Part(Part),
     /// The table: the robot's mounting plane.
     Table,
@@ -87,9 +90,13 @@ impl fmt::Display for Against {
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 #[error("{part} hits {against}: penetration {:.3} mm (clearance {:.1} mm required)", penetration * 1e3, clearance * 1e3)]
 pub struct Collision {
+    /// The part that violates the clearance (for a pair, the first of the pair).
     pub part: Part,
+    /// What it comes too close to.
     pub against: Against,
+    /// Overlap depth, m (negative: the gap is smaller than `clearance` but positive).
     pub penetration: f64,
+    /// The clearance required, m.
     pub clearance: f64,
 }
 
@@ -99,9 +106,11 @@ pub struct Collision {
 pub struct PathCollision {
     /// Index of the colliding sample, 0 = the start, `samples` = the end.
     pub sample: usize,
+    /// Steps the move was cut into (its samples are 0 to `samples`).
     pub samples: usize,
     /// The colliding configuration, rad.
     pub q: Vec<f64>,
+    /// The violation at that sample.
     pub collision: Collision,
 }
 
@@ -133,9 +142,13 @@ impl Default for Clearances {
 /// the product specification (base 180 × 180 mm, arm castings roughly 100–120 mm across).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LinkRadii {
+    /// Base column ([`Part::BaseColumn`]).
     pub base_column: f64,
+    /// Upper arm ([`Part::UpperArm`]).
     pub upper_arm: f64,
+    /// Forearm and elbow ([`Part::Forearm`], [`Part::Elbow`]).
     pub forearm: f64,
+    /// Wrist ([`Part::Wrist`]).
     pub wrist: f64,
 }
 
@@ -172,8 +185,11 @@ pub enum Mount {
 /// One part: a capsule fixed in a frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PartShape {
+    /// Which part.
     pub part: Part,
+    /// The frame it is fixed in.
     pub mount: Mount,
+    /// The capsule in that frame, m.
     pub local: Capsule,
 }
 
@@ -193,7 +209,7 @@ pub const PATH_STEP: f64 = DEG;
 
 impl CollisionModel {
     /// A general model: `pairs` index into `parts`. The base column (if any) is exempt from the
-    /// table check.
+    /// table check. Panics when a pair indexes outside `parts` or pairs a part with itself.
     pub fn new(
         chain: Chain,
         parts: Vec<PartShape>,
@@ -207,7 +223,9 @@ impl CollisionModel {
     }
 
     /// The IRB 120 (any ABB-family parameter set: the link lengths are read from `set`'s current
-    /// values and the chain is `set.chain()`) with a tool body given in the flange frame.
+    /// values and the chain is `set.chain()`) with a tool body given in the flange frame. The
+    /// table is the XY plane of the chain's base {0}; `plate` is the artefact's prism, if any.
+    /// Panics when `set` lacks d1, a2, a3, d4 or d6.
     ///
     /// Parts, in the MDH link frames:
     /// - base column, in {0}: (0, 0, 0) → (0, 0, d1), from the mounting plane to axis 2;
@@ -262,10 +280,12 @@ impl CollisionModel {
         Self::new(chain, parts, pairs, table, plate, clearances)
     }
 
+    /// The chain the parts are placed with.
     pub fn chain(&self) -> &Chain {
         &self.chain
     }
 
+    /// The parts, in the order placed capsules and pairs use.
     pub fn parts(&self) -> &[PartShape] {
         &self.parts
     }
@@ -275,14 +295,17 @@ impl CollisionModel {
         &self.pairs
     }
 
+    /// The table, if the model has one.
     pub fn table(&self) -> Option<&HalfSpace> {
         self.table.as_ref()
     }
 
+    /// The artefact's plate and stand, if the model has them.
     pub fn plate(&self) -> Option<&VerticalPrism> {
         self.plate.as_ref()
     }
 
+    /// The safety margins the checks apply.
     pub fn clearances(&self) -> &Clearances {
         &self.clearances
     }
@@ -312,7 +335,8 @@ impl CollisionModel {
         }));
     }
 
-    /// The static check of placed parts (from [`Self::place`]).
+    /// The static check of placed parts (from [`Self::place`]): the first violation, in the order
+    /// the module lists (pairs, then the table, then the plate).
     pub fn check_placed(&self, placed: &[Capsule]) -> Result<(), Collision> {
         let cl = &self.clearances;
         for &(i, j) in &self.pairs {
@@ -376,7 +400,7 @@ impl CollisionModel {
 
     /// The linear joint-space move `from` → `to`, sampled at most [`PATH_STEP`] apart on every
     /// joint, endpoints included: every sample must pass the static check. Reports the first
-    /// colliding sample along the move.
+    /// colliding sample along the move. Panics when `from` and `to` differ in length.
     pub fn check_path(&self, from: &[f64], to: &[f64]) -> Result<(), PathCollision> {
         assert_eq!(from.len(), to.len(), "one value per joint");
         let steps = Self::path_steps(from, to);

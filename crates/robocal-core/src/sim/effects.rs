@@ -28,51 +28,77 @@ use crate::units::DEG;
 pub struct Cyclic {
     /// Joint, 1-based.
     pub j: usize,
+    /// Harmonic h, cycles per joint revolution (1–255).
     pub h: u8,
+    /// Amplitude, degrees.
     pub amp_deg: f64,
+    /// Phase, degrees (0 when absent).
     #[serde(default)]
     pub phase_deg: f64,
 }
 
+/// Backlash of one joint: Δθ_j = ±deg by the logged approach direction (0 when the joint did not
+/// move).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Backlash {
+    /// Joint, 1-based.
     pub j: usize,
     /// Half play: Δθ = ±deg by the approach direction.
     pub deg: f64,
 }
 
+/// Thermal expansion: every link length a, d scales by 1 + α·(T − 20 °C), with the robot's
+/// temperature T from [`Effects::temperature_at`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Thermal {
+    /// Expansion coefficient α, 10⁻⁶/K (23 for aluminium).
     pub alpha_ppm: f64,
+    /// Temperature rise over the run, °C (the asymptote of the warm-up).
     pub rise_c: f64,
+    /// Warm-up time constant, s (positive).
     pub tau_s: f64,
+    /// Temperature at the start of the run, °C.
     pub start_c: f64,
 }
 
+/// Coupling between two joints: Δθ_to = ratio·q_from (q_from in rad).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Coupling {
+    /// The driving joint, 1-based.
     pub from: usize,
+    /// The driven joint, 1-based (not `from`).
     pub to: usize,
+    /// Radians of `to` per radian of `from`.
     pub ratio: f64,
 }
 
+/// Cubic gear compliance of one joint, on top of the linear one: Δθ_j += d·τ_j³, τ_j the holding
+/// torque.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ComplianceCubic {
+    /// Joint, 1-based.
     pub j: usize,
-    /// deg/(N·m)³
+    /// Coefficient d, deg/(N·m)³.
     pub d: f64,
 }
 
+/// A payload that differs from the declared one: every tool's true mass is its declared mass plus
+/// `delta_kg`, at its declared centre of mass. It acts through the compliances.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ToolMass {
+    /// True minus declared payload mass, kg.
     pub delta_kg: f64,
 }
 
+/// Link 2 bending under its gravity load: at the end of link 2 (after joint 3's row
+/// Rx(α₂)·Tx(a₂)) the chain turns by φ = −k·τ₂ about that frame's z axis and shifts by φ·a₂/2
+/// along its y, k being `deg_per_nm` in rad/(N·m) (a cantilever under an end moment; τ₂ is the
+/// holding torque, so −τ₂ is the root moment). Robots with more than two joints only.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LinkBending {
@@ -84,22 +110,37 @@ pub struct LinkBending {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Effects {
+    /// Cyclic errors, any number.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub cyclic: Vec<Cyclic>,
+    /// Backlash terms, any number.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub backlash: Vec<Backlash>,
+    /// Thermal expansion of the link lengths; without it the robot is near 20 °C (see
+    /// [`Effects::temperature_at`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub thermal: Option<Thermal>,
+    /// Joint couplings, any number.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub coupling: Vec<Coupling>,
+    /// Cubic compliances, any number.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub compliance_cubic: Vec<ComplianceCubic>,
+    /// Payload mass error (outside the parameter vector: applied by
+    /// [`super::truth::Truth::robot`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tool_mass: Option<ToolMass>,
+    /// Link-2 bending (outside the parameter vector: applied by
+    /// [`super::truth::TrueRobot::tcp`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub link_bending: Option<LinkBending>,
+    /// Model-side switch: the model fitted to this cell should leave out β (the truth keeps it).
+    /// The simulator does not read it; the caller that chooses the fitted model does.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub no_beta: bool,
+    /// Model-side switch: the model fitted to this cell should leave out the compliances (the
+    /// truth keeps them). The simulator does not read it; the caller that chooses the fitted
+    /// model does.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub no_compliance: bool,
 }
@@ -108,17 +149,27 @@ pub struct Effects {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{item}: {reason}")]
 pub struct EffectError {
+    /// The offending comma-separated item, as written.
     pub item: String,
+    /// What is wrong with it.
     pub reason: String,
 }
 
 impl Effects {
+    /// No effect and no model-side switch: equal to `Effects::default()`.
     pub fn is_empty(&self) -> bool {
         *self == Effects::default()
     }
 
     /// Parse `name[:key=value]*` items separated by commas, e.g.
-    /// `cyclic:j=2:h=1:amp_deg=0.01,backlash,thermal:rise_c=5,no_beta`.
+    /// `cyclic:j=2:h=1:amp_deg=0.01,backlash,thermal:rise_c=5,no_beta`. Names, keys and defaults
+    /// are those of the module's table; joints are 1-based and at most `dof`. Blank items are
+    /// skipped; the list effects (cyclic, backlash, coupling, compliance_cubic) add one entry per
+    /// item, the others keep the last item.
+    ///
+    /// Errors, naming the item: a part that is not `key=value`, a value that is not a finite
+    /// number, a joint outside 1–`dof` or not whole, a harmonic `h` not whole in 1–255, `tau_s`
+    /// not positive, a coupling with `from` = `to`, an unknown effect or an unknown key.
     pub fn parse(spec: &str, dof: usize) -> Result<Effects, EffectError> {
         let mut e = Effects::default();
         for item in spec.split(',').map(str::trim).filter(|s| !s.is_empty()) {
@@ -209,7 +260,9 @@ impl Effects {
     }
 
     /// Attach the joint-angle effects to a true parameter set as parameters (cyclic terms,
-    /// backlash, coupling, cubic compliance) and the thermal coefficient. The other effects act
+    /// backlash, coupling, cubic compliance) and the thermal coefficient, converted to SI (rad,
+    /// rad/(N·m)³, 1/K); a cyclic term becomes its sin and cos parameters, amp·cos(phase) and
+    /// amp·sin(phase). Values add to a parameter the set already has. The other effects act
     /// outside the parameter vector (see [`super::truth`]).
     pub fn apply_to(&self, set: &mut ParameterSet) {
         let mut add = |p: Param, v: f64| {
@@ -236,7 +289,9 @@ impl Effects {
     }
 
     /// Robot temperature at time t (s) since the start of the run, °C. Without the thermal
-    /// effect the lab holds 20 °C within ±0.3 °C (thesis Table 2.1), logged as a slow drift.
+    /// effect the lab holds 20 °C within ±0.3 °C (thesis Table 2.1), logged as a slow drift: a
+    /// sine of amplitude 0.3 °C and period 4 h. With it, the warm-up
+    /// `start_c + rise_c·(1 − e^(−t/tau_s))` plus that same drift.
     pub fn temperature_at(&self, t: f64) -> f64 {
         let drift = 0.3 * (std::f64::consts::TAU * t / 14_400.0).sin();
         match &self.thermal {

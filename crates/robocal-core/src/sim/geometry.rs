@@ -11,12 +11,16 @@ use crate::kinematics::Frame;
 /// A segment `a`–`b` swept by a ball of `radius` (m).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Capsule {
+    /// One end of the segment, m.
     pub a: Vector3<f64>,
+    /// The other end of the segment (equal to `a` for a ball), m.
     pub b: Vector3<f64>,
+    /// Radius, m.
     pub radius: f64,
 }
 
 impl Capsule {
+    /// The capsule of segment `a`–`b` (m) and `radius` (m); nothing is checked.
     pub fn new(a: Vector3<f64>, b: Vector3<f64>, radius: f64) -> Self {
         Self { a, b, radius }
     }
@@ -96,7 +100,9 @@ pub fn point_segment_distance(p: &Vector3<f64>, a: &Vector3<f64>, b: &Vector3<f6
 /// The free side of a plane: points `p` with `normal · (p − point) ≥ 0` (normal of unit length).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HalfSpace {
+    /// A point of the plane, m.
     pub point: Vector3<f64>,
+    /// Unit normal, pointing to the free side.
     pub normal: Vector3<f64>,
 }
 
@@ -106,7 +112,7 @@ impl HalfSpace {
         Self { point: frame.t, normal: frame.r.column(2).into() }
     }
 
-    /// Signed height of `p` above the plane.
+    /// Signed height of `p` above the plane (m; negative on the solid side).
     pub fn height(&self, p: &Vector3<f64>) -> f64 {
         self.normal.dot(&(p - self.point))
     }
@@ -124,6 +130,7 @@ pub struct VerticalPrism {
     corners: Vec<Vector2<f64>>,
     /// Outward unit normal of edge i (corner i → corner i+1).
     normals: Vec<Vector2<f64>>,
+    /// Height of the top face, z in {W}, m.
     pub top: f64,
 }
 
@@ -131,7 +138,8 @@ pub struct VerticalPrism {
 const GOLDEN_ITERATIONS: usize = 60;
 
 impl VerticalPrism {
-    /// `None` unless the corners (at least three) form a strictly convex counter-clockwise polygon.
+    /// `None` unless the corners (at least three, m) form a strictly convex counter-clockwise
+    /// polygon and every coordinate and `top` are finite.
     pub fn new(corners: Vec<Vector2<f64>>, top: f64) -> Option<Self> {
         let n = corners.len();
         if n < 3 || !top.is_finite() || corners.iter().any(|c| !c.x.is_finite() || !c.y.is_finite()) {
@@ -149,8 +157,9 @@ impl VerticalPrism {
         Some(Self { corners, normals, top })
     }
 
-    /// The polygon grown by `margin` on every side (each edge moved out by `margin`, corners
-    /// mitred, so the result is again a polygon with the same edge directions).
+    /// The polygon grown by `margin` (m) on every side (each edge moved out by `margin`, corners
+    /// mitred, so the result is again a polygon with the same edge directions). `None` when
+    /// [`Self::new`] refuses the corners or the grown polygon.
     pub fn grown(corners: &[Vector2<f64>], margin: f64, top: f64) -> Option<Self> {
         let base = Self::new(corners.to_vec(), top)?;
         let n = corners.len();
@@ -163,6 +172,7 @@ impl VerticalPrism {
         Self::new(grown, top)
     }
 
+    /// The polygon's corners in the XY plane, counter-clockwise, m.
     pub fn corners(&self) -> &[Vector2<f64>] {
         &self.corners
     }

@@ -1,4 +1,5 @@
-//! Instrument and robot noise of the virtual cell (thesis §2, §7, Table 2.1).
+//! Instrument and robot noise of the virtual cell (thesis §2.3–2.4 and Table 2.1; the method
+//! digest's §7). The random draws take the caller's generator: the simulator seeds it.
 
 use nalgebra::Vector3;
 use rand::Rng;
@@ -8,9 +9,10 @@ use rand_distr::StandardNormal;
 /// How the TriCal's auto-centring is simulated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum Centring {
-    /// The loop of §7 itself: corrections computed on the controller's nominal model, a fresh
-    /// non-repeatable offset at every stop, stop when the reading is within ε. The recorded
-    /// pair's error comes out at about the repeatability (see [`crate::sim::measure`]).
+    /// The loop of the measuring procedure itself (digest §7, thesis §2.3): corrections
+    /// computed on the controller's nominal model, a fresh non-repeatable offset at every stop,
+    /// stop when the reading is within ε. The recorded pair's error comes out at about the
+    /// repeatability (see [`crate::sim::measure`]).
     #[default]
     Loop,
     /// The shortcut: the physical TCP uniform in the ε-ball, the recorded joints those at which
@@ -20,6 +22,7 @@ pub enum Centring {
 }
 
 impl Centring {
+    /// From its name, `loop` or `uniform-ball`; `None` for anything else.
     pub fn parse(s: &str) -> Option<Centring> {
         match s {
             "loop" => Some(Centring::Loop),
@@ -28,6 +31,7 @@ impl Centring {
         }
     }
 
+    /// The name [`Self::parse`] reads.
     pub fn name(self) -> &'static str {
         match self {
             Centring::Loop => "loop",
@@ -36,20 +40,23 @@ impl Centring {
     }
 }
 
-/// Noise settings. All lengths in metres.
+/// Noise settings. All lengths in metres. `Default`: loop centring, ε = 10 µm, RP = 10 µm, a
+/// tracker of 16 µm + 0.8 µm/m.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Noise {
     /// How auto-centring is simulated.
     pub centring: Centring,
     /// TriCal auto-centring tolerance ε: the TCP ends uniformly inside a ball of this radius
-    /// around the ball centre (§7: ε = 10 µm, the robot's repeatability).
+    /// around the ball centre (thesis §2.3: ε = 10 µm, the robot's repeatability).
     pub epsilon: f64,
     /// The robot's positional repeatability RP (ISO 9283: mean + 3σ of the distances to the
     /// barycentre; 10 µm for the IRB 120). Modelled as an isotropic Gaussian offset between the
     /// pose the joints describe and where the robot physically is, σ = RP / 3.616 per axis.
     pub repeatability: f64,
-    /// Laser tracker, 1σ per axis: `tracker_sigma + tracker_sigma_per_m · distance`.
+    /// Laser tracker, 1σ per axis: `tracker_sigma + tracker_sigma_per_m · distance`; this is the
+    /// constant part, m.
     pub tracker_sigma: f64,
+    /// The tracker σ's growth with the distance from the tracker, m per m.
     pub tracker_sigma_per_m: f64,
 }
 
@@ -66,7 +73,7 @@ impl Default for Noise {
 }
 
 impl Noise {
-    /// No noise at all: every recorded value exact.
+    /// No noise at all: every recorded value exact (loop centring, every σ and ε zero).
     pub fn none() -> Self {
         Self {
             centring: Centring::Loop,
@@ -83,19 +90,22 @@ impl Noise {
         self.repeatability / ((8.0 / std::f64::consts::PI).sqrt() + 3.0 * (3.0 - 8.0 / std::f64::consts::PI).sqrt())
     }
 
-    /// Where auto-centring leaves the TCP relative to the ball centre: uniform in the ε-ball.
+    /// Where auto-centring leaves the TCP relative to the ball centre, m: uniform in the ε-ball
+    /// (a Gaussian direction and a radius ε·U^(1/3)).
     pub fn centring_offset<R: Rng>(&self, rng: &mut R) -> Vector3<f64> {
         let dir = unit_vector(rng);
         let r = self.epsilon * rng.random::<f64>().cbrt();
         dir * r
     }
 
-    /// The robot's non-repeatable offset.
+    /// The robot's non-repeatable offset, m: isotropic Gaussian with σ =
+    /// [`Self::repeatability_sigma`] per axis.
     pub fn repeatability_offset<R: Rng>(&self, rng: &mut R) -> Vector3<f64> {
         gaussian3(rng) * self.repeatability_sigma()
     }
 
-    /// A tracker reading's error at `distance` metres from the tracker.
+    /// A tracker reading's error at `distance` metres from the tracker, m: isotropic Gaussian with
+    /// σ = `tracker_sigma + tracker_sigma_per_m · distance` per axis.
     pub fn tracker_error<R: Rng>(&self, rng: &mut R, distance: f64) -> Vector3<f64> {
         gaussian3(rng) * (self.tracker_sigma + self.tracker_sigma_per_m * distance)
     }

@@ -1,8 +1,9 @@
 //! Simulated measuring runs: the true robot measured by the TriCal on the artefact's balls and
 //! by a laser tracker on reflector nests, along a list of planned configurations.
 //!
-//! TriCal (§7): the robot goes to the planned joints, the indicators are read, the TCP is moved
-//! by the reading until it sits within ε of the ball centre, and the joints are recorded.
+//! TriCal (digest §7, thesis §2.3): the robot goes to the planned joints, the indicators are
+//! read, the TCP is moved by the reading until it sits within ε of the ball centre, and the
+//! joints are recorded.
 //! Simulated as that loop: the first approach leaves the physical TCP within ±0.35 mm per axis of
 //! the ball (the thesis's initial-deviation range, §2.4); each stop adds a fresh non-repeatable
 //! offset η (physical = FK_true(q) + η); each correction moves the TCP by −d in the tool frame
@@ -34,14 +35,18 @@ use crate::metrology::TriCal;
 /// A planned TriCal measurement: joints and the ball (1-based).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BallPose {
+    /// Planned joints, rad: where the robot goes before centring.
     pub q: [f64; 6],
+    /// The ball, 1-based (1, 2 or 3).
     pub ball: usize,
 }
 
 /// A planned tracker measurement: joints and the reflector nest (0-based index into the tools).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NestPose {
+    /// Joints, rad: the robot stops exactly there and they are recorded as commanded.
     pub q: [f64; 6],
+    /// The nest, 0-based index into [`Rig::nests`].
     pub nest: usize,
 }
 
@@ -52,6 +57,7 @@ pub struct Rig<'a> {
     pub model: &'a RobotModel,
     /// T_0^W as the controller knows it (the cell file's base guess).
     pub base_guess: [f64; 6],
+    /// The artefact: the ball triangle that defines {W}, and the ball diameter.
     pub artefact: &'a Artefact,
     /// The TriCal tool used for identification.
     pub trical: &'a Tool,
@@ -59,6 +65,7 @@ pub struct Rig<'a> {
     pub nests: &'a [Tool],
     /// Laser tracker position in the robot base frame {0}, m.
     pub tracker_in_base: Vector3<f64>,
+    /// Instrument and robot noise.
     pub noise: Noise,
     /// Record the TriCal indicator readings left after centring.
     pub record_indicators: bool,
@@ -69,30 +76,54 @@ pub struct Rig<'a> {
 pub struct MeasurementTruth {
     /// Where the true model puts the TCP at the recorded joints, {W}: the best any model can do.
     pub model_position: Vector3<f64>,
-    /// Where the TCP physically was (model position minus the repeatability offset).
+    /// Where the TCP physically was, {W} (model position minus the repeatability offset).
     pub physical_position: Vector3<f64>,
-    /// TriCal: the centring offset u of the physical TCP from the ball centre.
+    /// TriCal: the centring offset u of the physical TCP from the ball centre, {W}; `None` for
+    /// a tracker measurement.
     pub centring_offset: Option<Vector3<f64>>,
 }
 
 /// The truth behind each session's measurements, in the cell's order.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct RunTruth {
+    /// Per session: its name and one truth per measurement, in the session's order.
     pub sessions: Vec<(String, Vec<MeasurementTruth>)>,
 }
 
+/// Why a run could not be measured.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum MeasureError {
+    /// A [`BallPose`] names a ball the artefact does not have (not 1, 2 or 3).
     #[error("ball {0} is not on the artefact")]
     Ball(usize),
+    /// A [`NestPose`] names a nest beyond [`Rig::nests`].
     #[error("nest {0} does not exist")]
     Nest(usize),
+    /// The true robot could not be put at a TriCal measurement's pose, or a centring correction
+    /// met a singular nominal Jacobian (then `source` holds the reading and the moves made).
     #[error("measurement {index} of {session}: {source}")]
-    Solve { session: String, index: usize, source: TruthSolveError },
+    Solve {
+        /// The session (`trical-1`).
+        session: String,
+        /// The measurement, 0-based.
+        index: usize,
+        /// The failed solve.
+        source: TruthSolveError,
+    },
+    /// Auto-centring did not bring the reading within ε in [`MAX_CENTRING_MOVES`] moves.
     #[error(
         "measurement {index} of {session}: auto-centring did not reach ε in {iterations} moves (last reading {reading_mm:.4} mm)"
     )]
-    Centring { session: String, index: usize, iterations: usize, reading_mm: f64 },
+    Centring {
+        /// The session (`trical-1`).
+        session: String,
+        /// The measurement, 0-based.
+        index: usize,
+        /// Correction moves made.
+        iterations: usize,
+        /// The last reading's length, mm.
+        reading_mm: f64,
+    },
 }
 
 /// Half-width of the first approach's deviation from the ball centre, per axis, m (thesis §2.4:
@@ -101,11 +132,26 @@ pub const INITIAL_DEVIATION: f64 = 0.35e-3;
 /// Correction moves after which auto-centring gives up.
 pub const MAX_CENTRING_MOVES: usize = 30;
 
-/// Seconds per TriCal measurement (centring loop included, thesis §2.3) and per tracker reading.
+/// Seconds per TriCal measurement (centring loop included, thesis §2.3).
 pub const TRICAL_SECONDS: f64 = 25.0;
+/// Seconds per tracker reading (each nest read at a stop counts once).
 pub const TRACKER_SECONDS: f64 = 10.0;
 
-/// Simulate the TriCal run on `balls` then the tracker run on `nests`, starting from `home`.
+/// Simulate the TriCal run on `balls` then the tracker run on `nests`, starting from `home`
+/// (rad; the robot returns home between the runs), as the module describes.
+///
+/// Returns the cell — `rig`'s model, base guess and artefact; a session `trical-1`
+/// (identification, the TriCal tool) and one `tracker-n{k}` (validation, nest k's tool, 1-based)
+/// per nest that was read — and the truth behind every measurement. Times run on from the
+/// TriCal run into the tracker run, and readings are in {W} (the tracker position is moved
+/// there with the truth's base).
+///
+/// Random: the centring offsets, repeatability offsets and tracker noise come from ChaCha8
+/// seeded with `seed`, on a stream of its own (so they do not repeat the planner's draws for the
+/// same seed). Same inputs, same seed: the same cell, to the bit.
+///
+/// Errors: [`MeasureError`] — an unknown ball or nest, a pose the true robot cannot be solved
+/// to, or a centring loop that does not converge.
 pub fn measure(
     truth: &Truth,
     rig: &Rig<'_>,

@@ -11,17 +11,28 @@ use crate::kinematics::Tool;
 use crate::kinematics::thesis::irb120_table_5_1;
 
 /// Everything a simulation depends on. `Default` is the thesis's cell and robot with default
-/// noise, no effects, 120 poses per ball and 506 validation poses.
+/// noise, no effects, 120 poses per ball and 506 validation poses, seed 1.
 #[derive(Clone, Debug)]
 pub struct SimulateOptions {
+    /// Seeds the identification plan, the validation plan (ChaCha8, each from this seed) and the
+    /// measuring run (its own stream of the same seed): same options, same cell.
     pub seed: u64,
+    /// The lab: robot model, base guess, tool and nests, artefact, tracker, home.
     pub layout: CellLayout,
-    /// The truth; `None` = the thesis's identified IRB 120 (Table 5.1) with `effects` attached.
+    /// The truth; `None` = the thesis's identified IRB 120 (Table 5.1) carrying the layout's
+    /// tool, with `effects` attached (whatever robot the layout names). A given truth must be of
+    /// the layout's robot (same preset and number of joints) and is used as it is.
     pub truth: Option<Truth>,
+    /// Effects attached to the default truth; ignored when `truth` is given.
     pub effects: Effects,
+    /// Identification configurations per ball (three balls, measured ball by ball).
     pub id_per_ball: usize,
+    /// Validation configurations (tracker stops).
     pub validation: usize,
+    /// Instrument and robot noise.
     pub noise: Noise,
+    /// Record the TriCal's indicator readings left after centring in each identification
+    /// measurement.
     pub record_indicators: bool,
     /// The payload of the validation run's tool when it is not the TriCal's: (mass kg, centre of
     /// mass in the flange frame, m) — the thesis's set-up 3 validated with the 2.7 kg artefact
@@ -53,21 +64,33 @@ impl Default for SimulateOptions {
 /// A simulated cell and its truth.
 #[derive(Clone, Debug)]
 pub struct Simulated {
+    /// The cell file's content: the nominal model, base guess, artefact and the measured
+    /// sessions (see [`measure`]).
     pub cell: Cell,
+    /// The true robot that was measured.
     pub truth: Truth,
+    /// What really happened at each measurement.
     pub run: RunTruth,
 }
 
+/// Why a simulation failed.
 #[derive(Debug, thiserror::Error)]
 pub enum SimulateError {
+    /// The layout cannot be planned in, or too few poses were found.
     #[error("planning: {0}")]
     Plan(#[from] PlanError),
+    /// The measuring run failed.
     #[error("measuring: {0}")]
     Measure(#[from] MeasureError),
+    /// The given truth is not of the layout's robot.
     #[error("truth: {0}")]
     Truth(String),
 }
 
+/// Simulate the virtual cell: plan `id_per_ball` identification configurations on each ball and
+/// `validation` tracker configurations on the layout (nominal model, base guess), then measure
+/// the true robot along them with the TriCal and the laser tracker. Deterministic for
+/// [`SimulateOptions::seed`]. [`simulate_with_progress`] without the reports.
 pub fn simulate(opts: &SimulateOptions) -> Result<Simulated, SimulateError> {
     simulate_with_progress(opts, &|_, _, _| {})
 }
@@ -76,7 +99,8 @@ pub fn simulate(opts: &SimulateOptions) -> Result<Simulated, SimulateError> {
 pub const SIMULATE_STAGES: usize = 3;
 
 /// [`simulate`], calling `progress` with (stages done, [`SIMULATE_STAGES`], the next stage) as it
-/// goes: planning the ball poses, planning the tracker poses, measuring.
+/// goes: planning the ball poses, planning the tracker poses, measuring; then once more with
+/// (3, 3, `done`).
 pub fn simulate_with_progress(
     opts: &SimulateOptions,
     progress: &dyn Fn(usize, usize, &str),

@@ -35,6 +35,7 @@ use crate::units::{DEG, MM};
 /// What the run is.
 #[derive(Clone, Debug)]
 pub struct TrackerRunOptions {
+    /// Seeds every random draw of the run (ChaCha8): poses, jitter, tracker noise, removed rows.
     pub seed: u64,
     /// Stops measured (before rows are removed).
     pub poses: usize,
@@ -42,21 +43,26 @@ pub struct TrackerRunOptions {
     pub removed: usize,
     /// The SMR centres in the flange frame, m.
     pub smrs: Vec<Vector3<f64>>,
-    /// The true payload (the plate and its SMRs), kg, at `payload_com` (flange frame, m; `None`:
-    /// the SMRs' centroid). The files do not declare it.
+    /// The true payload (the plate and its SMRs), kg, at `payload_com`. The files do not
+    /// declare it.
     pub payload_kg: f64,
+    /// The payload's centre of mass in the flange frame, m; `None`: the SMRs' centroid.
     pub payload_com: Option<Vector3<f64>>,
     /// The true robot's unmodelled effects (backlash is the hysteresis by direction of motion).
+    /// The run is at 20 °C throughout, so a thermal effect changes nothing.
     pub effects: Effects,
     /// σ of the random turn of each joint at each stop, rad: the pose-to-pose error no term
     /// explains (0.012° at the IRB 120's ~0.5 m lever is ≈0.1 mm per joint).
     pub jitter: f64,
-    /// Tracker noise per axis, 1σ: m + m per m of range.
+    /// Tracker noise per axis, 1σ: `tracker_sigma + tracker_sigma_per_m · range`, the range being
+    /// the SMR's distance from the tracker; this is the constant part, m.
     pub tracker_sigma: f64,
+    /// The tracker σ's growth with range, m per m.
     pub tracker_sigma_per_m: f64,
     /// T_0^T: the robot's base in the tracker frame (χ, m and rad).
     pub base_in_tracker: [f64; 6],
-    /// Largest angle between the plate's normal and the line of sight to the tracker, rad.
+    /// Largest angle between the plate's normal (the flange's z axis) and the line of sight to the
+    /// tracker, rad.
     pub acceptance: f64,
 }
 
@@ -64,7 +70,7 @@ impl Default for TrackerRunOptions {
     /// 982 stops over the IRB 120's workspace, 10 rows removed, three SMRs on a 150 mm triangle
     /// 40 mm above the flange and 20 mm off its axis, a 1 kg plate, backlash of 0.006° on joints
     /// 1–3, a jitter of 0.012° per joint (≈0.2 mm at the SMRs), a tracker of 20 µm + 5 µm/m about
-    /// 2.3 m from the base.
+    /// 2.3 m from the base, poses kept within 55° of facing it.
     fn default() -> Self {
         let centre = Vector3::new(0.020, 0.0, 0.040);
         let r = 0.150 / 3f64.sqrt();
@@ -106,19 +112,40 @@ pub struct TrackerRun {
     pub payload: Tool,
     /// Index in the measured sequence of each kept row.
     pub kept: Vec<usize>,
-    /// Per kept row: the true direction of each joint's last move (−1, 0, +1).
+    /// Per kept row: the true direction of each joint's last move, +1 or −1 (a joint that did not
+    /// move counts as −1; the first stop's move starts from (0, 0, 0, 0, 30°, 0)); 0 beyond the
+    /// robot's joints.
     pub approach: Vec<[i8; MAX_JOINTS]>,
 }
 
+/// Why a run could not be simulated.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum TrackerRunError {
+    /// An option is unusable (the message says which): no SMR, `removed` ≥ `poses`, or a
+    /// payload, jitter or tracker σ that is negative or not finite.
     #[error("{0}")]
     Option(String),
+    /// Fewer random poses than `poses` passed the filters within 400 draws per pose.
     #[error("only {found} of {wanted} random poses face the tracker after {tries} tries")]
-    TooFewPoses { found: usize, wanted: usize, tries: usize },
+    TooFewPoses {
+        /// Poses kept.
+        found: usize,
+        /// Poses asked for.
+        wanted: usize,
+        /// Draws made.
+        tries: usize,
+    },
 }
 
-/// Simulate a run of the thesis's identified IRB 120 (Table 5.1) with `opts`.
+/// Simulate a run of the thesis's identified IRB 120 (Table 5.1) with `opts`, its base moved to
+/// `base_in_tracker` (true and nominal), carrying the undeclared payload.
+///
+/// Poses: joint values uniform within the limits, kept when |q5| ≥ 10°, the flange is at least
+/// 50 mm above the base's XY plane and 150 mm from its z axis, and the plate's normal is within
+/// `acceptance` of the line of sight to the tracker (at the frame's origin). Then, in order, each
+/// stop's directions of motion, one jitter turn per joint (common to the SMRs) and each SMR's
+/// tracker noise; last, `removed` distinct rows drawn at random are dropped. Every draw comes
+/// from one ChaCha8 generator seeded with `opts.seed`.
 pub fn tracker_run(opts: &TrackerRunOptions) -> Result<TrackerRun, TrackerRunError> {
     if opts.smrs.is_empty() {
         return Err(TrackerRunError::Option("at least one SMR".into()));
@@ -242,9 +269,10 @@ pub fn tracker_run(opts: &TrackerRunOptions) -> Result<TrackerRun, TrackerRunErr
 }
 
 impl TrackerRun {
-    /// Write the run in the three-reflector format: `{tag}-joints.txt` (degrees, 6 decimals) and
-    /// `{tag}-smr{k}.txt` (mm, 4 decimals) in `dir`. Returns the joints file and the positions
-    /// files.
+    /// Write the run in the three-reflector format: `{tag}-joints.txt` (the first `dof` joints of
+    /// each kept row, degrees, 6 decimals) and `{tag}-smr{k}.txt` (k from 1; x y z in the tracker
+    /// frame, mm, 4 decimals) in `dir`, each file opening with a `#` comment line and overwritten
+    /// if present. Returns the joints file and the positions files; I/O errors are passed on.
     pub fn write(&self, dir: &Path, tag: &str, dof: usize) -> std::io::Result<(PathBuf, Vec<PathBuf>)> {
         let joints = dir.join(format!("{tag}-joints.txt"));
         let mut text = String::from("# joint readings, degrees, in measuring order\n");

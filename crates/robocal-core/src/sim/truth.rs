@@ -15,7 +15,10 @@ use crate::kinematics::{Chain, Frame, GravityModel, JointState, MAX_JOINTS, Para
 /// A truth: the true parameters (effect terms attached) and the effects description.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Truth {
+    /// The true parameter set (SI), its effect terms attached; its base is the true T_0^W.
     pub set: ParameterSet,
+    /// The effects it was built with; the payload error, the link bending and the run's
+    /// temperature are read from here.
     pub effects: Effects,
 }
 
@@ -23,7 +26,9 @@ pub struct Truth {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("the true robot does not converge to the requested pose ({residual_mm:.3e} mm after {iterations} iterations)")]
 pub struct TruthSolveError {
+    /// Position residual at the last iterate, mm.
     pub residual_mm: f64,
+    /// Iterations done before giving up (60 when the budget ran out).
     pub iterations: usize,
 }
 
@@ -40,7 +45,7 @@ impl Truth {
     }
 
     /// The true robot carrying `tool` (its TCP as declared; its payload plus any `tool_mass`
-    /// difference).
+    /// difference), on the truth's base.
     pub fn robot(&self, tool: &Tool) -> TrueRobot {
         let mut payload = tool.clone();
         if let Some(m) = &self.effects.tool_mass {
@@ -70,7 +75,9 @@ pub struct TrueRobot {
 }
 
 impl TrueRobot {
-    /// The logged state at joints q with an approach direction and a temperature.
+    /// The logged state at joints q (rad) with an approach direction per joint (−1, 0, +1) and a
+    /// temperature (°C): the holding torques are this robot's gravity model at q (nominal
+    /// geometry, true payload).
     pub fn state(&self, q: &[f64], approach: &[f64], temperature_c: f64) -> JointState {
         let tau = self.gravity.torques(q);
         let mut s = JointState::with_torques(q, &tau[..self.dof]);
@@ -79,7 +86,8 @@ impl TrueRobot {
         s
     }
 
-    /// The true TCP pose in {W}.
+    /// The true TCP pose in {W}: the true chain's forward kinematics at `s`, with link 2's bending
+    /// inserted at joint 3 when the truth has it.
     pub fn tcp(&self, s: &JointState) -> Frame {
         match self.bending {
             None => self.chain.fk(s),
@@ -94,9 +102,12 @@ impl TrueRobot {
         }
     }
 
-    /// Joints at which the true TCP reaches `target` under the given approach and temperature,
-    /// from a nearby seed. Quasi-Newton: the model's joint Jacobian (without the small effect
-    /// derivatives) drives the steps, the exact truth decides convergence (1e-13 m, 1e-12 rad).
+    /// Joints at which the true TCP reaches `target` (position and orientation, {W}) under the
+    /// given approach and temperature, from a nearby seed (rad). Quasi-Newton: the model's joint
+    /// Jacobian (without the small effect derivatives) drives the steps, the exact truth decides
+    /// convergence (1e-13 m, 1e-12 rad). Only six-joint robots: with any other number it fails at
+    /// once; it also fails at the first singular Jacobian, or after 60 iterations without
+    /// converging.
     pub fn solve(
         &self,
         target: &Frame,
@@ -131,16 +142,19 @@ impl TrueRobot {
         Err(TruthSolveError { residual_mm: last * 1e3, iterations: 60 })
     }
 
+    /// The true chain: the truth's parameters, base T_0^W and this tool's TCP (without the link
+    /// bending, which only [`Self::tcp`] applies).
     pub fn chain(&self) -> &Chain {
         &self.chain
     }
 
+    /// The holding-torque model: the nominal structure with the true payload.
     pub fn gravity(&self) -> &GravityModel {
         &self.gravity
     }
 }
 
-/// Identity helper for tests and callers that need a rotation-only frame.
+/// A frame with rotation `r` and no translation.
 pub fn rotation_frame(r: Matrix3<f64>) -> Frame {
     Frame::new(r, Vector3::zeros())
 }

@@ -71,9 +71,11 @@ impl PlanningCell {
         self.ball(k).ok_or_else(|| PlanError::Layout(format!("there is no ball {k}")))
     }
 
-    /// A pool of statically collision-free identification configurations on ball `k` (no path
-    /// checks: for a later selection, e.g. DETMAX, whose chosen subset is then sequenced and
-    /// path-checked with [`Self::check_sequence`]).
+    /// A pool of `count` statically collision-free identification configurations on ball `k`
+    /// (1-based), ν ≤ `nu_max` (rad), drawn from `rng` (no path checks: for a later selection,
+    /// e.g. DETMAX, whose chosen subset is then sequenced with [`Self::sequence`] or path-checked
+    /// with [`Self::check_sequence`]). [`PlanError::Layout`] when there is no ball k,
+    /// [`PlanError::Ball`] when `max_attempts` draws give fewer than `count`.
     pub fn identification_candidates<R: Rng>(
         &self,
         k: usize,
@@ -99,6 +101,8 @@ impl PlanningCell {
 
     /// Identification plan: `per_ball` configurations on ball 1, then ball 2, then ball 3, each
     /// reachable from the previous one (the first from home) by a collision-free joint move.
+    /// Draws from ChaCha8 seeded with `seed`: same cell, options and seed, same plan.
+    /// [`PlanError::Ball`] when a ball's `per_ball · attempts_per_pose` draws run out.
     pub fn plan_identification(&self, opts: &IdentificationOptions, seed: u64) -> Result<Plan, PlanError> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut poses = Vec::with_capacity(3 * opts.per_ball);

@@ -84,6 +84,7 @@ pub struct CellLayout {
     pub tool: Tool,
     /// The tool's collision shape in the flange frame.
     pub tool_shape: ToolShape,
+    /// Capsule radii of the robot's links.
     pub link_radii: LinkRadii,
     /// Guess of T_0^W as χ (m, rad).
     pub base: [f64; 6],
@@ -98,6 +99,7 @@ pub struct CellLayout {
     pub tracker: Vector3<f64>,
     /// Reflector nests for validation.
     pub nests: Vec<Nest>,
+    /// Safety margins of the collision checks.
     pub clearances: Clearances,
     /// Safe start configuration of every plan, rad.
     pub home: [f64; 6],
@@ -131,6 +133,14 @@ impl Default for CellLayout {
 }
 
 impl PlanningCell {
+    /// Compile a layout for planning: the nominal chain with the measuring tool on the base
+    /// guess, its analytic inverse kinematics, and the IRB 120 capsule model
+    /// ([`CollisionModel::irb120`]) with the plate grown from the ball triangle.
+    ///
+    /// [`PlanError::Layout`] when `rod_length` or `plate_margin` is negative or not finite, the
+    /// robot model is invalid or has no analytic inverse kinematics, a nest's opening is not a
+    /// unit vector or its acceptance not in (0, 180°], a tool capsule radius is negative, or the
+    /// triangle makes no plate; [`PlanError::Home`] when the home configuration collides.
     pub fn new(layout: &CellLayout) -> Result<Self, PlanError> {
         let bad = |m: String| PlanError::Layout(m);
         for (name, v) in [("rod_length", layout.rod_length), ("plate_margin", layout.plate_margin)] {

@@ -8,8 +8,9 @@
 //! - Identification: for each ball in turn, the TCP on the ball centre with the TriCal's axis
 //!   within ν_max of the ball's rod, orientations drawn uniformly on that cap and about the axis,
 //!   one of the valid inverse-kinematics branches drawn at random.
-//! - Validation: joint configurations drawn uniformly within the limits, kept when a reflector
-//!   nest faces the tracker with a clear line of sight.
+//! - Validation: configurations drawn in Cartesian space (by default, the thesis's way: the TCP
+//!   uniform in a box, a nest turned towards the tracker) or uniformly within the joint limits,
+//!   kept when a reflector nest faces the tracker with a clear line of sight.
 //!
 //! Every accepted configuration passes the static check of [`CollisionModel`] and the path check
 //! of the linear joint move from the previously accepted one (the first from the home
@@ -52,23 +53,51 @@ pub struct PlannedPose {
 /// Why no plan.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PlanError {
+    /// The layout (or a planning option) cannot be planned with; the message says why.
     #[error("cell layout: {0}")]
     Layout(String),
+    /// The home configuration fails the static collision check.
     #[error("the home configuration is not collision-free: {0}")]
     Home(Collision),
+    /// Identification: a ball ran out of draws before enough configurations were accepted.
     #[error("ball {ball}: found only {found} of {wanted} identification poses in {attempts} attempts")]
-    Ball { ball: usize, found: usize, wanted: usize, attempts: usize },
+    Ball {
+        /// The ball, 1-based.
+        ball: usize,
+        /// Configurations accepted.
+        found: usize,
+        /// Configurations asked for.
+        wanted: usize,
+        /// Draws made.
+        attempts: usize,
+    },
+    /// Validation: the draws ran out before enough configurations were accepted.
     #[error("found only {found} of {wanted} validation poses in {attempts} attempts")]
-    Validation { found: usize, wanted: usize, attempts: usize },
+    Validation {
+        /// Configurations accepted.
+        found: usize,
+        /// Configurations asked for.
+        wanted: usize,
+        /// Draws made.
+        attempts: usize,
+    },
+    /// Sequencing: no collision-free move reaches any configuration left, and none can be
+    /// slotted in between sequenced ones.
     #[error(
         "no collision-free move leads to any of the {remaining} configurations left after {sequenced} were sequenced"
     )]
-    Sequence { sequenced: usize, remaining: usize },
+    Sequence {
+        /// Configurations in order so far.
+        sequenced: usize,
+        /// Configurations left over.
+        remaining: usize,
+    },
 }
 
 /// What happened to the draws of a plan (for one ball, or for the validation plan).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PlanStats {
+    /// Draws made; each ends in exactly one of the counts below.
     pub attempts: usize,
     /// No inverse-kinematics branch within the joint limits.
     pub unreachable: usize,
@@ -80,6 +109,7 @@ pub struct PlanStats {
     pub not_visible: usize,
     /// The move from the previous configuration collides.
     pub path: usize,
+    /// Accepted into the plan.
     pub accepted: usize,
 }
 
@@ -87,7 +117,9 @@ pub struct PlanStats {
 /// validation.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Plan {
+    /// The configurations, in measuring order.
     pub poses: Vec<PlannedPose>,
+    /// The draws' statistics: per ball (balls 1, 2, 3) or one for validation.
     pub stats: Vec<PlanStats>,
 }
 
@@ -112,24 +144,28 @@ pub struct PlanningCell {
 }
 
 impl PlanningCell {
+    /// The layout it was compiled from.
     pub fn layout(&self) -> &CellLayout {
         &self.layout
     }
 
-    /// The nominal chain with the measuring tool.
+    /// The nominal chain with the measuring tool, on the base guess.
     pub fn chain(&self) -> &Chain {
         &self.chain
     }
 
+    /// The analytic inverse kinematics of that chain.
     pub fn ik(&self) -> &AnalyticIk {
         &self.ik
     }
 
+    /// The collision model: the robot's capsules on the nominal chain with the measuring tool's
+    /// shape, the table and the artefact's plate.
     pub fn collision(&self) -> &CollisionModel {
         &self.collision
     }
 
-    /// The tracker in {W}.
+    /// The tracker in {W} (the layout's position in {0} moved by the base guess), m.
     pub fn tracker(&self) -> Vector3<f64> {
         self.tracker
     }
@@ -172,13 +208,17 @@ impl PlanStats {
 }
 
 /// Identification plan of a layout with the default ν ≤ 50°: `per_ball` configurations on each
-/// of the three balls, in measuring order (ball 1's, then 2's, then 3's).
+/// of the three balls, in measuring order (ball 1's, then 2's, then 3's). Compiles the layout
+/// ([`PlanningCell::new`]) and runs [`PlanningCell::plan_identification`] with the other
+/// [`IdentificationOptions`] defaults; their errors are passed on.
 pub fn plan_identification(layout: &CellLayout, per_ball: usize, seed: u64) -> Result<Vec<PlannedPose>, PlanError> {
     let opts = IdentificationOptions { per_ball, ..Default::default() };
     Ok(PlanningCell::new(layout)?.plan_identification(&opts, seed)?.poses)
 }
 
 /// Validation plan of a layout: `count` configurations in measuring order, each with its nest.
+/// Compiles the layout ([`PlanningCell::new`]) and runs [`PlanningCell::plan_validation`] with
+/// the other [`ValidationOptions`] defaults (Cartesian sampling); their errors are passed on.
 pub fn plan_validation(layout: &CellLayout, count: usize, seed: u64) -> Result<Vec<PlannedPose>, PlanError> {
     let opts = ValidationOptions { count, ..Default::default() };
     Ok(PlanningCell::new(layout)?.plan_validation(&opts, seed)?.poses)

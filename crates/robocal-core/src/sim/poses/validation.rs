@@ -29,20 +29,25 @@ pub enum ValidationSampling {
 /// Validation planning settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ValidationOptions {
+    /// Configurations wanted.
     pub count: usize,
+    /// How configurations are drawn.
     pub sampling: ValidationSampling,
-    /// Cartesian sampling: half-width of the box in x and y of {0} and its z range, m.
+    /// Cartesian sampling: half-width of the TCP's box in x and y of {0} (the base guess), m.
     pub box_half_width: f64,
+    /// Cartesian sampling: the box's z range in {0}, [low, high], m.
     pub box_z: [f64; 2],
-    /// Joint limits are shrunk by this much on both sides when sampling, rad.
+    /// Joint limits are shrunk by this much on both sides when sampling in joint space, rad
+    /// (checked under either sampling: a joint must keep some range).
     pub joint_margin: f64,
     /// The plan fails after `count · attempts_per_pose` configurations drawn.
     pub attempts_per_pose: usize,
 }
 
 impl Default for ValidationOptions {
-    /// 506 poses (§4.1, setup 2), 5° inside the limits, up to 200 draws per wanted pose (the
-    /// thesis cell needs about 9).
+    /// 506 poses (§4.1, setup 2), Cartesian sampling in a box ±0.70 m in x and y and −0.10 to
+    /// 1.00 m in z of {0}, 5° inside the limits, up to 200 draws per wanted pose (the thesis cell
+    /// needs about 9).
     fn default() -> Self {
         Self {
             count: 506,
@@ -56,7 +61,8 @@ impl Default for ValidationOptions {
 }
 
 impl PlanningCell {
-    /// The nest's reflector centre and opening direction in {W}.
+    /// Nest `nest`'s reflector centre (m) and opening direction (unit) in {W}, at the flange of
+    /// `trace`. Panics when there is no such nest.
     pub fn nest_in_world(&self, trace: &Trace, nest: usize) -> (Vector3<f64>, Vector3<f64>) {
         let n = &self.layout.nests[nest];
         (trace.flange.transform_point(&n.position()), trace.flange.r * n.opening)
@@ -78,8 +84,9 @@ impl PlanningCell {
             && self.collision.plate().is_none_or(|plate| plate.segment_signed_distance(&p, &t) > 0.0)
     }
 
-    /// The nest that measures configuration q (rad): among the nests facing the tracker within
-    /// their acceptance and seeing it, the most directly facing one.
+    /// The nest that measures the configuration of `trace` (with its parts `placed`): among the
+    /// nests facing the tracker within their acceptance and seeing it, the most directly facing
+    /// one; `None` when there is none.
     pub fn visible_nest(&self, trace: &Trace, placed: &[Capsule]) -> Option<usize> {
         let mut best: Option<(usize, f64)> = None;
         for k in 0..self.layout.nests.len() {
@@ -125,9 +132,13 @@ impl PlanningCell {
         self.validation_nest(q).ok()
     }
 
-    /// Validation plan: `count` configurations drawn uniformly in the joint limits (shrunk by
-    /// the margin; axis 6 within ±180°, as further turns change nothing the tracker sees),
-    /// each passing [`Self::validation_check`] and reachable from the previous one.
+    /// Validation plan: `count` configurations drawn as `opts.sampling` says — Cartesian (the
+    /// default, see [`ValidationSampling::Cartesian`]) or uniformly in the joint limits (shrunk
+    /// by the margin; axis 6 within ±180°, as further turns change nothing the tracker sees) —
+    /// each passing [`Self::validation_check`] and reachable from the previous one (the first
+    /// from home) by a collision-free joint move. Draws from ChaCha8 seeded with `seed`.
+    /// [`PlanError::Layout`] when the margin leaves a joint no range (whatever the sampling),
+    /// [`PlanError::Validation`] when `count · attempts_per_pose` draws run out.
     pub fn plan_validation(&self, opts: &ValidationOptions, seed: u64) -> Result<Plan, PlanError> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut ranges = [[0.0; 2]; 6];
