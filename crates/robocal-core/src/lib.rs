@@ -72,6 +72,9 @@
 // four arrays read worse than the formulas they implement.
 #![allow(clippy::needless_range_loop)]
 #![warn(missing_docs)]
+// A type the public API hands out must be nameable by its users (re-exported where its module is
+// private to the crate).
+#![warn(unnameable_types)]
 
 pub mod cell;
 // Every public item is documented (`missing_docs`), except in `formats`, whose items are being

@@ -35,7 +35,7 @@ pub struct Against {
     /// (m), `joint_distance_to_nearest_calibration` (RMS over the joints, rad), `q1`… (rad), `tau1`…
     /// (N·m) or `sigma_pred` (m).
     pub variable: String,
-    /// Least-squares line of |e| (m) on the variable; `None` when it cannot be fitted ([`linear_fit`]).
+    /// Least-squares line of |e| (m) on the variable; `None` when it cannot be fitted (`linear_fit`).
     pub fit: Option<LinearFit>,
     /// (bin centre, mean |e|, count) over equal-count bins.
     pub profile: Vec<(f64, f64, usize)>,
@@ -46,7 +46,7 @@ pub struct Against {
 pub struct Voxel {
     /// Centre in {W}, m.
     pub centre: Vector3<f64>,
-    /// Tested positions in the voxel (at least [`MIN_VOXEL`]).
+    /// Tested positions in the voxel (at least `MIN_VOXEL`).
     pub n: usize,
     /// Mean |e| of its positions, m.
     pub mean_error: f64,

@@ -7,10 +7,10 @@
 //!    identification and validation sessions, weighted by the instrument model, its geometry
 //!    anchored to the set's values — and linearised ([`stage`]);
 //! 2. the held-out error is decomposed into the noise floor, the extrapolation gap and the
-//!    unmodelled gap ([`floor`]);
-//! 3. where the misses lie ([`locate`]);
+//!    unmodelled gap (`floor`);
+//! 3. where the misses lie (`locate`);
 //! 4. which effect: screening, confirmation on held-out poses, greedy acceptance and honest
-//!    verdicts ([`search`], [`library`], [`screen`], [`cv`]);
+//!    verdicts (`search`, [`library`], `screen`, [`cv`]);
 //! 5. how far it shrinks: the held-out figures of every accepted model.
 //!
 //! Held-out means: grouped K-fold cross-validation over the validation poses, every fold's model
@@ -20,15 +20,15 @@
 
 pub mod cv;
 mod evidence;
-pub mod floor;
+pub(crate) mod floor;
 pub mod library;
-pub mod linalg;
-pub mod locate;
-pub mod refit;
-pub mod screen;
-pub mod search;
+pub(crate) mod linalg;
+pub(crate) mod locate;
+pub(crate) mod refit;
+pub(crate) mod screen;
+pub(crate) mod search;
 pub mod stage;
-pub mod stats;
+pub(crate) mod stats;
 mod verdict;
 
 use nalgebra::Vector3;
@@ -42,11 +42,11 @@ use crate::validate::stats::ErrorStats;
 use cv::Folds;
 use evidence::evidence;
 pub use evidence::{Evidence, EvidenceBin, EvidenceVariable};
-use floor::Floor;
+pub use floor::Floor;
 use library::{Candidate, Kind, Unavailable};
-use locate::Where;
-use search::Round;
-pub use search::SearchOptions;
+pub use locate::{Against, Axis, Voxel, Where};
+pub use screen::Score;
+pub use search::{Decision, Evaluated, Round, Screened, SearchOptions};
 pub use verdict::experiment;
 use verdict::verdict;
 

@@ -86,8 +86,8 @@ pub enum FixedReason {
         /// per row, lever the norm of its Jacobian column's component outside the span of the
         /// parameters kept before it (m, or rad when `angle`).
         std: f64,
-        /// The limit `std` exceeds: [`super::identifiability::UNDETERMINED_LENGTH_M`] or
-        /// [`super::identifiability::UNDETERMINED_ANGLE_RAD`].
+        /// The limit `std` exceeds: `super::identifiability::UNDETERMINED_LENGTH_M` or
+        /// `super::identifiability::UNDETERMINED_ANGLE_RAD`.
         bound: f64,
         /// The parameter is an angle: `std` and `bound` in rad, not m.
         angle: bool,

@@ -5,12 +5,12 @@
 pub mod base;
 pub mod crossval;
 pub mod detmax;
-pub mod identifiability;
-pub mod noise;
+pub(crate) mod identifiability;
+pub(crate) mod noise;
 pub mod observability;
 pub mod problem;
-pub mod quality;
-pub mod solver;
+pub(crate) mod quality;
+pub(crate) mod solver;
 pub mod study;
 
 mod error;

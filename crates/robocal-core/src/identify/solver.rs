@@ -17,7 +17,7 @@ use faer::linalg::solvers::{DenseSolveCore, Solve, SolveLstsq};
 
 use super::problem::Problem;
 
-/// Settings of [`solve`]: iteration limit, convergence tests, robust loss.
+/// Settings of `solve`: iteration limit, convergence tests, robust loss.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SolverOptions {
     /// Iterations before [`SolveError::IterationLimit`].
@@ -96,7 +96,7 @@ pub struct Fit {
     pub iterations: usize,
     /// Final (weighted) residual and Jacobian of the free parameters, unscaled (SI).
     pub residual: Vec<f64>,
-    /// (rows of the stacked system) × (free parameters, in the order of [`solve`]'s `free`).
+    /// (rows of the stacked system) × (free parameters, in the order of `solve`'s `free`).
     pub jacobian: Mat<f64>,
     /// Robust weight of each observation (1 = full weight).
     pub weights: Vec<f64>,

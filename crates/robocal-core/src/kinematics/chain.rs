@@ -736,13 +736,6 @@ fn trans_col(u: &Vector3<f64>) -> [f64; 6] {
     [u.x, u.y, u.z, 0.0, 0.0, 0.0]
 }
 
-/// φ of a joint term at a state: what its value multiplies to give Δθ_j. A map knot is taken as
-/// an interior knot of its table (see [`basis_at`]).
-#[inline]
-pub fn basis(term: JointTerm, j: usize, s: &JointState) -> f64 {
-    basis_at(term, j, s, MapEdge::default())
-}
-
 /// φ of a joint term at a state, a map knot at the given edge of its table.
 #[inline]
 pub fn basis_at(term: JointTerm, j: usize, s: &JointState, edge: MapEdge) -> f64 {

@@ -2,14 +2,14 @@
 //! identification Jacobian, gravity torques, analytic and numerical inverse kinematics, and
 //! fake-target compensation. SI units throughout (m, rad, kg, N·m).
 
-pub mod chain;
+pub(crate) mod chain;
 pub mod compensate;
 pub mod frame;
-pub mod gravity;
+pub(crate) mod gravity;
 pub mod ik_analytic;
 pub mod ik_numeric;
 pub mod model;
-pub mod param_set;
+pub(crate) mod param_set;
 pub mod params;
 pub mod thesis;
 

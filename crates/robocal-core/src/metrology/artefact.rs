@@ -17,7 +17,7 @@ pub enum ArtefactError {
     /// One distance exceeds the sum of the other two (the message names it, in mm).
     #[error("impossible triangle: {0}")]
     Impossible(String),
-    /// The balls are (nearly) collinear: ball 3 lies within [`MIN_HEIGHT_RATIO`]·d12 of the line
+    /// The balls are (nearly) collinear: ball 3 lies within `MIN_HEIGHT_RATIO`·d12 of the line
     /// through balls 1 and 2.
     #[error("degenerate triangle: {0}")]
     Degenerate(String),

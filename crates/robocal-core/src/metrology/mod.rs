@@ -2,9 +2,9 @@
 //! Pure math, SI units. (Not in ENGINEERING.md's layout: it is neither kinematics nor the virtual
 //! cell, and both the identification and the simulator use it.)
 
-pub mod artefact;
+pub(crate) mod artefact;
 pub mod registration;
-pub mod trical;
+pub(crate) mod trical;
 
 pub use artefact::{ArtefactError, BallTriangle};
 pub use trical::{TriCal, TriCalError};

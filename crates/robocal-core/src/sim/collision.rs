@@ -3,7 +3,7 @@
 //! Every body is a capsule — the set of points within `radius` of a segment — so a test between
 //! two parts reduces to an exact segment–segment distance, one against the table to the heights
 //! of the segment's ends, and one against the plate to a golden-section search of the prism's
-//! signed distance along the segment (the primitives are in [`super::geometry`] and re-exported
+//! signed distance along the segment (the primitives are in `super::geometry` and re-exported
 //! here). Robot parts are fixed in link frames and placed
 //! by the chain's forward-kinematics [`Trace`], so they follow whatever parameter set the chain was
 //! compiled at. The cell contributes two obstacles: the table (the robot's mounting plane, a
@@ -24,9 +24,7 @@ use std::fmt;
 
 use nalgebra::Vector3;
 
-pub use super::geometry::{
-    Capsule, HalfSpace, VerticalPrism, closest_segment_params, point_segment_distance, segment_distance,
-};
+pub use super::geometry::{Capsule, HalfSpace, VerticalPrism, segment_distance};
 use crate::kinematics::{Chain, JointState, Param, ParameterSet, Trace};
 use crate::units::DEG;
 
@@ -305,11 +303,6 @@ impl CollisionModel {
         self.plate.as_ref()
     }
 
-    /// The safety margins the checks apply.
-    pub fn clearances(&self) -> &Clearances {
-        &self.clearances
-    }
-
     /// Forward kinematics at joint readings q (rad, no joint torques).
     pub fn trace(&self, q: &[f64]) -> Trace {
         self.chain.trace(&self.chain.joint_angles(&JointState::new(q)))
@@ -337,7 +330,7 @@ impl CollisionModel {
 
     /// The static check of placed parts (from [`Self::place`]): the first violation, in the order
     /// the module lists (pairs, then the table, then the plate).
-    pub fn check_placed(&self, placed: &[Capsule]) -> Result<(), Collision> {
+    pub(crate) fn check_placed(&self, placed: &[Capsule]) -> Result<(), Collision> {
         let cl = &self.clearances;
         for &(i, j) in &self.pairs {
             let d = placed[i].distance(&placed[j]);
@@ -393,7 +386,7 @@ impl CollisionModel {
 
     /// Number of steps of a linear joint move so that no joint moves more than [`PATH_STEP`]
     /// between samples (at least 1; the move has `steps + 1` samples, endpoints included).
-    pub fn path_steps(from: &[f64], to: &[f64]) -> usize {
+    pub(crate) fn path_steps(from: &[f64], to: &[f64]) -> usize {
         let max = from.iter().zip(to).fold(0.0f64, |m, (a, b)| m.max((b - a).abs()));
         ((max / PATH_STEP).ceil() as usize).max(1)
     }

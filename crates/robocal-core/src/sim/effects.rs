@@ -264,7 +264,7 @@ impl Effects {
     /// rad/(N·m)³, 1/K); a cyclic term becomes its sin and cos parameters, amp·cos(phase) and
     /// amp·sin(phase). Values add to a parameter the set already has. The other effects act
     /// outside the parameter vector (see [`super::truth`]).
-    pub fn apply_to(&self, set: &mut ParameterSet) {
+    pub(crate) fn apply_to(&self, set: &mut ParameterSet) {
         let mut add = |p: Param, v: f64| {
             let i = set.extend(&[p])[0];
             set.values[i] += v;

@@ -26,7 +26,7 @@ impl Capsule {
     }
 
     /// The capsule expressed in the parent of `frame` (its endpoints mapped by `frame`).
-    pub fn transformed(&self, frame: &Frame) -> Capsule {
+    pub(crate) fn transformed(&self, frame: &Frame) -> Capsule {
         Capsule { a: frame.transform_point(&self.a), b: frame.transform_point(&self.b), radius: self.radius }
     }
 
@@ -48,7 +48,7 @@ const DEGENERATE_LEN2: f64 = 1e-30;
 /// reduce to point–segment distances. Parallel segments (sin² of the angle below machine ε, where
 /// the solve for s is ill-conditioned and the distance is constant along the overlap anyway)
 /// start from s = 0.
-pub fn closest_segment_params(
+pub(crate) fn closest_segment_params(
     p1: &Vector3<f64>,
     q1: &Vector3<f64>,
     p2: &Vector3<f64>,
@@ -90,7 +90,8 @@ pub fn segment_distance(p1: &Vector3<f64>, q1: &Vector3<f64>, p2: &Vector3<f64>,
 }
 
 /// Distance from point `p` to segment `a`–`b`.
-pub fn point_segment_distance(p: &Vector3<f64>, a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+#[cfg(test)]
+pub(crate) fn point_segment_distance(p: &Vector3<f64>, a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
     let d = b - a;
     let len2 = d.dot(&d);
     let t = if len2 <= DEGENERATE_LEN2 { 0.0 } else { ((p - a).dot(&d) / len2).clamp(0.0, 1.0) };
@@ -108,7 +109,7 @@ pub struct HalfSpace {
 
 impl HalfSpace {
     /// The plane z = 0 of `frame` (e.g. the robot's mounting plane from T_0^W), free side +z.
-    pub fn xy_plane_of(frame: &Frame) -> Self {
+    pub(crate) fn xy_plane_of(frame: &Frame) -> Self {
         Self { point: frame.t, normal: frame.r.column(2).into() }
     }
 
@@ -179,7 +180,7 @@ impl VerticalPrism {
 
     /// Signed distance of a point to the prism: Euclidean distance outside, minus the depth below
     /// the nearest face inside.
-    pub fn signed_distance(&self, p: &Vector3<f64>) -> f64 {
+    pub(crate) fn signed_distance(&self, p: &Vector3<f64>) -> f64 {
         let xy = Vector2::new(p.x, p.y);
         let n = self.corners.len();
         let mut inside_depth = f64::NEG_INFINITY;
@@ -232,7 +233,7 @@ impl VerticalPrism {
     }
 
     /// Distance between a capsule's surface and the prism; negative when they overlap.
-    pub fn capsule_distance(&self, c: &Capsule) -> f64 {
+    pub(crate) fn capsule_distance(&self, c: &Capsule) -> f64 {
         self.segment_signed_distance(&c.a, &c.b) - c.radius
     }
 }

@@ -100,13 +100,13 @@ impl Noise {
 
     /// The robot's non-repeatable offset, m: isotropic Gaussian with σ =
     /// [`Self::repeatability_sigma`] per axis.
-    pub fn repeatability_offset<R: Rng>(&self, rng: &mut R) -> Vector3<f64> {
+    pub(crate) fn repeatability_offset<R: Rng>(&self, rng: &mut R) -> Vector3<f64> {
         gaussian3(rng) * self.repeatability_sigma()
     }
 
     /// A tracker reading's error at `distance` metres from the tracker, m: isotropic Gaussian with
     /// σ = `tracker_sigma + tracker_sigma_per_m · distance` per axis.
-    pub fn tracker_error<R: Rng>(&self, rng: &mut R, distance: f64) -> Vector3<f64> {
+    pub(crate) fn tracker_error<R: Rng>(&self, rng: &mut R, distance: f64) -> Vector3<f64> {
         gaussian3(rng) * (self.tracker_sigma + self.tracker_sigma_per_m * distance)
     }
 }

@@ -128,14 +128,14 @@ pub enum MeasureError {
 
 /// Half-width of the first approach's deviation from the ball centre, per axis, m (thesis §2.4:
 /// the indicators' design range for the initial deviation, ±0.350 mm).
-pub const INITIAL_DEVIATION: f64 = 0.35e-3;
+pub(crate) const INITIAL_DEVIATION: f64 = 0.35e-3;
 /// Correction moves after which auto-centring gives up.
 pub const MAX_CENTRING_MOVES: usize = 30;
 
 /// Seconds per TriCal measurement (centring loop included, thesis §2.3).
-pub const TRICAL_SECONDS: f64 = 25.0;
+pub(crate) const TRICAL_SECONDS: f64 = 25.0;
 /// Seconds per tracker reading (each nest read at a stop counts once).
-pub const TRACKER_SECONDS: f64 = 10.0;
+pub(crate) const TRACKER_SECONDS: f64 = 10.0;
 
 /// Simulate the TriCal run on `balls` then the tracker run on `nests`, starting from `home`
 /// (rad; the robot returns home between the runs), as the module describes.

@@ -6,12 +6,12 @@
 //! - [`simulate`]: the entry point — plan, measure, return the cell and its truth.
 //! - [`truth`] and [`effects`]: the true robot and the unmodelled effects it can carry.
 //! - [`instruments`] and [`measure`]: the noise, and the TriCal and laser-tracker runs.
-//! - [`poses`], [`collision`] and [`geometry`]: collision-free pose planning.
+//! - `poses`, `collision` and `geometry`: collision-free pose planning.
 //! - [`tracker_run`]: a customer-style laser-tracker run in the three-reflector format.
 
 pub mod collision;
 pub mod effects;
-pub mod geometry;
+pub(crate) mod geometry;
 pub mod instruments;
 pub mod measure;
 pub mod poses;

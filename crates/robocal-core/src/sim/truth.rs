@@ -6,7 +6,7 @@
 //! payload: a truth without effects is then exactly in the model family, which is what lets the
 //! noise-free identification test demand micrometre-free answers.
 
-use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
+use nalgebra::{Matrix6, Vector3, Vector6};
 
 use super::effects::Effects;
 use crate::kinematics::frame::{rot_z, rotation_vector};
@@ -152,11 +152,6 @@ impl TrueRobot {
     pub fn gravity(&self) -> &GravityModel {
         &self.gravity
     }
-}
-
-/// A frame with rotation `r` and no translation.
-pub fn rotation_frame(r: Matrix3<f64>) -> Frame {
-    Frame::new(r, Vector3::zeros())
 }
 
 #[cfg(test)]

@@ -2,8 +2,9 @@
 //! or true positions.
 
 pub mod normality;
-pub mod regression;
+pub(crate) mod regression;
 pub mod report;
 pub mod stats;
 
+pub use regression::LinearFit;
 pub use stats::ErrorStats;

@@ -66,7 +66,7 @@ pub fn reflector_plate() -> Vec<Nest> {
 /// the flange origin to (40, 0, 95) mm, 35 mm short of the TCP (40, 0, 130) mm; the contact zone,
 /// the ball of radius 35 mm about the TCP, which closes on the artefact's ball (on a ball, it
 /// stays 15 mm above the plate under 50 mm rods).
-pub fn trical_shape() -> ToolShape {
+pub(crate) fn trical_shape() -> ToolShape {
     let tcp = Vector3::new(0.040, 0.0, 0.130);
     ToolShape {
         body: vec![Capsule::new(Vector3::zeros(), Vector3::new(0.040, 0.0, 0.095), 0.035)],

@@ -31,7 +31,7 @@ use nalgebra::Vector3;
 use rand::Rng;
 
 pub use identification::IdentificationOptions;
-pub use layout::{CellLayout, Nest, reflector_plate, trical_nests, trical_shape};
+pub use layout::{CellLayout, Nest, reflector_plate, trical_nests};
 pub use validation::{ValidationOptions, ValidationSampling};
 
 use super::collision::{Collision, CollisionModel};

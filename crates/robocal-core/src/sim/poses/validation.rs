@@ -63,13 +63,13 @@ impl Default for ValidationOptions {
 impl PlanningCell {
     /// Nest `nest`'s reflector centre (m) and opening direction (unit) in {W}, at the flange of
     /// `trace`. Panics when there is no such nest.
-    pub fn nest_in_world(&self, trace: &Trace, nest: usize) -> (Vector3<f64>, Vector3<f64>) {
+    pub(crate) fn nest_in_world(&self, trace: &Trace, nest: usize) -> (Vector3<f64>, Vector3<f64>) {
         let n = &self.layout.nests[nest];
         (trace.flange.transform_point(&n.position()), trace.flange.r * n.opening)
     }
 
     /// Angle between nest `nest`'s opening and the direction from it to the tracker, rad.
-    pub fn nest_angle(&self, trace: &Trace, nest: usize) -> f64 {
+    pub(crate) fn nest_angle(&self, trace: &Trace, nest: usize) -> f64 {
         let (p, n) = self.nest_in_world(trace, nest);
         let to = (self.tracker - p).normalize();
         n.dot(&to).clamp(-1.0, 1.0).acos()
@@ -77,7 +77,7 @@ impl PlanningCell {
 
     /// Whether the beam from nest `nest` to the tracker clears every placed part (from
     /// [`crate::sim::collision::CollisionModel::place`]) — the beam as a segment of zero radius — and the plate.
-    pub fn line_of_sight(&self, trace: &Trace, placed: &[Capsule], nest: usize) -> bool {
+    pub(crate) fn line_of_sight(&self, trace: &Trace, placed: &[Capsule], nest: usize) -> bool {
         let (p, _) = self.nest_in_world(trace, nest);
         let t = self.tracker;
         placed.iter().all(|c| segment_distance(&p, &t, &c.a, &c.b) > c.radius)
@@ -87,7 +87,7 @@ impl PlanningCell {
     /// The nest that measures the configuration of `trace` (with its parts `placed`): among the
     /// nests facing the tracker within their acceptance and seeing it, the most directly facing
     /// one; `None` when there is none.
-    pub fn visible_nest(&self, trace: &Trace, placed: &[Capsule]) -> Option<usize> {
+    pub(crate) fn visible_nest(&self, trace: &Trace, placed: &[Capsule]) -> Option<usize> {
         let mut best: Option<(usize, f64)> = None;
         for k in 0..self.layout.nests.len() {
             let angle = self.nest_angle(trace, k);
@@ -116,7 +116,7 @@ impl PlanningCell {
 
     /// Every nest facing the tracker within its acceptance and seeing it at q (in nest order):
     /// the nests a tracker can read at that stop.
-    pub fn visible_nests(&self, q: &[f64; 6]) -> Vec<usize> {
+    pub(crate) fn visible_nests(&self, q: &[f64; 6]) -> Vec<usize> {
         let trace = self.collision.trace(q);
         let placed = self.collision.place(&trace);
         (0..self.layout.nests.len())
