@@ -226,7 +226,7 @@ pub(super) fn validate(a: ValidateArgs) -> Result<String, CliError> {
         // The report draws every measurement: its document carries the residuals, as the
         // service stores them.
         let full = crate::domain::validation::report_to_json_with(&report, uncertainty, true);
-        let doc = crate::report::ValidationDoc::from_value(&full).map_err(CliError::msg)?;
+        let doc = crate::report::read_validation(&full).map_err(CliError::msg)?;
         write_report(path, &crate::report::validation_report(&doc))?;
         // On stderr when the JSON goes to stdout, so stdout stays the report alone.
         if !a.format.text(a.json) && a.out.is_none() {

@@ -5,7 +5,7 @@
 
 use std::fmt::Write;
 
-use crate::domain::validation::{AxisOut, FitOut, ModelErrorsOut, ValidationOut};
+use crate::domain::validation::{AxisOut, FitOut, ModelErrorsOut, ReferenceOut, ValidationOut};
 
 fn row(out: &mut String, w: usize, name: &str, m: &ModelErrorsOut) {
     let p = &m.position;
@@ -58,14 +58,20 @@ fn trend(out: &mut String, name: &str, f: Option<&FitOut>) {
 /// The report as text.
 pub fn text(v: &ValidationOut) -> String {
     let mut s = String::new();
-    let reference = if v.reference == "truth" { "the simulator's true TCP positions" } else { "the measurements" };
+    let reference = match v.reference {
+        ReferenceOut::Truth => "the simulator's true TCP positions",
+        ReferenceOut::Measured => "the measurements",
+    };
     let _ = writeln!(s, "Validation on {} against {reference}", v.sessions.join(", "));
-    let _ = writeln!(s, "{}", v.held_out_statement);
+    // Always recorded by this version (`ValidationOut::from_report`).
+    if let Some(why) = &v.held_out_statement {
+        let _ = writeln!(s, "{why}");
+    }
     let per_session: Vec<(String, String, &crate::domain::validation::SessionErrorsOut)> = if v.per_session.len() > 1 {
         v.per_session
             .iter()
             .map(|p| {
-                let head = format!("{} ({})", p.session, p.purpose);
+                let head = format!("{} ({})", p.session, p.purpose.as_str());
                 (format!("{head}, nominal"), format!("{head}, calibrated"), p)
             })
             .collect()

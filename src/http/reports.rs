@@ -18,7 +18,8 @@ use super::{ApiError, AppState, Problem};
 use crate::db::records;
 use crate::domain::ParameterSetFile;
 use crate::domain::diagnosis::DiagnosisOut;
-use crate::report::{self, ValidationDoc};
+use crate::domain::validation::ValidationOut;
+use crate::report;
 
 /// Whether `Accept` admits `text/html`: absent, or a range `text/html`, `text/*` or `*/*` with a
 /// non-zero q.
@@ -72,9 +73,9 @@ fn stored<T: serde::de::DeserializeOwned>(json: &str, what: &str) -> Result<T, A
     serde_json::from_str(json).map_err(|e| ApiError::Internal(format!("stored {what}: {e}")))
 }
 
-fn validation_doc(row: &records::ValidationRow) -> Result<ValidationDoc, ApiError> {
+fn validation_doc(row: &records::ValidationRow) -> Result<ValidationOut, ApiError> {
     let v: Value = stored(&row.report_json, "validation")?;
-    ValidationDoc::from_value(&v).map_err(|e| ApiError::Internal(format!("validation {}: {e}", row.id)))
+    report::read_validation(&v).map_err(|e| ApiError::Internal(format!("validation {}: {e}", row.id)))
 }
 
 /// A validation's report.

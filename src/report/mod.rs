@@ -26,7 +26,7 @@ pub use diagnosis::diagnosis_report;
 pub use history::{HistoryPoint, history_report};
 pub use parameters::{ReportSource, parameter_set_report};
 pub use studies::{crossval_report, study_report};
-pub use validation::{ValidationDoc, validation_report};
+pub use validation::{read_validation, validation_report};
 
 #[cfg(test)]
 mod tests;

@@ -8,8 +8,9 @@ use serde_json::Value;
 
 use super::html::{esc, figure, fixed, mm, page, sig, table};
 use super::plot;
-use super::validation::{ValidationDoc, validation_sections};
+use super::validation::validation_sections;
 use crate::domain::param_set::{ParamEntry, ParameterSetFile};
+use crate::domain::validation::ValidationOut;
 
 /// Decimals of a value and of its σ in `unit`: µm for mm, 0.1 mdeg (≈ 1.7 µrad) for deg.
 fn decimals(unit: &str) -> Option<(usize, usize)> {
@@ -196,7 +197,7 @@ impl ReportSource {
 /// where the set comes from.
 pub fn parameter_set_report(
     set: &ParameterSetFile,
-    validation: Option<&ValidationDoc>,
+    validation: Option<&ValidationOut>,
     source: &ReportSource,
 ) -> String {
     let mut body = source.html();

@@ -42,7 +42,7 @@ fn self_contained(html: &str) {
 fn the_validation_report_draws_every_plot_and_tells_the_reports_numbers() {
     let sim = sim();
     let report = validation(&sim);
-    let doc = ValidationDoc::from_value(&report_to_json(&report, true)).unwrap();
+    let doc = read_validation(&report_to_json(&report, true)).unwrap();
     let t = std::time::Instant::now();
     let html = validation_report(&doc);
     let elapsed = t.elapsed();
@@ -51,7 +51,7 @@ fn the_validation_report_draws_every_plot_and_tells_the_reports_numbers() {
     // grid, |e| against both distances (calibrated and nominal apart), the projections.
     assert!(sim.cell.artefact.is_some());
     assert_eq!(count(&html, "<svg"), 10);
-    assert_eq!(doc.plot_count(), 10);
+    assert_eq!(validation::plot_count(&doc), 10);
     // The projections' points: one circle (fill) and one outline per validation pose per view,
     // beside the other plots' circles.
     let n = report.residuals.len();
@@ -79,10 +79,134 @@ fn the_validation_report_draws_every_plot_and_tells_the_reports_numbers() {
     assert!(elapsed.as_millis() < 2000, "{elapsed:?}");
 
     // Stored without residuals: the tables, no plot.
-    let bare = ValidationDoc::from_value(&report_to_json(&report, false)).unwrap();
+    let bare = read_validation(&report_to_json(&report, false)).unwrap();
     let html = validation_report(&bare);
     assert_eq!(count(&html, "<svg"), 0);
     assert!(html.contains("without its per-measurement residuals"));
+}
+
+/// The fields of a validation document as robocal wrote it at a commit of
+/// `crates/robocal-core/src/formats/validation.rs` (formerly `src/domain/validation.rs`), read
+/// from that commit's `ValidationOut`, `SessionErrorsOut` and `ResidualOut`: the top level's and
+/// each session's besides the flattened `ModelErrorsOut` ([`MODEL`], unchanged since the first),
+/// and whether residuals had `position_mm`.
+struct Written {
+    top: &'static [&'static str],
+    session: &'static [&'static str],
+    positions: bool,
+}
+
+/// `ModelErrorsOut`'s fields (flattened) and `nominal`, in every version.
+const MODEL: &[&str] = &[
+    "n",
+    "mean_mm",
+    "median_mm",
+    "std_mm",
+    "rms_mm",
+    "p95_mm",
+    "max_mm",
+    "orientation",
+    "per_axis",
+    "shapiro",
+    "vs_base_distance",
+    "vs_zone_distance",
+    "nominal",
+];
+
+/// `ResidualOut`'s fields in every version (`position_mm` came later).
+const RESIDUAL: &[&str] = &[
+    "session",
+    "index",
+    "error_mm",
+    "error_norm_mm",
+    "nominal_error_mm",
+    "nominal_error_norm_mm",
+    "orientation_error_mrad",
+    "nominal_orientation_error_mrad",
+    "distance_to_base_mm",
+    "distance_to_zone_mm",
+];
+
+/// 2d4aa5a (2026-11-22, the first JSON report) up to 1c46f89: no `per_session`, no `balls_mm`,
+/// residuals without `position_mm`, nothing about held out.
+const BEFORE_PER_SESSION: Written =
+    Written { top: &["sessions", "purposes", "reference", "residuals"], session: &[], positions: false };
+
+/// ad0899c (2026-11-24, the HTML report) and de0f43f (`validated_envelope`) up to 8de8956: per
+/// session and positions, nothing about held out.
+const BEFORE_HELD_OUT: Written = Written {
+    top: &["sessions", "purposes", "reference", "residuals", "per_session", "balls_mm", "validated_envelope"],
+    session: &["session", "purpose"],
+    positions: true,
+};
+
+/// Today's document as the version `w` describes wrote it: every field it did not write removed.
+fn as_written(today: &serde_json::Value, w: &Written) -> serde_json::Value {
+    let keep = |v: &mut serde_json::Value, fields: &[&[&str]]| {
+        v.as_object_mut().unwrap().retain(|k, _| fields.iter().any(|f| f.contains(&k.as_str())));
+    };
+    let mut old = today.clone();
+    keep(&mut old, &[w.top, MODEL]);
+    for s in old.get_mut("per_session").and_then(|p| p.as_array_mut()).into_iter().flatten() {
+        keep(s, &[w.session, MODEL]);
+    }
+    let position: &[&str] = if w.positions { &["position_mm"] } else { &[] };
+    for r in old.get_mut("residuals").and_then(|r| r.as_array_mut()).into_iter().flatten() {
+        keep(r, &[RESIDUAL, position]);
+    }
+    old
+}
+
+#[test]
+fn validations_stored_by_earlier_versions_render_without_what_they_lack() {
+    let sim = sim();
+    let report = validation(&sim);
+    let today = report_to_json(&report, true);
+    let statement = today["held_out_statement"].as_str().unwrap().to_string();
+
+    // Today's: every field, the statement, the per-session table, every plot.
+    let doc = read_validation(&today).unwrap();
+    assert_eq!(doc.held_out, Some(report.held_out()));
+    assert!(doc.per_session.len() > 1 && doc.per_session.iter().all(|p| p.fitted == Some(false)));
+    // Read back, it writes the same document: nothing added, nothing lost.
+    assert_eq!(serde_json::to_value(&doc).unwrap(), today);
+    let html = validation_report(&doc);
+    self_contained(&html);
+    // The statement, capitalised, in a paragraph of its own.
+    let said = html.find(&html::esc(&statement[1..])).expect("the held-out statement");
+    let (from, to) = (html[..said].rfind("<p class=").unwrap(), said + html[said..].find("</p>").unwrap() + 4);
+    assert!(html[from..said].ends_with(&statement[..1].to_uppercase()));
+    assert!(html.contains("Per session, mm"));
+    assert_eq!(count(&html, "<svg"), 10);
+    let tables = |html: &str| html.split("<h2>Distribution").next().unwrap().to_string();
+    // Today's tables without the statement: what a document lacking only it shows.
+    let today_tables = tables(&format!("{}{}", &html[..from], &html[to..]));
+
+    for (w, svgs) in [(&BEFORE_HELD_OUT, 10), (&BEFORE_PER_SESSION, 9)] {
+        let old = as_written(&today, w);
+        assert!(old.get("held_out").is_none() && old.get("held_out_statement").is_none());
+        let doc = read_validation(&old).unwrap();
+        // What it lacks is absent, not made up.
+        assert!(doc.held_out.is_none() && doc.held_out_statement.is_none());
+        assert!(doc.fit.is_none() && doc.in_sample_sessions.is_none());
+        assert!(doc.per_session.iter().all(|p| p.fitted.is_none() && p.fitted_measurements.is_none()));
+        // And it writes back as stored.
+        assert_eq!(serde_json::to_value(&doc).unwrap(), old);
+        let html = validation_report(&doc);
+        self_contained(&html);
+        assert!(!html.contains(&html::esc(&statement[1..])), "a held-out statement the document does not make");
+        assert_eq!(count(&html, "<svg"), svgs);
+        assert_eq!(validation::plot_count(&doc), svgs);
+        if w.top.contains(&"per_session") {
+            // The same tables as today's but for the statement.
+            assert_eq!(tables(&html), today_tables);
+        } else {
+            // No per-session figures, no positions: no per-session table, no projections.
+            assert!(doc.per_session.is_empty() && doc.balls_mm.is_none());
+            assert!(doc.residuals.iter().flatten().all(|r| r.position_mm.is_none()));
+            assert!(!html.contains("Per session, mm") && !html.contains("Where the validation poses are"));
+        }
+    }
 }
 
 #[test]
@@ -136,7 +260,7 @@ fn the_identification_report_tabulates_each_parameter_with_its_error_bar() {
     assert!(html.contains("No validation of this parameter set yet."));
 
     // With its validation: the validation's plots follow.
-    let v = ValidationDoc::from_value(&report_to_json(&validation(&sim), true)).unwrap();
+    let v = read_validation(&report_to_json(&validation(&sim), true)).unwrap();
     let html = parameter_set_report(&file, Some(&v), &crate::report::ReportSource::default());
     assert_eq!(count(&html, "<svg"), 2 + 10);
 }

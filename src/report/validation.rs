@@ -3,151 +3,36 @@
 //! and per axis), error against distance to the base and to the calibration zone with the fitted
 //! lines, and the validation poses seen from the top, front and side, shaded by error.
 //!
-//! Its input is the validation report's wire form (`domain::validation::ValidationOut`, as
-//! `robocal validate --residuals` writes it and the service stores it): read here into
-//! [`ValidationDoc`], a view of the fields the report draws.
+//! Its input is the validation report's wire form ([`ValidationOut`], as `robocal validate
+//! --residuals` writes it and the service stores it), read back with [`read_validation`].
 
-use serde::Deserialize;
+use crate::domain::cell::PurposeSpec;
+use crate::domain::validation::{FitOut, ModelErrorsOut, ReferenceOut, ResidualOut, ValidationOut};
 
 use super::html::{esc, figure, fixed, mm, opt, p_value, table};
 use super::plot::{self, ScatterSeries};
 
-/// Position error figures, mm.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
-pub struct Figures {
-    pub mean_mm: f64,
-    pub median_mm: f64,
-    pub std_mm: f64,
-    pub rms_mm: f64,
-    pub p95_mm: f64,
-    pub max_mm: f64,
+/// Read a stored validation document (this version's or an earlier one's: the fields it lacks
+/// are absent, and the report leaves out what they would tell); the error names the field.
+pub fn read_validation(v: &serde_json::Value) -> Result<ValidationOut, String> {
+    serde_path_to_error::deserialize(v).map_err(|e| format!("validation report: {}: {}", e.path(), e.inner()))
 }
 
-#[derive(Clone, Debug, Deserialize, PartialEq)]
-pub struct Orientation {
-    pub n: usize,
-    pub mean_mrad: f64,
-    pub std_mrad: f64,
-    pub p95_mrad: f64,
-    pub max_mrad: f64,
-}
-
-#[derive(Clone, Debug, Deserialize, PartialEq)]
-pub struct Axis {
-    pub mean_mm: f64,
-    pub std_mm: f64,
-    pub min_mm: f64,
-    pub max_mm: f64,
-    pub shapiro_w: Option<f64>,
-    pub shapiro_p: Option<f64>,
-}
-
-#[derive(Clone, Debug, Deserialize, PartialEq)]
-pub struct PerAxis {
-    pub x: Axis,
-    pub y: Axis,
-    pub z: Axis,
-}
-
-#[derive(Clone, Debug, Deserialize, PartialEq)]
-pub struct Shapiro {
-    pub w: f64,
-    pub p: f64,
-}
-
-/// |error| = slope·distance + intercept.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
-pub struct Fit {
-    pub n: usize,
-    pub slope_mm_per_mm: f64,
-    pub slope_stderr_mm_per_mm: f64,
-    pub intercept_mm: f64,
-    pub r2: f64,
-    pub p: f64,
-}
-
-/// One model's figures.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
-pub struct Model {
-    pub n: usize,
-    #[serde(flatten)]
-    pub position: Figures,
-    pub orientation: Option<Orientation>,
-    pub per_axis: PerAxis,
-    pub shapiro: Option<Shapiro>,
-    pub vs_base_distance: Option<Fit>,
-    pub vs_zone_distance: Option<Fit>,
-}
-
-#[derive(Clone, Debug, Deserialize, PartialEq)]
-pub struct SessionModels {
-    pub session: String,
-    pub purpose: String,
-    #[serde(flatten)]
-    pub calibrated: Model,
-    pub nominal: Model,
-}
-
-#[derive(Clone, Debug, Deserialize, PartialEq)]
-pub struct Residual {
-    pub session: String,
-    pub index: usize,
-    pub error_mm: [f64; 3],
-    pub error_norm_mm: f64,
-    pub nominal_error_norm_mm: f64,
-    /// Absent in validations stored before positions were reported.
-    #[serde(default)]
-    pub position_mm: Option<[f64; 3]>,
-    pub distance_to_base_mm: f64,
-    pub distance_to_zone_mm: Option<f64>,
-}
-
-/// The validation report as the report draws it.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
-pub struct ValidationDoc {
-    pub sessions: Vec<String>,
-    pub purposes: Vec<String>,
-    /// "measured" or "truth".
-    pub reference: String,
-    #[serde(flatten)]
-    pub calibrated: Model,
-    pub nominal: Model,
-    #[serde(default)]
-    pub per_session: Vec<SessionModels>,
-    #[serde(default)]
-    pub residuals: Option<Vec<Residual>>,
-    #[serde(default)]
-    pub balls_mm: Option<[[f64; 3]; 3]>,
-    /// Held out or in-sample, in words (absent in reports stored before it was recorded).
-    #[serde(default)]
-    pub held_out_statement: Option<String>,
-    #[serde(default)]
-    pub held_out: Option<bool>,
-}
-
-impl ValidationDoc {
-    /// Read the wire form; the error names the field.
-    pub fn from_value(v: &serde_json::Value) -> Result<ValidationDoc, String> {
-        serde_path_to_error::deserialize(v).map_err(|e| format!("validation report: {}: {}", e.path(), e.inner()))
-    }
-
-    /// The number of plots [`validation_sections`] draws for this document.
-    pub fn plot_count(&self) -> usize {
-        let Some(res) = self.residuals.as_ref().filter(|r| !r.is_empty()) else { return 0 };
-        // Histogram, the CDFs of the calibrated and the nominal model (each on its own scale),
-        // Q–Q, per-axis grid; |e| against each distance, calibrated and nominal apart.
-        let mut n = 5;
-        n += 2 * usize::from(self.calibrated.vs_base_distance.is_some());
-        n += 2 * usize::from(
-            self.calibrated.vs_zone_distance.is_some() && res.iter().all(|r| r.distance_to_zone_mm.is_some()),
-        );
-        n += usize::from(res.iter().all(|r| r.position_mm.is_some()));
-        n
-    }
+/// The number of plots [`validation_sections`] draws for this document.
+pub fn plot_count(v: &ValidationOut) -> usize {
+    let Some(res) = v.residuals.as_ref().filter(|r| !r.is_empty()) else { return 0 };
+    // Histogram, the CDFs of the calibrated and the nominal model (each on its own scale),
+    // Q–Q, per-axis grid; |e| against each distance, calibrated and nominal apart.
+    let mut n = 5;
+    n += 2 * usize::from(v.calibrated.vs_base_distance.is_some());
+    n +=
+        2 * usize::from(v.calibrated.vs_zone_distance.is_some() && res.iter().all(|r| r.distance_to_zone_mm.is_some()));
+    n += usize::from(res.iter().all(|r| r.position_mm.is_some()));
+    n
 }
 
 /// The before/after rows (Table 5.4): statistic, nominal, calibrated, change.
-pub fn before_after_rows(v: &ValidationDoc) -> Vec<Vec<String>> {
+pub fn before_after_rows(v: &ValidationOut) -> Vec<Vec<String>> {
     let (c, n) = (&v.calibrated.position, &v.nominal.position);
     let row = |name: &str, nom: f64, cal: f64| {
         let change = if nom != 0.0 { format!("{} %", fixed(100.0 * (cal - nom) / nom, 1)) } else { "—".into() };
@@ -163,7 +48,7 @@ pub fn before_after_rows(v: &ValidationDoc) -> Vec<Vec<String>> {
     ]
 }
 
-fn axis_rows(m: &Model, model: &str) -> Vec<Vec<String>> {
+fn axis_rows(m: &ModelErrorsOut, model: &str) -> Vec<Vec<String>> {
     [("x", &m.per_axis.x), ("y", &m.per_axis.y), ("z", &m.per_axis.z)]
         .into_iter()
         .map(|(k, a)| {
@@ -181,7 +66,7 @@ fn axis_rows(m: &Model, model: &str) -> Vec<Vec<String>> {
         .collect()
 }
 
-fn fit_cell(f: &Option<Fit>) -> [String; 4] {
+fn fit_cell(f: &Option<FitOut>) -> [String; 4] {
     match f {
         Some(f) => [
             format!("{} ± {}", fixed(f.slope_mm_per_mm * 1e3, 3), fixed(f.slope_stderr_mm_per_mm * 1e3, 3)),
@@ -200,22 +85,25 @@ fn capitalised(s: &str) -> String {
 
 /// The validation's sections (tables and plots), for a page of its own or inside the
 /// identification's report.
-pub fn validation_sections(v: &ValidationDoc) -> String {
+pub fn validation_sections(v: &ValidationOut) -> String {
     let mut s = String::new();
     let sessions: Vec<String> =
-        v.sessions.iter().zip(&v.purposes).map(|(s, p)| format!("{} ({})", esc(s), esc(p))).collect();
+        v.sessions.iter().zip(&v.purposes).map(|(s, p)| format!("{} ({})", esc(s), esc(p.as_str()))).collect();
     s.push_str(&format!(
         "<p class=\"meta\">Validated on {}; {} measurements; errors = {} − model, in the artefact frame {{W}}.</p>",
         sessions.join(", "),
         v.calibrated.n,
-        if v.reference == "truth" { "true position (virtual cell)" } else { "measured position" }
+        match v.reference {
+            ReferenceOut::Truth => "true position (virtual cell)",
+            ReferenceOut::Measured => "measured position",
+        }
     ));
     match (v.held_out, &v.held_out_statement) {
         (Some(true), Some(why)) => s.push_str(&format!("<p class=\"meta\">{}.</p>", esc(&capitalised(why)))),
         (Some(false), Some(why)) => s.push_str(&format!("<p class=\"warn\">{}.</p>", esc(&capitalised(why)))),
         _ => {}
     }
-    if v.purposes.iter().any(|p| p == "identification") {
+    if v.purposes.contains(&PurposeSpec::Identification) {
         s.push_str(
             "<p class=\"warn\">Some sessions were used for the identification: their figures score the fit, \
              not the model's validity.</p>",
@@ -259,8 +147,9 @@ pub fn validation_sections(v: &ValidationDoc) -> String {
         &rows,
         &[false, false, true, true, true, true, true, true],
     ));
-    let sw =
-        |m: &Model| m.shapiro.as_ref().map_or("—".into(), |t| format!("W = {}, p = {}", fixed(t.w, 4), p_value(t.p)));
+    let sw = |m: &ModelErrorsOut| {
+        m.shapiro.as_ref().map_or("—".into(), |t| format!("W = {}, p = {}", fixed(t.w, 4), p_value(t.p)))
+    };
     s.push_str(&format!("<p>Shapiro–Wilk on |e|: calibrated {}; nominal {}.</p>", sw(&v.calibrated), sw(&v.nominal)));
     if v.per_session.len() > 1 {
         let rows: Vec<Vec<String>> = v
@@ -269,7 +158,7 @@ pub fn validation_sections(v: &ValidationDoc) -> String {
             .map(|p| {
                 vec![
                     esc(&p.session),
-                    esc(&p.purpose),
+                    esc(p.purpose.as_str()),
                     p.calibrated.n.to_string(),
                     mm(p.nominal.position.mean_mm),
                     mm(p.calibrated.position.mean_mm),
@@ -321,7 +210,7 @@ pub fn validation_sections(v: &ValidationDoc) -> String {
 }
 
 /// The distributions of the position errors: histogram, CDFs, Q–Q, per axis.
-fn distribution_section(s: &mut String, v: &ValidationDoc, res: &[Residual], cal: &[f64], nom: &[f64]) {
+fn distribution_section(s: &mut String, v: &ValidationOut, res: &[ResidualOut], cal: &[f64], nom: &[f64]) {
     s.push_str("<h2>Distribution of the position errors</h2>");
     // Each model on its own scale: the nominal model's errors are a hundred times the calibrated
     // one's, and on one axis the calibrated curve would be a flat line at zero.
@@ -347,13 +236,13 @@ fn distribution_section(s: &mut String, v: &ValidationDoc, res: &[Residual], cal
 }
 
 /// |e| of each model against the distance to the base and to the calibration zone.
-fn distance_section(s: &mut String, v: &ValidationDoc, res: &[Residual], cal: &[f64], nom: &[f64]) {
+fn distance_section(s: &mut String, v: &ValidationOut, res: &[ResidualOut], cal: &[f64], nom: &[f64]) {
     s.push_str("<h2>Error against distance</h2>");
-    let line = |f: &Option<Fit>| f.as_ref().map(|f| (f.slope_mm_per_mm, f.intercept_mm));
-    let r2 = |f: &Option<Fit>| f.as_ref().map_or("—".into(), |f| fixed(f.r2, 3));
+    let line = |f: &Option<FitOut>| f.as_ref().map(|f| (f.slope_mm_per_mm, f.intercept_mm));
+    let r2 = |f: &Option<FitOut>| f.as_ref().map_or("—".into(), |f| fixed(f.r2, 3));
     // One panel per model, each on its own |e| scale (the nominal errors would flatten the
     // calibrated ones against zero).
-    let mut against = |what: &str, x_desc: &str, d: &[f64], fits: (&Option<Fit>, &Option<Fit>), fig: &str| {
+    let mut against = |what: &str, x_desc: &str, d: &[f64], fits: (&Option<FitOut>, &Option<FitOut>), fig: &str| {
         for (model, errors, fit) in [("calibrated", &cal, fits.0), ("nominal", &nom, fits.1)] {
             let points: Vec<(f64, f64)> = d.iter().zip(errors.iter()).map(|(x, e)| (*x, *e)).collect();
             let svg = plot::scatter_fit_svg(
@@ -388,7 +277,7 @@ fn distance_section(s: &mut String, v: &ValidationDoc, res: &[Residual], cal: &[
 }
 
 /// Where the validation poses are, shaded by their calibrated |e|.
-fn positions_section(s: &mut String, v: &ValidationDoc, res: &[Residual], cal: &[f64]) {
+fn positions_section(s: &mut String, v: &ValidationOut, res: &[ResidualOut], cal: &[f64]) {
     let positions: Option<Vec<[f64; 3]>> = res.iter().map(|r| r.position_mm).collect();
     if let Some(p) = positions {
         s.push_str("<h2>Where the validation poses are</h2>");
@@ -406,6 +295,6 @@ fn positions_section(s: &mut String, v: &ValidationDoc, res: &[Residual], cal: &
 }
 
 /// The whole validation report page.
-pub fn validation_report(v: &ValidationDoc) -> String {
+pub fn validation_report(v: &ValidationOut) -> String {
     super::html::page("Validation report", &validation_sections(v))
 }

@@ -177,6 +177,35 @@ async fn identification_validation_and_diagnosis_reports() {
     assert_eq!(svgs(&d.text), 1 + usize::from(profiles > 0));
     assert!(d.text.contains("Decomposition of the error") && d.text.contains("How far the error shrinks"));
 
+    // A validation stored by a version before held out was recorded (8de8956, 2026-11-27): no
+    // `held_out`, `fit`, `in_sample_sessions`, `held_out_statement`, `uncertainty`, nor each
+    // session's `fitted` and `fitted_measurements`. Its page is today's without the statement.
+    let mut report = app.get(&format!("/v1/validations/{vid}")).await.body["report"].clone();
+    let statement = report["held_out_statement"].as_str().unwrap().to_string();
+    for k in ["held_out", "fit", "in_sample_sessions", "held_out_statement", "uncertainty"] {
+        report.as_object_mut().unwrap().remove(k);
+    }
+    for s in report["per_session"].as_array_mut().unwrap() {
+        s.as_object_mut().unwrap().retain(|k, _| k != "fitted" && k != "fitted_measurements");
+    }
+    let set_page = get_html(&app, &path).await.text;
+    let old = robocal::db::records::ValidationRow {
+        id: "v-stored-2026-11-25".into(),
+        parameter_set_id: set_id.clone(),
+        sessions_json: json!(["tracker-n1", "tracker-n2", "tracker-n3"]).to_string(),
+        report_json: report.to_string(),
+        job_id: None,
+        created_at: "2026-11-25T12:00:00.000Z".into(),
+    };
+    robocal::db::records::insert_validation(&app.state.pool, &old).await.unwrap();
+    let o = get_html(&app, "/v1/validations/v-stored-2026-11-25/report").await;
+    assert_eq!(svgs(&o.text), 10);
+    let said = v.text.find(&robocal::report::html::esc(&statement[1..])).expect("today's page states it");
+    let (from, to) = (v.text[..said].rfind("<p class=").unwrap(), said + v.text[said..].find("</p>").unwrap() + 4);
+    assert_eq!(o.text, format!("{}{}", &v.text[..from], &v.text[to..]), "today's page but for the statement");
+    // The set's report still shows its latest validation, today's.
+    assert_eq!(get_html(&app, &path).await.text, set_page);
+
     // Unknown ids.
     for p in ["/v1/validations/none/report", "/v1/parameter-sets/none/report", "/v1/diagnoses/none/report"] {
         assert_problem(&app.get(p).await, 404, None);

@@ -156,6 +156,8 @@ pub fn identify_cell(
 /// The figures of a parameter set on a cell's sessions: what `robocal validate --json` prints.
 #[pyclass(module = "robocal", frozen)]
 pub struct Validation {
+    /// `ValidationOut::from_report` with the residuals: every field a stored document may lack
+    /// (`held_out`, `held_out_statement`, each residual's `position_mm`) is recorded.
     out: ValidationOut,
     /// The CLI's document (rounded as it prints it).
     json: serde_json::Value,
@@ -167,13 +169,13 @@ impl Validation {
     /// validation session.
     #[getter]
     fn held_out(&self) -> bool {
-        self.out.held_out
+        self.out.held_out.expect("from_report records held_out")
     }
 
     /// The same in words.
     #[getter]
     fn held_out_statement(&self) -> &str {
-        &self.out.held_out_statement
+        self.out.held_out_statement.as_deref().expect("from_report records held_out_statement")
     }
 
     #[getter]
@@ -235,7 +237,7 @@ impl Validation {
     /// The reference positions, {W}, mm: (N, 3).
     #[getter]
     fn position_mm<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        self.column(py, |r| r.position_mm)
+        self.column(py, |r| r.position_mm.expect("from_report records every position"))
     }
 
     /// `(session, index)` of each row of the residual arrays (0-based index into the session).
@@ -260,7 +262,7 @@ impl Validation {
             "Validation(n={}, mean_mm={}, held_out={})",
             self.out.calibrated.n,
             self.mean_mm(),
-            if self.out.held_out { "True" } else { "False" }
+            if self.held_out() { "True" } else { "False" }
         )
     }
 }

@@ -4,56 +4,92 @@
 //! nominal model under `nominal`, the same again for each session under `per_session` (its name
 //! and purpose, its calibrated figures flat, its nominal ones under `nominal`), and optionally
 //! one row per measurement.
+//!
+//! The service stores the document, and the HTML report reads it back into these types, so they
+//! read what earlier versions stored too. Those lack the fields added since, each noted where it
+//! is declared: a field a document may lack is an `Option` (or a `Vec` never empty when written),
+//! absent meaning "not recorded", never a made-up value. This version writes every one of them
+//! (an absent one is skipped when written, so an old document reads and writes back as stored).
+//! What was added when:
+//! - `per_session`: 2026-11-24 (1c46f89);
+//! - `balls_mm` and each residual's `position_mm`: 2026-11-24, with the HTML report (ad0899c);
+//! - `validated_envelope`: 2026-11-24 (de0f43f), only for held-out validations since 8de8956;
+//! - `held_out`, `fit`, `in_sample_sessions`, `held_out_statement`, `uncertainty`, and each
+//!   session's `fitted` and `fitted_measurements`: 2026-11-27 (8de8956).
 
 use serde::{Deserialize, Serialize};
 
+use super::cell::PurposeSpec;
 use crate::units::{MM, MRAD};
 use crate::validate::normality::ShapiroWilk;
 use crate::validate::regression::LinearFit;
 use crate::validate::report::{AxisStats, FitData, ModelErrors, Residual, SessionErrors, ValidationReport};
 use crate::validate::stats::ErrorStats;
 
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ValidationOut {
     pub sessions: Vec<String>,
-    /// "identification" or "validation", per session.
-    pub purposes: Vec<&'static str>,
+    /// `identification` or `validation`, per session.
+    pub purposes: Vec<PurposeSpec>,
     /// Whether these figures are held out: none of the validated sessions was used to fit the set,
     /// and at least one is a validation session. Only a held-out validation vouches for the set
-    /// (the service's compensation gate counts no other).
-    pub held_out: bool,
-    /// What the set was fitted on, as its document records it.
-    pub fit: FitRecordOut,
-    /// The validated sessions the set was fitted on: their figures are fit residuals.
-    pub in_sample_sessions: Vec<String>,
-    /// The same in words.
-    pub held_out_statement: String,
-    /// "measured" or "truth".
-    pub reference: &'static str,
+    /// (the service's compensation gate counts no other). `None`: not recorded (a document stored
+    /// before 2026-11-27), which says nothing either way.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out: Option<bool>,
+    /// What the set was fitted on, as its document records it. `None`: not recorded (a document
+    /// stored before 2026-11-27).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fit: Option<FitRecordOut>,
+    /// The validated sessions the set was fitted on: their figures are fit residuals. `None`: not
+    /// recorded (a document stored before 2026-11-27), not "none of them".
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub in_sample_sessions: Option<Vec<String>>,
+    /// The same in words. `None`: not recorded (a document stored before 2026-11-27).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out_statement: Option<String>,
+    /// The positions the errors are taken against.
+    pub reference: ReferenceOut,
     #[serde(flatten)]
     pub calibrated: ModelErrorsOut,
     pub nominal: ModelErrorsOut,
     /// Each session's figures (several reflectors, or sessions of different purposes, apart).
+    /// Empty: not recorded (a document stored before 2026-11-24); never empty when written, as a
+    /// validation has at least one measurement.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub per_session: Vec<SessionErrorsOut>,
     /// The joint ranges and the box of {W} the held-out sessions cover (validation sessions the
     /// set was not fitted on): where this validation shows the model to hold (compensation
-    /// accepts targets there). Absent when the validation is not held out.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// accepts targets there). Absent when the validation is not held out (a document stored
+    /// from 2026-11-24 to 2026-11-27 has it whether held out or not; one stored before, never).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub validated_envelope: Option<super::validity::EnvelopeFile>,
     /// What this held-out validation measured about the error the set's parameter covariance
     /// does not predict, and how it grows with distance: compensation's uncertainty per target
     /// reads it. Absent when the validation is not held out.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncertainty: Option<super::validity::HeldOutUncertainty>,
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// One row per measurement, when asked for.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub residuals: Option<Vec<ResidualOut>>,
-    /// The artefact's ball centres in {W} (the calibration zone), when the cell has one.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// The artefact's ball centres in {W} (the calibration zone), when the cell has one (and the
+    /// document was written after 2026-11-24: an earlier one never records them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub balls_mm: Option<[[f64; 3]; 3]>,
 }
 
+/// What a validation's errors are taken against, as the document spells it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ReferenceOut {
+    /// The cell's readings (ball centres, tracker readings).
+    Measured,
+    /// The simulator's true TCP positions (a virtual cell).
+    Truth,
+}
+
 /// What a parameter set was fitted on.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FitRecordOut {
     /// Whether the set records it (a table typed in or imported from elsewhere does not).
     pub recorded: bool,
@@ -61,15 +97,19 @@ pub struct FitRecordOut {
     pub sessions: Vec<String>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SessionErrorsOut {
     pub session: String,
-    /// "identification" or "validation".
-    pub purpose: &'static str,
-    /// The set was fitted on (some of) this session's measurements.
-    pub fitted: bool,
-    /// How many of this session's validated measurements the fit used.
-    pub fitted_measurements: usize,
+    /// `identification` or `validation`.
+    pub purpose: PurposeSpec,
+    /// The set was fitted on (some of) this session's measurements. `None`: not recorded (a
+    /// document stored before 2026-11-27).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fitted: Option<bool>,
+    /// How many of this session's validated measurements the fit used. `None`: not recorded (a
+    /// document stored before 2026-11-27).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fitted_measurements: Option<usize>,
     #[serde(flatten)]
     pub calibrated: ModelErrorsOut,
     pub nominal: ModelErrorsOut,
@@ -79,16 +119,16 @@ impl SessionErrorsOut {
     fn from_errors(s: &SessionErrors, r: &ValidationReport) -> Self {
         Self {
             session: s.session.clone(),
-            purpose: s.purpose.as_str(),
-            fitted: r.fit.as_ref().is_some_and(|f| f.has_session(&s.session)),
-            fitted_measurements: r.fitted_measurements(&s.session),
+            purpose: PurposeSpec::from_purpose(s.purpose),
+            fitted: Some(r.fit.as_ref().is_some_and(|f| f.has_session(&s.session))),
+            fitted_measurements: Some(r.fitted_measurements(&s.session)),
             calibrated: ModelErrorsOut::from_errors(&s.calibrated),
             nominal: ModelErrorsOut::from_errors(&s.nominal),
         }
     }
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ModelErrorsOut {
     pub n: usize,
     #[serde(flatten)]
@@ -125,7 +165,7 @@ impl ErrorFigures {
     }
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct OrientationOut {
     pub n: usize,
     pub mean_mrad: f64,
@@ -136,14 +176,14 @@ pub struct OrientationOut {
     pub max_mrad: f64,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PerAxisOut {
     pub x: AxisOut,
     pub y: AxisOut,
     pub z: AxisOut,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct AxisOut {
     pub mean_mm: f64,
     pub std_mm: f64,
@@ -153,14 +193,14 @@ pub struct AxisOut {
     pub shapiro_p: Option<f64>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ShapiroOut {
     pub w: f64,
     pub p: f64,
 }
 
 /// |error| = slope·distance + intercept.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FitOut {
     pub n: usize,
     pub slope_mm_per_mm: f64,
@@ -172,7 +212,7 @@ pub struct FitOut {
     pub p: f64,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ResidualOut {
     pub session: String,
     pub index: usize,
@@ -186,8 +226,10 @@ pub struct ResidualOut {
     pub orientation_error_mrad: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub nominal_orientation_error_mrad: Option<f64>,
-    /// The reference position (measured or true), {W}.
-    pub position_mm: [f64; 3],
+    /// The reference position (measured or true), {W}. `None`: not recorded (a document stored
+    /// before 2026-11-24).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position_mm: Option<[f64; 3]>,
     pub distance_to_base_mm: f64,
     pub distance_to_zone_mm: Option<f64>,
 }
@@ -198,12 +240,12 @@ impl ValidationOut {
         let fit = r.fit.clone().unwrap_or_default();
         Self {
             sessions: r.sessions.clone(),
-            purposes: r.purposes.iter().map(|p| p.as_str()).collect(),
-            held_out,
-            fit: FitRecordOut { recorded: fit.recorded, sessions: fit.sessions.clone() },
-            in_sample_sessions: r.in_sample_sessions(),
-            held_out_statement: held_out_statement(r),
-            reference: if r.against_truth { "truth" } else { "measured" },
+            purposes: r.purposes.iter().map(|p| PurposeSpec::from_purpose(*p)).collect(),
+            held_out: Some(held_out),
+            fit: Some(FitRecordOut { recorded: fit.recorded, sessions: fit.sessions.clone() }),
+            in_sample_sessions: Some(r.in_sample_sessions()),
+            held_out_statement: Some(held_out_statement(r)),
+            reference: if r.against_truth { ReferenceOut::Truth } else { ReferenceOut::Measured },
             calibrated: ModelErrorsOut::from_errors(&r.calibrated),
             nominal: ModelErrorsOut::from_errors(&r.nominal),
             per_session: r.per_session.iter().map(|s| SessionErrorsOut::from_errors(s, r)).collect(),
@@ -299,7 +341,7 @@ impl ResidualOut {
             nominal_error_norm_mm: r.nominal_error.norm() / MM,
             orientation_error_mrad: r.orientation_error.map(|a| a / MRAD),
             nominal_orientation_error_mrad: r.nominal_orientation_error.map(|a| a / MRAD),
-            position_mm: mm(&r.position),
+            position_mm: Some(mm(&r.position)),
             distance_to_base_mm: r.distance_to_base / MM,
             distance_to_zone_mm: r.distance_to_zone.map(|d| d / MM),
         }
