@@ -29,8 +29,12 @@ fn covariance(set: &ParameterSet) -> Option<PredictionCovariance> {
         doc.std[set.layout.find(n).unwrap()] = Some(1e-5);
     }
     let m = names.len();
-    let corr: Vec<Vec<f64>> = (0..m).map(|i| (0..m).map(|j| f64::from(u8::from(i == j))).collect()).collect();
-    doc.quality = Some(serde_json::json!({"free": names, "correlation": corr}));
+    let corr = (0..m).map(|i| (0..m).map(|j| Some(f64::from(u8::from(i == j)))).collect()).collect();
+    doc.quality = Some(robocal::domain::Quality {
+        free: Some(names.iter().map(|n| n.to_string()).collect()),
+        correlation: Some(corr),
+        ..Default::default()
+    });
     PredictionCovariance::of_doc(&doc).unwrap()
 }
 

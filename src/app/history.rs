@@ -109,11 +109,12 @@ fn fit_sessions(doc_json: &str, listed: &[String]) -> Result<Vec<String>, serde_
     }
     #[derive(serde::Deserialize)]
     struct Quality {
+        /// `null` in a report written back without them.
         #[serde(default)]
-        sessions: Vec<String>,
+        sessions: Option<Vec<String>>,
     }
     let d: Doc = serde_json::from_str(doc_json)?;
-    let mut out = d.quality.map(|q| q.sessions).unwrap_or_default();
+    let mut out = d.quality.and_then(|q| q.sessions).unwrap_or_default();
     for s in listed {
         if !out.contains(s) {
             out.push(s.clone());

@@ -142,13 +142,7 @@ pub(super) fn identify(a: IdentifyArgs) -> Result<String, CliError> {
     write(&a.out, &doc.to_json_pretty())?;
     let mut reported = String::new();
     if let Some(path) = &a.report {
-        let sessions = doc
-            .quality
-            .as_ref()
-            .and_then(|q| q.get("sessions"))
-            .and_then(|v| v.as_array())
-            .map(|a| a.iter().filter_map(|s| s.as_str()).collect::<Vec<_>>().join(", "))
-            .unwrap_or_default();
+        let sessions = doc.quality.as_ref().and_then(|q| q.sessions.as_ref()).map(|s| s.join(", ")).unwrap_or_default();
         let source = crate::report::ReportSource {
             set: format!("Parameter-set file {}", a.out.display()),
             made: Some(humantime::format_rfc3339_millis(std::time::SystemTime::now()).to_string()),

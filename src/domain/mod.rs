@@ -29,7 +29,7 @@ pub mod identification {
     pub use robocal_core::formats::identification::*;
     pub use robocal_core::formats::identify_options::*;
 }
-pub use robocal_core::formats::{ParamEntry, ParameterSetDoc, ParameterSetFile};
+pub use robocal_core::formats::{ParamEntry, ParameterSetDoc, ParameterSetFile, Quality, quality};
 
 /// The boundary's units, defined once in [`crate::units`]; re-exported here because every file
 /// format converts with them.

@@ -92,9 +92,9 @@ struct QualityOnly {
 
 #[derive(Deserialize)]
 struct QualityFields {
-    /// The sessions fitted on.
+    /// The sessions fitted on (`null` in a report written back without them).
     #[serde(default)]
-    sessions: Vec<String>,
+    sessions: Option<Vec<String>>,
     #[serde(default)]
     n_parameters: Value,
     #[serde(default)]
@@ -113,7 +113,7 @@ struct QualityFields {
 /// `quality.sessions` joined with the store's list, as `domain::validation::fit_data` joins them).
 fn quality_summary(row: &records::ParameterSetRow) -> Result<(Value, Vec<String>), ApiError> {
     let q: QualityOnly = serde_json::from_str(&row.doc_json).map_err(|e| ApiError::Internal(e.to_string()))?;
-    let mut fit: Vec<String> = q.quality.as_ref().map(|q| q.sessions.clone()).unwrap_or_default();
+    let mut fit: Vec<String> = q.quality.as_ref().and_then(|q| q.sessions.clone()).unwrap_or_default();
     let listed: Vec<String> =
         serde_json::from_str(&row.sessions_json).map_err(|e| ApiError::Internal(e.to_string()))?;
     for s in listed {

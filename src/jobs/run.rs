@@ -360,25 +360,15 @@ fn stored_identify_error(e: IdentifyError, indices: &StoredIndices) -> IdentifyE
 /// `downweighted`) by their stored index.
 fn stored_quality(doc: &mut ParameterSetDoc, indices: &StoredIndices) {
     let Some(q) = doc.quality.as_mut() else { return };
-    for key in ["worst", "downweighted"] {
-        let Some(items) = q.get_mut(key).and_then(Value::as_array_mut) else { continue };
-        for item in items {
-            let session = item["session"].as_str().unwrap_or("").to_string();
-            if let Some(i) = item["index"].as_u64() {
-                item["index"] = json!(indices.stored(&session, i as usize));
-            }
-        }
+    for w in q.worst.iter_mut().flatten() {
+        w.index = indices.stored(&w.session, w.index);
     }
-    if let Some(items) = q.get_mut("fit_measurements").and_then(Value::as_array_mut) {
-        for item in items {
-            let session = item["session"].as_str().unwrap_or("").to_string();
-            if let Some(ix) = item.get_mut("indices").and_then(Value::as_array_mut) {
-                for i in ix.iter_mut() {
-                    if let Some(k) = i.as_u64() {
-                        *i = json!(indices.stored(&session, k as usize));
-                    }
-                }
-            }
+    for d in q.downweighted.iter_mut().flatten() {
+        d.index = indices.stored(&d.session, d.index);
+    }
+    for f in q.fit_measurements.iter_mut().flatten() {
+        for i in f.indices.iter_mut() {
+            *i = indices.stored(&f.session, *i);
         }
     }
 }

@@ -9,6 +9,7 @@ use serde_json::Value;
 use super::html::{esc, figure, fixed, mm, page, sig, table};
 use super::plot;
 use super::validation::validation_sections;
+use crate::domain::Quality;
 use crate::domain::param_set::{ParamEntry, ParameterSetFile};
 use crate::domain::validation::ValidationOut;
 
@@ -47,30 +48,23 @@ pub fn parameter_row(p: &ParamEntry) -> Vec<String> {
     ]
 }
 
-fn q<'a>(quality: &'a Value, path: &[&str]) -> Option<&'a Value> {
-    path.iter().try_fold(quality, |v, k| v.get(k))
-}
-
-fn qf(quality: &Value, path: &[&str]) -> Option<f64> {
-    q(quality, path).and_then(Value::as_f64)
-}
-
 /// The quality rows: what, value, comment.
-pub fn quality_rows(quality: &Value) -> Vec<Vec<String>> {
+pub fn quality_rows(quality: &Quality) -> Vec<Vec<String>> {
     let mut rows = Vec::new();
     let mut push = |what: &str, v: String, note: &str| rows.push(vec![esc(what), v, esc(note)]);
-    if let Some(s) = q(quality, &["sessions"]).and_then(Value::as_array) {
-        let names: Vec<&str> = s.iter().filter_map(Value::as_str).collect();
-        push("sessions", esc(&names.join(", ")), "");
+    if let Some(s) = &quality.sessions {
+        push("sessions", esc(&s.join(", ")), "");
     }
-    for (key, what) in
-        [("n_measurements", "measurements"), ("n_parameters", "parameters identified"), ("iterations", "iterations")]
-    {
-        if let Some(v) = q(quality, &[key]).and_then(Value::as_u64) {
+    for (v, what) in [
+        (quality.n_measurements, "measurements"),
+        (quality.n_parameters, "parameters identified"),
+        (quality.iterations, "iterations"),
+    ] {
+        if let Some(v) = v {
             push(what, v.to_string(), "");
         }
     }
-    if let Some(k) = qf(quality, &["kappa_si"]) {
+    if let Some(k) = quality.kappa_si {
         let note = if k <= 1000.0 {
             "≤ 1000: the thesis's criterion is met"
         } else {
@@ -78,25 +72,25 @@ pub fn quality_rows(quality: &Value) -> Vec<Vec<String>> {
         };
         push("κ(J), SI units (m, rad)", sig(k), note);
     }
-    if let Some(k) = qf(quality, &["kappa_scaled"]) {
+    if let Some(k) = quality.kappa_scaled {
         push("κ(J), columns scaled", sig(k), "what the kappa limit refuses on");
     }
-    if let Some(o) = qf(quality, &["observability_si", "O1"]) {
+    if let Some(o) = quality.observability_si.as_ref().and_then(|o| o.o1) {
         push("O1 (observability, SI)", sig(o), "larger is better (Borm & Menq)");
     }
-    if let Some(v) = qf(quality, &["rms_residual_mm"]) {
+    if let Some(v) = quality.rms_residual_mm {
         push("residual RMS", format!("{} mm", mm(v)), "");
     }
-    if let Some(v) = qf(quality, &["expected_rms_mm"]) {
+    if let Some(v) = quality.expected_rms_mm {
         push("RMS the instrument predicts", format!("{} mm", mm(v)), "");
     }
-    if let Some(v) = qf(quality, &["residual_ratio"]) {
+    if let Some(v) = quality.residual_ratio {
         push("residual / predicted", fixed(v, 2), "near 1: the residual is the instrument's noise");
     }
-    if let Some(v) = qf(quality, &["sigma_mm"]) {
+    if let Some(v) = quality.sigma_mm {
         push("σ̂ of the residuals", format!("{} mm", mm(v)), "");
     }
-    if let Some(v) = qf(quality, &["sigma_ratio"]) {
+    if let Some(v) = quality.sigma_ratio {
         push("σ̂ / instrument σ (weighted)", fixed(v, 3), "");
     }
     rows

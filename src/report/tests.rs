@@ -239,7 +239,10 @@ fn the_identification_report_tabulates_each_parameter_with_its_error_bar() {
     let beta = doc.set.layout.index_of(Param::Beta(2)).unwrap();
     doc.std[beta] = Some(1e-5);
     doc.quality = Some(
-        json!({"kappa_si": 812.5, "kappa_scaled": 40.2, "observability_si": {"O1": 0.0123}, "n_measurements": 30}),
+        serde_json::from_value(
+            json!({"kappa_si": 812.5, "kappa_scaled": 40.2, "observability_si": {"O1": 0.0123}, "n_measurements": 30}),
+        )
+        .unwrap(),
     );
     let file = doc.to_file();
     let html = parameter_set_report(&file, None, &crate::report::ReportSource::default());

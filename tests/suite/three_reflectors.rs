@@ -234,17 +234,9 @@ fn robocal(args: &[&str]) -> String {
 fn held_out(doc: &ParameterSetDoc, k: usize, poses: &[(Vec<f64>, Vector3<f64>)]) -> f64 {
     let quality = doc.quality.as_ref().unwrap();
     let name = format!("reflector-{}", k + 1);
-    let tool = quality["tools"].as_array().unwrap().iter().find(|t| t["sessions"][0] == name.as_str()).unwrap();
-    let mm = |v: &serde_json::Value| v.as_f64().unwrap();
-    let (p, r) = (&tool["tcp_mm"], &tool["tcp_rotation_deg"]);
-    let tcp = [
-        mm(&p[0]) * MM,
-        mm(&p[1]) * MM,
-        mm(&p[2]) * MM,
-        mm(&r[0]).to_radians(),
-        mm(&r[1]).to_radians(),
-        mm(&r[2]).to_radians(),
-    ];
+    let tool = quality.tools.iter().flatten().find(|t| t.sessions[0] == name).unwrap();
+    let (p, r) = (tool.tcp_mm, tool.tcp_rotation_deg);
+    let tcp = [p[0] * MM, p[1] * MM, p[2] * MM, r[0].to_radians(), r[1].to_radians(), r[2].to_radians()];
     let set = &doc.set;
     let chain = set.chain().with_base_tool(set.pose_of(Param::Base), tcp);
     let gravity = set.gravity_for(&Tool::flange());
@@ -279,7 +271,7 @@ fn a_three_reflector_file_calibrates_in_one_command() {
     let said = robocal(&["identify", c, "--out", all.to_str().unwrap()]);
     assert!(said.contains("times the"), "{said}");
     let all = ParameterSetDoc::from_json(&std::fs::read_to_string(&all).unwrap()).unwrap();
-    assert_eq!(all.quality.as_ref().unwrap()["tools"].as_array().unwrap().len(), 3);
+    assert_eq!(all.quality.as_ref().unwrap().tools.as_ref().unwrap().len(), 3);
 
     let mut best_single = f64::INFINITY;
     let mut together = Vec::new();

@@ -738,14 +738,12 @@ pub fn accepted_doc(d: &Diagnosis) -> Option<ParameterSetDoc> {
     let mut sessions = d.identification.clone();
     sessions.extend(d.validation.iter().cloned());
     let mut doc = super::identification::identification_doc(id, &sessions, None);
-    if let Some(q) = doc.quality.as_mut().and_then(|q| q.as_object_mut()) {
-        q.insert(
-            "diagnosis".into(),
-            serde_json::json!({
-                "accepted": d.verdict.effects.iter().map(|e| e.candidate.label()).collect::<Vec<_>>(),
-                "model": model_spec(d),
-            }),
-        );
+    if let Some(q) = doc.quality.as_mut() {
+        q.diagnosis = Some(super::quality::AcceptedDiagnosis {
+            accepted: Some(d.verdict.effects.iter().map(|e| e.candidate.label()).collect()),
+            model: Some(model_spec(d)),
+            other: Default::default(),
+        });
     }
     Some(doc)
 }

@@ -4,10 +4,11 @@
 //! nominal, std, unit and status, plus the quality report (in mm and degrees where it has lengths
 //! and angles).
 
-use serde_json::{Value, json};
+use serde_json::Value;
 
 use super::identify_options::DetmaxSelection;
 use super::param_set::ParameterSetDoc;
+use super::quality::{Downweighted, FitMeasurements, Observability, Quality, ToolQuality, WorstMeasurement};
 use crate::cell::Cell;
 use crate::identify::{Identification, IdentifyError, IdentifyOptions};
 use crate::units::{DEG, MM};
@@ -37,26 +38,24 @@ pub fn run_identification(
     Ok((id, doc))
 }
 
-/// The measurements an identification fitted, per session in cell order: `[{"session": name,
-/// "indices": [i, …]}]` (0-based, ascending) — what a validation checks to tell a held-out figure
-/// from an in-sample one.
-pub fn fit_measurements(id: &Identification) -> Value {
+/// The measurements an identification fitted, per session in cell order (0-based indices,
+/// ascending) — what a validation checks to tell a held-out figure from an in-sample one.
+pub fn fit_measurements(id: &Identification) -> Vec<FitMeasurements> {
     let names = &id.problem.session_names;
     let mut per: Vec<Vec<usize>> = vec![Vec::new(); names.len()];
     for o in &id.problem.obs {
         per[o.session].push(o.index);
     }
-    let out: Vec<Value> = names
+    names
         .iter()
         .zip(per)
         .filter(|(_, ix)| !ix.is_empty())
         .map(|(name, mut ix)| {
             ix.sort_unstable();
             ix.dedup();
-            json!({"session": name, "indices": ix})
+            FitMeasurements { session: name.clone(), indices: ix, other: Default::default() }
         })
-        .collect();
-    Value::Array(out)
+        .collect()
 }
 
 /// The parameter-set document of an identification; `selection` describes how the measurements
@@ -67,59 +66,88 @@ pub fn identification_doc(id: &Identification, sessions: &[String], selection: O
     doc.status = id.status.iter().map(|s| Some(s.to_string())).collect();
     let q = &id.quality;
     let m = q.std.len();
-    let tools: Vec<Value> = id
+    let tools = id
         .tools
         .iter()
         .map(|t| {
             let c = &t.tool.tcp;
-            json!({
-                "sessions": t.sessions,
-                "tcp_mm": [c[0] / MM, c[1] / MM, c[2] / MM],
-                "tcp_rotation_deg": [c[3] / DEG, c[4] / DEG, c[5] / DEG],
-                "std": (0..6).map(|k| t.std[k].map(|s| if k < 3 { s / MM } else { s / DEG })).collect::<Vec<_>>(),
-                "status": t.status,
-            })
+            ToolQuality {
+                sessions: t.sessions.clone(),
+                tcp_mm: [c[0] / MM, c[1] / MM, c[2] / MM],
+                tcp_rotation_deg: [c[3] / DEG, c[4] / DEG, c[5] / DEG],
+                std: (0..6).map(|k| t.std[k].map(|s| if k < 3 { s / MM } else { s / DEG })).collect(),
+                status: t.status.to_vec(),
+                other: Default::default(),
+            }
         })
         .collect();
-    let corr: Vec<Vec<f64>> = (0..m).map(|a| (0..m).map(|b| q.correlation[(a, b)]).collect()).collect();
-    doc.quality = Some(json!({
-        "sessions": sessions,
-        "fit_measurements": fit_measurements(id),
-        "selection": selection,
-        "n_measurements": q.n_configs,
-        "n_rows": q.n_rows,
-        "n_parameters": m,
-        "iterations": id.iterations,
-        "kappa_si": q.kappa,
-        "kappa_scaled": q.kappa_scaled,
-        "observability_si": {"O1": q.observability.o1, "O2": q.observability.o2, "O3": q.observability.o3, "O4": q.observability.o4, "O5": q.observability.o5},
-        "sigma_mm": q.sigma / MM,
+    let corr = (0..m).map(|a| (0..m).map(|b| Some(q.correlation[(a, b)])).collect()).collect();
+    let o = &q.observability;
+    let quality = Quality {
+        sessions: Some(sessions.to_vec()),
+        fit_measurements: Some(fit_measurements(id)),
+        selection,
+        n_measurements: Some(q.n_configs),
+        n_rows: Some(q.n_rows),
+        n_parameters: Some(m),
+        iterations: Some(id.iterations),
+        kappa_si: Some(q.kappa),
+        kappa_scaled: Some(q.kappa_scaled),
+        observability_si: Some(Observability {
+            o1: Some(o.o1),
+            o2: Some(o.o2),
+            o3: Some(o.o3),
+            o4: Some(o.o4),
+            o5: Some(o.o5),
+            other: Default::default(),
+        }),
+        // Rows weighted by an instrument model: σ̂ is a ratio to the instrument's σ, not a length.
+        sigma_mm: (!q.weighted).then(|| q.sigma / MM),
+        sigma_ratio: q.weighted.then_some(q.sigma),
         // How each std was computed: "classic" σ̂²(JᵀJ)⁻¹, or its larger with the cluster-robust
         // (by pose) one where the data hold enough poses.
-        "std_method": if q.robust { "max(classic, cluster-robust by pose)" } else { "classic" },
-        "rms_residual_mm": q.rms_residual / MM,
-        "singular_values_si": q.singular_values,
-        "free": id.free_names,
-        "correlation": corr,
-        "tools": tools,
-        "downweighted": id.downweighted.iter().map(|(s, i, w)| json!({"session": s, "index": i, "weight": w})).collect::<Vec<_>>(),
-        "expected_rms_mm": q.expected_rms / MM,
-        "residual_ratio": q.residual_ratio,
-        "envelope": super::validity::Envelope::of_identification(id).map(|e| super::validity::envelope_json(&e)),
-        "worst": id.worst.iter().map(|w| json!({"session": w.session, "index": w.index, "residual_mm": w.residual / MM, "ratio": w.ratio})).collect::<Vec<_>>(),
-        "notes": id.notes,
-    }));
-    if q.weighted
-        && let Some(obj) = doc.quality.as_mut().and_then(|v| v.as_object_mut())
-    {
-        // Rows weighted by an instrument model: σ̂ is a ratio to the instrument's σ, not a length.
-        obj.remove("sigma_mm");
-        obj.insert("sigma_ratio".into(), json!(q.sigma));
-    }
-    if let Some(q) = doc.quality.as_mut() {
-        super::rounding::round_json(q);
-    }
+        std_method: Some(if q.robust { "max(classic, cluster-robust by pose)" } else { "classic" }.to_string()),
+        rms_residual_mm: Some(q.rms_residual / MM),
+        singular_values_si: Some(q.singular_values.clone()),
+        free: Some(id.free_names.clone()),
+        correlation: Some(corr),
+        tools: Some(tools),
+        downweighted: Some(
+            id.downweighted
+                .iter()
+                .map(|(s, i, w)| Downweighted { session: s.clone(), index: *i, weight: *w, other: Default::default() })
+                .collect(),
+        ),
+        expected_rms_mm: Some(q.expected_rms / MM),
+        residual_ratio: Some(q.residual_ratio),
+        envelope: super::validity::Envelope::of_identification(id).map(|e| e.file().clone()),
+        worst: Some(
+            id.worst
+                .iter()
+                .map(|w| WorstMeasurement {
+                    session: w.session.clone(),
+                    index: w.index,
+                    residual_mm: Some(w.residual / MM),
+                    ratio: Some(w.ratio),
+                    other: Default::default(),
+                })
+                .collect(),
+        ),
+        notes: Some(id.notes.clone()),
+        diagnosis: None,
+        other: Default::default(),
+    };
+    doc.quality = Some(rounded(&quality));
     doc
+}
+
+/// `q` with its numbers rounded for output by their field's unit ([`super::rounding::round_json`]),
+/// through its JSON: what is written is what is kept. A non-finite figure (written `null`) is
+/// `None` afterwards.
+fn rounded(q: &Quality) -> Quality {
+    let mut v = serde_json::to_value(q).expect("the quality report has only string keys");
+    super::rounding::round_json(&mut v);
+    serde_json::from_value(v).expect("the quality report reads back what it writes")
 }
 
 /// The text of a reason, as the parameter-set files and the wire carry it in `status` (which is

@@ -12,6 +12,7 @@ pub mod identification;
 pub mod identify_options;
 pub mod limits;
 pub mod param_set;
+pub mod quality;
 pub mod robot;
 pub mod rounding;
 pub mod validation;
@@ -23,6 +24,7 @@ use nalgebra::Vector3;
 use serde::de::DeserializeOwned;
 
 pub use param_set::{ParamEntry, ParameterSetDoc, ParameterSetFile};
+pub use quality::Quality;
 pub use robot::{JointSpec, RobotSpec, ToolSpec};
 
 use crate::units::{DEG, MM};

@@ -11,6 +11,7 @@ use std::collections::HashSet;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
+use super::quality::Quality;
 use super::robot::{RobotSpec, ToolSpec};
 use super::{DomainError, from_json};
 use crate::kinematics::ParameterSet;
@@ -45,10 +46,10 @@ pub struct ParameterSetFile {
     pub tool: Option<ToolSpec>,
     #[serde(default)]
     pub parameters: Vec<ParamEntry>,
-    /// The identification's quality report, carried along unchanged.
+    /// The identification's quality report (its keys this version does not know carried along
+    /// unchanged).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[cfg_attr(feature = "openapi", schema(value_type = Option<Object>))]
-    pub quality: Option<Value>,
+    pub quality: Option<Quality>,
 }
 
 /// A parameter set with the per-parameter metadata files carry (SI).
@@ -57,7 +58,7 @@ pub struct ParameterSetDoc {
     pub set: ParameterSet,
     pub std: Vec<Option<f64>>,
     pub status: Vec<Option<String>>,
-    pub quality: Option<Value>,
+    pub quality: Option<Quality>,
 }
 
 impl ParameterSetDoc {
@@ -127,9 +128,6 @@ impl ParameterSetDoc {
 
 impl ParameterSetFile {
     pub fn to_doc(&self) -> Result<ParameterSetDoc, DomainError> {
-        if self.quality.as_ref().is_some_and(|q| !q.is_object()) {
-            return Err(DomainError::new("quality", "must be the identification's quality report (an object)"));
-        }
         let model =
             RobotSpec::from_json_value(&self.robot).and_then(|r| r.to_model()).map_err(|e| e.within("robot"))?;
         let tool = match &self.tool {

@@ -390,24 +390,17 @@ pub fn held_out_statement(r: &ValidationReport) -> String {
 /// `also` (the sessions the store lists for the set). Not recorded when neither names a session.
 pub fn fit_data(doc: &super::ParameterSetDoc, also: &[String]) -> FitData {
     let q = doc.quality.as_ref();
-    let mut sessions: Vec<String> = q
-        .and_then(|q| q.get("sessions"))
-        .and_then(serde_json::Value::as_array)
-        .map(|a| a.iter().filter_map(|v| v.as_str().map(str::to_string)).collect())
-        .unwrap_or_default();
+    let mut sessions: Vec<String> = q.and_then(|q| q.sessions.clone()).unwrap_or_default();
     for s in also {
         if !sessions.contains(s) {
             sessions.push(s.clone());
         }
     }
     let mut measurements = std::collections::BTreeMap::new();
-    if let Some(items) = q.and_then(|q| q.get("fit_measurements")).and_then(serde_json::Value::as_array) {
-        for item in items {
-            let (Some(name), Some(ix)) = (item["session"].as_str(), item["indices"].as_array()) else { continue };
-            let mut ix: Vec<usize> = ix.iter().filter_map(|v| v.as_u64().map(|i| i as usize)).collect();
-            ix.sort_unstable();
-            measurements.insert(name.to_string(), ix);
-        }
+    for item in q.and_then(|q| q.fit_measurements.as_ref()).into_iter().flatten() {
+        let mut ix = item.indices.clone();
+        ix.sort_unstable();
+        measurements.insert(item.session.clone(), ix);
     }
     // A session the store names but the document's list does not: fitted on whole.
     measurements.retain(|name, _| sessions.contains(name));

@@ -36,10 +36,13 @@ pub const POSITION_MARGIN_MM: f64 = 50.0;
 #[serde(deny_unknown_fields)]
 pub struct EnvelopeFile {
     /// Per joint, [min, max] of the identification measurements, deg.
+    #[cfg_attr(feature = "openapi", schema(value_type = Vec<JointRangeDeg>))]
     pub joints_deg: Vec<[f64; 2]>,
     /// The measured TCP positions' box in {W}: lower corner, mm.
+    #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub position_min_mm: [f64; 3],
     /// Upper corner, mm.
+    #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub position_max_mm: [f64; 3],
     /// Widening of each joint range on both sides, deg.
     pub joint_margin_deg: f64,
@@ -48,6 +51,31 @@ pub struct EnvelopeFile {
     /// Measurements the envelope was taken from.
     pub n_measurements: usize,
 }
+
+/// A joint's calibrated range in the OpenAPI document: [min, max], deg (two numbers, as
+/// `EnvelopeFile::joints_deg` reads them).
+#[cfg(feature = "openapi")]
+pub struct JointRangeDeg;
+
+#[cfg(feature = "openapi")]
+impl utoipa::PartialSchema for JointRangeDeg {
+    fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
+        use utoipa::openapi::schema::{ArrayBuilder, ObjectBuilder, Type};
+        ArrayBuilder::new()
+            .items(
+                ObjectBuilder::new()
+                    .schema_type(Type::Number)
+                    .format(Some(utoipa::openapi::SchemaFormat::KnownFormat(utoipa::openapi::KnownFormat::Double))),
+            )
+            .min_items(Some(2))
+            .max_items(Some(2))
+            .description(Some("[min, max], deg."))
+            .into()
+    }
+}
+
+#[cfg(feature = "openapi")]
+impl utoipa::ToSchema for JointRangeDeg {}
 
 /// The envelope in SI, margins included.
 #[derive(Clone, Debug, PartialEq)]
@@ -196,13 +224,8 @@ impl Envelope {
 
     /// The envelope a parameter-set document records, if any.
     pub fn of_doc(doc: &ParameterSetDoc) -> Result<Option<Envelope>, DomainError> {
-        let Some(v) = doc.quality.as_ref().and_then(|q| q.get("envelope")) else { return Ok(None) };
-        if v.is_null() {
-            return Ok(None);
-        }
-        let f: EnvelopeFile =
-            serde_json::from_value(v.clone()).map_err(|e| DomainError::new("quality.envelope", e.to_string()))?;
-        Envelope::from_file(&f).map(Some).map_err(|e| e.within("quality.envelope"))
+        let Some(f) = doc.quality.as_ref().and_then(|q| q.envelope.as_ref()) else { return Ok(None) };
+        Envelope::from_file(f).map(Some).map_err(|e| e.within("quality.envelope"))
     }
 }
 
@@ -223,11 +246,7 @@ impl PredictionCovariance {
     /// no covariance; an error when it carries a malformed one.
     pub fn of_doc(doc: &ParameterSetDoc) -> Result<Option<PredictionCovariance>, DomainError> {
         let Some(q) = doc.quality.as_ref() else { return Ok(None) };
-        let (Some(free), Some(corr)) = (q.get("free"), q.get("correlation")) else { return Ok(None) };
-        let free: Vec<String> =
-            serde_json::from_value(free.clone()).map_err(|e| DomainError::new("quality.free", e.to_string()))?;
-        let corr: Vec<Vec<f64>> =
-            serde_json::from_value(corr.clone()).map_err(|e| DomainError::new("quality.correlation", e.to_string()))?;
+        let (Some(free), Some(corr)) = (&q.free, &q.correlation) else { return Ok(None) };
         let m = free.len();
         if corr.len() != m || corr.iter().any(|r| r.len() != m) {
             return Err(DomainError::new(
@@ -247,7 +266,8 @@ impl PredictionCovariance {
             rows.push((a, c, s, is_tool));
         }
         let n = rows.len();
-        let cov = DMatrix::from_fn(n, n, |i, j| rows[i].2 * rows[j].2 * corr[rows[i].0][rows[j].0]);
+        // An undefined correlation (`null`, written for NaN) makes the covariance unusable.
+        let cov = DMatrix::from_fn(n, n, |i, j| rows[i].2 * rows[j].2 * corr[rows[i].0][rows[j].0].unwrap_or(f64::NAN));
         if cov.iter().any(|v| !v.is_finite()) {
             return Err(DomainError::new("quality.correlation", "must be finite"));
         }
@@ -671,16 +691,15 @@ mod tests {
         let mut doc = ParameterSetDoc::new(set.clone());
         let names = ["a2", "d4", "theta3", "tool_z"];
         let sig = [2e-5, 3e-5, 1e-4, 1e-5];
-        let corr = vec![
-            vec![1.0, 0.3, 0.0, -0.2],
-            vec![0.3, 1.0, 0.1, 0.0],
-            vec![0.0, 0.1, 1.0, 0.0],
-            vec![-0.2, 0.0, 0.0, 1.0],
-        ];
+        let corr = [[1.0, 0.3, 0.0, -0.2], [0.3, 1.0, 0.1, 0.0], [0.0, 0.1, 1.0, 0.0], [-0.2, 0.0, 0.0, 1.0]];
         for (n, s) in names.iter().zip(sig) {
             doc.std[set.layout.find(n).unwrap()] = Some(s);
         }
-        doc.quality = Some(serde_json::json!({"free": names, "correlation": corr}));
+        doc.quality = Some(crate::formats::Quality {
+            free: Some(names.iter().map(|n| n.to_string()).collect()),
+            correlation: Some(corr.iter().map(|r| r.iter().map(|&c| Some(c)).collect()).collect()),
+            ..Default::default()
+        });
         let pc = PredictionCovariance::of_doc(&doc).unwrap().unwrap();
         let q = [0.3, 0.2, -0.4, 0.5, 0.8, -0.3];
         let s = JointState::new(&q);

@@ -1,0 +1,349 @@
+//! The quality report a parameter-set file carries (`quality`): what an identification (and an
+//! accepted diagnosis) records about its fit — the data it was fitted on, the conditioning and
+//! observability of the problem, the residual against the instrument's prediction, the free
+//! parameters' correlations, the calibrated envelope — in millimetres and degrees where it has
+//! lengths and angles, SI (m, rad) where a field's name says `_si`.
+//!
+//! Written by [`super::identification::identification_doc`] in the order the fields are declared
+//! here, rounded by [`super::rounding::round_json`]. Read leniently: every field may be missing (a
+//! file written by an earlier version, or made by hand) and stays `None` — no figure is made up —
+//! and `null` reads as `None` too (the writer puts `null` where a figure is undefined, e.g. a
+//! non-finite κ). Keys this version does not know are kept in `other` and written back, so a file
+//! passes through unchanged; a known key of the wrong type is refused, naming its path
+//! (`quality.kappa_si`). Every known key is written, `null` when it is `None`, except
+//! `sigma_mm`/`sigma_ratio` (one of the two) and `diagnosis`, which are left out when `None`.
+
+use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value};
+
+use super::validity::EnvelopeFile;
+
+/// An identification's quality report (the `quality` of a parameter-set file).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(default)]
+pub struct Quality {
+    /// The sessions fitted on, in the order of the problem's tool blocks.
+    pub sessions: Option<Vec<String>>,
+    /// The measurements fitted on, per session (0-based indices, ascending): what a validation
+    /// checks to tell a held-out figure from an in-sample one. A session not listed here but in
+    /// `sessions` was fitted on whole.
+    pub fit_measurements: Option<Vec<FitMeasurements>>,
+    /// How the measurements were chosen when a selection ran (DETMAX: `method`, `n`, `seed`,
+    /// `pool`, the selection index before and after, exchanges, …); `null` when all were used.
+    #[cfg_attr(feature = "openapi", schema(value_type = Option<Object>))]
+    pub selection: Option<Value>,
+    /// Measurements fitted (the n of O1's normalisation).
+    pub n_measurements: Option<usize>,
+    /// Rows of the Jacobian: the measurement rows, then the prior rows.
+    pub n_rows: Option<usize>,
+    /// Free (identified) parameters.
+    pub n_parameters: Option<usize>,
+    /// Iterations of the solver.
+    pub iterations: Option<usize>,
+    /// κ(J) = σ_max/σ_min of the Jacobian in SI units (m, rad), comparable to the thesis's
+    /// κ ≤ 1000 criterion; dimensionless.
+    pub kappa_si: Option<f64>,
+    /// κ of the Jacobian with unit-norm columns (what the `kappa` limit refuses on); dimensionless.
+    pub kappa_scaled: Option<f64>,
+    /// The observability indices O1–O5 of the Jacobian in SI units.
+    pub observability_si: Option<Observability>,
+    /// Residual standard deviation per row, σ̂ = √(‖r‖²/(N − m)), mm; an unweighted fit's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sigma_mm: Option<f64>,
+    /// σ̂ of a fit weighted by an instrument model, as a ratio to the instrument's σ (1 when the
+    /// model and the instrument model are right); dimensionless. Written instead of `sigma_mm`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sigma_ratio: Option<f64>,
+    /// How each parameter's `std` was computed: `classic` (σ̂²(JᵀJ)⁻¹), or
+    /// `max(classic, cluster-robust by pose)`.
+    pub std_method: Option<String>,
+    /// RMS of the measurement residual norms, mm (weighted fits: of the weighted residuals).
+    pub rms_residual_mm: Option<f64>,
+    /// Singular values of the Jacobian in SI units (m, rad per parameter unit), descending.
+    pub singular_values_si: Option<Vec<f64>>,
+    /// The free parameters' names, in the order of `correlation`'s rows and columns.
+    pub free: Option<Vec<String>>,
+    /// Correlations of the free parameters (m × m, dimensionless, from σ̂²(JᵀJ)⁻¹); `null` where
+    /// one is undefined (a zero standard deviation).
+    pub correlation: Option<Vec<Vec<Option<f64>>>>,
+    /// Every tool the identification fitted, its TCP as fitted.
+    pub tools: Option<Vec<ToolQuality>>,
+    /// Measurements the robust (Huber) loss weighted down, with their weights.
+    pub downweighted: Option<Vec<Downweighted>>,
+    /// RMS of the residual the instrument model and the measurements' own σ predict (outliers
+    /// left out), mm.
+    pub expected_rms_mm: Option<f64>,
+    /// `rms_residual_mm` over `expected_rms_mm` (near 1 when model and noise model are right);
+    /// dimensionless.
+    pub residual_ratio: Option<f64>,
+    /// The calibrated envelope: the joint ranges and the box of {W} the measurements covered,
+    /// with the margins compensation applies; `null` when there were no measurements to take it
+    /// from.
+    pub envelope: Option<EnvelopeFile>,
+    /// The measurements with the largest residuals, largest first.
+    pub worst: Option<Vec<WorstMeasurement>>,
+    /// What the identification noted (parameters held, payload or compliances not determined, …).
+    pub notes: Option<Vec<String>>,
+    /// The diagnosis this set was accepted from (an accepted diagnosis's set only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub diagnosis: Option<AcceptedDiagnosis>,
+    /// Keys this version does not know (a later version's, or a hand-made file's), kept as they
+    /// came and written back after the known ones.
+    #[serde(flatten)]
+    #[cfg_attr(feature = "openapi", schema(value_type = std::collections::HashMap<String, AnyJson>))]
+    pub other: Map<String, Value>,
+}
+
+/// The measurements of one session an identification fitted on.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct FitMeasurements {
+    /// The session's name.
+    pub session: String,
+    /// 0-based indices of its measurements fitted on, ascending (the service writes the stored
+    /// indices).
+    pub indices: Vec<usize>,
+    /// Keys this version does not know, kept as they came.
+    #[serde(flatten)]
+    #[cfg_attr(feature = "openapi", schema(value_type = std::collections::HashMap<String, AnyJson>))]
+    pub other: Map<String, Value>,
+}
+
+/// The observability indices (Borm & Menq) of the Jacobian in SI units; larger is better.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(default)]
+pub struct Observability {
+    /// O1 = (σ_1·…·σ_m)^{1/m}/√n, σ_i the singular values, n the measurements.
+    #[serde(rename = "O1")]
+    pub o1: Option<f64>,
+    /// O2 = σ_min/σ_max (the inverse of κ).
+    #[serde(rename = "O2")]
+    pub o2: Option<f64>,
+    /// O3 = σ_min.
+    #[serde(rename = "O3")]
+    pub o3: Option<f64>,
+    /// O4 = σ_min²/σ_max.
+    #[serde(rename = "O4")]
+    pub o4: Option<f64>,
+    /// O5 = 1/Σ 1/σ_i².
+    #[serde(rename = "O5")]
+    pub o5: Option<f64>,
+    /// Keys this version does not know, kept as they came.
+    #[serde(flatten)]
+    #[cfg_attr(feature = "openapi", schema(value_type = std::collections::HashMap<String, AnyJson>))]
+    pub other: Map<String, Value>,
+}
+
+/// A tool the identification fitted: its TCP as fitted (T_T^6), with uncertainties.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct ToolQuality {
+    /// The sessions measured with it.
+    pub sessions: Vec<String>,
+    /// TCP position x, y, z, mm.
+    #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
+    pub tcp_mm: [f64; 3],
+    /// TCP orientation a, b, c (ZY'X''), deg.
+    #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
+    pub tcp_rotation_deg: [f64; 3],
+    /// Standard deviation of each TCP component when identified: x, y, z in mm, a, b, c in deg;
+    /// `null` for a component held.
+    pub std: Vec<Option<f64>>,
+    /// Per TCP component: `identified`, or why it is held.
+    pub status: Vec<String>,
+    /// Keys this version does not know, kept as they came.
+    #[serde(flatten)]
+    #[cfg_attr(feature = "openapi", schema(value_type = std::collections::HashMap<String, AnyJson>))]
+    pub other: Map<String, Value>,
+}
+
+/// A measurement the robust loss weighted down.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct Downweighted {
+    /// The session's name.
+    pub session: String,
+    /// 0-based index of the measurement in the session (the service writes the stored index).
+    pub index: usize,
+    /// Its weight in the fit, 0–1; dimensionless.
+    pub weight: f64,
+    /// Keys this version does not know, kept as they came.
+    #[serde(flatten)]
+    #[cfg_attr(feature = "openapi", schema(value_type = std::collections::HashMap<String, AnyJson>))]
+    pub other: Map<String, Value>,
+}
+
+/// A measurement with a large residual.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct WorstMeasurement {
+    /// The session's name.
+    pub session: String,
+    /// 0-based index of the measurement in the session (the service writes the stored index).
+    pub index: usize,
+    /// |residual| (position and, for a pose, the weighted rotation), mm.
+    pub residual_mm: Option<f64>,
+    /// How many times the typical measurement's residual it is; dimensionless, `null` when the
+    /// typical residual is zero.
+    pub ratio: Option<f64>,
+    /// Keys this version does not know, kept as they came.
+    #[serde(flatten)]
+    #[cfg_attr(feature = "openapi", schema(value_type = std::collections::HashMap<String, AnyJson>))]
+    pub other: Map<String, Value>,
+}
+
+/// The diagnosis a set was accepted from.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(default)]
+pub struct AcceptedDiagnosis {
+    /// The effects accepted, by their candidate labels.
+    pub accepted: Option<Vec<String>>,
+    /// The model fitted, as `robocal identify --model` spells it.
+    pub model: Option<String>,
+    /// Keys this version does not know, kept as they came.
+    #[serde(flatten)]
+    #[cfg_attr(feature = "openapi", schema(value_type = std::collections::HashMap<String, AnyJson>))]
+    pub other: Map<String, Value>,
+}
+
+/// Any JSON value — what a key this version does not know may hold — in the OpenAPI document
+/// (`serde_json::Value`'s own schema names no type, which the document's checks cannot read).
+#[cfg(feature = "openapi")]
+pub struct AnyJson;
+
+#[cfg(feature = "openapi")]
+impl utoipa::PartialSchema for AnyJson {
+    fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
+        use utoipa::openapi::schema::{ObjectBuilder, SchemaType, Type};
+        let any = [Type::Object, Type::Array, Type::String, Type::Number, Type::Boolean, Type::Null];
+        ObjectBuilder::new()
+            .schema_type(SchemaType::from_iter(any))
+            .description(Some("Any JSON value (a key this version does not know, kept as it came)."))
+            .into()
+    }
+}
+
+#[cfg(feature = "openapi")]
+impl utoipa::ToSchema for AnyJson {}
+
+#[cfg(test)]
+mod tests {
+    use serde_json::json;
+
+    use super::*;
+    use crate::formats::ParameterSetDoc;
+    use crate::formats::identification::run_identification;
+    use crate::identify::{IdentifyOptions, NoiseModel};
+    use crate::sim::simulate::{SimulateOptions, simulate};
+
+    /// The parameter-set text of an identification of the virtual cell (seed 1), weighted or not,
+    /// with a selection recorded.
+    fn identification_text(weighted: bool) -> String {
+        let sim = simulate(&SimulateOptions { seed: 1, ..Default::default() }).unwrap();
+        let opts = IdentifyOptions { noise: weighted.then(NoiseModel::default), ..Default::default() };
+        let (_, mut doc) = run_identification(&sim.cell, opts, None, &|| ()).unwrap();
+        doc.quality.as_mut().unwrap().selection = Some(json!({"method": "detmax", "n": 75, "converged": true}));
+        doc.to_json_pretty()
+    }
+
+    /// An identification's document reads back into the same report and writes the same bytes;
+    /// the weighted fit writes `sigma_ratio` where the unweighted one writes `sigma_mm`.
+    #[test]
+    fn an_identifications_document_round_trips_byte_for_byte() {
+        for weighted in [false, true] {
+            let text = identification_text(weighted);
+            let back = ParameterSetDoc::from_json(&text).unwrap();
+            assert_eq!(back.to_json_pretty(), text, "weighted: {weighted}");
+            let q = back.quality.unwrap();
+            assert_eq!((q.sigma_mm.is_some(), q.sigma_ratio.is_some()), (!weighted, weighted));
+            assert!(q.other.is_empty(), "every key is known: {:?}", q.other.keys().collect::<Vec<_>>());
+            assert!(q.kappa_si.is_some() && q.envelope.is_some() && q.observability_si.unwrap().o1.is_some());
+            assert_eq!(q.free.as_ref().map(Vec::len), q.n_parameters);
+            let v: Value = serde_json::from_str(&text).unwrap();
+            assert!(v["quality"].get(if weighted { "sigma_mm" } else { "sigma_ratio" }).is_none());
+            assert!(v["quality"].get("diagnosis").is_none());
+        }
+    }
+
+    /// A report written by an earlier version (no fit_measurements, std_method, envelope, worst,
+    /// notes), one with nulls, and the {free, correlation} a test or an import may carry all read;
+    /// what is missing stays `None`.
+    #[test]
+    fn old_and_partial_reports_read_and_nothing_is_made_up() {
+        let old = json!({"sessions": ["trical-1"], "selection": null, "n_measurements": 360, "n_rows": 1080,
+            "n_parameters": 31, "iterations": 3, "kappa_si": 2459.0, "kappa_scaled": 281.6,
+            "observability_si": {"O1": 0.1265, "O2": null}, "sigma_mm": 0.0048, "rms_residual_mm": 0.0048,
+            "singular_values_si": [3.1, 0.2], "free": ["a2", "d4"], "correlation": [[1.0, null], [null, 1.0]],
+            "tools": [{"sessions": ["trical-1"], "tcp_mm": [40.0, 0.0, 130.0], "tcp_rotation_deg": [0.0, 0.0, 0.0],
+                "std": [0.001, 0.001, 0.002, null, null, null], "status": ["identified", "identified", "identified",
+                "orientation not measured", "orientation not measured", "orientation not measured"]}],
+            "downweighted": []});
+        let q: Quality = serde_json::from_value(old).unwrap();
+        assert_eq!(q.kappa_si, Some(2459.0));
+        assert_eq!(q.observability_si.as_ref().unwrap().o2, None);
+        assert_eq!(q.correlation.as_ref().unwrap()[0], vec![Some(1.0), None]);
+        assert_eq!(q.tools.as_ref().unwrap()[0].std[3], None);
+        assert_eq!((q.fit_measurements.as_ref(), q.envelope.as_ref(), q.worst.as_ref()), (None, None, None));
+        assert_eq!((q.expected_rms_mm, q.residual_ratio, q.sigma_ratio), (None, None, None));
+        assert!(q.notes.is_none() && q.std_method.is_none() && q.diagnosis.is_none() && q.other.is_empty());
+
+        let q: Quality = serde_json::from_value(json!({"free": ["a2"], "correlation": [[1.0]]})).unwrap();
+        assert_eq!(
+            q,
+            Quality { free: Some(vec!["a2".into()]), correlation: Some(vec![vec![Some(1.0)]]), ..Default::default() }
+        );
+        let q: Quality = serde_json::from_value(json!({})).unwrap();
+        assert_eq!(q, Quality::default());
+        // Written back, the missing keys are `null` (the writer's every key), none gets a figure.
+        let v = serde_json::to_value(Quality { kappa_si: Some(812.5), ..Default::default() }).unwrap();
+        assert_eq!(v["kappa_si"], json!(812.5));
+        assert!(v["kappa_scaled"].is_null() && v["envelope"].is_null() && v.get("sigma_mm").is_none());
+    }
+
+    /// A known key of the wrong type is refused, named by its path in the file.
+    #[test]
+    fn a_wrong_typed_field_is_refused_naming_it() {
+        let text = identification_text(false);
+        let refused = |from: &str, to: &str| {
+            assert!(text.contains(from), "{from}");
+            ParameterSetDoc::from_json(&text.replacen(from, to, 1)).unwrap_err()
+        };
+        let e = refused("\"kappa_si\": ", "\"kappa_si\": \"big\", \"was\": ");
+        assert_eq!(e.path, "quality.kappa_si", "{e}");
+        let e = refused("\"O1\": ", "\"O1\": [], \"was\": ");
+        assert_eq!(e.path, "quality.observability_si.O1", "{e}");
+        let e = refused(
+            "\"worst\": [\n      {\n        \"session\": ",
+            "\"worst\": [\n      {\n        \"session\": 7, \"was\": ",
+        );
+        assert_eq!(e.path, "quality.worst[0].session", "{e}");
+        let e = refused("\"free\": [", "\"free\": [1, ");
+        assert_eq!(e.path, "quality.free[0]", "{e}");
+        let e = ParameterSetDoc::from_json(r#"{"robot": {"preset": "irb120"}, "quality": [1, 2]}"#).unwrap_err();
+        assert_eq!(e.path, "quality", "{e}");
+    }
+
+    /// Keys this version does not know — in the report and in its entries — are kept and written
+    /// back where they were (after the known ones): the file passes through unchanged.
+    #[test]
+    fn unknown_keys_survive_a_round_trip() {
+        let text = identification_text(false);
+        let v: Value = serde_json::from_str(&text).unwrap();
+        let mut v2 = v.clone();
+        let q = v2["quality"].as_object_mut().unwrap();
+        q.insert("uncertainty_model".into(), json!({"a_mm": 0.01, "b": [1, 2]}));
+        q.insert("made_by".into(), json!("robocal 9"));
+        q["worst"][0].as_object_mut().unwrap().insert("axis".into(), json!(3));
+        q["tools"][0].as_object_mut().unwrap().insert("name".into(), json!("TriCal"));
+        q["observability_si"].as_object_mut().unwrap().insert("O6".into(), json!(0.5));
+        let with = serde_json::to_string_pretty(&v2).unwrap();
+        let back = ParameterSetDoc::from_json(&with).unwrap();
+        let q = back.quality.as_ref().unwrap();
+        assert_eq!(q.other.keys().collect::<Vec<_>>(), ["uncertainty_model", "made_by"]);
+        assert_eq!(q.worst.as_ref().unwrap()[0].other["axis"], json!(3));
+        assert_eq!(back.to_json_pretty(), with);
+    }
+}
