@@ -7,11 +7,11 @@
 //! Written by [`super::identification::identification_doc`] in the order the fields are declared
 //! here, rounded by [`super::rounding::round_json`]. Read leniently: every field may be missing (a
 //! file written by an earlier version, or made by hand) and stays `None` — no figure is made up —
-//! and `null` reads as `None` too (the writer puts `null` where a figure is undefined, e.g. a
-//! non-finite κ). Keys this version does not know are kept in `other` and written back, so a file
-//! passes through unchanged; a known key of the wrong type is refused, naming its path
-//! (`quality.kappa_si`). Every known key is written, `null` when it is `None`, except
-//! `sigma_mm`/`sigma_ratio` (one of the two) and `diagnosis`, which are left out when `None`.
+//! and `null` reads as `None` too (a figure that was not finite, written by JSON as `null`). A
+//! field that is `None` is left out when written: a key is absent when it was not recorded (an
+//! older or hand-made file, no selection, no envelope) or its figure was not finite. Keys this
+//! version does not know are kept in `other` and written back, so a file passes through
+//! unchanged; a known key of the wrong type is refused, naming its path (`quality.kappa_si`).
 
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
@@ -24,29 +24,39 @@ use super::validity::EnvelopeFile;
 #[serde(default)]
 pub struct Quality {
     /// The sessions fitted on, in the order of the problem's tool blocks.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub sessions: Option<Vec<String>>,
     /// The measurements fitted on, per session (0-based indices, ascending): what a validation
     /// checks to tell a held-out figure from an in-sample one. A session not listed here but in
     /// `sessions` was fitted on whole.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub fit_measurements: Option<Vec<FitMeasurements>>,
     /// How the measurements were chosen when a selection ran (DETMAX: `method`, `n`, `seed`,
-    /// `pool`, the selection index before and after, exchanges, …); `null` when all were used.
+    /// `pool`, the selection index before and after, exchanges, …); absent when all were used.
     #[cfg_attr(feature = "openapi", schema(value_type = Option<Object>))]
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub selection: Option<Value>,
     /// Measurements fitted (the n of O1's normalisation).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub n_measurements: Option<usize>,
     /// Rows of the Jacobian: the measurement rows, then the prior rows.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub n_rows: Option<usize>,
     /// Free (identified) parameters.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub n_parameters: Option<usize>,
     /// Iterations of the solver.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub iterations: Option<usize>,
     /// κ(J) = σ_max/σ_min of the Jacobian in SI units (m, rad), comparable to the thesis's
     /// κ ≤ 1000 criterion; dimensionless.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub kappa_si: Option<f64>,
     /// κ of the Jacobian with unit-norm columns (what the `kappa` limit refuses on); dimensionless.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub kappa_scaled: Option<f64>,
     /// The observability indices O1–O5 of the Jacobian in SI units.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub observability_si: Option<Observability>,
     /// Residual standard deviation per row, σ̂ = √(‖r‖²/(N − m)), mm; an unweighted fit's.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -57,33 +67,45 @@ pub struct Quality {
     pub sigma_ratio: Option<f64>,
     /// How each parameter's `std` was computed: `classic` (σ̂²(JᵀJ)⁻¹), or
     /// `max(classic, cluster-robust by pose)`.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub std_method: Option<String>,
     /// RMS of the measurement residual norms, mm (weighted fits: of the weighted residuals).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub rms_residual_mm: Option<f64>,
     /// Singular values of the Jacobian in SI units (m, rad per parameter unit), descending.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub singular_values_si: Option<Vec<f64>>,
     /// The free parameters' names, in the order of `correlation`'s rows and columns.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub free: Option<Vec<String>>,
     /// Correlations of the free parameters (m × m, dimensionless, from σ̂²(JᵀJ)⁻¹); `null` where
     /// one is undefined (a zero standard deviation).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub correlation: Option<Vec<Vec<Option<f64>>>>,
     /// Every tool the identification fitted, its TCP as fitted.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub tools: Option<Vec<ToolQuality>>,
     /// Measurements the robust (Huber) loss weighted down, with their weights.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub downweighted: Option<Vec<Downweighted>>,
     /// RMS of the residual the instrument model and the measurements' own σ predict (outliers
     /// left out), mm.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub expected_rms_mm: Option<f64>,
     /// `rms_residual_mm` over `expected_rms_mm` (near 1 when model and noise model are right);
     /// dimensionless.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub residual_ratio: Option<f64>,
     /// The calibrated envelope: the joint ranges and the box of {W} the measurements covered,
     /// with the margins compensation applies; `null` when there were no measurements to take it
     /// from.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub envelope: Option<EnvelopeFile>,
     /// The measurements with the largest residuals, largest first.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub worst: Option<Vec<WorstMeasurement>>,
     /// What the identification noted (parameters held, payload or compliances not determined, …).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub notes: Option<Vec<String>>,
     /// The diagnosis this set was accepted from (an accepted diagnosis's set only).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -117,18 +139,23 @@ pub struct FitMeasurements {
 pub struct Observability {
     /// O1 = (σ_1·…·σ_m)^{1/m}/√n, σ_i the singular values, n the measurements.
     #[serde(rename = "O1")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub o1: Option<f64>,
     /// O2 = σ_min/σ_max (the inverse of κ).
     #[serde(rename = "O2")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub o2: Option<f64>,
     /// O3 = σ_min.
     #[serde(rename = "O3")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub o3: Option<f64>,
     /// O4 = σ_min²/σ_max.
     #[serde(rename = "O4")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub o4: Option<f64>,
     /// O5 = 1/Σ 1/σ_i².
     #[serde(rename = "O5")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub o5: Option<f64>,
     /// Keys this version does not know, kept as they came.
     #[serde(flatten)]
@@ -184,9 +211,11 @@ pub struct WorstMeasurement {
     /// 0-based index of the measurement in the session (the service writes the stored index).
     pub index: usize,
     /// |residual| (position and, for a pose, the weighted rotation), mm.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub residual_mm: Option<f64>,
     /// How many times the typical measurement's residual it is; dimensionless, `null` when the
     /// typical residual is zero.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub ratio: Option<f64>,
     /// Keys this version does not know, kept as they came.
     #[serde(flatten)]
@@ -200,8 +229,10 @@ pub struct WorstMeasurement {
 #[serde(default)]
 pub struct AcceptedDiagnosis {
     /// The effects accepted, by their candidate labels.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub accepted: Option<Vec<String>>,
     /// The model fitted, as `robocal identify --model` spells it.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub model: Option<String>,
     /// Keys this version does not know, kept as they came.
     #[serde(flatten)]
@@ -297,10 +328,9 @@ mod tests {
         );
         let q: Quality = serde_json::from_value(json!({})).unwrap();
         assert_eq!(q, Quality::default());
-        // Written back, the missing keys are `null` (the writer's every key), none gets a figure.
+        // Written back, what is missing stays missing: no key gets a figure, or a `null`.
         let v = serde_json::to_value(Quality { kappa_si: Some(812.5), ..Default::default() }).unwrap();
-        assert_eq!(v["kappa_si"], json!(812.5));
-        assert!(v["kappa_scaled"].is_null() && v["envelope"].is_null() && v.get("sigma_mm").is_none());
+        assert_eq!(v, json!({"kappa_si": 812.5}));
     }
 
     /// A known key of the wrong type is refused, named by its path in the file.
