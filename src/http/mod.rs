@@ -170,7 +170,9 @@ pub fn openapi_for(require_auth: bool) -> utoipa::openapi::OpenApi {
 fn physical_bounds(api: &mut utoipa::openapi::OpenApi) {
     use crate::domain::limits::{Applies, SCHEMA_BOUNDS};
     use serde_json::{Value, json};
-    let Ok(mut doc) = serde_json::to_value(&*api) else { return };
+    // A document that does not convert both ways would silently lose every bound: fail loudly (the
+    // OpenAPI test and the server's start both build it).
+    let mut doc = serde_json::to_value(&*api).expect("the OpenAPI document converts to JSON");
     fn set(s: &mut Value, lo: f64, hi: f64, exclusive: bool) {
         if exclusive {
             s["exclusiveMinimum"] = json!(lo);
@@ -202,9 +204,7 @@ fn physical_bounds(api: &mut utoipa::openapi::OpenApi) {
         let p = doc.pointer_mut(&at).unwrap_or_else(|| panic!("SCHEMA_BOUNDS names {at}, which the document lacks"));
         apply(p, lo, hi, to, exclusive);
     }
-    if let Ok(back) = serde_json::from_value(doc) {
-        *api = back;
-    }
+    *api = serde_json::from_value(doc).expect("the OpenAPI document reads back with its bounds (a schema utoipa cannot read, e.g. serde_json::Value's, must be declared by hand)");
 }
 
 /// The scope an operation's bearer requirement names (`read`, `measure`, …, `admin`), if any.
