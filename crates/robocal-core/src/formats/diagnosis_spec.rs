@@ -109,8 +109,12 @@ pub struct DiagnoseSpec {
     #[serde(default = "five")]
     #[cfg_attr(feature = "openapi", schema(minimum = 2, maximum = 20))]
     pub folds: usize,
+    /// Seed of the folds' random assignment of poses and of the noise floor's Monte Carlo
+    /// (default 1); the same seed gives the same diagnosis.
     #[serde(default = "one")]
     pub seed: u64,
+    /// The instrument model (defaults: the thesis's error budget); weights the pooled fits and
+    /// sets the noise floor.
     #[serde(default)]
     pub noise: NoiseSpec,
     /// Family-wise error rate of the screening (Holm).

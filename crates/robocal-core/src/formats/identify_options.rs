@@ -41,6 +41,7 @@ pub fn default_residual_ratio_limit() -> f64 {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct MeasurementRef {
+    /// Name of the session the measurement is in.
     pub session: String,
     /// 0-based (at most 2³¹−1, far beyond any session).
     #[cfg_attr(feature = "openapi", schema(maximum = 2147483647))]
@@ -154,6 +155,7 @@ fn one() -> u64 {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct SelectSpec {
+    /// Number of measurements to select from the chosen sessions (1 … 100 000).
     #[cfg_attr(feature = "openapi", schema(minimum = 1, maximum = 100000))]
     pub n: usize,
     /// `O1` (default, the thesis's) … `O5`.
@@ -167,8 +169,11 @@ pub struct SelectSpec {
 /// A checked DETMAX selection.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DetmaxSelection {
+    /// Number of measurements to select (1 … 100 000).
     pub n: usize,
+    /// The observability index maximised (O1 … O5).
     pub index: Index,
+    /// Seed of the random start.
     pub seed: u64,
 }
 

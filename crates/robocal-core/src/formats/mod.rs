@@ -32,11 +32,14 @@ use crate::units::{DEG, MM};
 /// Bad input: where (a JSON-style path such as `parameters[3].value`) and why.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct DomainError {
+    /// The field at fault, e.g. `parameters[3].value` or `tool.tcp_mm[2]`; empty: the whole document.
     pub path: String,
+    /// Why the field is refused, in words (e.g. "must be a finite number").
     pub reason: String,
 }
 
 impl DomainError {
+    /// An error at `path` (empty: the whole document) for `reason`.
     pub fn new(path: impl Into<String>, reason: impl Into<String>) -> Self {
         Self { path: path.into(), reason: reason.into() }
     }

@@ -1,6 +1,7 @@
 //! Parameter-set JSON, the contract every later stage shares:
 //! `{"robot": …, "tool": …, "parameters": [{"name": "a2", "value": 270.146, "nominal": 270.0,
-//! "unit": "mm"}, …]}` — values in mm, deg and deg/(N·m).
+//! "unit": "mm"}, …]}` — values in mm, deg, deg/(N·m) and the other units each entry's `unit`
+//! names (kg, ppm/K, rad/rad, deg/(N·m)³).
 //!
 //! On input `parameters` may list a subset: the others take their nominal values. A `nominal`
 //! that contradicts the robot's table is refused; for the base and tool (cell-specific, not in
@@ -18,32 +19,48 @@ use crate::kinematics::ParameterSet;
 use crate::kinematics::model::Tool;
 use crate::kinematics::params::{JointTerm, Param, Unit};
 
+/// One parameter of a set: its name, value and nominal value in its unit, and what the
+/// identification says of it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct ParamEntry {
+    /// The parameter, e.g. `a2`, `d4`, `theta3`, `alpha1`, `beta2`, `c2` (compliance), `base_x`,
+    /// `tool_c`; an effect term (cyclic, backlash, coupling, cubic compliance, thermal) not in
+    /// the robot's table joins the set. Listed at most once.
     pub name: String,
+    /// The value, in `unit` (within ±100 000 mm, ±360 deg, ±5 000 kg, else ±1e6; a compliance
+    /// within ±57 deg/(N·m)).
     pub value: f64,
+    /// The nominal value, in `unit`; must agree with the robot's table (base and tool: the
+    /// cell's own). Absent: the table's value (base: `value` itself).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub nominal: Option<f64>,
+    /// The unit of `value`, `nominal` and `std` (`mm`, `deg`, `deg/(N·m)`, `kg`, `ppm/K`, …);
+    /// absent: the parameter's own, which a given one must match.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub unit: Option<String>,
-    /// Standard deviation from the identification, in `unit`.
+    /// Standard deviation from the identification, in `unit` (≥ 0); absent: not known.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub std: Option<f64>,
-    /// "identified", or why the parameter was held fixed.
+    /// "identified", or why the parameter was held fixed; absent: not recorded.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub status: Option<String>,
 }
 
+/// A parameter-set file as written: the robot, the tool and the parameters in mm and degrees, and
+/// the identification's quality report.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct ParameterSetFile {
+    /// The robot: its nominal DH table and joints (a robot file).
     #[cfg_attr(feature = "openapi", schema(value_type = super::robot::RobotDoc))]
     pub robot: Value,
+    /// The tool the set was identified with; absent: the bare flange.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tool: Option<ToolSpec>,
+    /// The parameters; on input a subset may be listed, the others take their nominal values.
     #[serde(default)]
     pub parameters: Vec<ParamEntry>,
     /// The identification's quality report (its keys this version does not know carried along
@@ -55,13 +72,18 @@ pub struct ParameterSetFile {
 /// A parameter set with the per-parameter metadata files carry (SI).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ParameterSetDoc {
+    /// The parameter values, nominal values, robot model and tool, SI.
     pub set: ParameterSet,
+    /// Per parameter (in the set's order), its standard deviation, SI; `None`: not known.
     pub std: Vec<Option<f64>>,
+    /// Per parameter, "identified" or why it was held fixed; `None`: not recorded.
     pub status: Vec<Option<String>>,
+    /// The identification's quality report; `None`: none recorded.
     pub quality: Option<Quality>,
 }
 
 impl ParameterSetDoc {
+    /// `set` with nothing else recorded: no standard deviations, statuses or quality report.
     pub fn new(set: ParameterSet) -> Self {
         let n = set.values.len();
         Self { set, std: vec![None; n], status: vec![None; n], quality: None }
@@ -91,6 +113,8 @@ impl ParameterSetDoc {
         from_json::<ParameterSetFile>(text)?.to_doc()
     }
 
+    /// The file form: every parameter with its nominal value and unit, in mm and degrees to 12
+    /// significant digits, the robot and the tool.
     pub fn to_file(&self) -> ParameterSetFile {
         let s = &self.set;
         let parameters = s
@@ -121,12 +145,16 @@ impl ParameterSetDoc {
         }
     }
 
+    /// The file form as indented JSON text.
     pub fn to_json_pretty(&self) -> String {
         serde_json::to_string_pretty(&self.to_file()).expect("parameter set serialises")
     }
 }
 
 impl ParameterSetFile {
+    /// Check and convert to SI. Refuses a bad robot or tool (under `robot`, `tool`), an unknown
+    /// or repeated parameter name, a wrong unit, a value, nominal or std out of bounds, a nominal
+    /// contradicting the table and a negative std (each under `parameters[i]`).
     pub fn to_doc(&self) -> Result<ParameterSetDoc, DomainError> {
         let model =
             RobotSpec::from_json_value(&self.robot).and_then(|r| r.to_model()).map_err(|e| e.within("robot"))?;

@@ -16,20 +16,27 @@ use crate::units::{DEG, MM};
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct JointSpec {
+    /// Link twist α, deg (±360).
     pub alpha_deg: f64,
+    /// Link length a, mm (±10 000).
     pub a_mm: f64,
+    /// Joint-angle offset θ, deg (±360); default 0.
     #[serde(default)]
     pub theta_deg: f64,
+    /// Link offset d, mm (±10 000).
     pub d_mm: f64,
     /// Present for a joint carrying Hayati's β (its nominal value, usually 0).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub beta_deg: Option<f64>,
-    /// [lower, upper], lower below upper.
+    /// Joint limits [lower, upper], deg, lower below upper (each within ±720).
     #[cfg_attr(feature = "openapi", schema(min_items = 2, max_items = 2))]
     pub limits_deg: [f64; 2],
+    /// Mass of the link, kg (0 … 5 000); default 0 (no gravity load from this link).
     #[serde(default)]
     #[cfg_attr(feature = "openapi", schema(minimum = 0))]
     pub mass_kg: f64,
+    /// The link's centre of mass, mm (each within ±10 000): in frame {i} (modified DH) or the
+    /// distal frame (standard DH); default the frame's origin.
     #[serde(default)]
     #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub com_mm: [f64; 3],
@@ -52,17 +59,21 @@ pub enum Convention {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct CustomRobotSpec {
+    /// The robot's name (1 … 200 characters, not blank).
     #[cfg_attr(
         feature = "openapi",
         schema(min_length = 1, max_length = 200, pattern = "^[^\\u0000]*[^\\s\\u0000][^\\u0000]*$")
     )]
     pub name: String,
+    /// DH convention of `joints`; default `modified`.
     #[serde(default)]
     pub convention: Convention,
     /// Gravity in the base frame {0}, m/s²; default (0, 0, −9.80665).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub gravity_mps2: Option<[f64; 3]>,
+    /// The joints from the base to the flange (1 … 8). In the standard convention the last row
+    /// must have `a_mm` = 0 and `alpha_deg` = 0 (that offset belongs in the tool).
     #[cfg_attr(feature = "openapi", schema(min_items = 1, max_items = 8))]
     pub joints: Vec<JointSpec>,
 }
@@ -73,7 +84,9 @@ pub struct CustomRobotSpec {
 #[serde(rename_all = "lowercase")]
 #[allow(dead_code)] // a schema only: presets are parsed by `Preset::from_name`
 pub enum PresetName {
+    /// The ABB IRB 120 (the thesis's robot), `irb120`.
     Irb120,
+    /// The Universal Robots UR10, `ur10`.
     Ur10,
 }
 
@@ -83,6 +96,7 @@ pub enum PresetName {
 #[serde(deny_unknown_fields)]
 #[allow(dead_code)] // a schema only
 pub struct PresetRef {
+    /// The preset's name.
     pub preset: PresetName,
 }
 
@@ -93,7 +107,9 @@ pub struct PresetRef {
 #[serde(untagged)]
 #[allow(dead_code)] // a schema only
 pub enum RobotDoc {
+    /// A built-in robot by name.
     Preset(PresetRef),
+    /// A custom joint table.
     Custom(CustomRobotSpec),
 }
 
@@ -106,7 +122,9 @@ struct PresetSpec {
 /// `{"preset": name}` or a custom robot.
 #[derive(Clone, Debug, PartialEq)]
 pub enum RobotSpec {
+    /// A built-in robot.
     Preset(Preset),
+    /// A custom joint table (mm and degrees, not yet validated).
     Custom(CustomRobotSpec),
 }
 
@@ -128,6 +146,7 @@ impl RobotSpec {
         }
     }
 
+    /// The file form: `{"preset": name}` or the custom robot's object.
     pub fn to_json_value(&self) -> Value {
         match self {
             RobotSpec::Preset(p) => serde_json::json!({ "preset": p.name() }),
@@ -135,7 +154,8 @@ impl RobotSpec {
         }
     }
 
-    /// The SI model, validated.
+    /// The SI model, validated: a custom robot's name, gravity, joint fields and limits are
+    /// checked (errors name e.g. `joints[2].a_mm`, `gravity_mps2[1]`).
     pub fn to_model(&self) -> Result<RobotModel, DomainError> {
         let c = match self {
             RobotSpec::Preset(p) => return Ok(p.model()),
@@ -287,20 +307,27 @@ fn model_error(e: ModelError) -> DomainError {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct ToolSpec {
+    /// TCP position in the flange frame, mm (each within ±10 000).
     #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub tcp_mm: [f64; 3],
+    /// TCP orientation in the flange frame, ZY'X'' angles (a, b, c), deg (±360); absent: aligned
+    /// with the flange.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub tcp_rotation_deg: Option<[f64; 3]>,
+    /// Payload mass, kg (0 … 5 000); default 0.
     #[serde(default)]
     #[cfg_attr(feature = "openapi", schema(minimum = 0))]
     pub mass_kg: f64,
+    /// Payload centre of mass in the flange frame, mm (each within ±10 000); default the origin.
     #[serde(default)]
     #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub com_mm: [f64; 3],
 }
 
 impl ToolSpec {
+    /// The SI tool; refuses a field out of bounds or not finite, naming it (`tcp_mm[0]`,
+    /// `mass_kg`, …).
     pub fn to_tool(&self) -> Result<Tool, DomainError> {
         use super::limits;
         limits::length3_mm(self.tcp_mm, "tcp_mm")?;
@@ -321,6 +348,7 @@ impl ToolSpec {
         Ok(Tool { tcp, mass, com: vec3_mm(self.com_mm, "com_mm")? })
     }
 
+    /// The file form of a tool, in mm and degrees (no `tcp_rotation_deg` when it is zero).
     pub fn from_tool(t: &Tool) -> ToolSpec {
         let rot = [t.tcp[3] / DEG, t.tcp[4] / DEG, t.tcp[5] / DEG];
         ToolSpec {

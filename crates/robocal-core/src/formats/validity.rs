@@ -157,6 +157,7 @@ impl Envelope {
         Ok(Envelope { joints, lo: (lo - m) * MM, hi: (hi + m) * MM, file: f.clone() })
     }
 
+    /// The envelope as its file records it: the measured ranges and the margins, in mm and deg.
     pub fn file(&self) -> &EnvelopeFile {
         &self.file
     }
@@ -317,8 +318,12 @@ impl PredictionCovariance {
 /// `allow_outside`) and the predicted uncertainty.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Guard<'a> {
+    /// The set's calibrated envelope; `None`: the set records none, and targets are not checked.
     pub envelope: Option<&'a Envelope>,
+    /// A target outside the envelope is compensated (and noted) rather than refused.
     pub allow_outside: bool,
+    /// The set's parameter covariance, for each target's predicted uncertainty; `None`: the set
+    /// records none, and no covariance part is given.
     pub covariance: Option<&'a PredictionCovariance>,
     /// What the set's latest held-out validation measured: the error the covariance does not
     /// explain and its growth with distance. `None`: unknown (no held-out validation given).
@@ -377,12 +382,16 @@ pub struct GrowthFit {
     pub against: String,
     /// The point distances are taken from, {W}, mm.
     pub from_mm: [f64; 3],
-    /// The held-out poses' mean and largest distance from it, mm: the unexplained part is their
-    /// RMS error, so a target farther than the mean is charged the growth beyond it.
+    /// The held-out poses' mean distance from it, mm: the unexplained part is their RMS error, so
+    /// a target farther than the mean is charged the growth beyond it.
     pub mean_distance_mm: f64,
+    /// The held-out poses' largest distance from it, mm.
     pub max_distance_mm: f64,
+    /// Slope of the held-out |error| against the distance (least squares), mm per mm.
     pub slope_mm_per_mm: f64,
+    /// Standard error of the slope, mm per mm; the 95 % growth charges slope + 1.96 × this.
     pub slope_stderr_mm_per_mm: f64,
+    /// Number of held-out measurements the slope is fitted on.
     pub n: usize,
 }
 
@@ -602,12 +611,17 @@ pub struct ValidityOut {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct ValidationCheck {
+    /// Id of the validation (as the service stores it).
     pub validation_id: String,
+    /// Its mean position error with the calibrated parameters, mm.
     pub mean_mm: f64,
+    /// Its mean position error with the nominal parameters, mm.
     pub nominal_mean_mm: f64,
 }
 
 impl ValidityOut {
+    /// What `guard` checks, with a note for each of the envelope, covariance and held-out
+    /// uncertainty model the set lacks; `validation` is left absent (the service fills it in).
     pub fn new(guard: &Guard) -> Self {
         let mut notes = Vec::new();
         if guard.envelope.is_none() {
