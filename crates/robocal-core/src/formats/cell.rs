@@ -16,7 +16,7 @@
 //!
 //! A measurement is ball-constrained (`ball`, 1-based) or a measured `position_mm` in {W},
 //! optionally a full pose (`rotation_deg`, ZY'X''). Errors name the session, the measurement index
-//! and the field: `sessions[0] "trical-1" measurements[12].ball: …`.
+//! and the field: `sessions[0] "trical-1".measurements[12].ball: …`.
 //!
 //! Measuring order: a session's `order` says whether its measurements are listed as measured
 //! (`measured`), permuted afterwards (`shuffled`), drawn from measured sessions (`resampled`), or
@@ -36,20 +36,29 @@ use crate::kinematics::frame::{rot_zyx, zyx_from_rot};
 use crate::metrology::{ArtefactError, BallTriangle};
 use crate::units::{DEG, MM};
 
-/// A pose vector in file units.
+/// A pose vector in file units: a position in mm and ZY'X'' angles (a about Z, b about Y', c
+/// about X'') in deg, e.g. the base guess T_0^W ({0} in {W}).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct PoseXyzAbc {
+    /// Position x, mm (±100 000).
     pub x_mm: f64,
+    /// Position y, mm (±100 000).
     pub y_mm: f64,
+    /// Position z, mm (±100 000).
     pub z_mm: f64,
+    /// First ZY'X'' angle, about Z, deg (±360).
     pub a_deg: f64,
+    /// Second ZY'X'' angle, about Y', deg (±360).
     pub b_deg: f64,
+    /// Third ZY'X'' angle, about X'', deg (±360).
     pub c_deg: f64,
 }
 
 impl PoseXyzAbc {
+    /// The pose as χ = (x, y, z, a, b, c) in m and rad; refuses a field out of bounds, naming it
+    /// under `path` (e.g. `base_guess.z_mm`).
     pub fn to_si(&self, path: &str) -> Result<[f64; 6], DomainError> {
         let v = [self.x_mm, self.y_mm, self.z_mm, self.a_deg, self.b_deg, self.c_deg];
         let names = ["x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg"];
@@ -65,6 +74,7 @@ impl PoseXyzAbc {
         Ok(out)
     }
 
+    /// The file form of χ = (x, y, z, a, b, c) in m and rad.
     pub fn from_si(chi: &[f64; 6]) -> Self {
         Self {
             x_mm: chi[0] / MM,
@@ -77,31 +87,41 @@ impl PoseXyzAbc {
     }
 }
 
+/// The measured distances between the artefact's ball centres, mm; they must form a triangle.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct Distances {
+    /// Between balls 1 and 2, mm (> 0, at most 100 000).
     #[cfg_attr(feature = "openapi", schema(exclusive_minimum = 0))]
     pub d12: f64,
+    /// Between balls 1 and 3, mm (> 0, at most 100 000).
     #[cfg_attr(feature = "openapi", schema(exclusive_minimum = 0))]
     pub d13: f64,
+    /// Between balls 2 and 3, mm (> 0, at most 100 000).
     #[cfg_attr(feature = "openapi", schema(exclusive_minimum = 0))]
     pub d23: f64,
 }
 
+/// The kind of artefact.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum ArtefactKind {
+    /// Three balls on a plate (`ball_triangle`), the TriCal's artefact.
     BallTriangle,
 }
 
+/// The artefact of a cell: three balls whose centres define {W} (thesis eq. 4.3–4.7).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct ArtefactSpec {
+    /// The kind of artefact: `ball_triangle`.
     pub kind: ArtefactKind,
+    /// The measured distances between the ball centres, mm.
     pub distances_mm: Distances,
+    /// Diameter of the balls, mm (> 0, at most 100 000).
     pub ball_diameter_mm: f64,
 }
 
@@ -155,17 +175,20 @@ impl ArtefactSpec {
     }
 }
 
-// What a session is for, as files, the wire and the store spell it: `identification`,
-// `validation`. (A plain comment: a doc comment would change the OpenAPI schema.)
+/// What a session is for, as files, the wire and the store spell it: `identification`,
+/// `validation`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum PurposeSpec {
+    /// Measurements to identify the parameters from (the default identification selection).
     Identification,
+    /// Measurements to score an identified parameter set on (the default validation selection).
     Validation,
 }
 
 impl PurposeSpec {
+    /// The core's purpose.
     pub fn to_purpose(self) -> Purpose {
         match self {
             PurposeSpec::Identification => Purpose::Identification,
@@ -173,6 +196,7 @@ impl PurposeSpec {
         }
     }
 
+    /// The file form of a purpose.
     pub fn from_purpose(p: Purpose) -> Self {
         match p {
             Purpose::Identification => PurposeSpec::Identification,
@@ -180,22 +204,27 @@ impl PurposeSpec {
         }
     }
 
+    /// The name files, the wire and the store use.
     pub fn as_str(self) -> &'static str {
         self.to_purpose().as_str()
     }
 }
 
-// The instrument of a session, as files, the wire and the store spell it: `trical`,
-// `laser_tracker`. (A plain comment: a doc comment would change the OpenAPI schema.)
+/// The instrument of a session, as files, the wire and the store spell it: `trical`,
+/// `laser_tracker`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum InstrumentSpec {
+    /// Closed loop on the artefact's balls: each measurement names a ball (`ball`).
     Trical,
+    /// A laser tracker (or any 3D/6D instrument): each measurement is a position in {W}, maybe
+    /// a full pose.
     LaserTracker,
 }
 
 impl InstrumentSpec {
+    /// The core's instrument.
     pub fn to_instrument(self) -> Instrument {
         match self {
             InstrumentSpec::Trical => Instrument::TriCal,
@@ -203,6 +232,7 @@ impl InstrumentSpec {
         }
     }
 
+    /// The file form of an instrument.
     pub fn from_instrument(i: Instrument) -> Self {
         match i {
             Instrument::TriCal => InstrumentSpec::Trical,
@@ -219,21 +249,26 @@ impl InstrumentSpec {
     }
 }
 
-// Whether a session's measurements are listed in measuring order, as files, the wire and the
-// store spell it: `measured`, `shuffled`, `resampled`, `unknown`. (A plain comment: a doc comment
-// would change the OpenAPI schema of every type that uses it.)
+/// Whether a session's measurements are listed in measuring order, as files, the wire and the
+/// store spell it: `measured`, `shuffled`, `resampled`, `unknown`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum OrderSpec {
+    /// Listed as measured.
     Measured,
+    /// Permuted after measuring: the list says nothing of the measuring order (`time_s` and
+    /// `sequence` still do).
     Shuffled,
+    /// Drawn from measured sessions (a subset, a bootstrap sample, a selection).
     Resampled,
+    /// Not said (the default; cells written before the marker existed).
     #[default]
     Unknown,
 }
 
 impl OrderSpec {
+    /// The core's measuring order.
     pub fn to_order(self) -> MeasuringOrder {
         match self {
             OrderSpec::Measured => MeasuringOrder::Measured,
@@ -243,6 +278,7 @@ impl OrderSpec {
         }
     }
 
+    /// The file form of a measuring order.
     pub fn from_order(o: MeasuringOrder) -> Self {
         match o {
             MeasuringOrder::Measured => OrderSpec::Measured,
@@ -252,6 +288,7 @@ impl OrderSpec {
         }
     }
 
+    /// `unknown`: not said (and then omitted when written).
     pub fn is_unknown(&self) -> bool {
         *self == OrderSpec::Unknown
     }
@@ -283,51 +320,72 @@ macro_rules! from_name {
 
 from_name!(PurposeSpec, InstrumentSpec, OrderSpec);
 
+/// One measurement: the joint readings and what the instrument observed there — a ball of the
+/// artefact (`ball`, trical sessions) or a measured position in {W} (`position_mm`, maybe with
+/// `rotation_deg`), never both.
 #[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct MeasurementSpec {
+    /// Joint readings, deg, one per joint, each within the robot's joint limits.
     pub joints_deg: Vec<f64>,
+    /// The artefact's ball the TCP was centred on (1, 2 or 3); trical sessions only.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ball: Option<usize>,
+    /// The measured TCP position in {W}, mm (within 3 × the robot's reach of the base guess, and
+    /// ±100 000); laser-tracker sessions only.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub position_mm: Option<[f64; 3]>,
+    /// The measured TCP orientation in {W}, ZY'X'' angles, deg (±360), making the measurement a
+    /// full pose; needs `position_mm`. Absent: a position only.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub rotation_deg: Option<[f64; 3]>,
+    /// Robot temperature, °C (−50 … 150); absent: the reference temperature (20 °C) is assumed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub temperature_c: Option<f64>,
+    /// Time stamp of the reading, s, any origin (epoch seconds fit; within ±1e10); gives the
+    /// measuring order where the list does not.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub time_s: Option<f64>,
     /// Place in the measuring order of the session's run: increasing as measured; measurements
     /// taken at one stop (several reflectors) share it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sequence: Option<u64>,
+    /// Per joint, the direction of the last motion into the pose: −1, 0 or +1 (one per joint);
+    /// absent: not recorded.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub approach: Option<Vec<i8>>,
-    /// TriCal indicator readings after centring, mm.
+    /// TriCal indicator readings left after centring (dx, dy, dz), mm (±1 000); trical sessions
+    /// only.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub indicators_mm: Option<[f64; 3]>,
     /// The instrument's standard uncertainty of this position, 1σ along X, Y, Z of {W}, mm (e.g.
-    /// what a laser tracker reports with each reading). Without it the instrument model applies.
+    /// what a laser tracker reports with each reading; each > 0, at most 1 000). Without it the
+    /// instrument model applies.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub sigma_mm: Option<[f64; 3]>,
-    /// The same for the orientation of a full pose, 1σ about X, Y, Z of {W}, deg; needs
-    /// `rotation_deg` and `sigma_mm`.
+    /// The same for the orientation of a full pose, 1σ about X, Y, Z of {W}, deg (each > 0, at
+    /// most 180); needs `rotation_deg` and `sigma_mm`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub sigma_rotation_deg: Option<[f64; 3]>,
 }
 
+/// One session of a cell file: measurements taken with one instrument and one tool.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SessionSpec {
+    /// The session's name, unique in the cell (1 … 200 characters, not blank).
     pub name: String,
+    /// What the session is for: `identification` or `validation`.
     pub purpose: PurposeSpec,
+    /// The instrument: `trical` (needs the cell's artefact) or `laser_tracker`.
     pub instrument: InstrumentSpec,
+    /// The tool carried: TCP in the flange frame, payload.
     pub tool: ToolSpec,
     /// The tool's TCP is a guess to be identified (e.g. an unmeasured reflector nest).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
@@ -340,17 +398,23 @@ pub struct SessionSpec {
     /// TCP of its own.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub target: Option<String>,
+    /// The measurements, in the order `order` describes.
     pub measurements: Vec<MeasurementSpec>,
 }
 
+/// A cell file: the robot, the approximate base pose, the artefact and the measurement sessions.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CellFile {
+    /// The robot: `{"preset": "irb120"}` or a custom joint table.
     pub robot: Value,
+    /// The base pose T_0^W ({0} in {W}) when known approximately; absent: unknown.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub base_guess: Option<PoseXyzAbc>,
+    /// The artefact; needed by trical sessions, absent when there is none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub artefact: Option<ArtefactSpec>,
+    /// The measurement sessions.
     pub sessions: Vec<SessionSpec>,
 }
 
@@ -365,6 +429,9 @@ pub fn cell_to_json(cell: &Cell) -> String {
 }
 
 impl CellFile {
+    /// Check and convert to SI. Errors name the session and measurement, e.g.
+    /// `sessions[0] "trical-1".measurements[12].ball`: a duplicate session name, a target shared
+    /// with another tool, a trical session without an artefact, a bad robot, tool or measurement.
     pub fn to_cell(&self) -> Result<Cell, DomainError> {
         let model =
             RobotSpec::from_json_value(&self.robot).and_then(|r| r.to_model()).map_err(|e| e.within("robot"))?;
@@ -423,6 +490,7 @@ impl CellFile {
         Ok(Cell { model, base_guess, artefact, sessions })
     }
 
+    /// The file form of a cell, in mm and degrees.
     pub fn from_cell(c: &Cell) -> CellFile {
         CellFile {
             robot: RobotSpec::from_model(&c.model).to_json_value(),
