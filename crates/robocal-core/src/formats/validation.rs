@@ -26,8 +26,11 @@ use crate::validate::regression::LinearFit;
 use crate::validate::report::{AxisStats, FitData, ModelErrors, Residual, SessionErrors, ValidationReport};
 use crate::validate::stats::ErrorStats;
 
+/// A validation report: the errors of a parameter set on the validated sessions' measurements,
+/// calibrated (flat at the top level) and nominal (`nominal`), in mm and mrad.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ValidationOut {
+    /// The validated sessions, by name.
     pub sessions: Vec<String>,
     /// `identification` or `validation`, per session.
     pub purposes: Vec<PurposeSpec>,
@@ -50,8 +53,10 @@ pub struct ValidationOut {
     pub held_out_statement: Option<String>,
     /// The positions the errors are taken against.
     pub reference: ReferenceOut,
+    /// The calibrated model's errors (flattened into the top level).
     #[serde(flatten)]
     pub calibrated: ModelErrorsOut,
+    /// The same figures for the nominal model (the set's nominal values, the declared tool).
     pub nominal: ModelErrorsOut,
     /// Each session's figures (several reflectors, or sessions of different purposes, apart).
     /// Empty: not recorded (a document stored before 2026-11-24); never empty when written, as a
@@ -97,8 +102,10 @@ pub struct FitRecordOut {
     pub sessions: Vec<String>,
 }
 
+/// One validated session's figures: calibrated flat, nominal under `nominal`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SessionErrorsOut {
+    /// The session, by name.
     pub session: String,
     /// `identification` or `validation`.
     pub purpose: PurposeSpec,
@@ -110,8 +117,10 @@ pub struct SessionErrorsOut {
     /// document stored before 2026-11-27).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fitted_measurements: Option<usize>,
+    /// The calibrated model's errors on this session (flattened).
     #[serde(flatten)]
     pub calibrated: ModelErrorsOut,
+    /// The nominal model's errors on this session.
     pub nominal: ModelErrorsOut,
 }
 
@@ -128,15 +137,27 @@ impl SessionErrorsOut {
     }
 }
 
+/// One model's errors over the validated measurements (error = reference − model, {W}).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ModelErrorsOut {
+    /// Number of measurements.
     pub n: usize,
+    /// Statistics of the position error's magnitude |error|, mm (flattened).
     #[serde(flatten)]
     pub position: ErrorFigures,
+    /// Orientation error statistics over the measurements that observed a full pose; `null` when
+    /// none did or the reference is the truth.
     pub orientation: Option<OrientationOut>,
+    /// Statistics of the signed error along X, Y and Z of {W}.
     pub per_axis: PerAxisOut,
+    /// Shapiro–Wilk test of |error|; `null` for fewer than 3 or more than 5000 values, or all
+    /// equal.
     pub shapiro: Option<ShapiroOut>,
+    /// |error| regressed on the reference position's distance to the base origin; `null` when it
+    /// cannot be fitted (n < 3, zero variance).
     pub vs_base_distance: Option<FitOut>,
+    /// |error| regressed on the distance to the calibration zone (the artefact's ball centroid);
+    /// `null` without an artefact or when it cannot be fitted.
     pub vs_zone_distance: Option<FitOut>,
 }
 
@@ -144,15 +165,22 @@ pub struct ModelErrorsOut {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct ErrorFigures {
+    /// Mean, mm.
     pub mean_mm: f64,
+    /// Median, mm.
     pub median_mm: f64,
+    /// Sample standard deviation (divisor n − 1; 0 for one value), mm.
     pub std_mm: f64,
+    /// Root mean square, mm.
     pub rms_mm: f64,
+    /// 95th percentile (linear interpolation), mm.
     pub p95_mm: f64,
+    /// Largest, mm.
     pub max_mm: f64,
 }
 
 impl ErrorFigures {
+    /// The figures of error statistics in metres, converted to mm.
     pub fn of(s: &ErrorStats) -> Self {
         ErrorFigures {
             mean_mm: s.mean / MM,
@@ -165,76 +193,118 @@ impl ErrorFigures {
     }
 }
 
+/// Statistics of the orientation error (the angle of R_ref·R_modelᵀ), mrad.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct OrientationOut {
+    /// Number of full-pose measurements.
     pub n: usize,
+    /// Mean, mrad.
     pub mean_mrad: f64,
+    /// Median, mrad.
     pub median_mrad: f64,
+    /// Sample standard deviation (divisor n − 1), mrad.
     pub std_mrad: f64,
+    /// Root mean square, mrad.
     pub rms_mrad: f64,
+    /// 95th percentile, mrad.
     pub p95_mrad: f64,
+    /// Largest, mrad.
     pub max_mrad: f64,
 }
 
+/// Statistics of the signed error along each axis of {W}.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PerAxisOut {
+    /// Along X of {W}.
     pub x: AxisOut,
+    /// Along Y of {W}.
     pub y: AxisOut,
+    /// Along Z of {W}.
     pub z: AxisOut,
 }
 
+/// Statistics of the signed error along one axis of {W}, mm.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct AxisOut {
+    /// Mean signed error, mm.
     pub mean_mm: f64,
+    /// Sample standard deviation (divisor n − 1), mm.
     pub std_mm: f64,
+    /// Smallest (most negative) signed error, mm.
     pub min_mm: f64,
+    /// Largest signed error, mm.
     pub max_mm: f64,
+    /// Shapiro–Wilk W of the signed errors; `null` for fewer than 3 or more than 5000 values, or
+    /// all equal.
     pub shapiro_w: Option<f64>,
+    /// Its p-value (Royston); `null` with `shapiro_w`.
     pub shapiro_p: Option<f64>,
 }
 
+/// A Shapiro–Wilk normality test.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ShapiroOut {
+    /// W ≤ 1, close to 1 for a normal sample.
     pub w: f64,
+    /// Royston's p-value: a small p is evidence against normality.
     pub p: f64,
 }
 
 /// |error| = slope·distance + intercept.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FitOut {
+    /// Number of points.
     pub n: usize,
+    /// Slope, mm of |error| per mm of distance.
     pub slope_mm_per_mm: f64,
+    /// Standard error of the slope, mm per mm.
     pub slope_stderr_mm_per_mm: f64,
+    /// Intercept: |error| at distance 0, mm.
     pub intercept_mm: f64,
+    /// Pearson correlation coefficient.
     pub r: f64,
+    /// Coefficient of determination, r².
     pub r2: f64,
     /// Two-sided p-value of a zero slope.
     pub p: f64,
 }
 
+/// One measurement's errors.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ResidualOut {
+    /// The measurement's session, by name.
     pub session: String,
+    /// Index of the measurement within its session (0-based).
     pub index: usize,
-    /// Reference − calibrated model, {W}.
+    /// Reference − calibrated model, {W}, mm.
     pub error_mm: [f64; 3],
+    /// |error_mm|, mm.
     pub error_norm_mm: f64,
-    /// Reference − nominal model, {W}.
+    /// Reference − nominal model, {W}, mm.
     pub nominal_error_mm: [f64; 3],
+    /// |nominal_error_mm|, mm.
     pub nominal_error_norm_mm: f64,
+    /// Orientation error of the calibrated model (angle of R_ref·R_modelᵀ), mrad; absent unless
+    /// a full pose was measured and the reference is measured.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub orientation_error_mrad: Option<f64>,
+    /// The same for the nominal model, mrad.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub nominal_orientation_error_mrad: Option<f64>,
-    /// The reference position (measured or true), {W}. `None`: not recorded (a document stored
-    /// before 2026-11-24).
+    /// The reference position (measured or true), {W}, mm. `None`: not recorded (a document
+    /// stored before 2026-11-24).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub position_mm: Option<[f64; 3]>,
+    /// Distance of the reference position to the base origin, mm.
     pub distance_to_base_mm: f64,
+    /// Distance of the reference position to the artefact's ball centroid, mm; `null` without
+    /// an artefact.
     pub distance_to_zone_mm: Option<f64>,
 }
 
 impl ValidationOut {
+    /// The wire form of a report, with one row per measurement when `include_residuals`; every
+    /// field of this version is written except `uncertainty` (see [`report_to_json_with`]).
     pub fn from_report(r: &ValidationReport, include_residuals: bool) -> Self {
         let held_out = r.held_out();
         let fit = r.fit.clone().unwrap_or_default();
@@ -263,6 +333,7 @@ impl ValidationOut {
 }
 
 impl ModelErrorsOut {
+    /// The wire form of one model's errors, in mm and mrad.
     pub fn from_errors(e: &ModelErrors) -> Self {
         let p = &e.position;
         Self {
