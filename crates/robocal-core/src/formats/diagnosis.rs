@@ -1,6 +1,7 @@
 //! The diagnosis on the wire: the report in millimetres and degrees with the unit in every field
-//! name (its options as given are [`super::diagnosis_spec`]'s, re-exported here). Top-level keys: `verdict`, `decomposition`, `where`, `candidates`, `shrink`
-//! (and `rounds`, `unavailable`, `model`, `sessions`, `notes`).
+//! name (its options as given are [`super::diagnosis_spec`]'s, re-exported here). Top-level keys:
+//! `verdict`, `decomposition`, `where`, `candidates`, `shrink` (and `rounds`, `unavailable`,
+//! `model`, `sessions`, `transfer`, `evidence`, `notes`).
 
 use serde::{Deserialize, Serialize};
 
@@ -16,11 +17,17 @@ use crate::kinematics::{Param, Unit};
 use crate::units::{DEG, MM, OUT_DEG, round_to};
 use crate::validate::stats::ErrorStats;
 
+/// A diagnosis report: what the calibrated model misses, where, and which named effects
+/// (DIAGNOSIS.md's library) explain it on held-out poses, in mm and degrees.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct DiagnosisOut {
+    /// What the diagnosis concludes.
     pub verdict: VerdictOut,
+    /// The starting model's error decomposed: calibrated, held out, noise floor.
     pub decomposition: DecompositionOut,
+    /// Where the starting model misses (`where`): per axis, against configuration variables,
+    /// per workspace voxel.
     #[serde(rename = "where")]
     pub location: WhereOut,
     /// Every candidate of every round, with its screening statistics and, for the ones
@@ -28,11 +35,13 @@ pub struct DiagnosisOut {
     pub candidates: Vec<CandidateOut>,
     /// From the starting model to the last accepted one: held-out figures of each.
     pub shrink: Vec<ShrinkOut>,
+    /// The rounds of the search, in order, each with its decision.
     pub rounds: Vec<RoundOut>,
     /// Candidates these data cannot test, and why.
     pub unavailable: Vec<UnavailableOut>,
     /// The final model as `identify --model` options.
     pub model: String,
+    /// The sessions used and how they were cross-validated.
     pub sessions: SessionsOut,
     /// The starting and the final model carried to other sessions (base and tools refitted).
     pub transfer: Vec<TransferOut>,
@@ -41,6 +50,8 @@ pub struct DiagnosisOut {
     /// residual after it (binned). Absent in a diagnosis stored before this field.
     #[serde(default)]
     pub evidence: Vec<EvidenceOut>,
+    /// Remarks in words: where the approach directions came from, a starting model that did not
+    /// converge, what accepting fits.
     pub notes: Vec<String>,
 }
 
@@ -63,6 +74,7 @@ pub struct EvidenceOut {
     pub explained_share: Option<f64>,
     /// Poses used: tested poses where joint j moves the TCP by at least a fifth of the median.
     pub n: usize,
+    /// The residuals binned along the x axis.
     pub bins: Vec<EvidenceBinOut>,
 }
 
@@ -72,6 +84,7 @@ pub struct EvidenceOut {
 pub struct EvidenceBinOut {
     /// The bin's centre on the x axis (the variable's unit).
     pub at: f64,
+    /// Poses in the bin.
     pub n: usize,
     /// Mean of the held-out residual before the effect, as the joint angle that explains it best.
     pub before_deg: f64,
@@ -84,15 +97,23 @@ pub struct EvidenceBinOut {
     pub after_deg: f64,
 }
 
+/// A model carried to another set-up's session: its base and tools refitted there, its position
+/// errors on that session.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct TransferOut {
+    /// The transfer session, by name.
     pub session: String,
     /// `start`, `start + <effect> + …` (an intermediate model of the search, with the first
     /// effects accepted) or `final` (every accepted effect, fitted on the pooled data).
     pub model: String,
+    /// Position |e| statistics of the model on the session, mm; `null` when the refit or its
+    /// validation failed (then `error` says why).
     pub errors: Option<StatsOut>,
+    /// Why the refit or its validation failed; `null` when it did not.
     pub error: Option<String>,
+    /// Condition number κ of the column-scaled Jacobian of the base-and-tools refit; `null` when
+    /// not known.
     pub kappa_scaled: Option<f64>,
     /// The errors split by whether the pose lies inside the joint ranges the model was identified
     /// on: outside them a table, harmonic or compliance term is extrapolated, and the transfer
@@ -118,24 +139,35 @@ pub struct JointRangeSplitOut {
     pub outside: Option<StatsOut>,
 }
 
+/// The sessions a diagnosis used.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct SessionsOut {
+    /// The identification sessions, by name.
     pub identification: Vec<String>,
+    /// The validation sessions, by name (empty: cross-validated on the identification sessions).
     pub validation: Vec<String>,
     /// Whose poses the folds test: `validation`, or `identification` when there is none.
     pub tested: String,
+    /// K of the grouped K-fold cross-validation.
     pub folds: usize,
 }
 
+/// What a diagnosis concludes.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct VerdictOut {
+    /// `named`, `none`, `not_separable`, `unknown_effect` or `partial`.
     pub status: Status,
+    /// The verdict in a sentence or two.
     pub summary: String,
     /// Named effects, most important first; for `not_separable`, the suspects.
     pub effects: Vec<EffectOut>,
+    /// For `not_separable`: a look-alike the data cannot tell from the best candidate; `null`
+    /// otherwise.
     pub lookalike: Option<CandidateRef>,
+    /// For `not_separable` with a look-alike: the largest canonical correlation between the
+    /// unabsorbed columns of the two; `null` otherwise.
     pub canonical_correlation: Option<f64>,
     /// Model parameters that absorb the suspect.
     pub absorbed_by: Vec<AbsorbedOut>,
@@ -148,16 +180,21 @@ pub struct VerdictOut {
     pub approach_source: Option<String>,
 }
 
+/// What remains after the named effects, as another verdict.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct RemainingOut {
+    /// The remainder's status (`unknown_effect`, `partial`, …).
     pub status: Status,
+    /// The remainder in words.
     pub summary: String,
 }
 
+/// A model parameter that absorbs part of a candidate.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct AbsorbedOut {
+    /// The parameter's name (e.g. `theta3`).
     pub parameter: String,
     /// Share of the candidate the parameter absorbs.
     pub share: f64,
@@ -170,6 +207,7 @@ pub struct CandidateRef {
     /// hayati_beta, compliance, compliance_cubic, cyclic, joint_map, backlash, thermal, coupling,
     /// tool_mass, base, tool.
     pub name: String,
+    /// A short human label: `cyclic j2 h1`, `coupling 5→6`, `joint_map j3 (3° knots)`.
     pub label: String,
     /// The joint it acts on (1-based): the corrected joint, the coupling's destination, the
     /// Hayati joint (β of `beta{j−1}` tilts joint j), the tool's index (1-based) for `tool`.
@@ -186,18 +224,25 @@ pub struct CandidateRef {
     pub step_deg: Option<u8>,
 }
 
+/// A named effect (or, for `not_separable`, a suspect) with its size and evidence.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct EffectOut {
+    /// Which candidate (flattened).
     #[serde(flatten)]
     pub which: CandidateRef,
     /// The effect's size in `unit`: cyclic amplitude, backlash half-play, table RMS, α, kg, …
     pub estimate: Option<f64>,
+    /// Standard deviation of `estimate`, in `unit`; `null` where not known (a suspect, a table).
     pub std: Option<f64>,
+    /// The unit of `estimate` and `std` (`deg`, `mm`, `deg/(N·m)`, `ppm/K`, `kg`, …).
     pub unit: String,
+    /// Its parameters: as fitted in the model that accepted it, or the screening's linear
+    /// estimates for a suspect.
     pub parameters: Vec<ParamOut>,
-    /// Held-out gain when it is added: mean and RMS of |e|, mm.
+    /// Held-out gain when it is added: mean |e| before minus after, mm.
     pub gain_mean_mm: f64,
+    /// Held-out gain when it is added: RMS of |e| before minus after, mm.
     pub gain_rms_mm: f64,
     /// One-sided Wilcoxon p-value of the held-out confirmation.
     pub confirm_p: Option<f64>,
@@ -207,12 +252,17 @@ pub struct EffectOut {
     pub separability: f64,
 }
 
+/// One parameter of an effect.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct ParamOut {
+    /// The parameter's name, as in parameter-set files (e.g. `cyc2_h1_sin`, `backlash3`).
     pub name: String,
+    /// Its value, in `unit`.
     pub estimate: f64,
+    /// Its standard deviation, in `unit`; `null` for a suspect or a parameter held fixed.
     pub std: Option<f64>,
+    /// The unit of `estimate` and `std`.
     pub unit: String,
 }
 
@@ -221,63 +271,88 @@ pub struct ParamOut {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct StatsOut {
+    /// Number of poses (observations).
     pub n: usize,
+    /// The figures, mm (flattened).
     #[serde(flatten)]
     pub figures: ErrorFigures,
 }
 
+/// The noise floor: the |e| the instrument and the robot's repeatability alone would give at the
+/// tested positions, mm.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct FloorOut {
+    /// Mean |e| under the floor (Monte Carlo), mm.
     pub mean_mm: f64,
+    /// RMS of |e| under the floor (exact), mm.
     pub rms_mm: f64,
+    /// 95th percentile of |e| under the floor (Monte Carlo), mm.
     pub p95_mm: f64,
-    /// Mean instrument-and-repeatability σ per axis.
+    /// Mean instrument-and-repeatability σ per axis, mm.
     pub instrument_sigma_mm: f64,
-    /// RMS of σ_pred(q) from the parameter covariance.
+    /// RMS of σ_pred(q) from the parameter covariance, mm.
     pub prediction_rms_mm: f64,
 }
 
+/// The starting model's error decomposed into coverage, missing physics and noise.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct DecompositionOut {
-    /// The parameter set as given, on the validation poses (no refit).
+    /// The parameter set as given, on the validation poses (no refit); `null` without validation
+    /// sessions.
     pub calibrated: Option<StatsOut>,
     /// The starting model, cross-validated (trained on the identification data and the other
     /// folds of the validation poses).
     pub heldout: StatsOut,
+    /// The noise floor at the tested positions.
     pub floor: FloorOut,
-    /// calibrated − held-out mean: what the calibration poses' coverage explains.
+    /// calibrated − held-out mean, mm: what the calibration poses' coverage explains; `null`
+    /// without validation sessions.
     pub extrapolation_gap_mm: Option<f64>,
-    /// held-out − floor mean: what missing physics explains; gap closure is measured against it.
+    /// held-out − floor mean, mm: what missing physics explains; gap closure is measured against
+    /// it.
     pub unmodelled_gap_mm: f64,
 }
 
+/// The held-out signed error along one axis of {W}.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct AxisOut {
+    /// Mean signed error, mm.
     pub mean_mm: f64,
+    /// Sample standard deviation (divisor n − 1), mm.
     pub std_mm: f64,
+    /// Shapiro–Wilk p-value of the signed errors (H0: normal); `null` when the test refuses the
+    /// sample (fewer than 3 or more than 5000 values, or all equal).
     pub shapiro_p: Option<f64>,
 }
 
+/// The held-out signed error along each axis of {W}.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct PerAxisOut {
+    /// Along X of {W}.
     pub x: AxisOut,
+    /// Along Y of {W}.
     pub y: AxisOut,
+    /// Along Z of {W}.
     pub z: AxisOut,
 }
 
+/// One bin of an error profile.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct BinOut {
     /// Bin centre in the variable's unit.
     pub at: f64,
+    /// Mean |e| of the bin's poses, mm.
     pub mean_mm: f64,
+    /// Poses in the bin.
     pub n: usize,
 }
 
+/// The held-out |e| of the starting model against one configuration variable.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct AgainstOut {
@@ -286,114 +361,172 @@ pub struct AgainstOut {
     pub variable: String,
     /// The variable's unit: mm, deg, N·m.
     pub unit: String,
+    /// Pearson correlation of |e| with the variable; `null` when the line cannot be fitted
+    /// (n < 3, zero variance).
     pub r: Option<f64>,
+    /// Coefficient of determination, r²; `null` with `r`.
     pub r2: Option<f64>,
-    /// mm of |e| per unit of the variable.
+    /// mm of |e| per unit of the variable (least squares); `null` with `r`.
     pub slope: Option<f64>,
+    /// Two-sided p-value of a zero slope; `null` with `r`.
     pub p_value: Option<f64>,
+    /// Mean |e| over equal-count bins of the variable.
     pub profile: Vec<BinOut>,
 }
 
+/// A workspace voxel whose held-out error stands above the noise floor.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct VoxelOut {
+    /// Centre of the voxel in {W}, mm.
     pub centre_mm: [f64; 3],
+    /// Tested positions in the voxel.
     pub n: usize,
+    /// Mean |e| of its positions, mm.
     pub mean_mm: f64,
+    /// The floor's mean |e| there, mm.
     pub floor_mean_mm: f64,
+    /// Uncorrected p-value of "the errors in this voxel are the floor's" (χ² test).
     pub p: f64,
     /// Benjamini–Hochberg q-value.
     pub q: f64,
 }
 
+/// The voxel tests of the workspace.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct VoxelsOut {
+    /// Edge of the voxels, mm.
     pub size_mm: f64,
+    /// Number of voxels tested.
     pub tested: usize,
     /// Voxels whose error stands above the floor at the false-discovery rate, worst first.
     pub above_floor: Vec<VoxelOut>,
 }
 
+/// Where the starting model misses.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct WhereOut {
     /// The residuals used: held-out errors of the starting model at the tested poses.
     pub n: usize,
+    /// Signed error statistics along X, Y and Z of {W}.
     pub per_axis: PerAxisOut,
+    /// |e| against each configuration variable.
     pub against: Vec<AgainstOut>,
+    /// Workspace voxels tested against the floor.
     pub voxels: VoxelsOut,
 }
 
+/// A candidate's held-out figures: the model plus the candidate against the model alone, on the
+/// linearised folds.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct HeldoutOut {
+    /// Mean |e| of the model minus that with the candidate, mm.
     pub gain_mean_mm: f64,
+    /// RMS of |e| of the model minus that with the candidate, mm.
     pub gain_rms_mm: f64,
+    /// One-sided Wilcoxon signed-rank p-value that the candidate lowers the per-pose squared
+    /// error; `null` when the test cannot be run.
     pub p: Option<f64>,
     /// Share of the held-out variance above the floor it explains.
     pub share: f64,
+    /// Whether it confirms: Wilcoxon p below the confirmation level (Bonferroni over the round's
+    /// cross-validated candidates), RMS and mean gains above their thresholds.
     pub confirmed: bool,
 }
 
+/// One candidate of one round: its score test on the round's model and, when cross-validated,
+/// its held-out figures.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct CandidateOut {
     /// Search round (1-based).
     pub round: usize,
+    /// Which candidate (flattened).
     #[serde(flatten)]
     pub which: CandidateRef,
     /// S: drop of the weighted RSS if added (score statistic).
     pub statistic: f64,
+    /// Degrees of freedom d of the test (rank of the candidate's unabsorbed columns, or effective
+    /// for a regularised candidate).
     pub dof: f64,
+    /// F = (S/d)/((RSS − S)/(n − p − d)); 0 without a testable direction.
     pub f: f64,
+    /// log10 of the uncorrected p-value (times the scan's multiplicity for a scanned frequency).
     pub log10_p: f64,
     /// Holm-corrected p-value (and its log10, which stays meaningful below 1e-300).
     pub p_holm: f64,
+    /// log10 of the Holm-corrected p-value.
     pub log10_p_holm: f64,
+    /// Whether the Holm-corrected p is below `alpha` (and the candidate has a testable direction).
     pub significant: bool,
+    /// Separability ρ = ‖J̃_k‖_F/‖J_k‖_F: the share of its columns the model cannot absorb (0:
+    /// absorbed; 1: orthogonal to the model).
     pub separability: f64,
+    /// BIC gain n·ln(RSS/(RSS − S)) − d·ln n, the ranking (0 when not finite).
     pub bic_gain: f64,
+    /// Held-out figures; `null` when the candidate was not cross-validated this round.
     pub heldout: Option<HeldoutOut>,
+    /// The model parameters that absorb most of it (at most three, each above 5 %).
     pub absorbed_by: Vec<AbsorbedOut>,
 }
 
+/// Held-out figures of one model of the search: the starting model or one with the first
+/// accepted effects, refitted in full on the folds.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct ShrinkOut {
     /// `start`, then `start + …` with each accepted effect.
     pub model: String,
+    /// The effects added to the starting model, by label (empty for `start`).
     pub effects: Vec<String>,
+    /// Number of tested observations.
     pub n: usize,
+    /// Mean held-out |e|, mm.
     pub mean_mm: f64,
+    /// RMS of held-out |e|, mm.
     pub rms_mm: f64,
+    /// 95th percentile of held-out |e|, mm.
     pub p95_mm: f64,
+    /// Largest held-out |e|, mm.
     pub max_mm: f64,
-    /// (E_start − E)/(E_start − E_floor) on the mean.
+    /// (E_start − E)/(E_start − E_floor) on the mean; `null` for the starting model.
     pub gap_closure: Option<f64>,
 }
 
+/// One round of the search and what it decided.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct RoundOut {
+    /// The round (1-based).
     pub round: usize,
     /// `accept`, `nothing`, `not_separable`, `unknown_effect`, `partial` (the best candidate explains a
     /// minority of what a smooth function explains) or `refuted` (confirmed on linearised folds, not
     /// by the model refitted in full on them).
     pub decision: String,
+    /// The label of the candidate the decision is about; `null` for `nothing` (and for
+    /// `unknown_effect` when no candidate confirmed).
     pub candidate: Option<String>,
-    /// The smoother (a generic joint-space correction) against the round's model.
+    /// The smoother (a generic joint-space correction) against the round's model: its held-out
+    /// RMS gain, mm.
     pub smoother_gain_rms_mm: f64,
+    /// One-sided Wilcoxon p-value that the smoother beats the round's model; `null` when the test
+    /// cannot be run.
     pub smoother_p: Option<f64>,
     /// Why a `refuted` round's candidate was not named: the linearised and the refitted gains.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
 }
 
+/// A kind of candidate these data cannot test.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct UnavailableOut {
+    /// The kind (`backlash`, `thermal`, …).
     pub name: String,
+    /// Why, in a clause.
     pub reason: String,
 }
 
@@ -411,6 +544,7 @@ fn floor_out(f: &Floor) -> FloorOut {
     }
 }
 
+/// The wire form of a candidate: its kind, label and place (joints 1-based).
 pub fn candidate_ref(c: &Candidate) -> CandidateRef {
     let q = c.quarters;
     CandidateRef {
@@ -555,6 +689,7 @@ fn model_spec(d: &Diagnosis) -> String {
     items.join(",")
 }
 
+/// The wire form of a diagnosis, in mm and degrees, with its notes.
 pub fn diagnosis_out(d: &Diagnosis) -> DiagnosisOut {
     let v = &d.verdict;
     let verdict = VerdictOut {
