@@ -87,7 +87,8 @@ impl PoseXyzAbc {
     }
 }
 
-/// The measured distances between the artefact's ball centres, mm; they must form a triangle.
+/// The measured distances between the artefact's ball centres, mm; they must form a triangle
+/// (not nearly collinear).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
@@ -112,7 +113,8 @@ pub enum ArtefactKind {
     BallTriangle,
 }
 
-/// The artefact of a cell: three balls whose centres define {W} (thesis eq. 4.3–4.7).
+/// The artefact of a cell: three balls on a plate whose centres define the world frame {W}
+/// (ball 1 at the origin, ball 2 on +X, ball 3 in the XY plane; thesis eq. 4.3–4.7).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
@@ -332,8 +334,8 @@ pub struct MeasurementSpec {
     /// The artefact's ball the TCP was centred on (1, 2 or 3); trical sessions only.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ball: Option<usize>,
-    /// The measured TCP position in {W}, mm (within 3 × the robot's reach of the base guess, and
-    /// ±100 000); laser-tracker sessions only.
+    /// The measured TCP position in {W}, mm (±100 000, and within 3 × the robot's reach of the
+    /// base guess when there is one); laser-tracker sessions only.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub position_mm: Option<[f64; 3]>,

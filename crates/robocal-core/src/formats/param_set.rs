@@ -32,8 +32,9 @@ pub struct ParamEntry {
     /// The value, in `unit` (within ±100 000 mm, ±360 deg, ±5 000 kg, else ±1e6; a compliance
     /// within ±57 deg/(N·m)).
     pub value: f64,
-    /// The nominal value, in `unit`; must agree with the robot's table (base and tool: the
-    /// cell's own). Absent: the table's value (base: `value` itself).
+    /// The nominal value, in `unit`; must agree with the robot's table (any value for the base
+    /// and tool, which are cell-specific). Absent: the table's (a tool parameter: `tool`'s; a base
+    /// parameter: `value` itself).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub nominal: Option<f64>,
     /// The unit of `value`, `nominal` and `std` (`mm`, `deg`, `deg/(N·m)`, `kg`, `ppm/K`, …);

@@ -84,9 +84,9 @@ pub struct CustomRobotSpec {
 #[serde(rename_all = "lowercase")]
 #[allow(dead_code)] // a schema only: presets are parsed by `Preset::from_name`
 pub enum PresetName {
-    /// The ABB IRB 120 (the thesis's robot), `irb120`.
+    /// ABB IRB 120, `irb120`.
     Irb120,
-    /// The Universal Robots UR10, `ur10`.
+    /// Universal Robots UR10 (CB3), `ur10`.
     Ur10,
 }
 
