@@ -55,7 +55,7 @@ pub struct ParamEntry {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct ParameterSetFile {
-    /// The robot: its nominal DH table and joints (a robot file).
+    /// The robot: `{"preset": "irb120"}` or a custom joint table (its nominal model).
     #[cfg_attr(feature = "openapi", schema(value_type = super::robot::RobotDoc))]
     pub robot: Value,
     /// The tool the set was identified with; absent: the bare flange.

@@ -303,8 +303,8 @@ pub struct ResidualOut {
 }
 
 impl ValidationOut {
-    /// The wire form of a report, with one row per measurement when `include_residuals`; every
-    /// field of this version is written except `uncertainty` (see [`report_to_json_with`]).
+    /// The wire form of a report, with one row per measurement when `include_residuals`;
+    /// `uncertainty` is left absent (see [`report_to_json_with`]).
     pub fn from_report(r: &ValidationReport, include_residuals: bool) -> Self {
         let held_out = r.held_out();
         let fit = r.fit.clone().unwrap_or_default();
