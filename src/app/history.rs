@@ -109,7 +109,7 @@ fn fit_sessions(doc_json: &str, listed: &[String]) -> Result<Vec<String>, serde_
     }
     #[derive(serde::Deserialize)]
     struct Quality {
-        /// `null` in a report written back without them.
+        /// Absent or `null` where a report does not record them (an imported table, an older file).
         #[serde(default)]
         sessions: Option<Vec<String>>,
     }

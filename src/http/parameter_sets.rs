@@ -92,7 +92,8 @@ struct QualityOnly {
 
 #[derive(Deserialize)]
 struct QualityFields {
-    /// The sessions fitted on (`null` in a report written back without them).
+    /// The sessions fitted on; absent or `null` where a report does not record them (an imported
+    /// table, an older file).
     #[serde(default)]
     sessions: Option<Vec<String>>,
     #[serde(default)]
