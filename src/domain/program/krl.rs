@@ -453,276 +453,348 @@ fn named(mut e: ProgramError, name: &str) -> ProgramError {
     e
 }
 
+/// A `.src` + `.dat` pair read in three steps: the `.dat`'s declarations, the `.src`'s tools,
+/// bases and motions in text order, then the `.dat`'s points as targets with the tool and base of
+/// the motions that use them.
 fn parse_pair(files: &[ProgramFile], pair: &Pair, parsed: &mut Parsed) -> Result<(), ProgramError> {
-    // The .dat: its declarations by lower-case name, in order.
-    let mut decls: Vec<(String, DatDecl)> = Vec::new();
-    let mut arrays: HashMap<String, String> = HashMap::new();
-    let mut fdats: HashMap<String, (Option<String>, Option<String>)> = HashMap::new();
-    let dat_reader = match pair.dat {
-        Some(d) => {
-            let f = &files[d];
-            Some(Reader { file: &f.name, bytes: &f.bytes, toks: lex::tokenize(&f.bytes, &SYNTAX, &f.name)? })
-        }
-        None => None,
+    let dat = read_dat(files, pair)?;
+    let src = match pair.src {
+        Some(s) => read_src(files, s, &dat, parsed)?,
+        None => SrcUses::new(dat.decls.len()),
     };
-    if let Some(r) = &dat_reader {
-        for (a, b) in r.statements() {
-            let mut k = a;
-            while k < b && matches!(r.text(k).as_str(), "decl" | "global" | "const") && r.toks[k].kind == Tok::Ident {
-                k += 1;
-            }
-            if k + 1 >= b || r.toks[k].kind != Tok::Ident {
+    let decl_target = dat_targets(pair, &dat, &src, parsed)?;
+    for s in src.sequence {
+        match s {
+            Ok(d) => parsed.sequence.extend(decl_target[d]),
+            Err(i) => parsed.sequence.push(i),
+        }
+    }
+    Ok(())
+}
+
+/// The FDAT values a `.dat` declares: its `TOOL_NO` and `BASE_NO`, each where given.
+type Fdat = (Option<String>, Option<String>);
+
+/// What a `.dat` declares.
+struct Dat<'a> {
+    /// Its reader (none without a `.dat`).
+    reader: Option<Reader<'a>>,
+    /// Its points and frames by name (as written), in order.
+    decls: Vec<(String, DatDecl)>,
+    /// Its FDATs by lower-case name.
+    fdats: HashMap<String, Fdat>,
+    /// Lower-case name → index in `decls`.
+    index: HashMap<String, usize>,
+}
+
+/// Reads the pair's `.dat`: its declarations of interest by name, in order; a name declared twice
+/// is an error.
+fn read_dat<'a>(files: &'a [ProgramFile], pair: &Pair) -> Result<Dat<'a>, ProgramError> {
+    let mut dat = Dat { reader: None, decls: Vec::new(), fdats: HashMap::new(), index: HashMap::new() };
+    let Some(d) = pair.dat else { return Ok(dat) };
+    let f = &files[d];
+    let r = Reader { file: &f.name, bytes: &f.bytes, toks: lex::tokenize(&f.bytes, &SYNTAX, &f.name)? };
+    let mut arrays: HashMap<String, String> = HashMap::new();
+    for (a, b) in r.statements() {
+        let mut k = a;
+        while k < b && matches!(r.text(k).as_str(), "decl" | "global" | "const") && r.toks[k].kind == Tok::Ident {
+            k += 1;
+        }
+        if k + 1 >= b || r.toks[k].kind != Tok::Ident {
+            continue;
+        }
+        let first = r.text(k);
+        let interesting = |t: &str| POSE_TYPES.contains(&t) || JOINT_TYPES.contains(&t) || t == "fdat";
+        if interesting(&first) && r.toks[k + 1].kind == Tok::Ident {
+            let name = lex::latin1(r.toks[k + 1].text(r.bytes));
+            let lname = name.to_ascii_lowercase();
+            let mut i = k + 2;
+            if r.toks.get(i).is_some_and(|t| t.is(b'[')) && i < b {
+                arrays.insert(lname, first);
                 continue;
             }
-            let first = r.text(k);
-            let interesting = |t: &str| POSE_TYPES.contains(&t) || JOINT_TYPES.contains(&t) || t == "fdat";
-            if interesting(&first) && r.toks[k + 1].kind == Tok::Ident {
-                let name = lex::latin1(r.toks[k + 1].text(r.bytes));
-                let lname = name.to_ascii_lowercase();
-                let mut i = k + 2;
-                if r.toks.get(i).is_some_and(|t| t.is(b'[')) && i < b {
-                    arrays.insert(lname, first);
-                    continue;
-                }
-                if !(i < b && r.toks[i].is(b'=')) {
-                    continue;
-                }
+            if !(i < b && r.toks[i].is(b'=')) {
+                continue;
+            }
+            i += 1;
+            if !(i < b && r.toks[i].is(b'{')) {
+                return Err(ProgramError::new(r.file, r.toks[k].line, format!("{name}: expected '{{' after '='")));
+            }
+            let agg = r.agg(&mut i, b).map_err(|e| named(e, &name))?;
+            if i != b {
+                return Err(ProgramError::new(
+                    r.file,
+                    r.toks[k].line,
+                    format!("{name}: unexpected text after the value"),
+                ));
+            }
+            if first == "fdat" {
+                let num = |key: &str| agg.num(key).map(|(_, v)| format!("{v}"));
+                dat.fdats.insert(lname, (num("tool_no"), num("base_no")));
+            } else {
+                dat.decls.push((name, DatDecl { type_: first, agg }));
+            }
+        } else if r.toks[k + 1].is(b'[') {
+            // An array element: NAME[i] = {…} (or NAME[i,j]).
+            let Some(type_) = arrays.get(&first).cloned() else { continue };
+            let mut i = k + 2;
+            while i < b && !r.toks[i].is(b']') {
                 i += 1;
-                if !(i < b && r.toks[i].is(b'{')) {
-                    return Err(ProgramError::new(r.file, r.toks[k].line, format!("{name}: expected '{{' after '='")));
-                }
-                let agg = r.agg(&mut i, b).map_err(|e| named(e, &name))?;
-                if i != b {
-                    return Err(ProgramError::new(
-                        r.file,
-                        r.toks[k].line,
-                        format!("{name}: unexpected text after the value"),
-                    ));
-                }
-                if first == "fdat" {
-                    let num = |key: &str| agg.num(key).map(|(_, v)| format!("{v}"));
-                    fdats.insert(lname, (num("tool_no"), num("base_no")));
-                } else {
-                    decls.push((name, DatDecl { type_: first, agg }));
-                }
-            } else if r.toks[k + 1].is(b'[') {
-                // An array element: NAME[i] = {…} (or NAME[i,j]).
-                let Some(type_) = arrays.get(&first).cloned() else { continue };
-                let mut i = k + 2;
-                while i < b && !r.toks[i].is(b']') {
-                    i += 1;
-                }
-                if i + 2 >= b || !r.toks[i + 1].is(b'=') || !r.toks[i + 2].is(b'{') {
-                    continue;
-                }
-                let index = lex::latin1(&r.bytes[r.toks[k + 1].end..r.toks[i].start]);
-                let name = format!("{}[{}]", lex::latin1(r.toks[k].text(r.bytes)), index.replace(' ', ""));
-                let mut j = i + 2;
-                let agg = r.agg(&mut j, b).map_err(|e| named(e, &name))?;
-                if type_ != "fdat" {
-                    decls.push((name, DatDecl { type_, agg }));
-                }
+            }
+            if i + 2 >= b || !r.toks[i + 1].is(b'=') || !r.toks[i + 2].is(b'{') {
+                continue;
+            }
+            let index = lex::latin1(&r.bytes[r.toks[k + 1].end..r.toks[i].start]);
+            let name = format!("{}[{}]", lex::latin1(r.toks[k].text(r.bytes)), index.replace(' ', ""));
+            let mut j = i + 2;
+            let agg = r.agg(&mut j, b).map_err(|e| named(e, &name))?;
+            if type_ != "fdat" {
+                dat.decls.push((name, DatDecl { type_, agg }));
             }
         }
     }
-    let mut dat_index: HashMap<String, usize> = HashMap::new();
-    for (k, (n, d)) in decls.iter().enumerate() {
-        if let Some(first) = dat_index.insert(n.to_ascii_lowercase(), k) {
-            let r = dat_reader.as_ref().expect("declarations come from a .dat");
+    for (k, (n, d)) in dat.decls.iter().enumerate() {
+        if let Some(first) = dat.index.insert(n.to_ascii_lowercase(), k) {
             return Err(ProgramError::new(
                 r.file,
                 d.agg.line,
-                format!("{n} is declared twice (lines {} and {})", decls[first].1.agg.line, d.agg.line),
+                format!("{n} is declared twice (lines {} and {})", dat.decls[first].1.agg.line, d.agg.line),
             ));
         }
     }
-    // The .src: tools, bases and motions in text order.
-    let mut uses: Vec<Vec<(Active, Active, usize)>> = vec![Vec::new(); decls.len()];
-    let mut frame_tools: HashMap<String, usize> = HashMap::new();
-    let mut frame_bases: HashMap<String, usize> = HashMap::new();
-    let mut sequence: Vec<Result<usize, usize>> = Vec::new(); // Ok(decl), Err(inline target index)
-    if let Some(s) = pair.src {
-        let f = &files[s];
-        let r = Reader { file: &f.name, bytes: &f.bytes, toks: lex::tokenize(&f.bytes, &SYNTAX, &f.name)? };
-        let nothing =
-            |what: &str| Active::Missing(format!("no {what} is set before it in the .src (FDAT_ACT, ${what} or BAS)"));
-        let mut tool = nothing("TOOL");
-        let mut base = nothing("BASE");
-        for (a, b) in r.statements() {
-            let first = r.text(a);
-            let line = r.toks[a].line;
-            let assign = b > a + 2 && r.toks[a + 1].is(b'=');
-            match first.as_str() {
-                "$tool" | "$base" if assign => {
-                    let is_tool = first == "$tool";
-                    let (data, null) = if is_tool {
-                        ("tool_data", ["$nullframe", ""])
-                    } else {
-                        ("base_data", ["$nullframe", "$world"])
-                    };
-                    let rhs = a + 2;
-                    let value = if r.toks[rhs].is(b'{') {
-                        let mut i = rhs;
-                        let agg = r.agg(&mut i, b)?;
-                        match frame_of(&agg) {
-                            Some(fr) if i == b => Active::Inline(fr),
-                            _ => Active::Missing(format!(
-                                "{} is set by an expression on line {line}",
-                                first.to_ascii_uppercase()
-                            )),
-                        }
-                    } else if r.toks[rhs].kind == Tok::Ident && b == rhs + 1 {
-                        let n = r.text(rhs);
-                        if null.contains(&n.as_str()) {
-                            Active::Identity
-                        } else {
-                            let map = if is_tool { &mut frame_tools } else { &mut frame_bases };
-                            map.entry(n.clone()).or_insert(line);
-                            Active::Name(n)
-                        }
-                    } else if b == rhs + 4
-                        && r.text(rhs) == data
-                        && r.toks[rhs + 1].is(b'[')
-                        && r.toks[rhs + 2].kind == Tok::Number
-                        && r.toks[rhs + 3].is(b']')
-                    {
-                        Active::number(&lex::latin1(r.toks[rhs + 2].text(r.bytes)))
-                    } else {
-                        Active::Missing(format!(
-                            "{} is set by an expression on line {line}",
-                            first.to_ascii_uppercase()
-                        ))
-                    };
-                    if is_tool { tool = value } else { base = value }
-                }
-                "fdat_act" if assign && b == a + 3 && r.toks[a + 2].kind == Tok::Ident => {
-                    let n = r.text(a + 2);
-                    match fdats.get(&n) {
-                        Some((t, bn)) => {
-                            tool = t.as_deref().map_or_else(
-                                || Active::Missing(format!("{} has no TOOL_NO", n.to_ascii_uppercase())),
-                                Active::number,
-                            );
-                            base = bn.as_deref().map_or_else(
-                                || Active::Missing(format!("{} has no BASE_NO", n.to_ascii_uppercase())),
-                                Active::number,
-                            );
-                        }
-                        None => {
-                            let why = format!("FDAT {} (line {line}) is not in the .dat", n.to_ascii_uppercase());
-                            tool = Active::Missing(why.clone());
-                            base = Active::Missing(why);
-                        }
-                    }
-                }
-                "bas" if b >= a + 6 && r.toks[a + 1].is(b'(') => {
-                    let which = r.text(a + 2);
-                    if r.toks[a + 3].is(b',') && r.toks[a + 4].kind == Tok::Number {
-                        let n = lex::latin1(r.toks[a + 4].text(r.bytes));
-                        match which.as_str() {
-                            "#tool" => tool = Active::number(&n),
-                            "#base" => base = Active::number(&n),
-                            _ => {}
-                        }
-                    }
-                }
-                m if MOTIONS.contains(&m) => {
-                    let mut i = a + 1;
-                    let count = if m.ends_with("circ") { 2 } else { 1 };
-                    for k in 0..count {
-                        if i >= b {
-                            return Err(ProgramError::new(
-                                r.file,
-                                line,
-                                format!("{}: a target is missing", first.to_ascii_uppercase()),
-                            ));
-                        }
-                        if k > 0 {
-                            if !r.toks[i].is(b',') {
-                                return Err(ProgramError::new(
-                                    r.file,
-                                    line,
-                                    format!("{}: expected ',' between its two targets", first.to_ascii_uppercase()),
-                                ));
-                            }
-                            i += 1;
-                        }
-                        if i < b && r.toks[i].is(b'{') {
-                            let agg = r.agg(&mut i, b)?;
-                            let joint = agg.items.iter().any(|(key, _)| key == "a1");
-                            let type_ = if joint { "e6axis" } else { "e6pos" };
-                            let label = format!(
-                                "{} (inline{})",
-                                first.to_ascii_uppercase(),
-                                if count == 2 { if k == 0 { ", auxiliary point" } else { ", end point" } } else { "" }
-                            );
-                            let mut t = target(s, &label, type_, &agg, &r)?;
-                            t.tool = tool.tool();
-                            t.base = if joint { Ref::Given(Frame::identity()) } else { base.base() };
-                            sequence.push(Err(parsed.targets.len()));
-                            parsed.targets.push(t);
-                        } else if i < b && r.toks[i].kind == Tok::Ident {
-                            let mut name = r.text(i);
-                            i += 1;
-                            if i < b && r.toks[i].is(b'[') {
-                                let open = i;
-                                while i < b && !r.toks[i].is(b']') {
-                                    i += 1;
-                                }
-                                if i >= b {
-                                    return Err(ProgramError::new(
-                                        r.file,
-                                        line,
-                                        format!("{name}: a '[' is not closed"),
-                                    ));
-                                }
-                                name = format!(
-                                    "{name}[{}]",
-                                    lex::latin1(&r.bytes[r.toks[open].end..r.toks[i].start])
-                                        .replace(' ', "")
-                                        .to_ascii_lowercase()
-                                );
-                                i += 1;
-                            }
-                            if let Some(&d) = dat_index.get(&name) {
-                                uses[d].push((tool.clone(), base.clone(), line));
-                                sequence.push(Ok(d));
-                            }
-                        } else {
-                            break;
-                        }
-                    }
-                }
-                _ => {}
-            }
+    dat.reader = Some(r);
+    Ok(dat)
+}
+
+/// What the `.src` says about the `.dat`'s declarations and its own inline targets.
+struct SrcUses {
+    /// Per declaration: the tool and base of each motion to it, with the motion's line.
+    uses: Vec<Vec<(Active, Active, usize)>>,
+    /// FRAME names set as `$TOOL`, with the first line that does.
+    frame_tools: HashMap<String, usize>,
+    /// FRAME names set as `$BASE`, with the first line that does.
+    frame_bases: HashMap<String, usize>,
+    /// The motions in text order: `Ok(declaration)` or `Err(inline target's index)`.
+    sequence: Vec<Result<usize, usize>>,
+}
+
+impl SrcUses {
+    fn new(n_decls: usize) -> SrcUses {
+        SrcUses {
+            uses: vec![Vec::new(); n_decls],
+            frame_tools: HashMap::new(),
+            frame_bases: HashMap::new(),
+            sequence: Vec::new(),
         }
     }
-    // The .dat's points become targets; FRAMEs used as $TOOL or $BASE are frames.
-    let mut decl_target: Vec<Option<usize>> = vec![None; decls.len()];
-    for (k, (name, d)) in decls.iter().enumerate() {
+}
+
+/// Reads the `.src` (file `s`) in text order: the tool and base each statement sets, and the
+/// motions with the tool and base active there. Inline targets go straight to `parsed`.
+fn read_src(files: &[ProgramFile], s: usize, dat: &Dat, parsed: &mut Parsed) -> Result<SrcUses, ProgramError> {
+    let mut out = SrcUses::new(dat.decls.len());
+    let f = &files[s];
+    let r = Reader { file: &f.name, bytes: &f.bytes, toks: lex::tokenize(&f.bytes, &SYNTAX, &f.name)? };
+    let nothing =
+        |what: &str| Active::Missing(format!("no {what} is set before it in the .src (FDAT_ACT, ${what} or BAS)"));
+    let mut tool = nothing("TOOL");
+    let mut base = nothing("BASE");
+    for (a, b) in r.statements() {
+        let first = r.text(a);
+        let line = r.toks[a].line;
+        let assign = b > a + 2 && r.toks[a + 1].is(b'=');
+        match first.as_str() {
+            "$tool" | "$base" if assign => {
+                let is_tool = first == "$tool";
+                let frames = if is_tool { &mut out.frame_tools } else { &mut out.frame_bases };
+                let value = frame_assignment(&r, a, b, is_tool, frames)?;
+                if is_tool { tool = value } else { base = value }
+            }
+            "fdat_act" if assign && b == a + 3 && r.toks[a + 2].kind == Tok::Ident => {
+                let n = r.text(a + 2);
+                match dat.fdats.get(&n) {
+                    Some((t, bn)) => {
+                        tool = t.as_deref().map_or_else(
+                            || Active::Missing(format!("{} has no TOOL_NO", n.to_ascii_uppercase())),
+                            Active::number,
+                        );
+                        base = bn.as_deref().map_or_else(
+                            || Active::Missing(format!("{} has no BASE_NO", n.to_ascii_uppercase())),
+                            Active::number,
+                        );
+                    }
+                    None => {
+                        let why = format!("FDAT {} (line {line}) is not in the .dat", n.to_ascii_uppercase());
+                        tool = Active::Missing(why.clone());
+                        base = Active::Missing(why);
+                    }
+                }
+            }
+            "bas" if b >= a + 6 && r.toks[a + 1].is(b'(') => {
+                let which = r.text(a + 2);
+                if r.toks[a + 3].is(b',') && r.toks[a + 4].kind == Tok::Number {
+                    let n = lex::latin1(r.toks[a + 4].text(r.bytes));
+                    match which.as_str() {
+                        "#tool" => tool = Active::number(&n),
+                        "#base" => base = Active::number(&n),
+                        _ => {}
+                    }
+                }
+            }
+            m if MOTIONS.contains(&m) => {
+                let at = Motion { r: &r, file: s, a, b, tool: &tool, base: &base };
+                motion(&at, dat, &mut out, parsed)?;
+            }
+            _ => {}
+        }
+    }
+    Ok(out)
+}
+
+/// The value of `$TOOL = …` or `$BASE = …` (statement `a..b`): an inline frame, `$NULLFRAME`
+/// (or `$WORLD` for a base), a FRAME's name (recorded in `named` with its line), `TOOL_DATA[n]` /
+/// `BASE_DATA[n]`, or unknown for any other expression.
+fn frame_assignment(
+    r: &Reader,
+    a: usize,
+    b: usize,
+    is_tool: bool,
+    named: &mut HashMap<String, usize>,
+) -> Result<Active, ProgramError> {
+    let first = r.text(a);
+    let line = r.toks[a].line;
+    let (data, null) =
+        if is_tool { ("tool_data", ["$nullframe", ""]) } else { ("base_data", ["$nullframe", "$world"]) };
+    let expression =
+        || Active::Missing(format!("{} is set by an expression on line {line}", first.to_ascii_uppercase()));
+    let rhs = a + 2;
+    Ok(if r.toks[rhs].is(b'{') {
+        let mut i = rhs;
+        let agg = r.agg(&mut i, b)?;
+        match frame_of(&agg) {
+            Some(fr) if i == b => Active::Inline(fr),
+            _ => expression(),
+        }
+    } else if r.toks[rhs].kind == Tok::Ident && b == rhs + 1 {
+        let n = r.text(rhs);
+        if null.contains(&n.as_str()) {
+            Active::Identity
+        } else {
+            named.entry(n.clone()).or_insert(line);
+            Active::Name(n)
+        }
+    } else if b == rhs + 4
+        && r.text(rhs) == data
+        && r.toks[rhs + 1].is(b'[')
+        && r.toks[rhs + 2].kind == Tok::Number
+        && r.toks[rhs + 3].is(b']')
+    {
+        Active::number(&lex::latin1(r.toks[rhs + 2].text(r.bytes)))
+    } else {
+        expression()
+    })
+}
+
+/// A motion statement of the `.src`, with the tool and base active there.
+struct Motion<'r, 'a> {
+    r: &'r Reader<'a>,
+    /// The `.src`'s file index.
+    file: usize,
+    /// The statement's first and one-past-last token.
+    a: usize,
+    b: usize,
+    tool: &'r Active,
+    base: &'r Active,
+}
+
+/// Reads one motion's target(s) (two for a CIRC): an inline aggregate becomes a target now; a
+/// name (or `NAME[i]`) declared in the `.dat` is recorded as used with the active tool and base.
+fn motion(m: &Motion, dat: &Dat, out: &mut SrcUses, parsed: &mut Parsed) -> Result<(), ProgramError> {
+    let r = m.r;
+    let (a, b) = (m.a, m.b);
+    let first = r.text(a);
+    let line = r.toks[a].line;
+    let upper = first.to_ascii_uppercase();
+    let mut i = a + 1;
+    let count = if first.ends_with("circ") { 2 } else { 1 };
+    for k in 0..count {
+        if i >= b {
+            return Err(ProgramError::new(r.file, line, format!("{upper}: a target is missing")));
+        }
+        if k > 0 {
+            if !r.toks[i].is(b',') {
+                return Err(ProgramError::new(r.file, line, format!("{upper}: expected ',' between its two targets")));
+            }
+            i += 1;
+        }
+        if i < b && r.toks[i].is(b'{') {
+            let agg = r.agg(&mut i, b)?;
+            let joint = agg.items.iter().any(|(key, _)| key == "a1");
+            let type_ = if joint { "e6axis" } else { "e6pos" };
+            let which = match (count, k) {
+                (2, 0) => ", auxiliary point",
+                (2, _) => ", end point",
+                _ => "",
+            };
+            let mut t = target(m.file, &format!("{upper} (inline{which})"), type_, &agg, r)?;
+            t.tool = m.tool.tool();
+            t.base = if joint { Ref::Given(Frame::identity()) } else { m.base.base() };
+            out.sequence.push(Err(parsed.targets.len()));
+            parsed.targets.push(t);
+        } else if i < b && r.toks[i].kind == Tok::Ident {
+            let mut name = r.text(i);
+            i += 1;
+            if i < b && r.toks[i].is(b'[') {
+                let open = i;
+                while i < b && !r.toks[i].is(b']') {
+                    i += 1;
+                }
+                if i >= b {
+                    return Err(ProgramError::new(r.file, line, format!("{name}: a '[' is not closed")));
+                }
+                let index = lex::latin1(&r.bytes[r.toks[open].end..r.toks[i].start]);
+                name = format!("{name}[{}]", index.replace(' ', "").to_ascii_lowercase());
+                i += 1;
+            }
+            if let Some(&d) = dat.index.get(&name) {
+                out.uses[d].push((m.tool.clone(), m.base.clone(), line));
+                out.sequence.push(Ok(d));
+            }
+        } else {
+            break;
+        }
+    }
+    Ok(())
+}
+
+/// The `.dat`'s points become targets (FRAMEs used as `$TOOL` or `$BASE` become frames): each with
+/// the tool and base of the motions that use it, else of its own FDAT. Returns each declaration's
+/// target index.
+fn dat_targets(pair: &Pair, dat: &Dat, src: &SrcUses, parsed: &mut Parsed) -> Result<Vec<Option<usize>>, ProgramError> {
+    let mut decl_target: Vec<Option<usize>> = vec![None; dat.decls.len()];
+    for (k, (name, d)) in dat.decls.iter().enumerate() {
         let lname = name.to_ascii_lowercase();
-        let dat = pair.dat.expect("declarations come from a .dat");
-        let r = dat_reader.as_ref().expect("a .dat reader");
+        let file = pair.dat.expect("declarations come from a .dat");
+        let r = dat.reader.as_ref().expect("a .dat reader");
         if d.type_ == "frame" {
             let frame = frame_of(&d.agg).ok_or_else(|| format!("{name}: a FRAME needs X, Y, Z, A, B, C"));
-            if frame_tools.contains_key(&lname) {
-                parsed.tools.insert(
-                    lname.clone(),
-                    Declared { value: frame.clone().map(|f| tool_of(&f)), file: dat, line: d.agg.line },
-                );
+            if src.frame_tools.contains_key(&lname) {
+                let value = frame.clone().map(|f| tool_of(&f));
+                parsed.tools.insert(lname.clone(), Declared { value, file, line: d.agg.line });
             }
-            if frame_bases.contains_key(&lname) {
-                parsed.bases.insert(lname.clone(), Declared { value: frame.clone(), file: dat, line: d.agg.line });
+            if src.frame_bases.contains_key(&lname) {
+                parsed.bases.insert(lname.clone(), Declared { value: frame.clone(), file, line: d.agg.line });
             }
-            if uses[k].is_empty() {
+            if src.uses[k].is_empty() {
                 continue; // a frame, not a point: no motion goes to it
             }
         }
-        let mut t = target(dat, name, &d.type_, &d.agg, r)?;
+        let mut t = target(file, name, &d.type_, &d.agg, r)?;
         let joint = matches!(t.kind, Kind::Joints { .. });
-        match uses[k].first() {
+        let uses = &src.uses[k];
+        match uses.first() {
             Some((tool, base, line)) => {
-                if let Some((t2, b2, l2)) = uses[k].iter().find(|(t2, b2, _)| t2 != tool || !joint && b2 != base) {
+                if let Some((t2, b2, l2)) = uses.iter().find(|(t2, b2, _)| t2 != tool || !joint && b2 != base) {
                     t.problem.get_or_insert(format!(
                         "used with tool {} base {} (line {line}) and with tool {} base {} (line {l2}): one value cannot serve both",
                         tool.show(),
@@ -734,43 +806,38 @@ fn parse_pair(files: &[ProgramFile], pair: &Pair, parsed: &mut Parsed) -> Result
                 t.tool = tool.tool();
                 t.base = if joint { Ref::Given(Frame::identity()) } else { base.base() };
             }
-            None => {
-                // Its own FDAT (XP3 ↔ FP3), as the inline forms store it.
-                let fdat = lname.strip_prefix('x').map(|rest| format!("f{rest}"));
-                match fdat.as_ref().and_then(|f| fdats.get(f)) {
-                    Some((tn, bn)) => {
-                        t.tool = tn.as_deref().map_or_else(
-                            || Ref::Missing("its FDAT has no TOOL_NO".into()),
-                            |n| Active::number(n).tool(),
-                        );
-                        t.base = if joint {
-                            Ref::Given(Frame::identity())
-                        } else {
-                            bn.as_deref().map_or_else(
-                                || Ref::Missing("its FDAT has no BASE_NO".into()),
-                                |n| Active::number(n).base(),
-                            )
-                        };
-                    }
-                    None => {
-                        let why = "no motion of the .src uses it and it has no FDAT: its tool and base are unknown"
-                            .to_string();
-                        t.tool = Ref::Missing(why.clone());
-                        t.base = if joint { Ref::Given(Frame::identity()) } else { Ref::Missing(why) };
-                    }
-                }
-            }
+            None => (t.tool, t.base) = own_fdat(&lname, joint, &dat.fdats),
         }
         decl_target[k] = Some(parsed.targets.len());
         parsed.targets.push(t);
     }
-    for s in sequence {
-        match s {
-            Ok(d) => parsed.sequence.extend(decl_target[d]),
-            Err(i) => parsed.sequence.push(i),
+    Ok(decl_target)
+}
+
+/// The tool and base of a point no motion uses, from its own FDAT (XP3 ↔ FP3, as the inline forms
+/// store it); unknown without one. A joint target's base is the identity.
+fn own_fdat(lname: &str, joint: bool, fdats: &HashMap<String, Fdat>) -> (Ref<Tool>, Ref<Frame>) {
+    let fdat = lname.strip_prefix('x').map(|rest| format!("f{rest}"));
+    let identity = || Ref::Given(Frame::identity());
+    match fdat.as_ref().and_then(|f| fdats.get(f)) {
+        Some((tn, bn)) => {
+            let tool = tn
+                .as_deref()
+                .map_or_else(|| Ref::Missing("its FDAT has no TOOL_NO".into()), |n| Active::number(n).tool());
+            let base = if joint {
+                identity()
+            } else {
+                bn.as_deref()
+                    .map_or_else(|| Ref::Missing("its FDAT has no BASE_NO".into()), |n| Active::number(n).base())
+            };
+            (tool, base)
+        }
+        None => {
+            let why = "no motion of the .src uses it and it has no FDAT: its tool and base are unknown".to_string();
+            let base = if joint { identity() } else { Ref::Missing(why.clone()) };
+            (Ref::Missing(why), base)
         }
     }
-    Ok(())
 }
 
 #[cfg(test)]
