@@ -544,3 +544,74 @@ fn reflector_plate_crossval_and_validate_per_session() {
     assert!(rows.iter().all(|r| r["purpose"] == "validation" && r["mean_mm"].as_f64().unwrap() < 0.1));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A plate of three reflectors imported from a tracker's files, each reflector's TCP unknown and
+/// identified: `validate` predicts every reflector's readings with its own identified TCP, so each
+/// reads what the fit's residual says (it once predicted reflectors 2 and 3 with reflector 1's TCP
+/// and read 150 mm), in-sample as they are.
+#[test]
+fn validate_predicts_each_reflector_with_its_own_identified_tcp() {
+    let dir = std::env::temp_dir().join(format!("robocal-cli-tcps-{}", std::process::id()));
+    let cell = reflector_plate_cell(&dir, "3");
+    let params = dir.join("params.json").to_string_lossy().to_string();
+    let (ok, _, err) = robocal(&["identify", &cell, "--out", &params]);
+    assert!(ok, "{err}");
+    let p: Value = serde_json::from_str(&std::fs::read_to_string(&params).unwrap()).unwrap();
+    let fit_rms = p["quality"]["rms_residual_mm"].as_f64().unwrap();
+    let tools = p["quality"]["tools"].as_array().unwrap();
+    assert_eq!(tools.len(), 3, "one TCP per reflector");
+    for k in 1..=3 {
+        let session = format!("reflector-{k}");
+        let (ok, v, err) = robocal(&["validate", &params, &cell, "--session", &session]);
+        assert!(ok, "{err}");
+        assert_eq!(v["held_out"], false, "{session} was fitted on: in-sample");
+        let rms = v["rms_mm"].as_f64().unwrap();
+        // Each reflector's share of the pooled residual: within a third of it.
+        assert!((rms / fit_rms - 1.0).abs() < 0.35, "{session}: rms {rms} mm against the fit's {fit_rms} mm");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A three-reflector tracker run of `simulate-tracker` (150 poses), imported as the README says;
+/// returns the cell file's path.
+fn reflector_plate_cell(dir: &std::path::Path, seed: &str) -> String {
+    let _ = std::fs::remove_dir_all(dir);
+    std::fs::create_dir_all(dir).unwrap();
+    let path = |n: &str| dir.join(n).to_string_lossy().to_string();
+    let twin = path("twin");
+    let (ok, _, err) = robocal(&["simulate-tracker", "--seed", seed, "--poses", "150", "--out-dir", &twin]);
+    assert!(ok, "{err}");
+    let file = |n: &str| format!("{twin}/run-{n}.txt");
+    let cell = path("cell.json");
+    let mut args = vec!["import", "three-reflector", "--robot", "irb120", "--joints"];
+    let (joints, smr) = (file("joints"), [file("smr1"), file("smr2"), file("smr3")]);
+    args.push(&joints);
+    for f in &smr {
+        args.extend(["--positions", f.as_str()]);
+    }
+    args.extend(["--out", &cell]);
+    let (ok, _, err) = robocal(&args);
+    assert!(ok, "{err}");
+    cell
+}
+
+/// Under the Huber loss the residual RMS a fit reports is the residual as measured, the one its
+/// ratio to the instrument's noise divides: it once reported the rows the loss had weighted
+/// (0.017 mm at `--huber 0.01`, beside "6.0 times the 0.031 mm the instrument predicts").
+#[test]
+fn a_huber_fit_reports_the_residual_its_ratio_divides() {
+    let dir = std::env::temp_dir().join(format!("robocal-cli-huber-{}", std::process::id()));
+    let cell = reflector_plate_cell(&dir, "2");
+    for huber in ["0.05", "2.5"] {
+        let params = dir.join(format!("p{huber}.json")).to_string_lossy().to_string();
+        let (ok, _, err) = robocal(&["identify", &cell, "--huber", huber, "--out", &params]);
+        assert!(ok, "{err}");
+        let p: Value = serde_json::from_str(&std::fs::read_to_string(&params).unwrap()).unwrap();
+        let q = &p["quality"];
+        let (rms, expected) = (q["rms_residual_mm"].as_f64().unwrap(), q["expected_rms_mm"].as_f64().unwrap());
+        let ratio = q["residual_ratio"].as_f64().unwrap();
+        // The ratio leaves gross outliers out (none here): equal to the rounding of the mm figures.
+        assert!((rms / expected / ratio - 1.0).abs() < 0.01, "huber {huber}: {rms} / {expected} mm against {ratio}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

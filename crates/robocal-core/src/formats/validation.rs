@@ -20,7 +20,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::cell::PurposeSpec;
-use crate::units::{MM, MRAD};
+use crate::units::{DEG, MM, MRAD};
 use crate::validate::normality::ShapiroWilk;
 use crate::validate::regression::LinearFit;
 use crate::validate::report::{AxisStats, FitData, ModelErrors, Residual, SessionErrors, ValidationReport};
@@ -475,7 +475,15 @@ pub fn fit_data(doc: &super::ParameterSetDoc, also: &[String]) -> FitData {
     }
     // A session the store names but the document's list does not: fitted on whole.
     measurements.retain(|name, _| sessions.contains(name));
-    FitData { recorded: !sessions.is_empty(), sessions, measurements }
+    let mut tcps = std::collections::BTreeMap::new();
+    for t in q.and_then(|q| q.tools.as_ref()).into_iter().flatten() {
+        let (p, r) = (t.tcp_mm, t.tcp_rotation_deg);
+        let tcp = [p[0] * MM, p[1] * MM, p[2] * MM, r[0] * DEG, r[1] * DEG, r[2] * DEG];
+        for s in t.sessions.iter().filter(|s| sessions.contains(s)) {
+            tcps.insert(s.clone(), tcp);
+        }
+    }
+    FitData { recorded: !sessions.is_empty(), sessions, measurements, tcps }
 }
 
 /// The report as the CLI prints it.

@@ -162,6 +162,11 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
     let mut quality = super::hold::hold_undetermined(&f, &mut fit, &mut free, &mut status)?;
     if opts.noise.is_some() {
         quality.weighted = true;
+    }
+    // The residual in metres, as measured: without the instrument's weights and without the robust
+    // loss's (a Huber fit's rows carry its weights; the RMS of those would not be the residual
+    // `residual_ratio` divides). Unweighted rows convert exactly (x / 1).
+    if opts.noise.is_some() || fit.weights.iter().any(|&w| w != 1.0) {
         quality.rms_residual = weighted_rms(&problem, &fit);
     }
     let worst = judge_fit(&problem, cell, opts, &fit, &free, &mut quality)?;

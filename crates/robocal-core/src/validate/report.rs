@@ -153,6 +153,10 @@ pub struct FitData {
     /// Per fitted session, the indices of the measurements the fit used; a session missing here
     /// counts as fitted on whole.
     pub measurements: BTreeMap<String, Vec<usize>>,
+    /// Per fitted session, the TCP (χ: m, rad) the fit identified for its tool, where it did. A
+    /// plate of reflectors has one TCP per reflector while the set's chain carries only the first:
+    /// each session is predicted with its own.
+    pub tcps: BTreeMap<String, [f64; 6]>,
 }
 
 impl FitData {
@@ -164,6 +168,18 @@ impl FitData {
     /// Whether the set was fitted on (some of) this session's measurements.
     pub(crate) fn has_session(&self, name: &str) -> bool {
         self.sessions.iter().any(|s| s == name)
+    }
+
+    /// The TCP the fit identified for `session`'s tool: the session's own, else that of a fitted
+    /// session of `cell` measuring the same named target (a reflector's held-out session).
+    pub(crate) fn tcp_of(&self, session: &Session, cell: &Cell) -> Option<[f64; 6]> {
+        self.tcps.get(&session.name).copied().or_else(|| {
+            let target = session.target.as_ref()?;
+            cell.sessions
+                .iter()
+                .filter(|s| s.target.as_ref() == Some(target))
+                .find_map(|s| self.tcps.get(&s.name).copied())
+        })
     }
 
     /// Whether the fit used measurement `index` of session `name`.
@@ -366,6 +382,14 @@ pub fn validate_fitted(
             }
         };
         let (cal_chain, nom_chain) = session_chains(set, session);
+        let cal_chain = match fit.and_then(|f| f.tcp_of(session, cell)) {
+            // Not for the chain's own TCP (the first tool's): the document's mm and degrees convert back
+            // to within an ulp, and its figures stay bit for bit.
+            Some(tcp) if tcp.iter().zip(&cal_chain.tool_pose()).any(|(a, b)| (a - b).abs() > 1e-9) => {
+                cal_chain.with_base_tool(cal_chain.base_pose(), tcp)
+            }
+            _ => cal_chain,
+        };
         let gravity = set.gravity_for(&session.tool);
         for (index, m) in session.measurements.iter().enumerate() {
             if m.q.len() != dof {
