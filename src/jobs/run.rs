@@ -335,6 +335,11 @@ pub fn identify_error(e: IdentifyError) -> JobError {
         IdentifyError::Outliers { .. } => {
             JobError::Numerical { kind: "outliers", title: "Outlier measurements", detail }
         }
+        IdentifyError::PositionScale { .. } => JobError::Numerical {
+            kind: "position-scale",
+            title: "The measured positions are not on the robot's scale (a unit mistake)",
+            detail,
+        },
         IdentifyError::StartRobot { .. } => JobError::Invalid { detail, field: Some("parameter_set_id".into()) },
         IdentifyError::Option { .. } => JobError::Invalid { field: e.field_path(), detail },
         IdentifyError::Problem(_) => JobError::Invalid { detail, field: None },

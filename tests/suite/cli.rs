@@ -615,3 +615,54 @@ fn a_huber_fit_reports_the_residual_its_ratio_divides() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Positions in centimetres, inches or metres where the file says millimetres are refused before
+/// they are fitted, with the unit named: fitted, they made a robot a tenth of its size (a2 27 mm
+/// for 270 mm) with a residual below the instrument's noise, and exit 0.
+#[test]
+fn positions_in_another_unit_are_refused_with_the_unit_named() {
+    let dir = std::env::temp_dir().join(format!("robocal-cli-units-{}", std::process::id()));
+    let cell = reflector_plate_cell(&dir, "4");
+    let text = std::fs::read_to_string(&cell).unwrap();
+    fn scale(v: &mut Value, k: f64) {
+        match v {
+            Value::Object(m) => {
+                for (key, x) in m.iter_mut() {
+                    match (key.as_str(), x) {
+                        ("position_mm", Value::Array(p)) => {
+                            p.iter_mut().for_each(|c| *c = Value::from(c.as_f64().unwrap() * k))
+                        }
+                        (_, x) => scale(x, k),
+                    }
+                }
+            }
+            Value::Array(a) => a.iter_mut().for_each(|x| scale(x, k)),
+            _ => {}
+        }
+    }
+    for (unit, k) in [("cm", 0.1), ("in", 1.0 / 25.4), ("m", 1e-3), ("x10", 10.0)] {
+        let mut c: Value = serde_json::from_str(&text).unwrap();
+        scale(&mut c, k);
+        let scaled = dir.join(format!("cell-{unit}.json"));
+        std::fs::write(&scaled, c.to_string()).unwrap();
+        let params = dir.join(format!("params-{unit}.json"));
+        let out = Command::new(env!("CARGO_BIN_EXE_robocal"))
+            .arg("identify")
+            .arg(&scaled)
+            .arg("--out")
+            .arg(&params)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{unit}: {err}");
+        assert!(err.contains("position_mm") && !params.exists(), "{unit}: {err}");
+        // The factor it states is the scale's (the reflectors' offsets from the flange, not
+        // scaled by the robot's joints, move it a little).
+        let stated: f64 = err.split(" times)").next().unwrap().rsplit('(').next().unwrap().parse().expect(&err);
+        assert!((stated / k - 1.0).abs() < 0.2, "{unit}: states {stated} for {k}");
+    }
+    let params = dir.join("params.json").to_string_lossy().to_string();
+    let (ok, _, err) = robocal(&["identify", &cell, "--out", &params]);
+    assert!(ok, "the file as written: {err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

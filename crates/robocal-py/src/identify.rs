@@ -249,6 +249,7 @@ pub(crate) fn identify_error(e: IdentifyError) -> Error {
         IdentifyError::Solve(_) => "no_convergence",
         IdentifyError::Misfit { .. } => "misfit",
         IdentifyError::Outliers { .. } => "outliers",
+        IdentifyError::PositionScale { .. } => "position_scale",
     };
     Error::Identification { kind, message }
 }

@@ -95,6 +95,22 @@ pub enum IdentifyError {
         /// The largest residuals in units of their σ, largest first (at most [`super::WORST_REPORTED`]).
         worst: Vec<Worst>,
     },
+    /// A session's measured positions spread over a different scale than the nominal robot's TCP
+    /// at the same joint readings: a unit mistake, refused before it is fitted.
+    #[error(
+        "session '{session}': its measured positions spread {} mm around their centroid, where the nominal robot's TCP spreads {} mm at the same joint readings ({ratio:.3} times): a calibration changes the robot by millimetres, not by this factor. Check the positions' unit (position_mm: centimetres read as mm give 0.1, inches 0.039, metres 0.001) and that the joints are in degrees (joints_deg)",
+        mm(*measured), mm(*nominal)
+    )]
+    PositionScale {
+        /// The session.
+        session: String,
+        /// RMS distance of its measured positions from their centroid, m.
+        measured: f64,
+        /// The same of the nominal robot's declared TCP (the flange where none is declared), m.
+        nominal: f64,
+        /// `measured` / `nominal`.
+        ratio: f64,
+    },
     /// Gross outliers the robust loss did not down-weight: measurements whose z (the RMS over their
     /// rows of e/√(σ² + τ²), τ² the spread the model leaves beyond the instrument) exceeds `factor`
     /// times the larger of the median z and 1.

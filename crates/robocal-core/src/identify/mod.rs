@@ -21,6 +21,7 @@ mod identify;
 mod options;
 mod pool;
 mod prepare;
+mod scale;
 
 pub use error::{IdentifyError, Worst, outliers_message};
 pub use fixed::{FixedReason, ModelTerm, Structure};

@@ -90,6 +90,12 @@ pub struct Obs {
 }
 
 impl Obs {
+    /// Whether it measured a ball of the artefact (its position is the ball's, not the TCP's
+    /// path).
+    pub(crate) fn is_ball(&self) -> bool {
+        matches!(self.target, Target::Ball { .. })
+    }
+
     /// The measured TCP position in {W} (m): the point, the ball centre, or the pose's origin.
     pub(crate) fn measured_position(&self) -> Vector3<f64> {
         match &self.target {

@@ -39,7 +39,9 @@ class IdentificationError(Exception):
     parameters), ``"no_convergence"`` or ``"diverged"`` (the Levenberg-Marquardt solver),
     ``"misfit"`` (residual RMS above ``residual_ratio_limit`` times the instrument's noise: a wrong
     TCP, another frame, unrelated data), ``"outliers"`` (single measurements far above the
-    typical residual; the message names them as ``session:index``), ``"registration"`` (no base
+    typical residual; the message names them as ``session:index``), ``"position_scale"`` (a
+    session's positions spread over another scale than the nominal robot at its joint readings: a
+    unit mistake, e.g. centimetres read as mm), ``"registration"`` (no base
     guess and the measured points cannot place the base), ``"option"`` or ``"problem"``.
     Not a ValueError: the arguments were well-formed, the data cannot answer.
     """

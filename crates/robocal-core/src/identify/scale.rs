@@ -1,0 +1,51 @@
+//! A unit mistake caught before it is fitted: positions in centimetres, inches or metres read as
+//! millimetres make a robot of a tenth, a 25th or a thousandth of its size, which a fit of the
+//! lengths then "identifies" (a2 27 mm for 270 mm) with a small residual.
+
+use super::IdentifyError;
+use super::problem::Problem;
+use crate::cell::Cell;
+
+/// Fewer readings than this in a session say too little about its spread to judge it.
+const MIN_READINGS: usize = 10;
+/// Below this spread of the nominal robot's TCP (m) the motion is too small to judge: an unknown
+/// reflector offset, turned by the wrist, would dominate the measured spread.
+const MIN_NOMINAL_SPREAD: f64 = 0.05;
+/// The largest ratio of the two spreads, either way, that an unknown TCP (up to a few hundred mm
+/// from the flange) and the base's placement can explain. Every unit confusion lies beyond it
+/// (×10, ×25.4, ×1000 and their inverses).
+const MAX_SPREAD_RATIO: f64 = 3.0;
+
+/// Per session of measured points or poses: the RMS distance of the measured positions from their
+/// centroid against that of the nominal robot's declared TCP (the flange where none is declared) at
+/// the same joint readings, which neither the base pose nor the instrument's frame changes. Refused when they differ by more than
+/// [`MAX_SPREAD_RATIO`]: the positions are not in the unit the file says, or the joints are not.
+pub(crate) fn check_position_scale(problem: &Problem, x0: &[f64], cell: &Cell) -> Result<(), IdentifyError> {
+    let chains = problem.chains(x0);
+    for (s, session) in cell.sessions.iter().enumerate() {
+        let obs: Vec<_> = problem.obs.iter().filter(|o| o.session == s && !o.is_ball()).collect();
+        if obs.len() < MIN_READINGS {
+            continue;
+        }
+        // The declared TCP, not the start's: a TCP registered from the data carries their scale.
+        let declared: Vec<_> = chains.iter().map(|c| c.with_base_tool(c.base_pose(), session.tool.tcp)).collect();
+        let measured = spread(obs.iter().map(|o| o.measured_position()));
+        let nominal = spread(obs.iter().map(|o| declared[o.tool].fk(&o.state).t));
+        if nominal < MIN_NOMINAL_SPREAD || !measured.is_finite() {
+            continue;
+        }
+        let ratio = measured / nominal;
+        if !(1.0 / MAX_SPREAD_RATIO..=MAX_SPREAD_RATIO).contains(&ratio) {
+            return Err(IdentifyError::PositionScale { session: session.name.clone(), measured, nominal, ratio });
+        }
+    }
+    Ok(())
+}
+
+/// RMS distance of points from their centroid, m.
+fn spread(points: impl Iterator<Item = nalgebra::Vector3<f64>>) -> f64 {
+    let p: Vec<_> = points.collect();
+    let n = p.len().max(1) as f64;
+    let centroid = p.iter().sum::<nalgebra::Vector3<f64>>() / n;
+    (p.iter().map(|x| (x - centroid).norm_squared()).sum::<f64>() / n).sqrt()
+}
