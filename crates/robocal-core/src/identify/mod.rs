@@ -22,6 +22,7 @@ mod options;
 mod pool;
 mod prepare;
 
+pub(crate) use error::outliers_found;
 pub use error::{IdentifyError, Worst, outliers_message};
 pub use fixed::{FixedReason, ModelTerm, Structure};
 pub use hold::{COMPLIANCE_SIGNIFICANCE, PAYLOAD_SIGNIFICANCE};
