@@ -214,6 +214,7 @@ pub(super) fn crossval(a: CrossvalArgs) -> Result<String, CliError> {
 
     let report = CrossvalReport::new(&cv, a.seed, a.folds, a.draws, elapsed, threads);
     let mut text = report.text();
+    text.push_str(&report.outlier_advice(&a.cell.display().to_string()));
     if let Some(out) = &a.out {
         write(out, &serde_json::to_string_pretty(&report).expect("json"))?;
         text.push_str(&format!("wrote {}", out.display()));
@@ -222,7 +223,27 @@ pub(super) fn crossval(a: CrossvalArgs) -> Result<String, CliError> {
         write_report(path, &crate::report::crossval_report(&cv))?;
         text.push_str(&wrote(&text, path));
     }
-    Ok(text.trim_end().to_string())
+    let text = text.trim_end().to_string();
+    // Refusals are part of the result (each in its row). A run that scored a fitted model
+    // succeeds with the others' refusals beside it; one that scored none, at most the "before"
+    // reference, has failed: exit 1, its tables still printed.
+    let scored = cv.scored();
+    if !scored.iter().any(|v| *v != "before") {
+        let before = if scored.is_empty() { ", the \"before\" reference's too" } else { "" };
+        return Err(CliError::failed(
+            Some(text),
+            format!(
+                "no fitted model was scored ({}: every fit refused{before}; the refusals are in the tables)",
+                opts_names(&cv)
+            ),
+        ));
+    }
+    Ok(text)
+}
+
+/// The fitted models of a run, comma-separated.
+fn opts_names(cv: &crate::identify::crossval::Crossval) -> String {
+    cv.variants().into_iter().filter(|v| *v != "before").collect::<Vec<_>>().join(", ")
 }
 
 #[derive(Args, Debug)]

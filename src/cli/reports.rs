@@ -38,9 +38,13 @@ pub struct CrossvalReport {
     pub sizes: Vec<SizeFigures>,
     pub transfer: Vec<TransferFigures>,
     pub quartiles: &'static str,
-    /// What the run derived and did not read (approach directions from the measuring order).
+    /// What the run derived and did not read (approach directions from the measuring order), and
+    /// the held-out readings a scheme could not score.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub notes: Vec<String>,
+    /// The readings refused fits named as outliers (session, index in the session).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub outliers: Vec<MeasurementFigure>,
     /// Wall-clock seconds and worker threads: the text's, not the document's.
     #[serde(skip)]
     pub seconds: f64,
@@ -64,6 +68,24 @@ pub struct HeldOutFigures {
     pub orientation: Option<OrientationFigures>,
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub per_session: Vec<SessionFigures>,
+    /// Test readings left out of these figures, per session: the fit identifies their TCP and saw
+    /// no reading of their target, so it has none to predict them with (the notes say where).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub unscored: Vec<UnscoredFigures>,
+}
+
+/// A session's test readings that were not scored.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct UnscoredFigures {
+    pub session: String,
+    pub n: usize,
+}
+
+/// A measurement by its session and its 0-based index there, as identify's `--exclude` takes it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MeasurementFigure {
+    pub session: String,
+    pub index: usize,
 }
 
 /// One session's share of a test set's errors.
@@ -192,6 +214,11 @@ impl HeldOutFigures {
             mean_se_mm: h.mean_se.map(|v| v / MM),
             orientation: orientation_figures(&h.orientation),
             per_session: if several { h.per_session.iter().map(SessionFigures::of).collect() } else { Vec::new() },
+            unscored: h
+                .unscored
+                .iter()
+                .map(|(session, n)| UnscoredFigures { session: session.clone(), n: *n })
+                .collect(),
         }
     }
 
@@ -308,6 +335,11 @@ impl CrossvalReport {
                 .collect(),
             quartiles: "min, q1, median, q3, max over the draws",
             notes: cv.notes.clone(),
+            outliers: cv
+                .outliers
+                .iter()
+                .map(|(session, index)| MeasurementFigure { session: session.clone(), index: *index })
+                .collect(),
             seconds,
             threads,
         }
@@ -432,6 +464,40 @@ impl CrossvalReport {
             }
         }
         text
+    }
+
+    /// What a user of this command can do about the outliers refused fits named (`cell`: the cell
+    /// file's path): crossval scores every reading and has neither identify's `--exclude` nor its
+    /// `--huber`.
+    pub fn outlier_advice(&self, cell: &str) -> String {
+        if self.outliers.is_empty() {
+            return String::new();
+        }
+        let mut sessions: Vec<&str> = self.session.split(',').collect();
+        for m in &self.outliers {
+            if !sessions.contains(&m.session.as_str()) {
+                sessions.push(&m.session);
+            }
+        }
+        // A handful is named in full; hundreds (a file off by a line) are a data problem, not outliers.
+        const SHOWN: usize = 5;
+        let named: Vec<String> =
+            self.outliers.iter().take(SHOWN).map(|m| format!("{}[{}]", m.session, m.index)).collect();
+        let refs: Vec<String> =
+            self.outliers.iter().take(SHOWN).map(|m| format!("{}:{}", m.session, m.index)).collect();
+        let more = match self.outliers.len() {
+            n if n > SHOWN => format!(
+                " and {} more (so many point at the data: a file off by a line, a shared TCP, sessions in different frames)",
+                n - SHOWN
+            ),
+            _ => String::new(),
+        };
+        format!(
+            "\noutliers named by the refused fits: {}{more}. crossval scores every reading and cannot leave one out or fit with the Huber loss: see the fit without them with `robocal identify {cell} --sessions {} --exclude {}` (or `--huber 2.5`); to cross-validate without them, remove them from the cell file (three-reflector data: write their rows as `nan nan nan` in the positions file and import again)\n",
+            named.join(", "),
+            sessions.join(","),
+            refs.join(",")
+        )
     }
 }
 

@@ -296,3 +296,150 @@ fn the_named_hysteresis_is_fitted_from_the_row_order() {
     let f = cv.folds.iter().find(|f| f.variant == "hysteresis").unwrap();
     assert!(f.pooled.is_some(), "{:?}", f.per_fold);
 }
+
+/// The k-fold options of the twin tests below: `sessions` split, the default model only.
+fn cv_options(sessions: &[&str], folds: usize, sizes: Vec<usize>) -> CrossvalOptions {
+    CrossvalOptions {
+        sessions: sessions.iter().map(|s| s.to_string()).collect(),
+        folds,
+        sizes,
+        draws: 3,
+        transfer: Vec::new(),
+        transfer_kappa_limit: None,
+        transfer_fixed: Vec::new(),
+        variants: vec![Variant { name: "geometry".into(), options: options("-compliance", &[]) }],
+        before: IdentifyOptions::default(),
+        seed: 1,
+        threads: 2,
+    }
+}
+
+/// A reflector with no reading in a fold's training set has no identified TCP there: its held-out
+/// readings are counted and named, not scored with the declared (zero) TCP, which gave 110–150 mm
+/// "held-out errors" and polluted the pooled figures.
+#[test]
+fn a_reflector_absent_from_training_is_not_scored() {
+    let (_, mut cell) = twin(300, 5);
+    let names = ["reflector-1", "reflector-2", "reflector-3"];
+    let r3 = cell.sessions.iter().position(|s| s.name == "reflector-3").unwrap();
+    cell.sessions[r3].measurements.truncate(1);
+    let cv = crossval(&cell, &cv_options(&names, 5, Vec::new())).unwrap();
+    let total: usize = names.iter().map(|n| cell.session(n).unwrap().measurements.len()).sum();
+    for f in &cv.folds {
+        let pooled = f.pooled.as_ref().unwrap_or_else(|| panic!("{}: {:?}", f.variant, f.per_fold));
+        assert_eq!(pooled.unscored, vec![("reflector-3".to_string(), 1)], "{}", f.variant);
+        assert_eq!(pooled.position.n, total - 1);
+        assert!(pooled.per_session.iter().all(|s| s.session != "reflector-3"));
+        assert!(pooled.position.max < 5.0 * MM, "{}: max {} mm", f.variant, pooled.position.max / MM);
+        let unscored: Vec<usize> = f.per_fold.iter().map(|r| r.as_ref().unwrap().unscored.len()).collect();
+        assert_eq!(unscored.iter().sum::<usize>(), 1, "one fold holds it: {unscored:?}");
+    }
+    let note = cv.notes.iter().find(|n| n.starts_with("reflector-3: 1 held-out reading not scored in fold "));
+    assert!(note.is_some_and(|n| n.contains("no reading of reflector-3 in the training set")), "{:?}", cv.notes);
+
+    // Few poses: reflector-3 read at every 30th pose, rarely among 12 identification poses.
+    let (_, mut cell) = twin(300, 5);
+    let r3 = cell.sessions.iter().position(|s| s.name == "reflector-3").unwrap();
+    let kept = cell.sessions[r3].measurements.iter().step_by(30).cloned().collect();
+    cell.sessions[r3].measurements = kept;
+    let cv = crossval(&cell, &cv_options(&names, 0, vec![12])).unwrap();
+    let mut unscored = 0;
+    for s in &cv.sizes {
+        for d in &s.draws {
+            let h = d.as_ref().unwrap();
+            unscored += h.unscored.iter().map(|u| u.1).sum::<usize>();
+            assert!(h.position.max < 5.0 * MM, "{} n = {}: max {} mm", s.variant, s.n, h.position.max / MM);
+        }
+    }
+    assert!(unscored > 0, "no draw left reflector-3 out of training: {:?}", cv.notes);
+    assert!(cv.notes.iter().any(|n| n.starts_with("reflector-3: ") && n.contains("draws of n = 12")), "{:?}", cv.notes);
+}
+
+/// A gross reading refuses the fits that see it; the refusal names it by its index in its session
+/// (not in the fold's subset), offers no option cross-validation lacks, and the run lists it.
+#[test]
+fn an_outlier_is_named_by_its_index_in_the_session() {
+    let (_, mut cell) = twin(300, 5);
+    let r2 = cell.sessions.iter().position(|s| s.name == "reflector-2").unwrap();
+    let robocal::cell::Observation::Position(p) = &mut cell.sessions[r2].measurements[17].observation else {
+        panic!("a position")
+    };
+    p.x += 5.0 * MM;
+    let mut o = cv_options(&["reflector-1", "reflector-2", "reflector-3"], 5, Vec::new());
+    o.variants = vec![Variant { name: "default".into(), options: options("", &[]) }];
+    let cv = crossval(&cell, &o).unwrap();
+    assert_eq!(cv.outliers, vec![("reflector-2".to_string(), 17)]);
+    let f = cv.folds.iter().find(|f| f.variant == "default").unwrap();
+    let refused: Vec<&String> = f.per_fold.iter().filter_map(|r| r.as_ref().err()).collect();
+    assert!(!refused.is_empty(), "{:?}", f.per_fold);
+    for e in refused {
+        assert!(e.contains("reflector-2[17] "), "{e}");
+        assert!(!e.contains("exclude") && !e.contains("huber") && !e.contains("Huber"), "{e}");
+    }
+}
+
+/// The twin's files with `edit` applied to reflector-2's positions (its lines after the header),
+/// imported by the command line; `robocal crossval` on them: (exit status, stdout, stderr).
+fn crossval_cli(tag: &str, edit: impl Fn(&mut Vec<String>)) -> (i32, String, String) {
+    let o = TrackerRunOptions { seed: 5, poses: 200, removed: 2, ..Default::default() };
+    let dir = common::fresh_dir(tag);
+    let (joints, files) = tracker_run(&o).unwrap().write(&dir, "run", 6).unwrap();
+    let text = std::fs::read_to_string(&files[1]).unwrap();
+    let (header, mut rows): (Vec<String>, Vec<String>) =
+        text.lines().map(String::from).partition(|l| l.starts_with('#'));
+    edit(&mut rows);
+    std::fs::write(&files[1], [header, rows].concat().join("\n") + "\n").unwrap();
+    let cell = dir.join("cell.json");
+    let run = |args: Vec<&str>| std::process::Command::new(env!("CARGO_BIN_EXE_robocal")).args(args).output().unwrap();
+    let f: Vec<&str> = files.iter().flat_map(|f| ["--positions", f.to_str().unwrap()]).collect();
+    let j = joints.to_str().unwrap();
+    let import = run([
+        vec!["import", "three-reflector", "--robot", "irb120", "--joints", j],
+        f.clone(),
+        vec!["--out", cell.to_str().unwrap()],
+    ]
+    .concat());
+    assert!(import.status.success(), "{}", String::from_utf8_lossy(&import.stderr));
+    let sessions = "reflector-1,reflector-2,reflector-3";
+    let out = run(vec![
+        "crossval",
+        cell.to_str().unwrap(),
+        "--session",
+        sessions,
+        "--folds",
+        "3",
+        "--model=",
+        "--threads",
+        "2",
+    ]);
+    let s = |b: &[u8]| String::from_utf8_lossy(b).to_string();
+    (out.status.code().unwrap(), s(&out.stdout), s(&out.stderr))
+}
+
+/// `robocal crossval` with a gross reading: the default model is refused in the folds that train on
+/// it, only the "before" reference is scored, so the run fails (exit 1, tables printed), and the
+/// advice names the reading by its session index with what this command's user can do.
+#[test]
+fn crossval_cli_fails_when_only_the_reference_is_scored_and_advises_on_outliers() {
+    let (code, out, err) = crossval_cli("cv-outlier", |rows| {
+        let v: Vec<f64> = rows[17].split_whitespace().map(|x| x.parse().unwrap()).collect();
+        rows[17] = format!("{:.4} {} {}", v[0] + 5.0, v[1], v[2]);
+    });
+    assert_eq!(code, 1, "{out}\n{err}");
+    assert!(out.lines().any(|l| l.starts_with("before ") && !l.contains("refused")), "{out}");
+    assert!(
+        out.lines()
+            .any(|l| l.starts_with("default ") && l.contains("refused: 1 outlier") && l.contains("reflector-2[17] ")),
+        "{out}"
+    );
+    assert!(out.contains("outliers named by the refused fits: reflector-2[17]."), "{out}");
+    assert!(out.contains("--sessions reflector-1,reflector-2,reflector-3 --exclude reflector-2:17`"), "{out}");
+    assert!(!out.contains("(exclude ") && !out.contains("(huber "), "{out}");
+    assert!(err.contains("error: no fitted model was scored (default: every fit refused;"), "{err}");
+
+    // Reflector-2's file off by one line: every fit refused, the reference's too.
+    let (code, out, err) = crossval_cli("cv-refused", |rows| rows.rotate_left(1));
+    assert_eq!(code, 1, "{out}\n{err}");
+    assert!(out.lines().filter(|l| l.contains(" refused: ")).count() >= 2, "{out}");
+    assert!(err.contains("every fit refused, the \"before\" reference's too;"), "{err}");
+}

@@ -107,6 +107,10 @@ pub struct HeldOut {
     pub mean_se: Option<f64>,
     /// The same per session (reflector) that has test measurements, in the options' order.
     pub per_session: Vec<SessionHeldOut>,
+    /// Test measurements left out of every figure above, per session (options' order): their
+    /// target's TCP is identified by the fit, and no reading of that target was in the training
+    /// set, so the model has no TCP to predict them with. Empty when every one was scored.
+    pub unscored: Vec<(String, usize)>,
 }
 
 /// One session's share of a test set's errors.
@@ -122,8 +126,9 @@ pub struct SessionHeldOut {
 
 impl HeldOut {
     /// The statistics of `errors` (per test measurement: its session's index into `names`, |position
-    /// error|, orientation error when observed).
-    fn of(errors: &[Scored], names: &[String]) -> Option<HeldOut> {
+    /// error|, orientation error when observed), with the test measurements not scored (session
+    /// index, count; a session may appear once per fold).
+    fn of(errors: &[Scored], names: &[String], unscored: &[(usize, usize)]) -> Option<HeldOut> {
         let position: Vec<f64> = errors.iter().map(|e| e.position).collect();
         let orientation: Vec<f64> = errors.iter().filter_map(|e| e.orientation).collect();
         let per_session = names
@@ -145,6 +150,12 @@ impl HeldOut {
             orientation: ErrorStats::of(&orientation),
             mean_se: clustered_mean_se(errors.iter().map(|e| (e.pose, e.position))),
             per_session,
+            unscored: names
+                .iter()
+                .enumerate()
+                .map(|(k, name)| (name.clone(), unscored.iter().filter(|u| u.0 == k).map(|u| u.1).sum()))
+                .filter(|u| u.1 > 0)
+                .collect(),
         })
     }
 }
@@ -279,8 +290,82 @@ pub struct Crossval {
     /// The transfer results, per variant (the reference first), then per transfer session.
     pub transfer: Vec<TransferResult>,
     /// What the run derived and did not read (the backlash terms' approach directions from the
-    /// measuring order, or why they could not be), one sentence each.
+    /// measuring order, or why they could not be), and the held-out measurements a scheme could
+    /// not score (their TCP unknown to the fit: [`HeldOut::unscored`]), one sentence each.
     pub notes: Vec<String>,
+    /// The measurements refused fits named as outliers, (session, index in the session), sorted.
+    /// Cross-validation scores every measurement of its sessions, so one gross reading refuses
+    /// every fit that sees it; a front end says how its user can leave it out.
+    pub outliers: Vec<(String, usize)>,
+}
+
+impl Crossval {
+    /// The models evaluated, the "before" reference first.
+    pub fn variants(&self) -> Vec<&str> {
+        let names = self.folds.iter().map(|f| f.variant.as_str());
+        let names = names.chain(self.sizes.iter().map(|s| s.variant.as_str()));
+        let mut out: Vec<&str> = Vec::new();
+        for n in names.chain(self.transfer.iter().map(|t| t.variant.as_str())) {
+            if !out.contains(&n) {
+                out.push(n);
+            }
+        }
+        out
+    }
+
+    /// The models some scheme scored: pooled k-fold figures (every fold fitted), a few-poses draw
+    /// or a transfer. A run whose fitted models (the reference aside) are not among them measured
+    /// nothing it was asked to.
+    pub fn scored(&self) -> Vec<&str> {
+        let kfold = self.folds.iter().filter(|f| f.pooled.is_some()).map(|f| f.variant.as_str());
+        let sizes = self.sizes.iter().filter(|s| s.draws.iter().any(|d| d.is_ok())).map(|s| s.variant.as_str());
+        let transfer = self.transfer.iter().filter(|t| t.errors.is_ok()).map(|t| t.variant.as_str());
+        let all: Vec<&str> = kfold.chain(sizes).chain(transfer).collect();
+        self.variants().into_iter().filter(|v| all.contains(v)).collect()
+    }
+}
+
+/// What the schemes found beside their figures: notes for the reader, and the outliers that
+/// refused fits named.
+#[derive(Default)]
+struct Found {
+    notes: Vec<String>,
+    outliers: std::collections::BTreeSet<(String, usize)>,
+}
+
+impl Found {
+    /// `r` with its refusal as the results carry it, the outliers it named kept.
+    fn keep<T>(&mut self, r: Result<T, Refusal>) -> Result<T, String> {
+        r.map_err(|e| {
+            self.outliers.extend(e.outliers);
+            e.message
+        })
+    }
+
+    /// A note that `n` held-out readings of split session `s` were not scored ([`Split::unknown_tcp`]);
+    /// `scope` says where ("in fold 2 of 5").
+    fn unscored(&mut self, split: &Split, s: usize, n: usize, scope: &str) {
+        self.notes.push(format!(
+            "{}: {} not scored {scope}: no reading of {} in the training set, so its TCP is unknown; the figures leave {} out",
+            split.names[s],
+            readings(n),
+            target_name(split.sessions[s]),
+            if n == 1 { "it" } else { "them" }
+        ));
+    }
+}
+
+/// "1 held-out reading", "3 held-out readings".
+fn readings(n: usize) -> String {
+    format!("{n} held-out reading{}", if n == 1 { "" } else { "s" })
+}
+
+/// The physical target of a session's TCP, as a note names it.
+fn target_name(s: &Session) -> String {
+    match &s.target {
+        Some(t) => format!("its target '{t}'"),
+        None => s.name.clone(),
+    }
 }
 
 /// A cell holding, for each (session, indices), that session with those measurements (sessions
@@ -356,34 +441,43 @@ impl Split<'_> {
         train: &[usize],
         test: &[usize],
         options: &IdentifyOptions,
-    ) -> Result<(HeldOut, f64), String> {
+    ) -> Result<(HeldOut, f64), Refusal> {
         let e = self.fold_errors(cell, train, test, options)?;
-        let h = HeldOut::of(&e.scored, &self.names).ok_or_else(|| "no test measurement".to_string())?;
+        let h = HeldOut::of(&e.scored, &self.names, &e.unscored).ok_or_else(|| Refusal::plain(NOTHING_SCORED))?;
         Ok((h, e.kappa_scaled))
     }
 
-    /// The errors of every measurement of the `test` poses, for pooling folds.
+    /// The errors of every measurement of the `test` poses, for pooling folds; those whose TCP the
+    /// fit cannot know ([`Split::unknown_tcp`]) are counted, not scored.
     fn fold_errors(
         &self,
         cell: &Cell,
         train: &[usize],
         test: &[usize],
         options: &IdentifyOptions,
-    ) -> Result<FoldErrors, String> {
+    ) -> Result<FoldErrors, Refusal> {
         let train = self.indices(train);
         let id_cell = subsets_cell(cell, &train);
-        let test_idx = self.indices(test);
+        let mut test_idx = self.indices(test);
+        let unscored = self.unknown_tcp(&train, &test_idx);
+        for &(s, _) in &unscored {
+            test_idx[s].1.clear();
+        }
         let poses = self.poses_by_measurement();
         let mut o = options.clone();
         o.selection.sessions = id_cell.sessions.iter().map(|s| s.name.clone()).collect();
         o.selection.subset.clear();
-        let id = identify(&id_cell, &o).map_err(|e| e.to_string())?;
+        let id = identify(&id_cell, &o).map_err(|e| refusal(e, &train))?;
         let mut test_cell = subsets_cell(cell, &test_idx);
-        with_identified_tools(&mut test_cell, &id);
+        with_fold_tools(&mut test_cell, cell, &id);
         let names: Vec<String> = test_cell.sessions.iter().map(|s| s.name.clone()).collect();
-        let r = validate(&id.set, &test_cell, &names, Reference::Measured).map_err(|e| e.to_string())?;
-        let scored = r
-            .residuals
+        let residuals = if names.is_empty() {
+            Vec::new()
+        } else {
+            let r = validate(&id.set, &test_cell, &names, Reference::Measured);
+            r.map_err(|e| Refusal::plain(e.to_string()))?.residuals
+        };
+        let scored = residuals
             .iter()
             .map(|x| {
                 let session = self.names.iter().position(|n| *n == x.session).expect("a split session");
@@ -397,7 +491,86 @@ impl Split<'_> {
                 }
             })
             .collect();
-        Ok(FoldErrors { scored, identified: id.free_names.len(), kappa_scaled: id.quality.kappa_scaled })
+        Ok(FoldErrors { scored, unscored, identified: id.free_names.len(), kappa_scaled: id.quality.kappa_scaled })
+    }
+
+    /// The test sessions (index into the split, test measurements) whose TCP a fit on `train`
+    /// cannot know: the fit identifies their target's TCP and no session of that target (itself,
+    /// or one naming the same `target`) has a training measurement. Their declared TCP is a guess
+    /// (the flange, for reflectors imported without one): scoring them with it would report the
+    /// guess's error, 100 mm and more, as the model's. The same for every model of one split.
+    fn unknown_tcp(&self, train: &[(&Session, Vec<usize>)], test: &[(&Session, Vec<usize>)]) -> Vec<(usize, usize)> {
+        let trained = |s: &Session| {
+            train
+                .iter()
+                .any(|(t, idx)| !idx.is_empty() && (t.name == s.name || (s.target.is_some() && t.target == s.target)))
+        };
+        test.iter()
+            .enumerate()
+            .filter(|(_, (s, idx))| !idx.is_empty() && s.identify_tcp && !trained(s))
+            .map(|(k, (_, idx))| (k, idx.len()))
+            .collect()
+    }
+}
+
+/// Why a fold's figures are missing when the fit was not refused.
+const NOTHING_SCORED: &str = "no test measurement could be scored";
+
+/// A refused fit of one split: why, and the measurements it named as outliers (session, index in
+/// the whole session).
+#[derive(Clone, Debug)]
+struct Refusal {
+    message: String,
+    outliers: Vec<(String, usize)>,
+}
+
+impl Refusal {
+    fn plain(message: impl Into<String>) -> Refusal {
+        Refusal { message: message.into(), outliers: Vec::new() }
+    }
+}
+
+/// Why identifying on `parts` (each split session's measurements the fit saw) was refused, each
+/// measurement it names by its index in its whole session: the fit numbers a subset from 0, and
+/// the 13th reading of a fold's subset is no reading the user can find. An outlier refusal names
+/// no remedy option: cross-validation has neither `exclude` nor a loss of its own (the front end
+/// says what its user can do, from [`Crossval::outliers`]).
+fn refusal(e: IdentifyError, parts: &[(&Session, Vec<usize>)]) -> Refusal {
+    let whole = |w: &mut super::Worst| {
+        if let Some(&i) = parts.iter().find(|(s, _)| s.name == w.session).and_then(|(_, idx)| idx.get(w.index)) {
+            w.index = i;
+        }
+    };
+    match e {
+        IdentifyError::Outliers { mut outliers, factor } => {
+            outliers.iter_mut().for_each(whole);
+            Refusal {
+                message: format!(
+                    "{}; cross-validation scores every measurement of its sessions: remove them from the sessions to cross-validate without them",
+                    super::outliers_found(&outliers, factor)
+                ),
+                outliers: outliers.into_iter().map(|w| (w.session, w.index)).collect(),
+            }
+        }
+        IdentifyError::Misfit { rms, expected, ratio, limit, mut worst } => {
+            worst.iter_mut().for_each(whole);
+            Refusal::plain(IdentifyError::Misfit { rms, expected, ratio, limit, worst }.to_string())
+        }
+        e => Refusal::plain(e.to_string()),
+    }
+}
+
+/// Give every test session the TCP the fold's fit identified for its target: its own tool block's,
+/// or that of a training session naming the same `target` (one block per physical target). The
+/// others keep their declared TCP: fixed ones, since [`Split::unknown_tcp`] left the rest out.
+fn with_fold_tools(test: &mut Cell, cell: &Cell, id: &super::Identification) {
+    let target_of = |name: &String| cell.session(name).and_then(|s| s.target.as_ref());
+    for s in &mut test.sessions {
+        let same_target = |n: &String| s.target.is_some() && target_of(n) == s.target.as_ref();
+        let fitted = id.tools.iter().find(|t| t.sessions.contains(&s.name) || t.sessions.iter().any(same_target));
+        if let Some(tcp) = fitted.map(|t| t.tool.tcp) {
+            s.tool.tcp = tcp;
+        }
     }
 }
 
@@ -414,7 +587,7 @@ pub(crate) fn with_identified_tools(cell: &mut Cell, id: &super::Identification)
 }
 
 /// Identify on all the measurements of `session` with `options` and score the model there.
-fn fit_and_score_whole(cell: &Cell, session: &Session, options: &IdentifyOptions) -> Result<(HeldOut, f64), String> {
+fn fit_and_score_whole(cell: &Cell, session: &Session, options: &IdentifyOptions) -> Result<(HeldOut, f64), Refusal> {
     let all: Vec<usize> = (0..session.measurements.len()).collect();
     let split = Split {
         sessions: vec![session],
@@ -428,6 +601,8 @@ fn fit_and_score_whole(cell: &Cell, session: &Session, options: &IdentifyOptions
 /// Per-measurement errors of one fit on its test set.
 struct FoldErrors {
     scored: Vec<Scored>,
+    /// Test measurements not scored, their TCP unknown ([`Split::unknown_tcp`]): (session, count).
+    unscored: Vec<(usize, usize)>,
     identified: usize,
     kappa_scaled: f64,
 }
@@ -506,10 +681,13 @@ pub fn crossval_with_progress(
             + if opts.transfer.is_empty() { 0 } else { 1 + opts.transfer.len() });
     let done = AtomicUsize::new(0);
     let tick = || progress(done.fetch_add(1, Ordering::Relaxed) + 1, total);
+    let mut found = Found { notes, ..Default::default() };
     let (kfold_test, folds) =
-        if opts.folds >= 2 { kfold(cell, opts, &split, &variants, &tick) } else { Default::default() };
-    let sizes = if opts.sizes.is_empty() { Vec::new() } else { few_poses(cell, opts, &split, &variants, &tick) };
-    let transfer = if opts.transfer.is_empty() { Vec::new() } else { transfer(cell, opts, &split, &variants, &tick) };
+        if opts.folds >= 2 { kfold(cell, opts, &split, &variants, &tick, &mut found) } else { Default::default() };
+    let sizes =
+        if opts.sizes.is_empty() { Vec::new() } else { few_poses(cell, opts, &split, &variants, &tick, &mut found) };
+    let transfer =
+        if opts.transfer.is_empty() { Vec::new() } else { transfer(cell, opts, &split, &variants, &tick, &mut found) };
     Ok(Crossval {
         sessions: split.names.clone(),
         measurements: split.items.len(),
@@ -518,7 +696,8 @@ pub fn crossval_with_progress(
         folds,
         sizes,
         transfer,
-        notes,
+        notes: found.notes,
+        outliers: found.outliers.into_iter().collect(),
     })
 }
 
@@ -561,6 +740,9 @@ fn check_schemes(cell: &Cell, opts: &CrossvalOptions, split: &Split) -> Result<(
     if opts.folds == 1 {
         return Err(IdentifyError::field("folds", "must be 0 (skip) or at least 2"));
     }
+    if opts.folds == 0 && opts.sizes.is_empty() && opts.transfer.is_empty() {
+        return Err(IdentifyError::field("folds", "0 with no sizes and no transfer sessions: no scheme to run"));
+    }
     if opts.folds > n_poses {
         return Err(IdentifyError::field("folds", format!("{} exceeds {what}", opts.folds)));
     }
@@ -596,6 +778,7 @@ fn kfold(
     split: &Split,
     variants: &[Variant],
     tick: &(impl Fn() + Sync),
+    found: &mut Found,
 ) -> (Vec<Vec<(String, usize)>>, Vec<FoldsResult>) {
     let n_poses = split.members.len();
     let order = shuffled(n_poses, opts.seed);
@@ -613,14 +796,19 @@ fn kfold(
             split.indices(t).into_iter().flat_map(|(s, idx)| idx.into_iter().map(|i| (s.name.clone(), i))).collect()
         })
         .collect();
+    let train_of = |test: &[usize]| -> Vec<usize> { (0..n_poses).filter(|p| test.binary_search(p).is_err()).collect() };
     let jobs: Vec<(usize, usize)> = (0..variants.len()).flat_map(|v| (0..k).map(move |f| (v, f))).collect();
     let results = par_map(&jobs, opts.threads, |&(v, f)| {
-        let test = &tests[f];
-        let train: Vec<usize> = (0..n_poses).filter(|p| test.binary_search(p).is_err()).collect();
-        let r = split.fold_errors(cell, &train, test, &variants[v].options);
+        let r = split.fold_errors(cell, &train_of(&tests[f]), &tests[f], &variants[v].options);
         tick();
         r
     });
+    let results: Vec<Result<FoldErrors, String>> = results.into_iter().map(|r| found.keep(r)).collect();
+    for (f, test) in tests.iter().enumerate() {
+        for (s, n) in split.unknown_tcp(&split.indices(&train_of(test)), &split.indices(test)) {
+            found.unscored(split, s, n, &format!("in fold {} of {k}", f + 1));
+        }
+    }
     let mut folds = Vec::new();
     let mut previous: Option<Vec<Scored>> = None;
     for (v, variant) in variants.iter().enumerate() {
@@ -644,14 +832,15 @@ fn pooled_folds(
     let per_fold: Vec<Result<HeldOut, String>> = mine
         .iter()
         .map(|r| match r {
-            Ok(e) => HeldOut::of(&e.scored, names).ok_or_else(|| "empty fold".to_string()),
+            Ok(e) => HeldOut::of(&e.scored, names, &e.unscored).ok_or_else(|| NOTHING_SCORED.to_string()),
             Err(e) => Err(e.clone()),
         })
         .collect();
     let pooled = if mine.iter().all(|r| r.is_ok()) {
-        let all: Vec<Scored> =
-            mine.iter().filter_map(|r| r.as_ref().ok()).flat_map(|e| e.scored.iter().copied()).collect();
-        HeldOut::of(&all, names)
+        let ok = || mine.iter().filter_map(|r| r.as_ref().ok());
+        let all: Vec<Scored> = ok().flat_map(|e| e.scored.iter().copied()).collect();
+        let unscored: Vec<(usize, usize)> = ok().flat_map(|e| e.unscored.iter().copied()).collect();
+        HeldOut::of(&all, names, &unscored)
     } else {
         None
     };
@@ -673,22 +862,42 @@ fn few_poses(
     split: &Split,
     variants: &[Variant],
     tick: &(impl Fn() + Sync),
+    found: &mut Found,
 ) -> Vec<SizeResult> {
     let n_poses = split.members.len();
     let jobs: Vec<(usize, usize, usize)> = (0..variants.len())
         .flat_map(|v| opts.sizes.iter().flat_map(move |&n| (0..opts.draws).map(move |d| (v, n, d))))
         .collect();
-    let results = par_map(&jobs, opts.threads, |&(v, n, d)| {
+    let halves = |n: usize, d: usize| {
         let order = shuffled(n_poses, draw_seed(opts.seed, d));
-        let half = n_poses / 2;
         let mut train: Vec<usize> = order[..n].to_vec();
         train.sort_unstable();
-        let mut test: Vec<usize> = order[half..].to_vec();
+        let mut test: Vec<usize> = order[n_poses / 2..].to_vec();
         test.sort_unstable();
+        (train, test)
+    };
+    let results = par_map(&jobs, opts.threads, |&(v, n, d)| {
+        let (train, test) = halves(n, d);
         let r = split.fit_and_score(cell, &train, &test, &variants[v].options).map(|r| r.0);
         tick();
         r
     });
+    let results: Vec<Result<HeldOut, String>> = results.into_iter().map(|r| found.keep(r)).collect();
+    // One note per size and session: over how many draws, how many readings in all.
+    for &n in &opts.sizes {
+        let mut per: std::collections::BTreeMap<usize, (usize, usize)> = Default::default();
+        for d in 0..opts.draws {
+            let (train, test) = halves(n, d);
+            for (s, c) in split.unknown_tcp(&split.indices(&train), &split.indices(&test)) {
+                let e = per.entry(s).or_default();
+                e.0 += 1;
+                e.1 += c;
+            }
+        }
+        for (s, (draws, c)) in per {
+            found.unscored(split, s, c, &format!("in {draws} of the {} draws of n = {n}", opts.draws));
+        }
+    }
     let mut sizes = Vec::new();
     for (v, variant) in variants.iter().enumerate() {
         for &n in &opts.sizes {
@@ -712,22 +921,25 @@ fn transfer(
     split: &Split,
     variants: &[Variant],
     tick: &(impl Fn() + Sync),
+    found: &mut Found,
 ) -> Vec<TransferResult> {
     let all_poses: Vec<usize> = (0..split.members.len()).collect();
-    let whole = subsets_cell(cell, &split.indices(&all_poses));
+    let parts = split.indices(&all_poses);
+    let whole = subsets_cell(cell, &parts);
     let fitted = par_map(variants, opts.threads, |v| {
         let mut o = v.options.clone();
         o.selection.sessions = split.names.clone();
-        let r = identify(&whole, &o).map_err(|e| e.to_string());
+        let r = identify(&whole, &o).map_err(|e| refusal(e, &parts));
         tick();
         r
     });
+    let fitted: Vec<Result<super::Identification, String>> = fitted.into_iter().map(|r| found.keep(r)).collect();
     let on = split.names.join(", ");
     let jobs: Vec<(usize, usize)> =
         (0..variants.len()).flat_map(|v| (0..opts.transfer.len()).map(move |t| (v, t))).collect();
     let results = par_map(&jobs, opts.threads, |&(v, t)| {
         let _done = Tick(tick);
-        let id = fitted[v].as_ref().map_err(|e| format!("identification on '{on}': {e}"))?;
+        let id = fitted[v].as_ref().map_err(|e| Refusal::plain(format!("identification on '{on}': {e}")))?;
         let target = cell.session(&opts.transfer[t]).expect("checked above");
         let mut o = IdentifyOptions {
             start: Some(id.set.clone()),
@@ -742,7 +954,7 @@ fn transfer(
         fit_and_score_whole(cell, target, &o)
     });
     jobs.iter()
-        .zip(results)
+        .zip(results.into_iter().map(|r| found.keep(r)))
         .map(|(&(v, t), r)| {
             let (errors, kappa_scaled) = match r {
                 Ok((h, k)) => (Ok(h), Some(k)),

@@ -180,7 +180,16 @@ pub struct Worst {
 pub fn outliers_message(outliers: &[Worst], factor: f64, exclude: &str, huber: &str) -> String {
     let refs = outliers.iter().take(5).map(|w| format!("{}:{}", w.session, w.index)).collect::<Vec<_>>().join(",");
     format!(
-        "{} outlier measurement(s), each more than {factor:.0} times the typical residual: {}; leave them out ({exclude} {refs}) or fit with the Huber loss ({huber} 2.5)",
+        "{}; leave them out ({exclude} {refs}) or fit with the Huber loss ({huber} 2.5)",
+        outliers_found(outliers, factor)
+    )
+}
+
+/// The outliers of a refusal without its remedies, for a caller whose remedies differ (a
+/// cross-validation has neither `exclude` nor `huber`).
+pub(crate) fn outliers_found(outliers: &[Worst], factor: f64) -> String {
+    format!(
+        "{} outlier measurement(s), each more than {factor:.0} times the typical residual: {}",
         outliers.len(),
         worst_list(outliers)
     )

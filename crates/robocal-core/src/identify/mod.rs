@@ -23,6 +23,7 @@ mod pool;
 mod prepare;
 mod scale;
 
+pub(crate) use error::outliers_found;
 pub use error::{IdentifyError, Worst, outliers_message};
 pub use fixed::{FixedReason, ModelTerm, Structure};
 pub use hold::{COMPLIANCE_SIGNIFICANCE, PAYLOAD_SIGNIFICANCE};
