@@ -282,6 +282,10 @@ pub struct DiagnoseArgs {
     /// cross-validate on the identification sessions alone.
     #[arg(long)]
     pub validation: Option<String>,
+    /// Measurements left out of every fit and every test, `session:index` (0-based),
+    /// comma-separated: the outliers an identification refused (as given to `identify --exclude`).
+    #[arg(long)]
+    pub exclude: Option<String>,
     /// Folds of the grouped cross-validation.
     #[arg(long, default_value_t = 5)]
     pub folds: usize,
@@ -373,6 +377,11 @@ pub(super) fn diagnose(a: DiagnoseArgs) -> Result<String, CliError> {
         crate::domain::identification::kappa_limit(a.transfer_kappa_limit, "transfer_kappa_limit")
             .map_err(option_error)?;
     opts.threads = a.threads.count()?;
+    opts.exclude = list(&a.exclude)
+        .iter()
+        .map(|m| crate::domain::identification::MeasurementRef::parse(m, "exclude").map(|r| (r.session, r.index)))
+        .collect::<Result<_, _>>()
+        .map_err(option_error)?;
     let input = input_of(&cell, &doc);
     let diag = crate::diagnose::diagnose(&input, &opts).map_err(|e| CliError::msg(e.to_string()))?;
     let out = diagnosis_out(&diag);

@@ -340,6 +340,9 @@ pub fn identify_error(e: IdentifyError) -> JobError {
             title: "The measured positions are not on the robot's scale (a unit mistake)",
             detail,
         },
+        IdentifyError::JointUnit { .. } => {
+            JobError::Numerical { kind: "joint-unit", title: "The joint readings are in radians, not degrees", detail }
+        }
         IdentifyError::StartRobot { .. } => JobError::Invalid { detail, field: Some("parameter_set_id".into()) },
         IdentifyError::Option { .. } => JobError::Invalid { field: e.field_path(), detail },
         IdentifyError::Problem(_) => JobError::Invalid { detail, field: None },

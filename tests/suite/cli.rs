@@ -575,11 +575,16 @@ fn validate_predicts_each_reflector_with_its_own_identified_tcp() {
 /// A three-reflector tracker run of `simulate-tracker` (150 poses), imported as the README says;
 /// returns the cell file's path.
 fn reflector_plate_cell(dir: &std::path::Path, seed: &str) -> String {
+    reflector_plate_cell_of(dir, seed, "150")
+}
+
+/// [`reflector_plate_cell`] with `poses` poses.
+fn reflector_plate_cell_of(dir: &std::path::Path, seed: &str, poses: &str) -> String {
     let _ = std::fs::remove_dir_all(dir);
     std::fs::create_dir_all(dir).unwrap();
     let path = |n: &str| dir.join(n).to_string_lossy().to_string();
     let twin = path("twin");
-    let (ok, _, err) = robocal(&["simulate-tracker", "--seed", seed, "--poses", "150", "--out-dir", &twin]);
+    let (ok, _, err) = robocal(&["simulate-tracker", "--seed", seed, "--poses", poses, "--out-dir", &twin]);
     assert!(ok, "{err}");
     let file = |n: &str| format!("{twin}/run-{n}.txt");
     let cell = path("cell.json");
@@ -624,25 +629,9 @@ fn positions_in_another_unit_are_refused_with_the_unit_named() {
     let dir = std::env::temp_dir().join(format!("robocal-cli-units-{}", std::process::id()));
     let cell = reflector_plate_cell(&dir, "4");
     let text = std::fs::read_to_string(&cell).unwrap();
-    fn scale(v: &mut Value, k: f64) {
-        match v {
-            Value::Object(m) => {
-                for (key, x) in m.iter_mut() {
-                    match (key.as_str(), x) {
-                        ("position_mm", Value::Array(p)) => {
-                            p.iter_mut().for_each(|c| *c = Value::from(c.as_f64().unwrap() * k))
-                        }
-                        (_, x) => scale(x, k),
-                    }
-                }
-            }
-            Value::Array(a) => a.iter_mut().for_each(|x| scale(x, k)),
-            _ => {}
-        }
-    }
     for (unit, k) in [("cm", 0.1), ("in", 1.0 / 25.4), ("m", 1e-3), ("x10", 10.0)] {
         let mut c: Value = serde_json::from_str(&text).unwrap();
-        scale(&mut c, k);
+        scale_field(&mut c, "position_mm", k);
         let scaled = dir.join(format!("cell-{unit}.json"));
         std::fs::write(&scaled, c.to_string()).unwrap();
         let params = dir.join(format!("params-{unit}.json"));
@@ -661,8 +650,69 @@ fn positions_in_another_unit_are_refused_with_the_unit_named() {
         let stated: f64 = err.split(" times)").next().unwrap().rsplit('(').next().unwrap().parse().expect(&err);
         assert!((stated / k - 1.0).abs() < 0.2, "{unit}: states {stated} for {k}");
     }
+    // Joints in radians, written as degrees: the robot hardly moves at them, so the positions'
+    // check alone could not judge; the readings are named, with the conversion.
+    let mut c: Value = serde_json::from_str(&text).unwrap();
+    scale_field(&mut c, "joints_deg", std::f64::consts::PI / 180.0);
+    let radians = dir.join("cell-rad.json");
+    std::fs::write(&radians, c.to_string()).unwrap();
+    let params = dir.join("params-rad.json").to_string_lossy().to_string();
+    let (ok, _, err) = robocal(&["identify", &radians.to_string_lossy(), "--out", &params]);
+    assert!(!ok && err.contains("radians, not degrees (joints_deg)") && err.contains("57.2958"), "{err}");
     let params = dir.join("params.json").to_string_lossy().to_string();
     let (ok, _, err) = robocal(&["identify", &cell, "--out", &params]);
     assert!(ok, "the file as written: {err}");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `diagnose --exclude` leaves an outlier out of every fit and every test, as `identify
+/// --exclude` leaves it out of the set: a reading 20 mm off, fitted and scored, makes the held-out
+/// maximum 20 mm; excluded, it is neither, and a bad exclusion is refused naming the option.
+#[test]
+fn diagnose_leaves_out_the_readings_it_is_told_to() {
+    let dir = std::env::temp_dir().join(format!("robocal-cli-diag-exclude-{}", std::process::id()));
+    let cell = reflector_plate_cell_of(&dir, "5", "60");
+    let mut c: Value = serde_json::from_str(&std::fs::read_to_string(&cell).unwrap()).unwrap();
+    let p = &mut c["sessions"][0]["measurements"][7]["position_mm"][0];
+    *p = Value::from(p.as_f64().unwrap() + 20.0);
+    let name = c["sessions"][0]["name"].as_str().unwrap().to_string();
+    let outlier = format!("{name}:7");
+    let bad = dir.join("bad.json").to_string_lossy().to_string();
+    std::fs::write(&bad, c.to_string()).unwrap();
+    let params = dir.join("params.json").to_string_lossy().to_string();
+    let (ok, _, err) = robocal(&["identify", &bad, "--exclude", &outlier, "--out", &params]);
+    assert!(ok, "{err}");
+    let diagnose = |extra: &[&str]| {
+        let mut args = vec!["diagnose", &params, &bad, "--validation", "none", "--threads", "2"];
+        args.extend_from_slice(extra);
+        let (ok, d, err) = robocal(&args);
+        assert!(ok, "{err}");
+        let start = &d["shrink"][0];
+        (start["n"].as_u64().unwrap(), start["max_mm"].as_f64().unwrap())
+    };
+    let (n_all, max_all) = diagnose(&[]);
+    let (n, max) = diagnose(&["--exclude", &outlier]);
+    assert!(max_all > 15.0, "the outlier scored: {max_all} mm");
+    assert!(max < 2.0 && n < n_all, "excluded: {n} readings (of {n_all}), max {max} mm");
+    let (ok, _, err) = robocal(&["diagnose", &params, &bad, "--exclude", &format!("{name}:600")]);
+    assert!(!ok && err.contains("exclude") && err.contains("600"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Multiply every number of every `field` array in `v` by `k`.
+fn scale_field(v: &mut Value, field: &str, k: f64) {
+    match v {
+        Value::Object(m) => {
+            for (key, x) in m.iter_mut() {
+                match x {
+                    Value::Array(p) if key == field => {
+                        p.iter_mut().for_each(|c| *c = Value::from(c.as_f64().unwrap() * k))
+                    }
+                    x => scale_field(x, field, k),
+                }
+            }
+        }
+        Value::Array(a) => a.iter_mut().for_each(|x| scale_field(x, field, k)),
+        _ => {}
+    }
 }

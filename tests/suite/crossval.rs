@@ -134,6 +134,33 @@ fn reflectors() -> Vec<String> {
     ["tracker-n1", "tracker-n2", "tracker-n3"].map(String::from).to_vec()
 }
 
+/// A variant's excluded readings are named by their index in the whole session; a fold fits and
+/// scores a renumbered subset, so they are taken out before it: the reading corrupted by 5 mm is
+/// neither fitted nor scored, and the rest are predicted exactly. (The fold once applied the
+/// index to its subset: another reading was left out and the corrupted one fitted.)
+#[test]
+fn a_variants_excluded_reading_is_left_out_of_every_fold() {
+    let mut s = plate(9, Noise::none());
+    let session = s.cell.sessions.iter_mut().find(|x| x.name == "tracker-n2").unwrap();
+    let Observation::Position(p) = &mut session.measurements[17].observation else { panic!("a position") };
+    p.x += 5e-3;
+    let mut variant = IdentifyOptions::default();
+    variant.selection.exclude = vec![("tracker-n2".into(), 17)];
+    let opts = CrossvalOptions {
+        sessions: reflectors(),
+        transfer: Vec::new(),
+        sizes: Vec::new(),
+        variants: vec![Variant { name: "default".into(), options: variant }],
+        ..options(2)
+    };
+    let cv = crossval(&s.cell, &opts).unwrap();
+    let model = cv.folds[1].pooled.as_ref().unwrap();
+    let total: usize = reflectors().iter().map(|r| s.cell.session(r).unwrap().measurements.len()).sum();
+    assert_eq!(model.position.n, total - 1, "every reading but the excluded one scored");
+    assert!(model.unscored.is_empty(), "{:?}", model.unscored);
+    assert!(model.position.max < 1e-8, "{:e}", model.position.max);
+}
+
 /// Three reflectors at the same poses are split by pose: no configuration is held out in one
 /// fold and trained on in it, every measurement is predicted once, and the pooled errors are
 /// the union of the per-reflector ones.

@@ -173,6 +173,21 @@ impl Cell {
         self.sessions.iter().find(|s| s.name == name)
     }
 
+    /// The TCP a fit identified for `session`'s target, the one place that resolves it: by the
+    /// session's own name in `by_name`, else by a session of this cell measuring the same named
+    /// `target` (a reflector held out of a fit, or whose readings a fold left out, takes the TCP
+    /// fitted on the same reflector's other readings). `None`: nothing fitted for that target.
+    pub(crate) fn identified_tcp(
+        &self,
+        session: &Session,
+        by_name: impl Fn(&str) -> Option<[f64; 6]>,
+    ) -> Option<[f64; 6]> {
+        by_name(&session.name).or_else(|| {
+            let target = session.target.as_ref()?;
+            self.sessions.iter().filter(|s| s.target.as_ref() == Some(target)).find_map(|s| by_name(&s.name))
+        })
+    }
+
     /// Sessions of one purpose, in file order.
     pub fn sessions_for(&self, purpose: Purpose) -> impl Iterator<Item = &Session> {
         self.sessions.iter().filter(move |s| s.purpose == purpose)

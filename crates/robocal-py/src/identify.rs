@@ -250,6 +250,7 @@ pub(crate) fn identify_error(e: IdentifyError) -> Error {
         IdentifyError::Misfit { .. } => "misfit",
         IdentifyError::Outliers { .. } => "outliers",
         IdentifyError::PositionScale { .. } => "position_scale",
+        IdentifyError::JointUnit { .. } => "joint_unit",
     };
     Error::Identification { kind, message }
 }

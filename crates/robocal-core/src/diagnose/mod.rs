@@ -87,6 +87,9 @@ pub struct DiagnoseOptions {
     pub transfer_fixed: Vec<String>,
     /// Threads for the held-out refits (1: sequential).
     pub threads: usize,
+    /// Readings left out of every fit and every test, (session, 0-based index in it): the
+    /// outliers an identification refused and was given as `exclude`. Only diagnosed sessions'.
+    pub exclude: Vec<(String, usize)>,
 }
 
 impl Default for DiagnoseOptions {
@@ -107,6 +110,7 @@ impl Default for DiagnoseOptions {
             transfer_kappa_limit: 1e4,
             transfer_fixed: Vec::new(),
             threads: 1,
+            exclude: Vec::new(),
         }
     }
 }
@@ -425,6 +429,7 @@ fn start_options(input: &Input<'_>, opts: &DiagnoseOptions, sessions: Vec<String
         ..unrefused()
     };
     o.selection.sessions = sessions;
+    o.selection.exclude = opts.exclude.clone();
     o
 }
 
@@ -597,6 +602,19 @@ fn diagnosed_sessions(cell: &Cell, opts: &DiagnoseOptions) -> Result<(Vec<String
     }
     if let Some(s) = identification.iter().find(|s| validation.contains(s)) {
         return Err(DiagnoseError::Option(format!("session '{s}' is named for both identification and validation")));
+    }
+    for (name, index) in &opts.exclude {
+        let diagnosed = identification.contains(name) || validation.contains(name);
+        match cell.session(name) {
+            Some(s) if diagnosed && *index < s.measurements.len() => {}
+            Some(s) if diagnosed => {
+                return Err(DiagnoseError::Option(format!(
+                    "exclude: session '{name}' has {} measurements (0-based), not {index}",
+                    s.measurements.len()
+                )));
+            }
+            _ => return Err(DiagnoseError::Option(format!("exclude: '{name}' is not a diagnosed session"))),
+        }
     }
     Ok((identification, validation))
 }

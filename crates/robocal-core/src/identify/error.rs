@@ -111,6 +111,23 @@ pub enum IdentifyError {
         /// `measured` / `nominal`.
         ratio: f64,
     },
+    /// A session's joint readings are radians read as degrees: every one, taken as radians, lies
+    /// within its joint's limits, the nominal robot hardly moves at them, and read as radians its TCP spreads as the measured
+    /// positions do. Refused before it is fitted.
+    #[error(
+        "session '{session}': its joint readings are in radians, not degrees (joints_deg): taken as radians, every one lies within its joint's limits, and its measured positions spread {} mm around their centroid where the nominal robot's TCP spreads {} mm with the readings taken as degrees but {} mm taken as radians. Convert them to degrees (× 57.2958) and import again",
+        mm(*measured), mm(*nominal), mm(*nominal_radians)
+    )]
+    JointUnit {
+        /// The session.
+        session: String,
+        /// RMS distance of its measured positions from their centroid, m.
+        measured: f64,
+        /// The same of the nominal robot's declared TCP at the readings as degrees, m.
+        nominal: f64,
+        /// The same with the readings taken as radians, m.
+        nominal_radians: f64,
+    },
     /// Gross outliers the robust loss did not down-weight: measurements whose z (the RMS over their
     /// rows of e/√(σ² + τ²), τ² the spread the model leaves beyond the instrument) exceeds `factor`
     /// times the larger of the median z and 1.

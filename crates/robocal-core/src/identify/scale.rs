@@ -19,7 +19,8 @@ const MAX_SPREAD_RATIO: f64 = 3.0;
 /// Per session of measured points or poses: the RMS distance of the measured positions from their
 /// centroid against that of the nominal robot's declared TCP (the flange where none is declared) at
 /// the same joint readings, which neither the base pose nor the instrument's frame changes. Refused when they differ by more than
-/// [`MAX_SPREAD_RATIO`]: the positions are not in the unit the file says, or the joints are not.
+/// [`MAX_SPREAD_RATIO`]: the positions are not in the unit the file says, or the joints are not —
+/// named when the readings taken as radians make the spreads agree ([`IdentifyError::JointUnit`]).
 pub(crate) fn check_position_scale(problem: &Problem, x0: &[f64], cell: &Cell) -> Result<(), IdentifyError> {
     let chains = problem.chains(x0);
     for (s, session) in cell.sessions.iter().enumerate() {
@@ -30,12 +31,44 @@ pub(crate) fn check_position_scale(problem: &Problem, x0: &[f64], cell: &Cell) -
         // The declared TCP, not the start's: a TCP registered from the data carries their scale.
         let declared: Vec<_> = chains.iter().map(|c| c.with_base_tool(c.base_pose(), session.tool.tcp)).collect();
         let measured = spread(obs.iter().map(|o| o.measured_position()));
-        let nominal = spread(obs.iter().map(|o| declared[o.tool].fk(&o.state).t));
-        if nominal < MIN_NOMINAL_SPREAD || !measured.is_finite() {
+        if !measured.is_finite() {
             continue;
         }
-        let ratio = measured / nominal;
-        if !(1.0 / MAX_SPREAD_RATIO..=MAX_SPREAD_RATIO).contains(&ratio) {
+        let nominal = spread(obs.iter().map(|o| declared[o.tool].fk(&o.state).t));
+        let agrees = |nominal: f64| {
+            nominal >= MIN_NOMINAL_SPREAD && (1.0 / MAX_SPREAD_RATIO..=MAX_SPREAD_RATIO).contains(&(measured / nominal))
+        };
+        if agrees(nominal) {
+            continue;
+        }
+        // Radians read as degrees: every reading, taken as radians, within its joint's limits (a
+        // robot that moved metres turns more than a few degrees somewhere), and the readings as
+        // radians move the nominal TCP as measured.
+        let radians_read_as_degrees = |q: &[f64]| {
+            cell.model
+                .links
+                .iter()
+                .zip(q)
+                .all(|(l, q)| (l.limits[0] - 1e-9..=l.limits[1] + 1e-9).contains(&q.to_degrees()))
+        };
+        if obs.iter().all(|o| radians_read_as_degrees(&o.state.q)) {
+            let as_radians = |o: &&super::problem::Obs| {
+                let mut state = o.state;
+                state.q.iter_mut().for_each(|q| *q = q.to_degrees());
+                declared[o.tool].fk(&state).t
+            };
+            let nominal_radians = spread(obs.iter().map(as_radians));
+            if agrees(nominal_radians) {
+                return Err(IdentifyError::JointUnit {
+                    session: session.name.clone(),
+                    measured,
+                    nominal,
+                    nominal_radians,
+                });
+            }
+        }
+        if nominal >= MIN_NOMINAL_SPREAD {
+            let ratio = measured / nominal;
             return Err(IdentifyError::PositionScale { session: session.name.clone(), measured, nominal, ratio });
         }
     }

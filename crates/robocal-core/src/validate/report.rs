@@ -170,16 +170,9 @@ impl FitData {
         self.sessions.iter().any(|s| s == name)
     }
 
-    /// The TCP the fit identified for `session`'s tool: the session's own, else that of a fitted
-    /// session of `cell` measuring the same named target (a reflector's held-out session).
+    /// The TCP the fit identified for `session`'s tool ([`Cell::identified_tcp`]).
     pub(crate) fn tcp_of(&self, session: &Session, cell: &Cell) -> Option<[f64; 6]> {
-        self.tcps.get(&session.name).copied().or_else(|| {
-            let target = session.target.as_ref()?;
-            cell.sessions
-                .iter()
-                .filter(|s| s.target.as_ref() == Some(target))
-                .find_map(|s| self.tcps.get(&s.name).copied())
-        })
+        cell.identified_tcp(session, |name| self.tcps.get(name).copied())
     }
 
     /// Whether the fit used measurement `index` of session `name`.

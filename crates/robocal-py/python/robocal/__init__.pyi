@@ -41,7 +41,8 @@ class IdentificationError(Exception):
     TCP, another frame, unrelated data), ``"outliers"`` (single measurements far above the
     typical residual; the message names them as ``session:index``), ``"position_scale"`` (a
     session's positions spread over another scale than the nominal robot at its joint readings: a
-    unit mistake, e.g. centimetres read as mm), ``"registration"`` (no base
+    unit mistake, e.g. centimetres read as mm), ``"joint_unit"`` (a session's joint readings are
+    radians, not degrees), ``"registration"`` (no base
     guess and the measured points cannot place the base), ``"option"`` or ``"problem"``.
     Not a ValueError: the arguments were well-formed, the data cannot answer.
     """

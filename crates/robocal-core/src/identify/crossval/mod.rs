@@ -342,9 +342,12 @@ impl Split<'_> {
         test: &[usize],
         options: &IdentifyOptions,
     ) -> Result<FoldErrors, Refusal> {
-        let train = self.indices(train);
+        // Readings the options exclude are neither fitted nor scored. They are named by their index
+        // in the whole session, which a fold's subset renumbers, so they are taken out here.
+        let excluded = &options.selection.exclude;
+        let train = without_excluded(self.indices(train), excluded);
         let id_cell = subsets_cell(cell, &train);
-        let mut test_idx = self.indices(test);
+        let mut test_idx = without_excluded(self.indices(test), excluded);
         let unscored = self.unknown_tcp(&train, &test_idx);
         for &(s, _) in &unscored {
             test_idx[s].1.clear();
@@ -353,9 +356,10 @@ impl Split<'_> {
         let mut o = options.clone();
         o.selection.sessions = id_cell.sessions.iter().map(|s| s.name.clone()).collect();
         o.selection.subset.clear();
+        o.selection.exclude.clear();
         let id = identify(&id_cell, &o).map_err(|e| refusal(e, &train))?;
         let mut test_cell = subsets_cell(cell, &test_idx);
-        with_fold_tools(&mut test_cell, cell, &id);
+        with_identified_tools(&mut test_cell, cell, &id);
         let names: Vec<String> = test_cell.sessions.iter().map(|s| s.name.clone()).collect();
         let residuals = if names.is_empty() {
             Vec::new()
@@ -446,30 +450,31 @@ fn refusal(e: IdentifyError, parts: &[(&Session, Vec<usize>)]) -> Refusal {
     }
 }
 
-/// Give every test session the TCP the fold's fit identified for its target: its own tool block's,
-/// or that of a training session naming the same `target` (one block per physical target). The
-/// others keep their declared TCP: fixed ones, since [`Split::unknown_tcp`] left the rest out.
-fn with_fold_tools(test: &mut Cell, cell: &Cell, id: &super::Identification) {
-    let target_of = |name: &String| cell.session(name).and_then(|s| s.target.as_ref());
-    for s in &mut test.sessions {
-        let same_target = |n: &String| s.target.is_some() && target_of(n) == s.target.as_ref();
-        let fitted = id.tools.iter().find(|t| t.sessions.contains(&s.name) || t.sessions.iter().any(same_target));
-        if let Some(tcp) = fitted.map(|t| t.tool.tcp) {
+/// Give every session of `scored` the TCP `id` identified for its target ([`Cell::identified_tcp`],
+/// the targets read from `cell`, the cell fitted on): its own tool block's, or that of a session
+/// measuring the same named target, so that each held-out measurement is predicted with its own
+/// target's TCP. Sessions whose declared tools are equal (several reflectors imported with the
+/// flange as their guess) would otherwise all be predicted with the parameter set's one tool — the
+/// first reflector's. The others keep their declared TCP: fixed ones, since
+/// [`Split::unknown_tcp`] left the rest out of the test.
+pub(crate) fn with_identified_tools(scored: &mut Cell, cell: &Cell, id: &super::Identification) {
+    let by_name = |name: &str| id.tools.iter().find(|t| t.sessions.iter().any(|n| n == name)).map(|t| t.tool.tcp);
+    for s in &mut scored.sessions {
+        if let Some(tcp) = cell.identified_tcp(s, by_name) {
             s.tool.tcp = tcp;
         }
     }
 }
 
-/// Give every session of `cell` that the identification fitted a TCP for (its own tool block)
-/// that TCP, so that each held-out measurement is predicted with its own target's TCP. Sessions
-/// whose declared tools are equal (several reflectors imported with the flange as their guess)
-/// are otherwise all predicted with the parameter set's one tool — the first reflector's.
-pub(crate) fn with_identified_tools(cell: &mut Cell, id: &super::Identification) {
-    for s in &mut cell.sessions {
-        if let Some(t) = id.tools.iter().find(|t| t.sessions.contains(&s.name)) {
-            s.tool.tcp = t.tool.tcp;
-        }
+/// `parts` without the readings `excluded` names (session, index in the whole session).
+fn without_excluded<'s>(
+    mut parts: Vec<(&'s Session, Vec<usize>)>,
+    excluded: &[(String, usize)],
+) -> Vec<(&'s Session, Vec<usize>)> {
+    for (session, idx) in &mut parts {
+        idx.retain(|&i| !excluded.iter().any(|(n, k)| *n == session.name && *k == i));
     }
+    parts
 }
 
 /// Identify on all the measurements of `session` with `options` and score the model there.
