@@ -158,6 +158,10 @@ pub struct Evaluated {
     /// round (Bonferroni); RMS gain above `min_gain`; mean gain at least `min_rel_gain` of the
     /// model's held-out mean.
     pub confirmed: bool,
+    /// Not confirmed for its size alone: significant at the same level, above `min_gain`, but
+    /// lowering the held-out mean by less than `min_rel_gain` of it. A real cause too small to
+    /// name, which a summary must not call absent.
+    pub too_small: bool,
 }
 
 /// Why a round ended the search, or what it accepted.
@@ -200,6 +204,11 @@ pub enum Decision {
         /// Held-out RMS gain of the smoother over the model, or of the candidate and the smoother
         /// together when larger, m.
         smoother_gain_rms: f64,
+        /// The candidate's gap closure when the smoother does not predict significantly better
+        /// than it: the candidate is partial for closing too little of the gap to the floor
+        /// alone — the rest is not a smooth function of the configuration. `None`: the smoother
+        /// predicts better (structure beyond the candidate).
+        closure_only: Option<f64>,
     },
     /// The best candidate was confirmed on the linearised folds, but the model refitted in full
     /// on the same folds does not reproduce the gain: it is not named, and the model stays as it
@@ -598,10 +607,11 @@ fn run_round(
         .map(|(&i, heldout)| {
             let vs_model = paired(base, &heldout);
             let share = (rms2(base) - rms2(&heldout)) / excess;
-            let confirmed = vs_model.p.is_some_and(|p| p < level)
-                && vs_model.gain_rms > opts.min_gain
-                && vs_model.gain_mean >= opts.min_rel_gain * base_mean;
-            Evaluated { index: i, heldout, vs_model, share, confirmed }
+            let significant = vs_model.p.is_some_and(|p| p < level) && vs_model.gain_rms > opts.min_gain;
+            let large = vs_model.gain_mean >= opts.min_rel_gain * base_mean;
+            let confirmed = significant && large;
+            let too_small = significant && !large && vs_model.gain_mean > 0.0;
+            Evaluated { index: i, heldout, vs_model, share, confirmed, too_small }
         })
         .collect();
 

@@ -214,16 +214,27 @@ fn last_finding(s: &search::Search, d: &Decomposition) -> Finding {
                 ..Finding::new(Status::NotSeparable, format!("{}: {reason}", b.candidate.label()))
             }
         }
-        Decision::Partial { best, share, smoother_gain_rms } => {
+        Decision::Partial { best, share, smoother_gain_rms, closure_only } => {
             let b = &lr.screened[*best];
             let gain = lr.evaluated.iter().find(|e| e.index == *best).map_or(0.0, |e| e.vs_model.gain_rms);
-            let summary = format!(
-                "{} explains {:.0} % of what a smooth function of the configuration explains beyond the model (held-out RMS gain {} against {}); the rest is unexplained: an effect outside the library, of which this term is a look-alike",
+            let explains = format!(
+                "{} explains {:.0} % of what a smooth function of the configuration explains beyond the model (held-out RMS gain {} against {})",
                 b.candidate.label(),
                 share * 100.0,
                 mm(gain),
                 mm(*smoother_gain_rms)
             );
+            let summary = match closure_only {
+                // No smooth structure beyond it: what it leaves changes from pose to pose. Too
+                // small a share of the gap to tell it from a look-alike, not evidence of one.
+                Some(c) => format!(
+                    "{explains}, but closes only {:.0} % of the gap to the floor; the rest changes from pose to pose, and so small a share cannot tell this term from a look-alike of an effect outside the library: not named",
+                    c * 100.0
+                ),
+                None => format!(
+                    "{explains}; the rest is unexplained: an effect outside the library, of which this term is a look-alike"
+                ),
+            };
             Finding {
                 absorbed_by: b.absorbed_by.clone(),
                 experiment: Some(experiment(b.candidate.kind, None)),
@@ -287,6 +298,14 @@ fn nothing_new(s: &search::Search, d: &Decomposition) -> Finding {
             k => experiment(k, None),
         })
         .collect::<Vec<_>>();
+    // A candidate the held-out poses confirm in all but its size: in the data, too small to name.
+    // Its share is of the mean it was judged against (the round's model, linearised folds).
+    let round_mean = ErrorStats::of(&s.baselines.last().expect("a baseline").norms()).map_or(now.mean, |e| e.mean);
+    let small = if matches!(lr.decision, Decision::Accept(_)) {
+        None
+    } else {
+        lr.evaluated.iter().filter(|e| e.too_small).max_by(|a, b| a.vs_model.gain_mean.total_cmp(&b.vs_model.gain_mean))
+    };
     match strong {
         _ if now.rms > EXCESS_RATIO * d.floor.rms && now.rms - d.floor.rms > EXCESS_MIN => Finding {
             experiment: Some(if exp.is_empty() {
@@ -294,13 +313,25 @@ fn nothing_new(s: &search::Search, d: &Decomposition) -> Finding {
             } else {
                 exp.join("; ")
             }),
+            suspects: small.map(|e| vec![effect_of(s, last, e.index, None)]).unwrap_or_default(),
             ..Finding::new(
                 Status::NotSeparable,
-                format!(
-                    "the held-out error (RMS {}) stands far above the floor ({}), but neither a candidate nor a smooth function of the configuration predicts it: an error that changes from pose to pose{untestable}",
-                    mm(now.rms),
-                    mm(d.floor.rms),
-                ),
+                match small {
+                    None => format!(
+                        "the held-out error (RMS {}) stands far above the floor ({}), but neither a candidate nor a smooth function of the configuration predicts it: an error that changes from pose to pose{untestable}",
+                        mm(now.rms),
+                        mm(d.floor.rms),
+                    ),
+                    Some(e) => format!(
+                        "the held-out error (RMS {}) stands far above the floor ({}), and neither a candidate nor a smooth function of the configuration predicts most of it: the best candidate, {}, predicts held-out poses better (p = {:.1e}) but lowers the held-out mean by only {} ({:.1} %), too little to name it or to tell it from a look-alike; the rest is an error that changes from pose to pose{untestable}",
+                        mm(now.rms),
+                        mm(d.floor.rms),
+                        lr.screened[e.index].candidate.label(),
+                        e.vs_model.p.unwrap_or(f64::NAN),
+                        mm(e.vs_model.gain_mean),
+                        100.0 * e.vs_model.gain_mean / round_mean,
+                    ),
+                },
             )
         },
         Some(c) if !matches!(lr.decision, Decision::Accept(_)) => {

@@ -80,7 +80,12 @@ pub(super) fn decide(
         Decision::Unknown { best: Some(best.index) }
     } else if within && (smoother_better || closure < opts.name_closure) {
         let sg = sm.vs_model.gain_rms.max(paired(base, &joint).gain_rms);
-        Decision::Partial { best: best.index, share, smoother_gain_rms: sg }
+        Decision::Partial {
+            best: best.index,
+            share,
+            smoother_gain_rms: sg,
+            closure_only: (!smoother_better).then_some(closure),
+        }
     } else if screened[best.index].candidate.kind == Kind::ToolMass && payloads(stage) < 2 {
         // A payload error acts through the compliances: with one payload it changes every
         // holding torque in proportion to what the compliances already scale, and what is
