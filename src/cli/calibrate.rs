@@ -99,14 +99,16 @@ pub struct ValidateArgs {
     pub json: bool,
 }
 
+/// `--exclude session:index,…` of identify and diagnose, each parsed; errors name the option.
+fn exclusions(arg: &Option<String>) -> Result<Vec<crate::domain::identification::MeasurementRef>, CliError> {
+    use crate::domain::identification::MeasurementRef;
+    list(arg).iter().map(|m| MeasurementRef::parse(m, "exclude")).collect::<Result<_, _>>().map_err(option_error)
+}
+
 pub(super) fn identify(a: IdentifyArgs) -> Result<String, CliError> {
-    use crate::domain::identification::{IdentifySpec, MeasurementRef, run_identification};
+    use crate::domain::identification::{IdentifySpec, run_identification};
     let cell = load_cell(&a.cell)?;
-    let exclude = list(&a.exclude)
-        .iter()
-        .map(|m| MeasurementRef::parse(m, "exclude"))
-        .collect::<Result<_, _>>()
-        .map_err(option_error)?;
+    let exclude = exclusions(&a.exclude)?;
     let spec = IdentifySpec {
         model: a.model.clone(),
         fix: list(&a.fix),
@@ -377,11 +379,7 @@ pub(super) fn diagnose(a: DiagnoseArgs) -> Result<String, CliError> {
         crate::domain::identification::kappa_limit(a.transfer_kappa_limit, "transfer_kappa_limit")
             .map_err(option_error)?;
     opts.threads = a.threads.count()?;
-    opts.exclude = list(&a.exclude)
-        .iter()
-        .map(|m| crate::domain::identification::MeasurementRef::parse(m, "exclude").map(|r| (r.session, r.index)))
-        .collect::<Result<_, _>>()
-        .map_err(option_error)?;
+    opts.exclude = exclusions(&a.exclude)?.into_iter().map(|r| (r.session, r.index)).collect();
     let input = input_of(&cell, &doc);
     let diag = crate::diagnose::diagnose(&input, &opts).map_err(|e| CliError::msg(e.to_string()))?;
     let out = diagnosis_out(&diag);
