@@ -375,6 +375,39 @@ fn a_hysteresis_too_small_to_name_is_said_not_called_absent() {
     assert!(d.verdict.effects.is_empty(), "{:?}", d.verdict.effects);
 }
 
+/// The σ a named effect is printed with holds at the data's own scale: on twins whose readings
+/// scatter 6× the instrument's noise by a turn of the joints at every stop (shared by the stop's
+/// three reflectors), every backlash term's estimate lies within 3 σ of the truth, and the true
+/// 0.006° is still told from zero by more than 3 σ. The σ was the instrument model's
+/// (JᵀJ)⁻¹ alone, ten times too small: 0.005888 ± 0.000045° for a true 0.006°.
+#[test]
+fn a_named_effects_uncertainty_covers_the_truth_under_pose_to_pose_scatter() {
+    use robocal::diagnose::Status;
+    for seed in [1, 2] {
+        let d = diagnose_twin(982, 10, "backlash:j=1:deg=0.006,backlash:j=2:deg=0.006,backlash:j=3:deg=0.006", seed);
+        let v = &d.verdict;
+        assert_eq!(v.status, Status::Named, "seed {seed}: {}", v.summary);
+        let e = v.effects.iter().find(|e| e.candidate.label() == "backlash").expect(&v.summary);
+        assert_eq!(e.parameters.len(), 6, "{:?}", e.parameters);
+        for (j, b) in e.parameters.iter().enumerate() {
+            let truth = if j < 3 { 0.006 * DEG } else { 0.0 };
+            let sd = b.std.expect("a σ");
+            let z = (b.value - truth) / sd;
+            assert!(
+                z.abs() < 3.0,
+                "seed {seed}, backlash{}: {} ± {} deg, truth {}",
+                j + 1,
+                b.value / DEG,
+                sd / DEG,
+                truth / DEG
+            );
+            if j < 3 {
+                assert!(truth > 3.0 * sd, "seed {seed}, backlash{}: σ {} deg tells nothing", j + 1, sd / DEG);
+            }
+        }
+    }
+}
+
 /// The k-fold options of the twin tests below: `sessions` split, the default model only.
 fn cv_options(sessions: &[&str], folds: usize, sizes: Vec<usize>) -> CrossvalOptions {
     CrossvalOptions {

@@ -8,7 +8,9 @@ use faer::Mat;
 use super::linalg::{a_b, at_b, at_v, orthonormal_basis, psd_solve};
 
 use crate::cell::Cell;
-use crate::identify::{GlobalParam, Identification, IdentifyError, IdentifyOptions, Problem, identify, prepare};
+use crate::identify::{
+    Fit, GlobalParam, Identification, IdentifyError, IdentifyOptions, Problem, Quality, identify, prepare,
+};
 use crate::kinematics::{Chain, Param, ParameterSet, Rows};
 
 /// A fitted model and its linearisation.
@@ -210,11 +212,36 @@ impl Stage {
         Ok(Stage { options, problem, x, free, set, fit: Err("extended by one linear step".into()), j: a, r, q, rss })
     }
 
-    /// Standard deviations of free global parameters from this stage's weighted Jacobian,
-    /// √[(JᵀJ)⁻¹]_gg (the instrument model's σ, priors included); `None` for a fixed one.
+    /// Standard deviations of free global parameters at the data's own scale, as an
+    /// identification reports them ([`crate::identify::Quality::make_robust`]): the larger of
+    /// σ̂²(JᵀJ)⁻¹, σ̂² the weighted residual per degree of freedom, and the cluster-robust σ with
+    /// the readings grouped by stop; `None` for a fixed parameter or one the data do not
+    /// determine (a non-finite σ).
+    ///
+    /// Why not (JᵀJ)⁻¹ alone: J is weighted by the instrument model, so that is the σ the
+    /// instrument alone would leave. On real data the residual is 10–30× the instrument's and the
+    /// readings of one stop (several reflectors) share the stop's error; on a tracker twin with
+    /// 0.35 mm of pose-to-pose error, a backlash printed 0.0152 ± 0.00006° was 0.012° in truth.
     pub(crate) fn stds_of(&self, globals: &[usize]) -> Vec<Option<f64>> {
-        let cov = super::floor::covariance(self);
-        globals.iter().map(|g| self.free.iter().position(|f| f == g).map(|c| cov[(c, c)].max(0.0).sqrt())).collect()
+        let pr = &self.problem;
+        let cost: f64 = self.r.iter().map(|v| v * v).sum();
+        let fit = Fit {
+            x: self.x.clone(),
+            iterations: 0,
+            residual: self.r.clone(),
+            jacobian: self.j.clone(),
+            weights: vec![1.0; pr.obs.len()],
+            cost,
+        };
+        let rows: Vec<(usize, usize)> = pr.obs.iter().map(|o| (o.row, o.rows)).collect();
+        let dof = pr.model.dof();
+        let (pose_of_obs, n_poses) = crate::cell::poses::group_poses(pr.obs.iter().map(|o| &o.state.q[..dof]));
+        let mut quality = Quality::of(&fit, pr.obs.len(), &rows);
+        quality.make_robust(&fit, &rows, &pose_of_obs, n_poses);
+        globals
+            .iter()
+            .map(|g| self.free.iter().position(|f| f == g).map(|c| quality.std[c]).filter(|s| s.is_finite()))
+            .collect()
     }
 
     /// Rows of J and r: the measurement rows, then the prior rows.
