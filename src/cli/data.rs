@@ -130,7 +130,8 @@ pub struct Ur10IpaArgs {
 
 #[derive(Args, Debug)]
 pub struct ThreeReflectorArgs {
-    /// Joints file: one pose per line, joint values in degrees, whitespace-separated.
+    /// Joints file: one pose per line, joint values in degrees, separated by whitespace or commas
+    /// (or semicolons, then a decimal comma is read too); a first line of labels is a header.
     #[arg(long)]
     pub joints: PathBuf,
     /// One positions file per reflector (x y z mm per line, line-aligned with the joints). Repeatable.

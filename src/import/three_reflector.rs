@@ -9,8 +9,11 @@
 //!   pose: that measurement is skipped for that reflector only.
 //! - In every file, blank lines and lines starting with `#` are comments. They do not count as
 //!   poses: pose i is the i-th non-comment line of each file, so all files must hold the same
-//!   number of pose lines.
-//! - Numbers use a decimal point.
+//!   number of pose lines. A first line without a number in it (`x y z`, `q1,q2,…`) is a column
+//!   header, skipped, and the import says so; anywhere else such a line is an error.
+//! - Values are separated by whitespace or commas, with a decimal point (`1.5 2 3`, `1.5,2,3`,
+//!   `1.5, 2, 3`); or by semicolons, then with a decimal point or a decimal comma (`1,5;2;3`),
+//!   as a spreadsheet in a locale with decimal commas writes them.
 //!
 //! Each reflector becomes one laser-tracker session, `reflector-1`, `reflector-2`, … in the order
 //! the files are given, with its measurements in file (measuring) order: the sessions are marked
@@ -129,7 +132,7 @@ fn read_files(
         return Err(ImportError::Input("give at least one reflector positions file".into()));
     }
     let joint_text = read_text(joints)?;
-    let joint_lines = pose_lines(&joint_text);
+    let (joint_lines, joint_header) = without_header(pose_lines(&joint_text));
     let poses: Vec<Vec<f64>> =
         joint_lines.iter().map(|(line, text)| joint_values(joints, *line, text, &model)).collect::<Result<_, _>>()?;
 
@@ -140,11 +143,13 @@ fn read_files(
         joints.display(),
         positions.len()
     )];
+    notes.extend(joint_header.map(|h| header_note(joints, h)));
     let mut sessions = Vec::with_capacity(positions.len());
     for (k, path) in positions.iter().enumerate() {
         let name = format!("reflector-{}", k + 1);
         let text = read_text(path)?;
-        let lines = pose_lines(&text);
+        let (lines, header) = without_header(pose_lines(&text));
+        notes.extend(header.map(|h| header_note(path, h)));
         if lines.len() != poses.len() {
             return Err(ImportError::PoseCount {
                 file: joints.to_path_buf(),
@@ -193,13 +198,57 @@ fn read_files(
     Ok(Imported { cell: Cell { model, base_guess: None, artefact: None, sessions }, notes })
 }
 
+/// A line of a file: its 1-based number and its text, trimmed.
+type PoseLine<'a> = (u64, &'a str);
+
 /// The pose lines of a file with their 1-based line numbers: comments (`#`) and blank lines out.
-fn pose_lines(text: &str) -> Vec<(u64, &str)> {
+fn pose_lines(text: &str) -> Vec<PoseLine<'_>> {
     text.lines()
         .enumerate()
         .map(|(i, l)| (i as u64 + 1, l.trim()))
         .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
         .collect()
+}
+
+/// The first pose line when it is a column header — no field of it reads as a number and one
+/// holds a letter (so `-`, a hidden reflector, is not one) — split off the pose lines.
+fn without_header(mut lines: Vec<PoseLine<'_>>) -> (Vec<PoseLine<'_>>, Option<PoseLine<'_>>) {
+    let header = lines.first().is_some_and(|(_, text)| {
+        let fields = fields(text);
+        fields.iter().all(|f| number(f).is_err() && !f.eq_ignore_ascii_case("nan"))
+            && fields.iter().any(|f| f.chars().any(char::is_alphabetic))
+    });
+    if header { (lines.split_off(1), Some(lines[0])) } else { (lines, None) }
+}
+
+fn header_note(path: &Path, (line, text): PoseLine<'_>) -> String {
+    format!("{} line {line} read as a column header and skipped: {text}", path.display())
+}
+
+/// The values of a pose line: separated by semicolons (each may use a decimal comma), else by
+/// whitespace and commas.
+fn fields(text: &str) -> Vec<String> {
+    if text.contains(';') {
+        text.split(';').map(|f| f.trim().replace(',', ".")).filter(|f| !f.is_empty()).collect()
+    } else {
+        text.split(|c: char| c.is_whitespace() || c == ',').filter(|f| !f.is_empty()).map(str::to_owned).collect()
+    }
+}
+
+/// When a line holds a comma between two digits and no semicolon: a hint that its commas may be
+/// decimal commas (read here as separators).
+fn comma_hint(text: &str) -> String {
+    let b = text.as_bytes();
+    let decimal_comma =
+        (1..b.len().saturating_sub(1)).any(|i| b[i] == b',' && b[i - 1].is_ascii_digit() && b[i + 1].is_ascii_digit());
+    if decimal_comma && !text.contains(';') {
+        format!(
+            " (read as decimal commas, {}: write a decimal point, or separate the values by semicolons)",
+            text.split_whitespace().count()
+        )
+    } else {
+        String::new()
+    }
 }
 
 /// A finite number written with a decimal point.
@@ -213,12 +262,12 @@ fn number(field: &str) -> Result<f64, String> {
 
 /// One joints line → q in rad, within the robot's limits.
 fn joint_values(path: &Path, line: u64, text: &str, model: &RobotModel) -> Result<Vec<f64>, ImportError> {
-    let fields: Vec<&str> = text.split_whitespace().collect();
+    let fields = fields(text);
     if fields.len() != model.dof() {
         return Err(ImportError::line(
             path,
             line,
-            format!("expected {} joint values, got {}", model.dof(), fields.len()),
+            format!("expected {} joint values, got {}{}", model.dof(), fields.len(), comma_hint(text)),
         ));
     }
     let mut q = Vec::with_capacity(fields.len());
@@ -242,7 +291,7 @@ fn joint_values(path: &Path, line: u64, text: &str, model: &RobotModel) -> Resul
 
 /// One positions line → the reflector position in m, or `None` when it was not visible.
 fn position(path: &Path, line: u64, text: &str) -> Result<Option<Vector3<f64>>, ImportError> {
-    let fields: Vec<&str> = text.split_whitespace().collect();
+    let fields = fields(text);
     if fields == ["-"] || (fields.len() == 3 && fields.iter().all(|f| f.eq_ignore_ascii_case("nan"))) {
         return Ok(None);
     }
@@ -250,7 +299,11 @@ fn position(path: &Path, line: u64, text: &str) -> Result<Option<Vector3<f64>>, 
         return Err(ImportError::line(
             path,
             line,
-            format!("expected x y z (3 values, or `nan nan nan` / `-` when not visible), got {}", fields.len()),
+            format!(
+                "expected x y z (3 values, or `nan nan nan` / `-` when not visible), got {}{}",
+                fields.len(),
+                comma_hint(text)
+            ),
         ));
     }
     let mut p = [0.0; 3];
@@ -298,9 +351,93 @@ mod tests {
         assert_eq!(position(p, 1, "1000 -250.5 3e2").unwrap(), Some(Vector3::new(1.0, -0.2505, 0.3)));
         let e = position(p, 4, "1 nan 3").unwrap_err();
         assert_eq!(e.to_string(), "r1.txt line 4, column y: 'nan' is not a finite number");
-        let e = position(p, 5, "1,5 2 3").unwrap_err();
-        assert_eq!(e.to_string(), "r1.txt line 5, column x: '1,5' is not a number");
+        let e = position(p, 5, "1,5 2,25 3,75").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "r1.txt line 5: expected x y z (3 values, or `nan nan nan` / `-` when not visible), got 6 (read as decimal commas, 3: write a decimal point, or separate the values by semicolons)"
+        );
+        let e = position(p, 5, "1.5;2;x").unwrap_err();
+        assert_eq!(e.to_string(), "r1.txt line 5, column z: 'x' is not a number");
         let e = position(p, 6, "1 2").unwrap_err();
         assert!(e.to_string().starts_with("r1.txt line 6: expected x y z"), "{e}");
+    }
+
+    /// Whitespace, commas, or semicolons with decimal commas: the same position.
+    #[test]
+    fn separators_of_the_usual_exports_read_the_same() {
+        let p = Path::new("r1.txt");
+        let want = Some(Vector3::new(1.0, -0.2505, 0.3));
+        for line in [
+            "1000 -250.5 3e2",
+            "1000\t-250.5\t300",
+            "1000,-250.5,300",
+            "1000, -250.5, 300",
+            "1000;-250,5;300",
+            "1000 ; -250.5 ; 300",
+        ] {
+            assert_eq!(position(p, 1, line).unwrap(), want, "{line}");
+        }
+        assert_eq!(position(p, 1, "nan,nan,nan").unwrap(), None);
+        assert_eq!(position(p, 1, "NaN;NaN;NaN").unwrap(), None);
+        let q = joint_values(Path::new("j.txt"), 1, "10,-20.5,30,0,45,-90", &irb120()).unwrap();
+        let r = joint_values(Path::new("j.txt"), 1, "10;-20,5;30;0;45;-90", &irb120()).unwrap();
+        assert_eq!(q, r);
+        assert!((q[1] - (-20.5 * DEG)).abs() < 1e-15);
+    }
+
+    /// A first line of labels is a header; a hidden reflector's `-` or `nan` line and a line of
+    /// numbers are not; only the first pose line can be one.
+    #[test]
+    fn a_first_line_of_labels_is_a_header() {
+        for text in ["x y z\n1 2 3\n", "# c\nX [mm],Y [mm],Z [mm]\n1,2,3\n", "q1;q2;q3;q4;q5;q6\n1;2;3;4;5;6\n"] {
+            let (lines, header) = without_header(pose_lines(text));
+            assert!(header.is_some(), "{text}");
+            assert_eq!(lines.len(), 1, "{text}");
+        }
+        for text in ["-\n1 2 3\n", "nan nan nan\n1 2 3\n", "1 2 3\nx y z\n", "1 2 y\n"] {
+            let (lines, header) = without_header(pose_lines(text));
+            assert!(header.is_none(), "{text}");
+            assert_eq!(lines.len(), text.lines().count(), "{text}");
+        }
+    }
+
+    /// Files with headers and commas import as the same files without them, and the import says
+    /// which lines it read as headers.
+    #[test]
+    fn headers_are_skipped_and_said() {
+        let dir = std::env::temp_dir().join(format!("robocal-3r-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let write = |name: &str, text: &str| {
+            let path = dir.join(name);
+            std::fs::write(&path, text).unwrap();
+            path
+        };
+        let joints = [[0.0, 10.0, 20.0, 30.0, 40.0, 50.0], [5.0, -10.0, 25.0, -30.0, 45.0, 60.0]];
+        let plain_j = joints.iter().map(|q| q.map(|v| v.to_string()).join(" ") + "\n").collect::<String>();
+        let comma_j = "J1,J2,J3,J4,J5,J6\n".to_owned()
+            + &joints.iter().map(|q| q.map(|v| v.to_string()).join(",") + "\n").collect::<String>();
+        let plain = read_files(
+            &write("j.txt", &plain_j),
+            &[write("r.txt", "500 20 300\n-\n")],
+            irb120(),
+            Purpose::Identification,
+        )
+        .unwrap();
+        let headed = read_files(
+            &write("jh.csv", &comma_j),
+            &[write("rh.csv", "X;Y;Z\n500;20;300\nnan;nan;nan\n")],
+            irb120(),
+            Purpose::Identification,
+        )
+        .unwrap();
+        let (a, b) = (&plain.cell.sessions[0].measurements, &headed.cell.sessions[0].measurements);
+        assert_eq!(a.len(), 1);
+        assert_eq!((&a[0].q, a[0].sequence), (&b[0].q, b[0].sequence));
+        assert_eq!(format!("{:?}", a[0].observation), format!("{:?}", b[0].observation));
+        let notes = headed.notes.join("\n");
+        assert!(notes.contains("jh.csv line 1 read as a column header and skipped: J1,J2,J3,J4,J5,J6"), "{notes}");
+        assert!(notes.contains("rh.csv line 1 read as a column header and skipped: X;Y;Z"), "{notes}");
+        assert!(!plain.notes.join("\n").contains("header"), "{:?}", plain.notes);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
