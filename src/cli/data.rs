@@ -98,6 +98,10 @@ pub struct SimulateTrackerArgs {
     pub tracker_sigma_um: f64,
     #[arg(long, default_value_t = 5.0)]
     pub tracker_sigma_um_per_m: f64,
+    /// Seconds from one stop to the next: with a thermal effect (`--effects thermal`), the robot
+    /// warms up along the run, which the files do not log. 0: every stop at the start's temperature.
+    #[arg(long, default_value_t = 0.0)]
+    pub stop_s: f64,
     /// The folder the files are written to (created): TAG-joints.txt, TAG-smr1.txt, …
     #[arg(long)]
     pub out_dir: PathBuf,
@@ -163,6 +167,7 @@ pub(super) fn simulate_tracker(a: SimulateTrackerArgs) -> Result<String, CliErro
         ("--jitter-deg", a.jitter_deg),
         ("--tracker-sigma-um", a.tracker_sigma_um),
         ("--tracker-sigma-um-per-m", a.tracker_sigma_um_per_m),
+        ("--stop-s", a.stop_s),
     ] {
         if !(v.is_finite() && v >= 0.0) {
             return Err(CliError::arg(arg, "must be a non-negative number"));
@@ -180,6 +185,7 @@ pub(super) fn simulate_tracker(a: SimulateTrackerArgs) -> Result<String, CliErro
         jitter: a.jitter_deg * crate::units::DEG,
         tracker_sigma: a.tracker_sigma_um * UM,
         tracker_sigma_per_m: a.tracker_sigma_um_per_m * UM,
+        stop_s: a.stop_s,
         ..TrackerRunOptions::default()
     };
     let run = tracker_run(&o).map_err(|e| CliError::msg(e.to_string()))?;

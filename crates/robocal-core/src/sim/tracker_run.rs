@@ -49,8 +49,12 @@ pub struct TrackerRunOptions {
     /// The payload's centre of mass in the flange frame, m; `None`: the SMRs' centroid.
     pub payload_com: Option<Vector3<f64>>,
     /// The true robot's unmodelled effects (backlash is the hysteresis by direction of motion).
-    /// The run is at 20 °C throughout, so a thermal effect changes nothing.
+    /// A thermal effect acts through the robot's temperature at each stop
+    /// ([`Effects::temperature_at`] of the stop's time, `stop_s` apart): the warm-up over a run
+    /// drifts along the measuring order, and the files log neither time nor temperature.
     pub effects: Effects,
+    /// Seconds from one stop to the next (0: every stop at the run's start and its temperature).
+    pub stop_s: f64,
     /// σ of the random turn of each joint at each stop, rad: the pose-to-pose error no term
     /// explains (0.012° at the IRB 120's ~0.5 m lever is ≈0.1 mm per joint).
     pub jitter: f64,
@@ -92,6 +96,7 @@ impl Default for TrackerRunOptions {
             tracker_sigma_per_m: 5e-6,
             base_in_tracker: [1.90, -1.25, -0.55, 2.4, 0.002, -0.003],
             acceptance: 55.0 * DEG,
+            stop_s: 0.0,
         }
     }
 }
@@ -158,6 +163,7 @@ pub fn tracker_run(opts: &TrackerRunOptions) -> Result<TrackerRun, TrackerRunErr
         ("jitter", opts.jitter),
         ("tracker_sigma", opts.tracker_sigma),
         ("tracker_sigma_per_m", opts.tracker_sigma_per_m),
+        ("stop_s", opts.stop_s),
     ] {
         if !(v.is_finite() && v >= 0.0) {
             return Err(TrackerRunError::Option(format!("{name} must be a non-negative number")));
@@ -225,7 +231,8 @@ pub fn tracker_run(opts: &TrackerRunOptions) -> Result<TrackerRun, TrackerRunErr
     let mut readings = vec![Vec::with_capacity(opts.poses); n_smr];
     let mut exact = vec![Vec::with_capacity(opts.poses); n_smr];
     let mut approaches = Vec::with_capacity(opts.poses);
-    for q in &poses {
+    for (stop, q) in poses.iter().enumerate() {
+        let temperature_c = opts.effects.temperature_at(stop as f64 * opts.stop_s);
         let mut approach = [0i8; MAX_JOINTS];
         let mut app = [0.0; MAX_JOINTS];
         for j in 0..dof {
@@ -241,8 +248,8 @@ pub fn tracker_run(opts: &TrackerRunOptions) -> Result<TrackerRun, TrackerRunErr
             }
         }
         for (k, robot) in robots.iter().enumerate() {
-            let p_true = robot.tcp(&robot.state(&moved[..dof], &app[..dof], 20.0)).t;
-            let p_model = robot.tcp(&robot.state(&q[..dof], &app[..dof], 20.0)).t;
+            let p_true = robot.tcp(&robot.state(&moved[..dof], &app[..dof], temperature_c)).t;
+            let p_model = robot.tcp(&robot.state(&q[..dof], &app[..dof], temperature_c)).t;
             let sigma = opts.tracker_sigma + opts.tracker_sigma_per_m * p_true.norm();
             let noise = Vector3::from_fn(|_, _| unit.sample(&mut rng) * sigma);
             readings[k].push(p_true + noise);
@@ -333,5 +340,35 @@ mod tests {
         // The SMRs are 150 mm apart.
         let s = &o.smrs;
         assert!(((s[0] - s[1]).norm() - 0.150).abs() < 1e-12 && ((s[1] - s[2]).norm() - 0.150).abs() < 1e-12);
+    }
+
+    /// A warm-up drifts along the measuring order: with `stop_s` the thermal effect's expansion
+    /// grows from nothing at the first stop to α·ΔT of the reflector's distance from the base at
+    /// the last (23 ppm × 8 °C·(1 − e^(−119·10/3600)) ≈ 52 ppm of ≈0.6 m here); without it every
+    /// stop is at the start's 20 °C and the thermal effect changes nothing.
+    #[test]
+    fn a_warm_up_drifts_along_the_measuring_order() {
+        let none = Effects::parse("", 6).unwrap();
+        let plain = TrackerRunOptions { poses: 120, removed: 0, jitter: 0.0, effects: none, ..Default::default() };
+        let thermal = Effects::parse("thermal", 6).unwrap();
+        let warm = |stop_s: f64| TrackerRunOptions { effects: thermal.clone(), stop_s, ..plain.clone() };
+        let (a, b, c) =
+            (tracker_run(&plain).unwrap(), tracker_run(&warm(0.0)).unwrap(), tracker_run(&warm(10.0)).unwrap());
+        assert_eq!(a.joints, c.joints);
+        let base = a.truth.set.chain().base().t;
+        let ratio = |k: usize, i: usize| {
+            let (p, q) = (a.true_positions[k][i], c.true_positions[k][i]);
+            (q - p).norm() / (p - base).norm()
+        };
+        for k in 0..3 {
+            let same =
+                a.true_positions[k].iter().zip(&b.true_positions[k]).map(|(p, q)| (p - q).norm()).fold(0.0, f64::max);
+            assert!(same < 1e-12, "stop_s 0 is the start's temperature: {same} m apart");
+            let rise = 1.0 - (-119.0 * 10.0 / 3600.0f64).exp();
+            let want = 23e-6 * 8.0 * rise;
+            assert!(ratio(k, 0) < 2e-7, "first stop: {}", ratio(k, 0));
+            let last = ratio(k, 119);
+            assert!(last > 0.5 * want && last < 1.5 * want, "last stop: {last} of the range, about {want}");
+        }
     }
 }
