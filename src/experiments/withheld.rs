@@ -78,7 +78,9 @@ pub enum Rig {
     /// imported as a user would (payload unknown), with a random turn of every joint at every
     /// stop (`jitter_deg`, 1σ per joint: an error that changes from pose to pose and that no
     /// term explains) and `removed` rows deleted afterwards.
-    TrackerTwin { jitter_deg: f64, removed: usize, payload_kg: f64 },
+    /// `stop_s` seconds from stop to stop: with a thermal effect, the robot warms up along the
+    /// run, which the files do not log.
+    TrackerTwin { jitter_deg: f64, removed: usize, payload_kg: f64, stop_s: f64 },
 }
 
 /// How the virtual cell's instruments are simulated (the diagnosis's own instrument model
@@ -249,21 +251,32 @@ pub fn suite() -> Vec<Case> {
     // Realistic twins of a real tracker run: the payload unknown, an error from pose to pose of
     // 0.1–0.3 mm that no term explains, rows removed; the hysteresis is named from the order of
     // the rows, the random part left unexplained.
-    let twin = |jitter_deg: f64| Rig::TrackerTwin { jitter_deg, removed: 10, payload_kg: 1.0 };
-    for (name, effects, jitter, expect) in [
+    // One twin warms up by 8 °C over its 2.7 hours (a stop every 10 s), unlogged: a drift along
+    // the measuring order that no term can take, beside the hysteresis that is named.
+    let twin = |jitter_deg: f64, stop_s: f64| Rig::TrackerTwin { jitter_deg, removed: 10, payload_kg: 1.0, stop_s };
+    for (name, effects, jitter, stop_s, expect) in [
         (
             "twin: hysteresis j1–j3, jitter 0.1 mm",
             "backlash:j=1:deg=0.006,backlash:j=2:deg=0.006,backlash:j=3:deg=0.006",
             0.006,
+            0.0,
             named(Kind::Backlash, None, None, None),
         ),
         (
             "twin: hysteresis j2, jitter 0.2 mm",
             "backlash:j=2:deg=0.01",
             0.012,
+            0.0,
             named(Kind::Backlash, Some(1), None, None),
         ),
-        ("twin: no hysteresis, jitter 0.2 mm", "", 0.012, Expect::NoName),
+        (
+            "twin: hysteresis j2, unlogged warm-up",
+            "thermal,backlash:j=2:deg=0.01",
+            0.012,
+            10.0,
+            named(Kind::Backlash, Some(1), None, None),
+        ),
+        ("twin: no hysteresis, jitter 0.2 mm", "", 0.012, 0.0, Expect::NoName),
     ] {
         cases.push(Case {
             name: name.into(),
@@ -272,7 +285,7 @@ pub fn suite() -> Vec<Case> {
             shuffle: false,
             noise: NoiseVariant::Default,
             heavy_validation: false,
-            rig: twin(jitter),
+            rig: twin(jitter, stop_s),
             expect,
         });
     }
@@ -349,8 +362,8 @@ pub fn run_case(case: &Case, seed: u64, opts: &DiagnoseOptions) -> Outcome {
             noise.tracker_sigma_per_m *= 1.5;
         }
     }
-    if let Rig::TrackerTwin { jitter_deg, removed, payload_kg } = case.rig {
-        return match twin_cell(&effects, jitter_deg, removed, payload_kg, seed) {
+    if let Rig::TrackerTwin { jitter_deg, removed, payload_kg, stop_s } = case.rig {
+        return match twin_cell(&effects, jitter_deg, removed, payload_kg, stop_s, seed) {
             Ok(cell) => score(case, seed, &cell, &effects, ModelOptions::default(), opts, t0),
             Err(e) => fail(e),
         };
@@ -373,7 +386,14 @@ pub fn run_case(case: &Case, seed: u64, opts: &DiagnoseOptions) -> Outcome {
 
 /// A realistic twin's cell: the run written as three-reflector files and imported as a user
 /// would, payload unknown.
-fn twin_cell(effects: &Effects, jitter_deg: f64, removed: usize, payload_kg: f64, seed: u64) -> Result<Cell, String> {
+fn twin_cell(
+    effects: &Effects,
+    jitter_deg: f64,
+    removed: usize,
+    payload_kg: f64,
+    stop_s: f64,
+    seed: u64,
+) -> Result<Cell, String> {
     use crate::sim::tracker_run::{TrackerRunOptions, tracker_run};
     let o = TrackerRunOptions {
         seed,
@@ -381,6 +401,7 @@ fn twin_cell(effects: &Effects, jitter_deg: f64, removed: usize, payload_kg: f64
         payload_kg,
         effects: effects.clone(),
         jitter: jitter_deg * crate::units::DEG,
+        stop_s,
         ..TrackerRunOptions::default()
     };
     let run = tracker_run(&o).map_err(|e| e.to_string())?;
