@@ -4,7 +4,8 @@ diagnose, and with CV=1 crossval over the three reflectors; each seed draws its 
 
 Each seed draws 300–982 stops, 0–150 removed rows, a 0.3–3 kg plate, 0.004–0.03° of pose-to-pose
 turn, up to three hysteresis terms, and (at random) a cyclic error, a coupling 2→3 and link
-bending; with MIX2=1 also a cubic compliance and cyclic errors of harmonics up to 40. It checks
+bending; with MIX2=1 also a cubic compliance and cyclic errors of harmonics up to 40; with BIG=1
+hysteresis on up to six joints, up to 0.035°. It checks
 what a verdict promises: a named verdict's shrink table ends lower, every named term's gain is
 positive, a named backlash lies within 4 σ of its truth, each reflector's held-out mean within
 10 % of the pooled one; and prints the verdict, the named or suspected terms and the payload's
@@ -22,11 +23,27 @@ start, n, scratch = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
 def run(args, cwd):
     p = subprocess.run([B] + args, cwd=cwd, capture_output=True, text=True)
     return p.returncode, p.stdout + p.stderr
+def true_effect(e, spec):
+    """Whether named effect `e` (the verdict's JSON) is the drawn effect `spec`."""
+    kind, *kv = spec.split(':')
+    kv = dict(x.split('=') for x in kv)
+    j = e.get('joint')
+    if e['name'] == 'backlash' and kind == 'backlash':
+        return j is None or j == int(kv['j'])
+    if e['name'] in ('cyclic', 'joint_map') and kind == 'cyclic':
+        h = e.get('harmonic')
+        return j == int(kv['j']) and (h is None or h == int(kv['h']) or e['name'] == 'joint_map')
+    if e['name'] == 'coupling' and kind == 'coupling':
+        return e.get('from_joint') == 2 and j == 3
+    if e['name'] == 'compliance_cubic' and kind == 'compliance_cubic':
+        return j == int(kv['j'])
+    return False
 for seed in range(start, start + n):
     rng = random.Random(seed)
     eff = []
-    for j in rng.sample(range(1, 7), rng.randint(0, 3)):
-        eff.append('backlash:j=%d:deg=%.4f' % (j, rng.uniform(0.003, 0.015)))
+    big = bool(os.environ.get('BIG'))
+    for j in rng.sample(range(1, 7), rng.randint(0, 6 if big else 3)):
+        eff.append('backlash:j=%d:deg=%.4f' % (j, rng.uniform(0.003, 0.035 if big else 0.015)))
     if rng.random() < 0.3:
         eff.append('cyclic:j=%d:h=%d:amp_deg=%.4f' % (rng.randint(1, 6), rng.randint(1, 3), rng.uniform(0.005, 0.02)))
     if rng.random() < 0.2:
@@ -99,5 +116,9 @@ for seed in range(start, start + n):
                 if per and max(abs(x - pp.get('mean_mm', 0)) for x in per) > 0.1 * pp.get('mean_mm', 1):
                     problems.append('cv %s per-reflector %s vs pooled %.4f' % (f.get('model'), per, pp.get('mean_mm', -1)))
     labels = [e['label'] for e in v['effects']]
+    if v['status'] == 'named':
+        for e in v['effects']:
+            if not any(true_effect(e, x) for x in eff):
+                problems.append('WRONG NAME %s' % e['label'])
     print(desc, '| res', res.group(1) if res else '?', '| r1', 'ok' if rc1 == 0 else 'FAIL', '|', v['status'], labels, '| pay', pay_s, '| shrink', round(sh[0]['mean_mm'], 4), '->', round(sh[-1]['mean_mm'], 4), '| PROBLEMS ' + '; '.join(problems) if problems else '')
     sys.stdout.flush()

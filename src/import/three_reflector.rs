@@ -6,7 +6,10 @@
 //! - Each **positions file** holds one line per pose, line-aligned with the joints file:
 //!   `x y z` in **mm** in the tracker frame, the position of that file's reflector at that pose.
 //!   A line `nan nan nan` (any case) or a single `-` means the reflector was not visible at that
-//!   pose: that measurement is skipped for that reflector only.
+//!   pose: that measurement is skipped for that reflector only. A pose line with no reading in
+//!   any file (every reflector hidden, or a row rejected as an outlier and blanked) is still a
+//!   stop the robot made: each measurement's `approach` is then written from the joints file's
+//!   order with it counted (deleting the line instead leaves the move after it a guess).
 //! - In every file, blank lines and lines starting with `#` are comments. They do not count as
 //!   poses: pose i is the i-th non-comment line of each file, so all files must hold the same
 //!   number of pose lines. A first line without a number in it (`x y z`, `q1,q2,…`) is a column
@@ -195,7 +198,41 @@ fn read_files(
             order: MeasuringOrder::Measured,
         });
     }
+    notes.extend(approach_through_unread_stops(&mut sessions, &poses, &joint_lines));
     Ok(Imported { cell: Cell { model, base_guess: None, artefact: None, sessions }, notes })
+}
+
+/// Where some pose lines have no reading in any file (every reflector hidden, or the row's
+/// positions blanked as an outlier), the robot still stopped there: the move into the next
+/// stop started from it, which the measurements alone cannot tell (a derivation from them
+/// would take the move from the stop before, wrong for about a third of the joints). So the
+/// import writes every measurement's `approach` from the joints file's order, every pose line
+/// counted, and says so. Without such lines the measurements are every stop and the
+/// derivation from their `sequence` gives the same directions: nothing is written.
+fn approach_through_unread_stops(
+    sessions: &mut [Session],
+    poses: &[Vec<f64>],
+    lines: &[PoseLine<'_>],
+) -> Option<String> {
+    let mut read = vec![false; poses.len()];
+    for m in sessions.iter().flat_map(|s| &s.measurements) {
+        if let Some(k) = m.sequence.and_then(|n| usize::try_from(n).ok()).filter(|&k| k < read.len()) {
+            read[k] = true;
+        }
+    }
+    let unread: Vec<u64> = read.iter().zip(lines).filter(|(r, _)| !**r).map(|(_, (line, _))| *line).collect();
+    if unread.is_empty() || unread.len() == poses.len() {
+        return None;
+    }
+    let dirs = crate::cell::order::directions(poses.iter().map(Vec::as_slice));
+    for m in sessions.iter_mut().flat_map(|s| &mut s.measurements) {
+        m.approach = m.sequence.and_then(|n| dirs.get(usize::try_from(n).ok()?)).cloned();
+    }
+    Some(format!(
+        "{} pose(s) without a reading in any file (line(s) {} of the joints file): the robot stopped there all the same, so each measurement's approach (the direction of each joint's move into its stop, what backlash depends on) is written from the joints file's order with those stops counted",
+        unread.len(),
+        line_list(&unread)
+    ))
 }
 
 /// A line of a file: its 1-based number and its text, trimmed.

@@ -111,7 +111,7 @@ impl Approach {
             .collect();
         if !derived.is_empty() {
             notes.push(format!(
-                "approach directions are not logged: derived from the measuring order of {} (the direction of each joint's move into each stop)",
+                "approach directions are not logged: derived from the measuring order of {} (the direction of each joint's move into each stop; a stop deleted from the list leaves the move after it a guess, which shrinks a fitted hysteresis)",
                 derived.join(", ")
             ));
         }
@@ -139,6 +139,31 @@ fn sign(d: f64) -> i8 {
 /// Two readings of the same configuration (every joint within [`STILL`]).
 fn same_stop(a: &[f64], b: &[f64]) -> bool {
     a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x - y).abs() <= STILL)
+}
+
+/// The direction of each joint's move into each reading of a run, readings in measuring order:
+/// consecutive readings of one configuration are one stop and share the move into it; the first
+/// stop, and a joint that did not move, get 0. Importers that know stops without a reading (a
+/// row whose every reflector is hidden) pass them too, so the move after them is the true one.
+pub fn directions<'a>(readings: impl IntoIterator<Item = &'a [f64]>) -> Vec<Vec<i8>> {
+    let mut stop: Option<&[f64]> = None;
+    let mut dir: Vec<i8> = Vec::new();
+    let mut out = Vec::new();
+    for q in readings {
+        match stop {
+            Some(p) if same_stop(p, q) => {}
+            Some(p) => {
+                dir = q.iter().zip(p).map(|(a, b)| sign(a - b)).collect();
+                stop = Some(q);
+            }
+            None => {
+                dir = vec![0; q.len()];
+                stop = Some(q);
+            }
+        }
+        out.push(dir.clone());
+    }
+    out
 }
 
 /// Sessions numbered as one run, and the configuration each number names.
@@ -252,23 +277,9 @@ pub fn fill_approach(cell: &mut Cell, sessions: &[String]) -> Approach {
     }
 
     for seq in runs {
-        // The configuration of the current stop and the one before it.
-        let mut stop: Option<Vec<f64>> = None;
-        let mut dir: Vec<i8> = Vec::new();
-        for (s, i) in seq {
-            let m = &mut cell.sessions[s].measurements[i];
-            match &stop {
-                Some(p) if same_stop(p, &m.q) => {}
-                Some(p) => {
-                    dir = m.q.iter().zip(p).map(|(a, b)| sign(a - b)).collect();
-                    stop = Some(m.q.clone());
-                }
-                None => {
-                    dir = vec![0; m.q.len()];
-                    stop = Some(m.q.clone());
-                }
-            }
-            m.approach = Some(dir.clone());
+        let dirs = directions(seq.iter().map(|&(s, i)| cell.sessions[s].measurements[i].q.as_slice()));
+        for ((s, i), dir) in seq.into_iter().zip(dirs) {
+            cell.sessions[s].measurements[i].approach = Some(dir);
         }
     }
 

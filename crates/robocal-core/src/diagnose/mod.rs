@@ -764,10 +764,8 @@ fn held_payload_with_named(
         .filter_map(|e| {
             let k = id.set.layout.index_of(e.param)?;
             let (v, s) = (id.set.values[k], id.std[k]?);
-            ((v - e.value).abs() > s.max(e.std.unwrap_or(0.0))).then(|| {
-                let u = e.param.unit();
-                format!("{} {} ± {} {}", e.param, verdict::num(v / u.to_si()), verdict::num(s / u.to_si()), u.as_str())
-            })
+            ((v - e.value).abs() > s.max(e.std.unwrap_or(0.0)))
+                .then(|| format!("{} {}", e.param, verdict::with_sd(v, Some(s), e.param.unit())))
         })
         .collect();
     let with = if moved.is_empty() { String::new() } else { format!(", and with it {}", moved.join(", ")) };

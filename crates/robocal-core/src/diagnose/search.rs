@@ -30,8 +30,8 @@
 //!   most of the effect; the parameters that absorb it are named.
 //! - **Unknown effect and partial explanations**: a flexible joint-space smoother (every joint's
 //!   angle corrected by a linear function of every holding torque, every reading and its square)
-//!   cross-validated the same way. If it confirms when no candidate does, the verdict is
-//!   `unknown_effect`. A confirmed candidate that is one of the smoother's own forms (given the
+//!   cross-validated the same way. If it confirms when no candidate does, and lowers the held-out
+//!   mean by `min_rel_gain` as a candidate must, the verdict is `unknown_effect`. A confirmed candidate that is one of the smoother's own forms (given the
 //!   smoother it adds nothing: encompassing score test at `confirm_p`) is named only if it closes
 //!   at least `name_closure` of the gap to the floor and the smoother does not predict
 //!   significantly better; otherwise it is `partial` — its share of what the smoother explains
@@ -623,13 +623,19 @@ fn run_round(
     let smoother_heldout = cvb.heldout(Some((&sm, Some(&sm_pen))));
     let smoother = paired(base, &smoother_heldout);
     let smoother_ok = smoother.p.is_some_and(|p| p < opts.confirm_p) && smoother.gain_rms > opts.min_gain;
+    // An effect outside the library is held to the size a candidate must reach: a smooth
+    // structure that lowers the held-out mean by less than `min_rel_gain` is no more a cause to
+    // call unknown than a candidate of that size is one to name (and a candidate too small to
+    // name may predict more of it than the smoother does).
+    let smoother_large = smoother.gain_mean >= opts.min_rel_gain * base_mean;
 
     timing("smoother", t0);
     let t0 = std::time::Instant::now();
     // Decide.
     let confirmed: Vec<&Evaluated> = evaluated.iter().filter(|e| e.confirmed).collect();
     let (decision, smoother_vs_best, share_of_best, closure_of_best) = if confirmed.is_empty() {
-        (if smoother_ok { Decision::Unknown { best: None } } else { Decision::Nothing }, None, None, None)
+        let unknown = smoother_ok && smoother_large;
+        (if unknown { Decision::Unknown { best: None } } else { Decision::Nothing }, None, None, None)
     } else {
         let sm = Smoother { cols: &sm, pen: &sm_pen, heldout: &smoother_heldout, vs_model: &smoother, ok: smoother_ok };
         let d = decide(stage, base, floor_ms, &cvb, &confirmed, &screened, &columns, &sm, opts);

@@ -105,7 +105,7 @@ fn magnitude(c: &Candidate, p: &[ParamEstimate]) -> (Option<f64>, Option<f64>, U
 }
 
 /// A number in four significant digits, without an exponent where it reads as plain decimals.
-pub(super) fn num(v: f64) -> String {
+fn num(v: f64) -> String {
     let a = v.abs();
     if a == 0.0 {
         "0".into()
@@ -114,6 +114,14 @@ pub(super) fn num(v: f64) -> String {
         format!("{v:.digits$}")
     } else {
         format!("{v:.3e}")
+    }
+}
+
+/// A value (SI) in its file unit, with its σ when known: `0.01956 ± 7.613e-4 deg`.
+pub(super) fn with_sd(v: f64, sd: Option<f64>, unit: Unit) -> String {
+    match sd {
+        Some(sd) => format!("{} ± {} {}", num(v / unit.to_si()), num(sd / unit.to_si()), unit.as_str()),
+        None => format!("{} {}", num(v / unit.to_si()), unit.as_str()),
     }
 }
 
@@ -286,15 +294,47 @@ fn last_finding(s: &search::Search, d: &Decomposition) -> Finding {
             }
         }
         Decision::Unknown { best } => {
+            let small = lr
+                .evaluated
+                .iter()
+                .filter(|e| e.too_small)
+                .max_by(|a, b| a.vs_model.gain_mean.total_cmp(&b.vs_model.gain_mean));
             let what = match best {
                 Some(i) => format!(
                     "a smooth function of the configuration predicts the residual better than the best candidate ({}), which is one of its forms",
                     lr.screened[*i].candidate.label()
                 ),
-                None => "a smooth function of the configuration predicts the residual; no candidate does".into(),
+                None => {
+                    let base = ErrorStats::of(&s.baselines.last().expect("a baseline").norms())
+                        .map_or(d.heldout.mean, |e| e.mean);
+                    let sm = &lr.smoother;
+                    let smooth = format!(
+                        "a smooth function of the configuration predicts the residual (held-out mean lower by {}, {:.1} %)",
+                        mm(sm.gain_mean),
+                        100.0 * sm.gain_mean / base
+                    );
+                    // A candidate the held-out poses confirm in all but its size is said, with its
+                    // figures: "no candidate does" would be contradicted by them.
+                    match small {
+                        Some(e) => format!(
+                            "{smooth}; no candidate predicts enough of it to name: the best, {}, predicts held-out poses better (p = {:.1e}) but lowers the held-out mean by only {} ({:.1} %)",
+                            lr.screened[e.index].candidate.label(),
+                            e.vs_model.p.unwrap_or(f64::NAN),
+                            mm(e.vs_model.gain_mean),
+                            100.0 * e.vs_model.gain_mean / base
+                        ),
+                        None => format!("{smooth}; no candidate does"),
+                    }
+                }
             };
             // Candidates these data cannot test are named here too: the cause may be one of them.
-            Finding::new(Status::UnknownEffect, format!("{what}{}", untestable(s)))
+            Finding {
+                suspects: match (best, small) {
+                    (None, Some(e)) => vec![effect_of(s, last, e.index, None)],
+                    _ => Vec::new(),
+                },
+                ..Finding::new(Status::UnknownEffect, format!("{what}{}", untestable(s)))
+            }
         }
     }
 }
@@ -406,10 +446,6 @@ fn named(s: &search::Search, d: &Decomposition, effects: &[Effect]) -> String {
         .map(|(r, b)| ErrorStats::of(&r.as_ref().unwrap_or(b).norms()).map(|e| e.mean))
         .collect();
     let gap_mean = d.heldout.mean - d.floor.mean;
-    let one = |v: f64, sd: Option<f64>, unit: Unit| match sd {
-        Some(sd) => format!("{} ± {} {}", num(v / unit.to_si()), num(sd / unit.to_si()), unit.as_str()),
-        None => format!("{} {}", num(v / unit.to_si()), unit.as_str()),
-    };
     effects
         .iter()
         .enumerate()
@@ -420,12 +456,12 @@ fn named(s: &search::Search, d: &Decomposition, effects: &[Effect]) -> String {
                 let terms: Vec<String> = e
                     .parameters
                     .iter()
-                    .map(|p| format!("{} {}", p.param, one(p.value, p.std, p.param.unit())))
+                    .map(|p| format!("{} {}", p.param, with_sd(p.value, p.std, p.param.unit())))
                     .collect();
                 format!(" ({})", terms.join(", "))
             } else {
                 match e.estimate {
-                    Some(v) => format!(" {}", one(v, e.std, e.unit)),
+                    Some(v) => format!(" {}", with_sd(v, e.std, e.unit)),
                     None => String::new(),
                 }
             };
