@@ -31,8 +31,9 @@
 //! - **Unknown effect and partial explanations**: a flexible joint-space smoother (every joint's
 //!   angle corrected by a linear function of every holding torque, every reading and its square)
 //!   cross-validated the same way. If it confirms when no candidate does, and lowers the held-out
-//!   mean by `min_rel_gain` as a candidate must, the verdict is `unknown_effect`. A confirmed candidate that is one of the smoother's own forms (given the
-//!   smoother it adds nothing: encompassing score test at `confirm_p`) is named only if it closes
+//!   mean by `min_rel_gain` as a candidate must, the verdict is `unknown_effect`. A confirmed
+//!   candidate that is one of the smoother's own forms (given the smoother it adds nothing:
+//!   encompassing score test at `confirm_p`) is named only if it closes
 //!   at least `name_closure` of the gap to the floor and the smoother does not predict
 //!   significantly better; otherwise it is `partial` — its share of what the smoother explains
 //!   said, the rest left unexplained — and below `partial_share` the verdict is

@@ -231,6 +231,29 @@ fn untestable(s: &search::Search) -> String {
     if missing.is_empty() { String::new() } else { format!("; not testable on these data: {}", missing.join("; ")) }
 }
 
+/// The candidate the held-out poses confirm in all but its size (the largest mean gain), if any.
+fn too_small(lr: &search::Round) -> Option<&search::Evaluated> {
+    lr.evaluated.iter().filter(|e| e.too_small).max_by(|a, b| a.vs_model.gain_mean.total_cmp(&b.vs_model.gain_mean))
+}
+
+/// "cyclic j2 h2, predicts held-out poses better (p = …) but lowers the held-out mean by only …
+/// (… %)", the share of `base` (the mean it was judged against, m).
+fn too_small_clause(lr: &search::Round, e: &search::Evaluated, base: f64) -> String {
+    format!(
+        "{}, predicts held-out poses better (p = {:.1e}) but lowers the held-out mean by only {} ({:.1} %)",
+        lr.screened[e.index].candidate.label(),
+        e.vs_model.p.unwrap_or(f64::NAN),
+        mm(e.vs_model.gain_mean),
+        100.0 * e.vs_model.gain_mean / base
+    )
+}
+
+/// The held-out mean the last round judged its candidates against (its model's, linearised
+/// folds); `otherwise` without a baseline figure.
+fn round_mean(s: &search::Search, otherwise: f64) -> f64 {
+    ErrorStats::of(&s.baselines.last().expect("a baseline").norms()).map_or(otherwise, |e| e.mean)
+}
+
 /// What the last round found (or did not).
 fn last_finding(s: &search::Search, d: &Decomposition) -> Finding {
     let last = s.rounds.len() - 1;
@@ -294,19 +317,14 @@ fn last_finding(s: &search::Search, d: &Decomposition) -> Finding {
             }
         }
         Decision::Unknown { best } => {
-            let small = lr
-                .evaluated
-                .iter()
-                .filter(|e| e.too_small)
-                .max_by(|a, b| a.vs_model.gain_mean.total_cmp(&b.vs_model.gain_mean));
+            let small = too_small(lr);
             let what = match best {
                 Some(i) => format!(
                     "a smooth function of the configuration predicts the residual better than the best candidate ({}), which is one of its forms",
                     lr.screened[*i].candidate.label()
                 ),
                 None => {
-                    let base = ErrorStats::of(&s.baselines.last().expect("a baseline").norms())
-                        .map_or(d.heldout.mean, |e| e.mean);
+                    let base = round_mean(s, d.heldout.mean);
                     let sm = &lr.smoother;
                     let smooth = format!(
                         "a smooth function of the configuration predicts the residual (held-out mean lower by {}, {:.1} %)",
@@ -317,11 +335,8 @@ fn last_finding(s: &search::Search, d: &Decomposition) -> Finding {
                     // figures: "no candidate does" would be contradicted by them.
                     match small {
                         Some(e) => format!(
-                            "{smooth}; no candidate predicts enough of it to name: the best, {}, predicts held-out poses better (p = {:.1e}) but lowers the held-out mean by only {} ({:.1} %)",
-                            lr.screened[e.index].candidate.label(),
-                            e.vs_model.p.unwrap_or(f64::NAN),
-                            mm(e.vs_model.gain_mean),
-                            100.0 * e.vs_model.gain_mean / base
+                            "{smooth}; no candidate predicts enough of it to name: the best, {}",
+                            too_small_clause(lr, e, base)
                         ),
                         None => format!("{smooth}; no candidate does"),
                     }
@@ -371,12 +386,7 @@ fn nothing_new(s: &search::Search, d: &Decomposition) -> Finding {
         .collect::<Vec<_>>();
     // A candidate the held-out poses confirm in all but its size: in the data, too small to name.
     // Its share is of the mean it was judged against (the round's model, linearised folds).
-    let round_mean = ErrorStats::of(&s.baselines.last().expect("a baseline").norms()).map_or(now.mean, |e| e.mean);
-    let small = if matches!(lr.decision, Decision::Accept(_)) {
-        None
-    } else {
-        lr.evaluated.iter().filter(|e| e.too_small).max_by(|a, b| a.vs_model.gain_mean.total_cmp(&b.vs_model.gain_mean))
-    };
+    let small = if matches!(lr.decision, Decision::Accept(_)) { None } else { too_small(lr) };
     match strong {
         _ if now.rms > EXCESS_RATIO * d.floor.rms && now.rms - d.floor.rms > EXCESS_MIN => Finding {
             experiment: Some(if exp.is_empty() {
@@ -394,13 +404,10 @@ fn nothing_new(s: &search::Search, d: &Decomposition) -> Finding {
                         mm(d.floor.rms),
                     ),
                     Some(e) => format!(
-                        "the held-out error (RMS {}) stands far above the floor ({}), and neither a candidate nor a smooth function of the configuration predicts most of it: the best candidate, {}, predicts held-out poses better (p = {:.1e}) but lowers the held-out mean by only {} ({:.1} %), too little to name it or to tell it from a look-alike; the rest is an error that changes from pose to pose{untestable}",
+                        "the held-out error (RMS {}) stands far above the floor ({}), and neither a candidate nor a smooth function of the configuration predicts most of it: the best candidate, {}, too little to name it or to tell it from a look-alike; the rest is an error that changes from pose to pose{untestable}",
                         mm(now.rms),
                         mm(d.floor.rms),
-                        lr.screened[e.index].candidate.label(),
-                        e.vs_model.p.unwrap_or(f64::NAN),
-                        mm(e.vs_model.gain_mean),
-                        100.0 * e.vs_model.gain_mean / round_mean,
+                        too_small_clause(lr, e, round_mean(s, now.mean)),
                     ),
                 },
             )
