@@ -7,6 +7,9 @@
 FROM rust:1.95-slim-bookworm AS build
 WORKDIR /src
 COPY Cargo.toml Cargo.lock rustfmt.toml ./
+# The workspace's members (the numerical core and the Python bindings): cargo loads every member's
+# manifest even to build one binary. scripts/dockerfile_check.sh checks that this COPY set builds.
+COPY crates ./crates
 COPY src ./src
 COPY benches ./benches
 COPY migrations ./migrations
