@@ -38,6 +38,11 @@ pub struct Stage {
     /// Weighted residual sum of squares of the measurement rows, after the model's own linear
     /// step (what no parameter of the model can explain).
     pub rss: f64,
+    /// Whether `x` solves the model's least-squares problem: a converged fit, or one linear step
+    /// from one (a small effect added). False when the fit was refused and the stage is
+    /// linearised at its starting point: its values are that point's and its J (the refused
+    /// fit's free parameters) says nothing about their uncertainty.
+    pub solved: bool,
 }
 
 impl Stage {
@@ -53,7 +58,7 @@ impl Stage {
                 // thin QR is the basis, at half the cost of an SVD of the tall matrix.
                 let q = j.qr().compute_thin_Q();
                 let (problem, x, free, set) = (id.problem.clone(), id.x.clone(), id.free.clone(), id.set.clone());
-                Ok(Stage::assemble(options, problem, x, free, set, Ok(id), j, r, q))
+                Ok(Stage::assemble(options, problem, x, free, set, Ok(id), j, r, q, true))
             }
             Err(
                 e @ (IdentifyError::Solve(_)
@@ -69,7 +74,7 @@ impl Stage {
                 set.layout = p.problem.layout.clone();
                 set.nominal = p.problem.layout.nominal_values(&cell.model, &p.problem.tools[0].tool, &p.base);
                 set.values = p.problem.layout_values(&p.x0, 0);
-                Ok(Stage::assemble(options, p.problem, p.x0, p.free, set, Err(e.to_string()), j, r, q))
+                Ok(Stage::assemble(options, p.problem, p.x0, p.free, set, Err(e.to_string()), j, r, q, false))
             }
             Err(e) => Err(e),
         }
@@ -86,6 +91,7 @@ impl Stage {
         j: Mat<f64>,
         r: Vec<f64>,
         q: Mat<f64>,
+        solved: bool,
     ) -> Stage {
         let n = problem.n_obs_rows;
         let c = at_v(q.as_ref(), &r);
@@ -95,7 +101,7 @@ impl Stage {
                 v * v
             })
             .sum();
-        Stage { options, problem, x, free, set, fit, j, r, q, rss }
+        Stage { options, problem, x, free, set, fit, j, r, q, rss, solved }
     }
 
     /// This stage's parameter set extended by `params`, with the values of `x` (the extended
@@ -209,20 +215,35 @@ impl Stage {
         });
         let set = self.extended_set(&problem, params, &x);
         let rss = r[..problem.n_obs_rows].iter().map(|v| v * v).sum();
-        Ok(Stage { options, problem, x, free, set, fit: Err("extended by one linear step".into()), j: a, r, q, rss })
+        Ok(Stage {
+            options,
+            problem,
+            x,
+            free,
+            set,
+            fit: Err("extended by one linear step".into()),
+            j: a,
+            r,
+            q,
+            rss,
+            solved: self.solved,
+        })
     }
 
     /// Standard deviations of free global parameters at the data's own scale, as an
     /// identification reports them ([`crate::identify::Quality::make_robust`]): the larger of
     /// σ̂²(JᵀJ)⁻¹, σ̂² the weighted residual per degree of freedom, and the cluster-robust σ with
-    /// the readings grouped by stop; `None` for a fixed parameter or one the data do not
-    /// determine (a non-finite σ).
+    /// the readings grouped by stop; `None` for a fixed parameter, one the data do not
+    /// determine (a non-finite σ), and every parameter of a stage that is not [`Stage::solved`].
     ///
     /// Why not (JᵀJ)⁻¹ alone: J is weighted by the instrument model, so that is the σ the
     /// instrument alone would leave. On real data the residual is 10–30× the instrument's and the
     /// readings of one stop (several reflectors) share the stop's error; on a tracker twin with
     /// 0.35 mm of pose-to-pose error, a backlash printed 0.0152 ± 0.00006° was 0.012° in truth.
     pub(crate) fn stds_of(&self, globals: &[usize]) -> Vec<Option<f64>> {
+        if !self.solved {
+            return vec![None; globals.len()];
+        }
         let pr = &self.problem;
         let cost: f64 = self.r.iter().map(|v| v * v).sum();
         let fit = Fit {
@@ -325,5 +346,32 @@ impl Stage {
             }
         }
         free
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::simulate::{SimulateOptions, simulate};
+
+    /// A stage whose fit is refused is linearised at its start, with the refused fit's free
+    /// parameters: its values are the start's and its J says nothing of their uncertainty, so it
+    /// reports no σ. The same model fitted reports one for every free parameter. (A refused refit
+    /// of a diagnosis's accepted effect once printed the start's value with a σ 200 times the
+    /// converged fit's: `compliance_cubic j2 -1.127e-6 ± 2.943e-5 deg/(N·m)³`, against
+    /// −1.52e-6 ± 1.50e-7 from the fit, issue 24.)
+    #[test]
+    fn a_refused_fit_reports_no_standard_deviation() {
+        let sim = simulate(&SimulateOptions { seed: 3, ..Default::default() }).unwrap();
+        let fitted = Stage::fit(&sim.cell, IdentifyOptions::default()).unwrap();
+        assert!(fitted.fit.is_ok() && fitted.solved);
+        assert!(fitted.stds_of(&fitted.free).iter().all(|s| s.is_some_and(|v| v > 0.0)));
+        let refused =
+            Stage::fit(&sim.cell, IdentifyOptions { kappa_limit: 2.0, ..IdentifyOptions::default() }).unwrap();
+        let why = refused.fit.as_ref().err().expect("refused at κ 2");
+        assert!(why.contains("ill-conditioned"), "{why}");
+        assert!(!refused.solved);
+        assert_eq!(refused.free, fitted.free);
+        assert!(refused.stds_of(&refused.free).iter().all(|s| s.is_none()));
     }
 }

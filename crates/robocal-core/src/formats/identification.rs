@@ -204,7 +204,7 @@ impl std::fmt::Display for crate::identify::FixedReason {
             ),
             ComplianceInsignificant { name, change, std, t, sigmas, held_at } => write!(
                 f,
-                "{name} not determined by these data ({:+.3e} ± {:.3e} deg/(N·m) from its start, {} σ, below {sigmas} σ): held at {} deg/(N·m)",
+                "{name} not determined by these data ({:+.3e} ± {:.3e} deg/(N·m) from its nominal, {} σ, below {sigmas} σ): held at {} deg/(N·m)",
                 change.to_degrees(),
                 std.to_degrees(),
                 if t.is_finite() { format!("{t:.1}") } else { "undefined".into() },

@@ -106,12 +106,12 @@ pub enum FixedReason {
         /// The solver's refusal of the fit with the payload.
         error: String,
     },
-    /// A compliance whose change from its start is not significant (rad/(N·m)): `change ± std`,
+    /// A compliance whose difference from its nominal is not significant (rad/(N·m)): `change ± std`,
     /// `t` σ (not finite when undefined), below `sigmas` σ, held at `held_at`.
     ComplianceInsignificant {
         /// The parameter's name.
         name: String,
-        /// Fitted value minus start value, rad/(N·m).
+        /// Fitted value minus nominal value, rad/(N·m).
         change: f64,
         /// Its standard deviation (as reported: the larger of the classic and the cluster-robust),
         /// rad/(N·m).
