@@ -368,7 +368,7 @@ mod tests {
         assert!(fitted.stds_of(&fitted.free).iter().all(|s| s.is_some_and(|v| v > 0.0)));
         let refused =
             Stage::fit(&sim.cell, IdentifyOptions { kappa_limit: 2.0, ..IdentifyOptions::default() }).unwrap();
-        let why = refused.fit.as_ref().err().expect("refused at κ 2");
+        let why = refused.fit.as_ref().expect_err("refused at κ 2");
         assert!(why.contains("ill-conditioned"), "{why}");
         assert!(!refused.solved);
         assert_eq!(refused.free, fitted.free);
