@@ -18,6 +18,25 @@ use serde_json::{Map, Value};
 
 use super::validity::EnvelopeFile;
 
+/// `selection` is a JSON object, or `null` (read as absent). Read as a bare `Value` it took
+/// anything, so a request with `"selection": [null, null]` — schema-invalid, the schema says
+/// object — was stored (schemathesis, ST201). A wrong type is refused like any other known key's.
+fn object_or_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<Value>, D::Error> {
+    match Option::<Value>::deserialize(d)? {
+        None | Some(Value::Null) => Ok(None),
+        Some(v @ Value::Object(_)) => Ok(Some(v)),
+        Some(other) => {
+            let kind = match other {
+                Value::Array(_) => "an array",
+                Value::String(_) => "a string",
+                Value::Number(_) => "a number",
+                _ => "a boolean",
+            };
+            Err(serde::de::Error::custom(format!("expected an object (how the measurements were chosen), got {kind}")))
+        }
+    }
+}
+
 /// An identification's quality report (the `quality` of a parameter-set file).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
@@ -34,7 +53,7 @@ pub struct Quality {
     /// How the measurements were chosen when a selection ran (DETMAX: `method`, `n`, `seed`,
     /// `pool`, the selection index before and after, exchanges, …); absent when all were used.
     #[cfg_attr(feature = "openapi", schema(value_type = Option<Object>))]
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(skip_serializing_if = "Option::is_none", deserialize_with = "object_or_null")]
     pub selection: Option<Value>,
     /// Measurements fitted (the n of O1's normalisation).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -354,6 +373,12 @@ mod tests {
         assert_eq!(e.path, "quality.free[0]", "{e}");
         let e = ParameterSetDoc::from_json(r#"{"robot": {"preset": "irb120"}, "quality": [1, 2]}"#).unwrap_err();
         assert_eq!(e.path, "quality", "{e}");
+        // `selection` is an object (its content is free): an array, as a fuzzer sent, is refused.
+        for bad in ["[null, null]", "\"detmax\"", "75"] {
+            let e = refused("\"selection\": {", &format!("\"selection\": {bad}, \"was\": {{"));
+            assert_eq!(e.path, "quality.selection", "{bad}: {e}");
+            assert!(e.to_string().contains("expected an object"), "{bad}: {e}");
+        }
     }
 
     /// Keys this version does not know — in the report and in its entries — are kept and written
