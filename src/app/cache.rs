@@ -184,9 +184,8 @@ impl Caches {
         let Some(row) = records::parameter_set(pool, id).await? else { return Ok(None) };
         let doc = ParameterSetDoc::from_json(&row.doc_json)
             .map_err(|e| AppError::Internal(format!("stored set {}: {e}", row.id)))?;
-        let stored = |e: crate::domain::DomainError| AppError::Internal(format!("stored set {}: {e}", row.id));
-        let envelope = Envelope::of_doc(&doc).map_err(stored)?;
-        let covariance = PredictionCovariance::of_doc(&doc).map_err(stored)?;
+        let (envelope, covariance) =
+            usable_parts(&doc).map_err(|e| AppError::Internal(format!("stored set {}: {e}", row.id)))?;
         let compensator = Compensator::new(&doc.set);
         let listed: Vec<String> = serde_json::from_str(&row.sessions_json)
             .map_err(|e| AppError::Internal(format!("stored set {}: sessions: {e}", row.id)))?;
@@ -195,6 +194,17 @@ impl Caches {
         self.sets.insert(id.to_string(), compiled.clone());
         Ok(Some(compiled))
     }
+}
+
+/// What a compensation compiles from a set's document besides its chain: the calibrated envelope
+/// and the parameters' covariance, each checked (a correlation matrix of another shape than the
+/// free parameters, a free parameter without σ, an envelope whose corners are upside down).
+/// The cache compiles a stored set with it, and an imported file is checked with it before it is
+/// stored: a file it refuses, stored, would answer 500 to every later use of the set.
+pub fn usable_parts(
+    doc: &ParameterSetDoc,
+) -> Result<(Option<Envelope>, Option<PredictionCovariance>), crate::domain::DomainError> {
+    Ok((Envelope::of_doc(doc)?, PredictionCovariance::of_doc(doc)?))
 }
 
 /// Announce a committed change to the replicas sharing a PostgreSQL database (nothing on SQLite).

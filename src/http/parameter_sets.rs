@@ -353,8 +353,14 @@ pub async fn import(
             format!("the file is for robot '{}', this robot is '{}'", doc.set.model.name, model.name),
         ));
     }
+    // Stored as text, compiled from that text by every later use (`app::cache`): what it reads
+    // back must compile, or each compensation with the set would answer 500.
+    let text = doc.to_json_pretty();
+    let back = crate::domain::ParameterSetDoc::from_json(&text)
+        .map_err(|e| ApiError::invalid(&e.path, format!("the file does not read back as written: {e}")))?;
+    crate::app::cache::usable_parts(&back).map_err(|e| ApiError::domain(e, ""))?;
     let mut tx = db::begin_write(&state.pool).await?;
-    let row = records::insert_parameter_set(&mut tx, &robot.id, &doc.to_json_pretty(), "[]", None).await?;
+    let row = records::insert_parameter_set(&mut tx, &robot.id, &text, "[]", None).await?;
     tx.commit().await?;
     Ok((StatusCode::CREATED, Json(set_out(&state, &row, false, true).await?)))
 }

@@ -1589,3 +1589,54 @@ async fn a_keyless_duplicate_batch_is_refused() {
     assert_eq!(app.get(&format!("/v1/sessions/{sid}")).await.body["measurements"], 7);
     app.stop().await;
 }
+
+/// A parameter-set file whose quality a compensation could not compile is refused at import (422
+/// naming the field), not stored: stored, every compensation with the set answered 500 (the
+/// fuzzer, schemathesis 4.32.5: ST101 on `POST /v1/robots/{id}/compensate` naming such a set).
+/// The same file with a well-formed quality is stored and compensates.
+#[tokio::test]
+async fn an_imported_set_that_a_compensation_cannot_compile_is_refused() {
+    let app = TestApp::default().await;
+    let rid = robot(&app, "uncompilable-set").await;
+    let table =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/irb120_table_5_1.json")).unwrap();
+    let file: Value = serde_json::from_str(&table).unwrap();
+    let with = |quality: Value| {
+        let mut f = file.clone();
+        f["quality"] = quality;
+        f
+    };
+    let envelope = |lo: [f64; 3], hi: [f64; 3]| {
+        json!({"joints_deg": [[-10, 10], [-10, 10], [-10, 10], [-10, 10], [-10, 10], [-10, 10]],
+               "position_min_mm": lo, "position_max_mm": hi, "joint_margin_deg": 5, "position_margin_mm": 50,
+               "n_measurements": 10})
+    };
+    for (quality, field) in [
+        (json!({"free": [], "correlation": [[]]}), "quality.correlation"),
+        (json!({"free": ["a2"], "correlation": [[1.0, 0.5]]}), "quality.correlation"),
+        // Table 5.1's a2 carries no σ.
+        (json!({"free": ["a2"], "correlation": [[1.0]]}), "parameters"),
+        (json!({"envelope": envelope([500.0, 0.0, 0.0], [400.0, 10.0, 10.0])}), "quality.envelope.position_min_mm"),
+    ] {
+        let r = app.post(&format!("/v1/robots/{rid}/parameter-sets"), &with(quality.clone())).await;
+        assert_problem(&r, 422, Some(field));
+    }
+    let r = app.get(&format!("/v1/robots/{rid}/parameter-sets")).await;
+    assert_eq!(r.body.as_array().map(Vec::len), Some(0), "nothing stored: {}", r.text);
+
+    let r = app
+        .post(
+            &format!("/v1/robots/{rid}/parameter-sets"),
+            &with(json!({"free": [], "correlation": [], "envelope": envelope([0.0; 3], [400.0, 10.0, 10.0])})),
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
+    let set = r.body["id"].as_str().unwrap();
+    let r = app
+        .post(
+            &format!("/v1/robots/{rid}/compensate"),
+            &json!({"parameter_set_id": set, "allow_unvalidated": true, "targets": [{"joints_deg": [1, 2, 3, 4, 5, 6]}]}),
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+}
