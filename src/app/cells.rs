@@ -31,7 +31,7 @@ pub async fn resolve_sessions(
     for (i, n) in names.iter().enumerate() {
         let s = records::session_of_robot(pool, robot_id, n)
             .await?
-            .ok_or_else(|| AppError::invalid(format!("{field}[{i}]"), format!("this robot has no session '{n}'")))?;
+            .ok_or_else(|| AppError::unknown(format!("{field}[{i}]"), format!("this robot has no session '{n}'")))?;
         if out.iter().any(|o| o.id == s.id) {
             return Err(AppError::invalid(format!("{field}[{i}]"), format!("session '{n}' is named twice")));
         }

@@ -127,7 +127,7 @@ fn fit_sessions(doc_json: &str, listed: &[String]) -> Result<Vec<String>, serde_
 pub async fn history(pool: &Pool, robot_id: &str, filter: &HistoryFilter) -> Result<HistoryPage, AppError> {
     let robot = records::robot(pool, robot_id)
         .await?
-        .ok_or_else(|| AppError::invalid("robot_id", format!("no robot '{robot_id}'")))?;
+        .ok_or_else(|| AppError::unknown("robot_id", format!("no robot '{robot_id}'")))?;
     let (from, to) = (filter.range.from.as_deref(), filter.range.to.as_deref());
     let total = records::parameter_set_count_in_range(pool, robot_id, filter.include_archived, from, to).await?;
     let limit = filter.limit.unwrap_or(i64::MAX);

@@ -96,6 +96,11 @@ pub enum AppError {
     /// sessions on different artefacts, a robot without a base guess): the field and why.
     #[error("{detail}")]
     Invalid { detail: String, field: Option<String> },
+    /// The request names, in `field`, something the store does not hold (a session, an artefact,
+    /// a parameter set): well-formed and within every bound, refused because of what is stored,
+    /// not because of what was sent. Answered 404 naming the field.
+    #[error("{detail}")]
+    Unknown { detail: String, field: Option<String> },
     /// The storage under the database refused: full, read-only or an I/O error.
     #[error("{}", .0.describe())]
     Storage(crate::db::StorageTrouble),
@@ -107,6 +112,11 @@ pub enum AppError {
 impl AppError {
     pub fn invalid(field: impl Into<String>, detail: impl Into<String>) -> Self {
         AppError::Invalid { detail: detail.into(), field: Some(field.into()) }
+    }
+
+    /// `field` names something the store does not hold (see [`AppError::Unknown`]).
+    pub fn unknown(field: impl Into<String>, detail: impl Into<String>) -> Self {
+        AppError::Unknown { detail: detail.into(), field: Some(field.into()) }
     }
 }
 

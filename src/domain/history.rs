@@ -17,20 +17,16 @@ pub struct TimeRange {
 }
 
 impl TimeRange {
-    /// Parse `from` and `to` (either may be absent); errors name the field.
+    /// Parse `from` and `to` (either may be absent); errors name the field. A `to` at or before
+    /// `from` is an empty range, not an error: no set was created in it.
     pub fn parse(from: Option<&str>, to: Option<&str>) -> Result<Self, DomainError> {
         let one = |v: Option<&str>, field: &str| -> Result<Option<SystemTime>, DomainError> {
-            match v.map(str::trim) {
-                None | Some("") => Ok(None),
+            match v {
+                None => Ok(None),
                 Some(s) => parse_time(s).map(Some).map_err(|reason| DomainError::new(field, reason)),
             }
         };
         let (f, t) = (one(from, "from")?, one(to, "to")?);
-        if let (Some(f), Some(t)) = (f, t)
-            && t < f
-        {
-            return Err(DomainError::new("to", "is before `from`"));
-        }
         Ok(TimeRange { from: f.map(stored), to: t.map(stored) })
     }
 }
@@ -49,10 +45,24 @@ const FORMAT: &str = "an RFC 3339 date-time with its offset (2026-11-24T13:00:00
 
 /// An RFC 3339 date-time with `Z` or a `±hh:mm` offset, or a full date (midnight UTC). A space
 /// where the offset's `+` belongs is taken as `+` (an unencoded `+` in a query string arrives as one).
+///
+/// Every year RFC 3339 has (0000–9999) is read: a time before 1970, when nothing was stored, is
+/// taken as 1970-01-01T00:00:00Z (`from` before it is "from the start", `to` before it an empty
+/// range), its calendar date still checked; humantime, which reads the rest, starts at 1970.
 pub fn parse_time(s: &str) -> Result<SystemTime, String> {
     let bad = || format!("'{s}' is not {FORMAT}");
     if !s.is_ascii() {
         return Err(bad());
+    }
+    if s.len() >= 10 && s.as_bytes()[..4].iter().all(u8::is_ascii_digit) {
+        let year: u32 = s[..4].parse().map_err(|_| bad())?;
+        if year < 1970 {
+            // The same date in a year of the same leap kind: 2000 (leap) or 2001.
+            let leap = year.is_multiple_of(4) && (!year.is_multiple_of(100) || year.is_multiple_of(400));
+            let twin = format!("{}{}", if leap { "2000" } else { "2001" }, &s[4..]);
+            parse_time(&twin)?;
+            return Ok(SystemTime::UNIX_EPOCH);
+        }
     }
     if s.len() == 10 {
         return humantime::parse_rfc3339(&format!("{s}T00:00:00Z")).map_err(|_| bad());
@@ -86,7 +96,9 @@ pub fn parse_time(s: &str) -> Result<SystemTime, String> {
     // Local time = UTC + offset.
     let d = Duration::from_secs(offset_s.unsigned_abs());
     let utc = if offset_s >= 0 { t.checked_sub(d) } else { t.checked_add(d) };
-    utc.ok_or_else(bad)
+    // Near either end of the span an offset can carry the instant outside it: held at the end.
+    let last = humantime::parse_rfc3339("9999-12-31T23:59:59.999Z").expect("a valid instant");
+    utc.map(|u| u.clamp(SystemTime::UNIX_EPOCH, last)).ok_or_else(bad)
 }
 
 #[cfg(test)]
@@ -102,7 +114,14 @@ mod tests {
         assert_eq!(r.from.as_deref(), Some("2026-11-24T13:30:00.001Z"));
         let r = TimeRange::parse(Some("2026-11-24t13:00:00z"), Some("2026-11-24T13:00:00 00:00")).unwrap();
         assert_eq!(r.from, r.to);
-        assert_eq!(TimeRange::parse(None, Some("")).unwrap(), TimeRange::default());
+        // Before 1970 nothing was stored: the start; a to before from is an empty range.
+        let r = TimeRange::parse(Some("0001-02-28T00:00:00-23:59"), Some("1969-12-31")).unwrap();
+        assert_eq!(r.from.as_deref(), Some("1970-01-01T00:00:00.000Z"));
+        assert_eq!(r.to, r.from);
+        let r = TimeRange::parse(Some("2026-11-25"), Some("2026-11-24")).unwrap();
+        assert!(r.to < r.from);
+        let r = TimeRange::parse(Some("9999-12-31T23:59:59.999999-23:59"), None).unwrap();
+        assert_eq!(r.from.as_deref(), Some("9999-12-31T23:59:59.999Z"));
     }
 
     #[test]
@@ -112,7 +131,9 @@ mod tests {
             (Some("2026-11-24T13:00:00"), None, "from"),
             (None, Some("2026-13-01"), "to"),
             (None, Some("2026-11-24T13:00:00+2:00"), "to"),
-            (Some("2026-11-25"), Some("2026-11-24"), "to"),
+            (Some(""), None, "from"),
+            (None, Some("1900-02-29"), "to"),
+            (Some("1600-02-30"), None, "from"),
         ] {
             let e = TimeRange::parse(from, to).unwrap_err();
             assert_eq!(e.path, field, "{from:?} {to:?}: {e}");

@@ -91,9 +91,12 @@ pub(super) async fn robot_set(
         .caches
         .parameter_set(&state.pool, set_id)
         .await?
-        .ok_or_else(|| ApiError::invalid("parameter_set_id", format!("no parameter set '{set_id}'")))?;
+        .ok_or_else(|| ApiError::unknown("parameter_set_id", format!("no parameter set '{set_id}'")))?;
     if compiled.row.robot_id != robot.id {
-        return Err(ApiError::invalid("parameter_set_id", "the set belongs to another robot"));
+        return Err(ApiError::unknown(
+            "parameter_set_id",
+            "this robot has no such parameter set: it belongs to another robot",
+        ));
     }
     Ok(compiled)
 }

@@ -1,7 +1,9 @@
 //! Errors as `application/problem+json` (RFC 9457): `type`, `title`, `status`, `detail` and the
 //! offending `field`. Bad input is 400 (malformed), 413 (too large), 415 (not JSON/CSV) or 422
 //! (well-formed but invalid: NaN, wrong lengths, joints outside limits, a degenerate artefact, a
-//! session of the wrong purpose); unknown ids 404; conflicts 409. Internal errors are logged with
+//! session of the wrong purpose); unknown ids 404, in the path or in a field that refers to
+//! stored data (`parameter_set_id`, `sessions[2]`, `artefact_id`: `unknown-reference`, naming the
+//! field); conflicts 409. Internal errors are logged with
 //! their context and answered with a bare 500 that echoes nothing.
 
 use axum::http::{HeaderValue, StatusCode, header};
@@ -45,6 +47,11 @@ pub enum ApiError {
     Forbidden(String),
     #[error("{what} '{id}' does not exist")]
     NotFound { what: &'static str, id: String },
+    /// A body or query field names something the store does not hold (a session, an artefact, a
+    /// parameter set of this robot): 404, naming the field. The request is well-formed and within
+    /// every bound the document states; what it refers to is not there.
+    #[error("{detail}")]
+    UnknownReference { detail: String, field: Option<String> },
     #[error("{detail}")]
     Conflict { detail: String, field: Option<String>, hint: Option<String> },
     /// The resource does not have this method (and never will): `allow` lists those it has.
@@ -95,6 +102,11 @@ impl ApiError {
         ApiError::Conflict { detail: detail.into(), field: None, hint: Some(hint.into()) }
     }
 
+    /// `field` names something the store does not hold (see [`ApiError::UnknownReference`]).
+    pub fn unknown(field: impl Into<String>, detail: impl Into<String>) -> Self {
+        ApiError::UnknownReference { detail: detail.into(), field: Some(field.into()) }
+    }
+
     pub fn not_found(what: &'static str, id: &str) -> Self {
         ApiError::NotFound { what, id: id.to_string() }
     }
@@ -116,7 +128,7 @@ impl ApiError {
             ApiError::Malformed { .. } => StatusCode::BAD_REQUEST,
             ApiError::Unauthorized(_) => StatusCode::UNAUTHORIZED,
             ApiError::Forbidden(_) => StatusCode::FORBIDDEN,
-            ApiError::NotFound { .. } => StatusCode::NOT_FOUND,
+            ApiError::NotFound { .. } | ApiError::UnknownReference { .. } => StatusCode::NOT_FOUND,
             ApiError::Conflict { .. } => StatusCode::CONFLICT,
             ApiError::MethodNotAllowed { .. } => StatusCode::METHOD_NOT_ALLOWED,
             ApiError::TooLarge { .. } => StatusCode::PAYLOAD_TOO_LARGE,
@@ -137,6 +149,7 @@ impl ApiError {
             ApiError::Unauthorized(_) => ("unauthorized", "Missing or unknown bearer token", None),
             ApiError::Forbidden(_) => ("forbidden", "The token lacks the scope", None),
             ApiError::NotFound { .. } => ("not-found", "Not found", None),
+            ApiError::UnknownReference { field, .. } => ("unknown-reference", "Unknown reference", field.clone()),
             ApiError::Conflict { field, .. } => ("conflict", "Conflict", field.clone()),
             ApiError::MethodNotAllowed { .. } => ("method-not-allowed", "Method Not Allowed", None),
             ApiError::TooLarge { field, .. } => ("too-large", "Request too large", field.clone()),
@@ -206,6 +219,7 @@ impl From<AppError> for ApiError {
     fn from(e: AppError) -> Self {
         match e {
             AppError::Invalid { detail, field } => ApiError::Invalid { detail, field },
+            AppError::Unknown { detail, field } => ApiError::UnknownReference { detail, field },
             AppError::Storage(t) => ApiError::Storage(t),
             AppError::Internal(m) => ApiError::Internal(m),
         }
@@ -228,6 +242,7 @@ impl From<JobError> for ApiError {
     fn from(e: JobError) -> Self {
         match e {
             JobError::Invalid { detail, field } => ApiError::Invalid { detail, field },
+            JobError::Unknown { detail, field } => ApiError::UnknownReference { detail, field },
             JobError::Numerical { kind, title, detail } => ApiError::Numerical { kind, title, detail },
             JobError::Storage(t) => ApiError::Storage(t),
             JobError::NotStored(d) => ApiError::NotStored(d),

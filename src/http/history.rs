@@ -23,11 +23,21 @@ use crate::domain::history::TimeRange;
 pub struct HistoryRangeQuery {
     /// Sets created at or after this: an RFC 3339 date-time with its offset
     /// (`2026-11-24T13:00:00Z`) or a date (`2026-11-24`, midnight UTC).
+    #[param(schema_with = instant)]
     pub from: Option<String>,
-    /// Sets created before this (same forms).
+    /// Sets created before this (same forms; at or before `from`: an empty range).
+    #[param(schema_with = instant)]
     pub to: Option<String>,
     /// Archived sets too (default false).
     pub include_archived: Option<bool>,
+}
+
+/// `from` and `to` as the document states them: a `date-time` or a `date` (RFC 3339), what
+/// [`TimeRange::parse`] reads.
+fn instant() -> utoipa::openapi::schema::Schema {
+    use utoipa::openapi::schema::{AnyOfBuilder, KnownFormat, ObjectBuilder, Schema, SchemaFormat, Type};
+    let of = |f| ObjectBuilder::new().schema_type(Type::String).format(Some(SchemaFormat::KnownFormat(f)));
+    Schema::AnyOf(AnyOfBuilder::new().item(of(KnownFormat::DateTime)).item(of(KnownFormat::Date)).build())
 }
 
 /// A robot's calibration history as a time series, oldest first: per parameter set its version,
@@ -41,7 +51,7 @@ pub struct HistoryRangeQuery {
             ("X-Total-Count" = i64, description = "Entries in the filtered history"),
             ("Link" = String, description = "`rel=\"next\"` / `rel=\"prev\"` pages, when there are"))),
         (status = 404, description = "Unknown robot", body = super::Problem, content_type = "application/problem+json"),
-        (status = 422, description = "Bad `from`, `to` (not RFC 3339, or `to` before `from`), `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
+        (status = 422, description = "Bad `from` or `to` (not an RFC 3339 date-time or date), `offset` or `limit`", body = super::Problem, content_type = "application/problem+json")),
     security(("bearer" = ["read"])))]
 pub async fn history(
     State(state): State<AppState>,
@@ -125,9 +135,9 @@ pub async fn drift(
         })?;
     let b = records::parameter_set(&state.pool, against)
         .await?
-        .ok_or_else(|| ApiError::invalid("against", format!("no parameter set '{against}'")))?;
+        .ok_or_else(|| ApiError::unknown("against", format!("no parameter set '{against}'")))?;
     if b.robot_id != a.robot_id {
-        return Err(ApiError::invalid("against", "the set belongs to another robot"));
+        return Err(ApiError::unknown("against", "this robot has no such parameter set: it belongs to another robot"));
     }
     let report = drift_of(&doc_of(&a)?, &doc_of(&b)?, "against").map_err(|e| ApiError::domain(e, ""))?;
     Ok(Json(DriftOut { parameter_set: set_ref(&a), against: set_ref(&b), drift: report }))

@@ -41,7 +41,7 @@ pub async fn create(
     pairs_of(&body.pairs, &assignments).map_err(ApiError::field)?;
     let session = records::session_of_robot(&state.pool, &robot.id, &body.session)
         .await?
-        .ok_or_else(|| ApiError::invalid("session", format!("this robot has no session '{}'", body.session)))?;
+        .ok_or_else(|| ApiError::unknown("session", format!("this robot has no session '{}'", body.session)))?;
     if session.usable() == 0 {
         return Err(ApiError::invalid(
             "session",
@@ -80,7 +80,7 @@ pub async fn create(
             let set = records::parameter_set(&state.pool, id).await?.filter(|s| s.robot_id == robot.id);
             Some(
                 set.ok_or_else(|| {
-                    ApiError::invalid("parameter_set_id", format!("this robot has no parameter set '{id}'"))
+                    ApiError::unknown("parameter_set_id", format!("this robot has no parameter set '{id}'"))
                 })?
                 .id,
             )

@@ -204,6 +204,13 @@ fn physical_bounds(api: &mut utoipa::openapi::OpenApi) {
         let p = doc.pointer_mut(&at).unwrap_or_else(|| panic!("SCHEMA_BOUNDS names {at}, which the document lacks"));
         apply(p, lo, hi, to, exclusive);
     }
+    // Session lists name each session once (`uniqueItems`, which utoipa's attributes lack): the
+    // server refuses a session named twice.
+    for at in ["IdentificationRequest/properties/sessions", "ValidationRequest/properties/sessions"] {
+        let p =
+            doc.pointer_mut(&format!("/components/schemas/{at}")).unwrap_or_else(|| panic!("the document lacks {at}"));
+        p["uniqueItems"] = json!(true);
+    }
     *api = serde_json::from_value(doc).expect("the OpenAPI document reads back with its bounds (a schema utoipa cannot read, e.g. serde_json::Value's, must be declared by hand)");
 }
 

@@ -429,10 +429,13 @@ pub async fn activate(
 ) -> Result<Json<ParameterSetOut>, ApiError> {
     let robot = find_robot(&state, &robot_id).await?;
     let row = records::parameter_set(&state.pool, &body.parameter_set_id).await?.ok_or_else(|| {
-        ApiError::invalid("parameter_set_id", format!("no parameter set '{}'", body.parameter_set_id))
+        ApiError::unknown("parameter_set_id", format!("no parameter set '{}'", body.parameter_set_id))
     })?;
     if row.robot_id != robot.id {
-        return Err(ApiError::invalid("parameter_set_id", "the set belongs to another robot"));
+        return Err(ApiError::unknown(
+            "parameter_set_id",
+            "this robot has no such parameter set: it belongs to another robot",
+        ));
     }
     let mut tx = db::begin_write(&state.pool).await?;
     // Under the write lock: the set cannot be archived between the check and the activation.

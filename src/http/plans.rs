@@ -42,7 +42,7 @@ pub async fn create(
     let model = model_of(&robot)?;
     let row = records::artefact(&state.pool, &body.artefact_id)
         .await?
-        .ok_or_else(|| ApiError::invalid("artefact_id", format!("no artefact '{}'", body.artefact_id)))?;
+        .ok_or_else(|| ApiError::unknown("artefact_id", format!("no artefact '{}'", body.artefact_id)))?;
     let artefact: ArtefactSpec = serde_json::from_str(&row.spec_json).map_err(|e| ApiError::Internal(e.to_string()))?;
     limits::per_ball(body.per_ball, "per_ball").map_err(|e| ApiError::domain(e, ""))?;
     limits::validation(body.validation, "validation").map_err(|e| ApiError::domain(e, ""))?;

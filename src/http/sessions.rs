@@ -122,7 +122,7 @@ pub async fn create(
     if let Some(a) = &body.artefact_id
         && records::artefact(&state.pool, a).await?.is_none()
     {
-        return Err(ApiError::invalid("artefact_id", format!("no artefact '{a}'")));
+        return Err(ApiError::unknown("artefact_id", format!("no artefact '{a}'")));
     }
     let target = match &body.target {
         None => None,

@@ -32,6 +32,9 @@ pub enum JobError {
     /// Bad input: the request field at fault, when there is one.
     #[error("{detail}")]
     Invalid { detail: String, field: Option<String> },
+    /// The request names something the store does not hold (answered 404 naming the field).
+    #[error("{detail}")]
+    Unknown { detail: String, field: Option<String> },
     /// Numerical trouble: rank deficiency, κ above the limit, divergence, an unreachable pose
     /// plan. `kind` is the problem slug, `title` its short description.
     #[error("{detail}")]
@@ -57,6 +60,11 @@ impl JobError {
         JobError::Invalid { detail: detail.into(), field: Some(field.into()) }
     }
 
+    /// `field` names something the store does not hold.
+    pub fn unknown(field: impl Into<String>, detail: impl Into<String>) -> Self {
+        JobError::Unknown { detail: detail.into(), field: Some(field.into()) }
+    }
+
     /// A domain error whose path is the request field itself: that field, the bare reason.
     pub fn field(e: DomainError) -> Self {
         JobError::Invalid { field: e.field(), detail: e.reason }
@@ -73,6 +81,7 @@ impl From<AppError> for JobError {
     fn from(e: AppError) -> Self {
         match e {
             AppError::Invalid { detail, field } => JobError::Invalid { detail, field },
+            AppError::Unknown { detail, field } => JobError::Unknown { detail, field },
             AppError::Storage(t) => JobError::Storage(t),
             AppError::Internal(m) => JobError::Internal(m),
         }

@@ -54,6 +54,7 @@ pub struct PosePlanRequest {
 #[serde(deny_unknown_fields)]
 pub struct IdentificationRequest {
     /// Identification sessions (ids or names), in order.
+    #[schema(min_items = 1)]
     pub sessions: Vec<String>,
     /// Model options as `robocal identify --model`: `+beta,-compliance,+cyc2_h1,…` (default:
     /// geometry + β + compliance).
@@ -116,6 +117,7 @@ impl IdentificationRequest {
 #[serde(deny_unknown_fields)]
 pub struct ValidationRequest {
     /// Validation sessions (ids or names) of the parameter set's robot.
+    #[schema(min_items = 1)]
     pub sessions: Vec<String>,
     /// Keep the per-measurement residuals in the report (default true).
     #[serde(default = "yes")]

@@ -158,7 +158,7 @@ pub async fn load(pool: &Pool, kind: JobKind, robot_id: &str, request_json: &str
             let request: PosePlanRequest = stored(request_json, "pose-plan request")?;
             let row = records::artefact(pool, &request.artefact_id)
                 .await?
-                .ok_or_else(|| JobError::invalid("artefact_id", format!("no artefact '{}'", request.artefact_id)))?;
+                .ok_or_else(|| JobError::unknown("artefact_id", format!("no artefact '{}'", request.artefact_id)))?;
             let artefact: ArtefactSpec = stored(&row.spec_json, "artefact")?;
             let model = model_of(&robot)?;
             let base = robot_base(&robot)?;
@@ -217,7 +217,7 @@ pub async fn load(pool: &Pool, kind: JobKind, robot_id: &str, request_json: &str
         JobKind::Iso9283 => {
             let request: Iso9283Request = stored(request_json, "ISO 9283 request")?;
             let session = records::session_of_robot(pool, &robot.id, &request.session).await?.ok_or_else(|| {
-                JobError::invalid("session", format!("this robot has no session '{}'", request.session))
+                JobError::unknown("session", format!("this robot has no session '{}'", request.session))
             })?;
             let set_json = match &request.parameter_set_id {
                 None => None,
@@ -271,7 +271,7 @@ fn iso9283(
                     EvaluationError::Session(EvaluateError::NotMeasured { index, .. }) => {
                         JobError::invalid(format!("poses[{}].index", row_of(index)), detail)
                     }
-                    EvaluationError::Session(EvaluateError::UnknownSession(_)) => JobError::invalid("session", detail),
+                    EvaluationError::Session(EvaluateError::UnknownSession(_)) => JobError::unknown("session", detail),
                     EvaluationError::Session(EvaluateError::Registration(_)) => JobError::Numerical {
                         kind: "registration",
                         title: "The base and tool could not be registered",

@@ -192,7 +192,7 @@ async fn sessions_and_measurement_batches() {
     };
     let path = format!("/v1/robots/{rid}/sessions");
     assert_problem(&app.post(&path, &sess("t", "trical", None)).await, 422, Some("artefact_id"));
-    assert_problem(&app.post(&path, &sess("t", "trical", Some("nope"))).await, 422, Some("artefact_id"));
+    assert_problem(&app.post(&path, &sess("t", "trical", Some("nope"))).await, 404, Some("artefact_id"));
     let mut bad_tool = sess("t", "trical", Some(&aid));
     bad_tool["tool"]["mass_kg"] = json!(-1);
     assert_problem(&app.post(&path, &bad_tool).await, 422, Some("tool.mass_kg"));
@@ -498,7 +498,7 @@ async fn identification_validation_and_compensation() {
     // Submission-time checks.
     let path = format!("/v1/robots/{rid}/identifications");
     assert_problem(&app.post(&path, &json!({"sessions": ["tracker-n1"]})).await, 422, Some("sessions[0]"));
-    assert_problem(&app.post(&path, &json!({"sessions": ["nope"]})).await, 422, Some("sessions[0]"));
+    assert_problem(&app.post(&path, &json!({"sessions": ["nope"]})).await, 404, Some("sessions[0]"));
     assert_problem(&app.post(&path, &json!({"sessions": ["trical-1"], "model": "+warp"})).await, 422, Some("model"));
     assert_problem(
         &app.post(&path, &json!({"sessions": ["trical-1"], "kappa_limit": 0.5})).await,
@@ -614,7 +614,7 @@ async fn identification_validation_and_compensation() {
     assert_problem(&r, 422, Some("work_object"));
     assert_problem(
         &app.post(&cpath, &json!({"targets": [], "parameter_set_id": "none"})).await,
-        422,
+        404,
         Some("parameter_set_id"),
     );
     assert_problem(
@@ -688,7 +688,7 @@ async fn identification_validation_and_compensation() {
     assert_eq!(h0["validations"][0]["figures"]["nominal"]["mean_mm"], rep["nominal"]["mean_mm"]);
     assert_problem(&app.get(&format!("/v1/robots/{rid}/active-parameter-set")).await, 404, None);
     let apath = format!("/v1/robots/{rid}/active-parameter-set");
-    assert_problem(&app.put(&apath, &json!({"parameter_set_id": "none"})).await, 422, Some("parameter_set_id"));
+    assert_problem(&app.put(&apath, &json!({"parameter_set_id": "none"})).await, 404, Some("parameter_set_id"));
     let r = app.put(&apath, &json!({"parameter_set_id": set_id})).await;
     assert_eq!(r.status, StatusCode::OK, "{}", r.text);
     assert_eq!(r.body["active"], true);
@@ -787,7 +787,7 @@ async fn pose_plans() {
     let aid = artefact(&app, "a").await;
     let tool = json!({"tcp_mm": [40, 0, 130], "mass_kg": 1.7, "com_mm": [30, 0, 64]});
     let path = format!("/v1/robots/{rid}/pose-plans");
-    assert_problem(&app.post(&path, &json!({"artefact_id": "none", "tool": tool})).await, 422, Some("artefact_id"));
+    assert_problem(&app.post(&path, &json!({"artefact_id": "none", "tool": tool})).await, 404, Some("artefact_id"));
     assert_problem(
         &app.post(&path, &json!({"artefact_id": aid, "tool": tool, "per_ball": 0})).await,
         422,

@@ -188,8 +188,6 @@ async fn without_an_effect_there_is_nothing_to_accept_and_bad_requests_name_the_
         (json!({"folds": 1}), "folds"),
         (json!({"alpha": 0.7}), "alpha"),
         (json!({"noise": {"trical_um": -1}}), "noise.trical_um"),
-        (json!({"validation": ["tracker-n9"]}), "validation[0]"),
-        (json!({"identification": ["nope"]}), "identification[0]"),
         (json!({"identification": ["tracker-n1"]}), "identification[0]"),
         (json!({"validation": ["trical-1"]}), "validation[0]"),
         (json!({"validation": ["tracker-n1", "tracker-n1"]}), "validation[1]"),
@@ -197,6 +195,13 @@ async fn without_an_effect_there_is_nothing_to_accept_and_bad_requests_name_the_
     ] {
         let r = app.post(&path, &body).await;
         assert_problem(&r, 422, Some(field));
+    }
+    // A session the robot does not have: 404 naming the field.
+    for (body, field) in [
+        (json!({"validation": ["tracker-n9"]}), "validation[0]"),
+        (json!({"identification": ["nope"]}), "identification[0]"),
+    ] {
+        assert_problem(&app.post(&path, &body).await, 404, Some(field));
     }
     assert_problem(&app.post("/v1/parameter-sets/none/diagnoses", &json!({})).await, 404, None);
     assert_problem(&app.get("/v1/parameter-sets/none/diagnoses").await, 404, None);

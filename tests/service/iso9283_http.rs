@@ -215,18 +215,25 @@ async fn bad_requests_name_the_field() {
         (with(&|b| b["pairs"][1]["to"] = json!("P9")), "pairs[1].to", "no measurement is assigned to pose 'P9'"),
         (with(&|b| b["pairs"][0]["to"] = json!("P1")), "pairs[0].to", "two different poses"),
         (with(&|b| b["poses"] = json!([])), "poses", "at least one"),
-        (with(&|b| b["session"] = json!("nope")), "session", "no session 'nope'"),
         (with(&|b| b["session"] = json!("trical-1")), "poses[0].index", "is a ball"),
-        (
-            with(&|b| b["parameter_set_id"] = json!("00000000-0000-0000-0000-000000000000")),
-            "parameter_set_id",
-            "no parameter set",
-        ),
         (with(&|b| b["colour"] = json!(1)), "colour", ""),
     ];
     for (b, field, words) in cases {
         let r = app.post(&path, &b).await;
         assert_problem(&r, 422, Some(field));
+        assert!(r.body["detail"].as_str().unwrap().contains(words), "{field}: {}", r.text);
+    }
+    // What the store does not hold: 404 naming the field.
+    for (b, field, words) in [
+        (with(&|b| b["session"] = json!("nope")), "session", "no session 'nope'"),
+        (
+            with(&|b| b["parameter_set_id"] = json!("00000000-0000-0000-0000-000000000000")),
+            "parameter_set_id",
+            "no parameter set",
+        ),
+    ] {
+        let r = app.post(&path, &b).await;
+        assert_problem(&r, 404, Some(field));
         assert!(r.body["detail"].as_str().unwrap().contains(words), "{field}: {}", r.text);
     }
     assert_problem(

@@ -184,7 +184,7 @@ fn robot_row(cell: &CellFile) -> RobotRow {
 /// session and measurement); a numerical failure says why; none is an internal error (a 500).
 fn names_the_place(e: &JobError) {
     match e {
-        JobError::Invalid { field, detail } => assert!(
+        JobError::Invalid { field, detail } | JobError::Unknown { field, detail } => assert!(
             field.is_some() || detail.contains("measurement") || detail.contains("sessions["),
             "a refusal that names no place: {e:?}"
         ),

@@ -93,14 +93,11 @@ impl PoseXyzAbc {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct Distances {
-    /// Between balls 1 and 2, mm (> 0, at most 100 000).
-    #[cfg_attr(feature = "openapi", schema(exclusive_minimum = 0))]
+    /// Between balls 1 and 2, mm (0.001 to 100 000).
     pub d12: f64,
-    /// Between balls 1 and 3, mm (> 0, at most 100 000).
-    #[cfg_attr(feature = "openapi", schema(exclusive_minimum = 0))]
+    /// Between balls 1 and 3, mm (0.001 to 100 000).
     pub d13: f64,
-    /// Between balls 2 and 3, mm (> 0, at most 100 000).
-    #[cfg_attr(feature = "openapi", schema(exclusive_minimum = 0))]
+    /// Between balls 2 and 3, mm (0.001 to 100 000).
     pub d23: f64,
 }
 
@@ -123,7 +120,7 @@ pub struct ArtefactSpec {
     pub kind: ArtefactKind,
     /// The measured distances between the ball centres, mm.
     pub distances_mm: Distances,
-    /// Diameter of the balls, mm (> 0, at most 100 000).
+    /// Diameter of the balls, mm (0.001 to 100 000).
     pub ball_diameter_mm: f64,
 }
 
@@ -134,6 +131,15 @@ impl ArtefactSpec {
     /// pose-plan jobs share.
     pub fn to_artefact(&self) -> Result<Artefact, DomainError> {
         let d = &self.distances_mm;
+        use super::limits::MIN_ARTEFACT_MM;
+        for (field, v) in [("d12", d.d12), ("d13", d.d13), ("d23", d.d23)] {
+            if v.is_finite() && v > 0.0 && v < MIN_ARTEFACT_MM {
+                return Err(DomainError::new(
+                    format!("distances_mm.{field}"),
+                    format!("{} mm is below the plausible {MIN_ARTEFACT_MM} mm", super::limits::show(v)),
+                ));
+            }
+        }
         let triangle = BallTriangle::from_distances(d.d12 * MM, d.d13 * MM, d.d23 * MM).map_err(|e| match e {
             ArtefactError::Distance { field, reason } => DomainError::new(format!("distances_mm.{field}"), reason),
             other => DomainError::new("distances_mm", other.to_string()),
@@ -153,6 +159,12 @@ impl ArtefactSpec {
         let diameter = self.ball_diameter_mm;
         if !(diameter.is_finite() && diameter > 0.0) {
             return Err(DomainError::new("ball_diameter_mm", "must be a positive number"));
+        }
+        if diameter < MIN_ARTEFACT_MM {
+            return Err(DomainError::new(
+                "ball_diameter_mm",
+                format!("{} mm is below the plausible {MIN_ARTEFACT_MM} mm", super::limits::show(diameter)),
+            ));
         }
         if diameter > super::limits::MAX_ARTEFACT_MM {
             return Err(DomainError::new(
@@ -365,13 +377,13 @@ pub struct MeasurementSpec {
     #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub indicators_mm: Option<[f64; 3]>,
     /// The instrument's standard uncertainty of this position, 1σ along X, Y, Z of {W}, mm (e.g.
-    /// what a laser tracker reports with each reading; each > 0, at most 1 000). Without it the
+    /// what a laser tracker reports with each reading; each from 1e-6 to 1 000). Without it the
     /// instrument model applies.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub sigma_mm: Option<[f64; 3]>,
-    /// The same for the orientation of a full pose, 1σ about X, Y, Z of {W}, deg (each > 0, at
-    /// most 180); needs `rotation_deg` and `sigma_mm`.
+    /// The same for the orientation of a full pose, 1σ about X, Y, Z of {W}, deg (each 1e-7 to
+    /// 180); needs `rotation_deg` and `sigma_mm`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
     pub sigma_rotation_deg: Option<[f64; 3]>,
@@ -616,13 +628,19 @@ pub fn measurement(
             return Err(DomainError::new("sigma_rotation_deg", "give sigma_mm too (the position's σ)"));
         }
         (Some(p), r) => {
-            let position = positive3(p, MM, super::limits::MAX_SIGMA_MM, "sigma_mm")?;
+            let position = positive3(p, MM, super::limits::MIN_SIGMA_MM, super::limits::MAX_SIGMA_MM, "sigma_mm")?;
             let rotation = match r {
                 None => None,
                 Some(_) if !matches!(observation, Observation::Pose(_)) => {
                     return Err(DomainError::new("sigma_rotation_deg", "only a full pose (rotation_deg) has one"));
                 }
-                Some(r) => Some(positive3(r, DEG, super::limits::MAX_SIGMA_DEG, "sigma_rotation_deg")?),
+                Some(r) => Some(positive3(
+                    r,
+                    DEG,
+                    super::limits::MIN_SIGMA_DEG,
+                    super::limits::MAX_SIGMA_DEG,
+                    "sigma_rotation_deg",
+                )?),
             };
             Some(Sigma { position, rotation })
         }
@@ -640,11 +658,17 @@ pub fn measurement(
 }
 
 /// Three standard deviations in file units → SI, each finite, positive and at most `max`.
-fn positive3(v: [f64; 3], unit: f64, max: f64, path: &str) -> Result<[f64; 3], DomainError> {
+fn positive3(v: [f64; 3], unit: f64, min: f64, max: f64, path: &str) -> Result<[f64; 3], DomainError> {
     let mut out = [0.0; 3];
     for i in 0..3 {
         if !(v[i].is_finite() && v[i] > 0.0) {
             return Err(DomainError::new(format!("{path}[{i}]"), "must be a positive number (1σ)"));
+        }
+        if v[i] < min {
+            return Err(DomainError::new(
+                format!("{path}[{i}]"),
+                format!("{} is below the plausible {} (1σ)", super::limits::show(v[i]), super::limits::show(min)),
+            ));
         }
         if v[i] > max {
             return Err(DomainError::new(
@@ -793,6 +817,12 @@ mod tests {
             &format!("{m1}.sigma_mm[2]"),
             "positive",
         );
+        // Positive but below a nanometre: 5e-324 mm is 0 m once converted, a weight of ∞.
+        check(
+            &|w| w["sessions"][1]["measurements"][1]["sigma_mm"][0] = json!(5e-324),
+            &format!("{m1}.sigma_mm[0]"),
+            "below the plausible",
+        );
         check(
             &|w| w["sessions"][1]["measurements"][0]["sigma_rotation_deg"] = json!([1, 1, 1]),
             "sessions[1] \"tracker-1\".measurements[0].sigma_rotation_deg",
@@ -825,6 +855,10 @@ mod tests {
         assert_eq!(bad(&|s| s.distances_mm.d23 = 700.0), "distances_mm");
         assert_eq!(bad(&|s| s.ball_diameter_mm = 0.0), "ball_diameter_mm");
         assert_eq!(bad(&|s| s.ball_diameter_mm = f64::NAN), "ball_diameter_mm");
+        // Positive but below a micrometre (5e-324 mm is 0 m once converted): refused, not a
+        // degenerate triangle.
+        assert_eq!(bad(&|s| s.ball_diameter_mm = 5e-324), "ball_diameter_mm");
+        assert_eq!(bad(&|s| s.distances_mm.d13 = 5e-324), "distances_mm.d13");
     }
 
     /// Each promised error, with the session, measurement index and field in its path.

@@ -102,12 +102,20 @@ pub const MAX_TIME_S: f64 = 1e10;
 pub const TEMPERATURE_C: [f64; 2] = [-50.0, 150.0];
 /// A reading's own standard uncertainty, mm (a metre: nothing a calibration can use beyond).
 pub const MAX_SIGMA_MM: f64 = 1_000.0;
+/// The smallest standard uncertainty of a reading, mm (a nanometre, below every instrument's).
+/// A bound, not just "positive": 5e-324 mm is positive and is 0 m once converted, a weight of ∞.
+pub const MIN_SIGMA_MM: f64 = 1e-6;
 /// An orientation's own standard uncertainty, deg.
 pub const MAX_SIGMA_DEG: f64 = 180.0;
+/// The smallest standard uncertainty of an orientation, deg (a nanoradian, about).
+pub const MIN_SIGMA_DEG: f64 = 1e-7;
 /// TriCal indicator readings, mm.
 pub const MAX_INDICATOR_MM: f64 = 1_000.0;
 /// An artefact's ball distances and diameter, mm.
 pub const MAX_ARTEFACT_MM: f64 = 100_000.0;
+/// The smallest ball distance or diameter, mm (a micrometre). A bound, not just "positive":
+/// 5e-324 mm is positive and is 0 m once converted.
+pub const MIN_ARTEFACT_MM: f64 = 1e-3;
 /// A parameter-set file's value (and nominal, std) in any other unit than mm, deg or kg
 /// (compliances, effect terms), in that unit.
 pub const MAX_EFFECT_TERM: f64 = 1e6;
@@ -147,12 +155,13 @@ pub const SCHEMA_BOUNDS: &[(&str, &str, f64, f64, Applies, bool)] = {
         ("MeasurementSpec", "temperature_c", TEMPERATURE_C[0], TEMPERATURE_C[1], Value, false),
         ("MeasurementSpec", "time_s", -MAX_TIME_S, MAX_TIME_S, Value, false),
         ("MeasurementSpec", "indicators_mm", -MAX_INDICATOR_MM, MAX_INDICATOR_MM, Items, false),
-        ("MeasurementSpec", "sigma_mm", 0.0, MAX_SIGMA_MM, Items, true),
-        ("MeasurementSpec", "sigma_rotation_deg", 0.0, MAX_SIGMA_DEG, Items, true),
-        ("Distances", "d12", 0.0, MAX_ARTEFACT_MM, Value, true),
-        ("Distances", "d13", 0.0, MAX_ARTEFACT_MM, Value, true),
-        ("Distances", "d23", 0.0, MAX_ARTEFACT_MM, Value, true),
-        ("NewArtefact", "ball_diameter_mm", 0.0, MAX_ARTEFACT_MM, Value, true),
+        ("MeasurementSpec", "sigma_mm", MIN_SIGMA_MM, MAX_SIGMA_MM, Items, false),
+        ("MeasurementSpec", "sigma_rotation_deg", MIN_SIGMA_DEG, MAX_SIGMA_DEG, Items, false),
+        ("MeasurementSpec", "approach", -1.0, 1.0, Items, false),
+        ("Distances", "d12", MIN_ARTEFACT_MM, MAX_ARTEFACT_MM, Value, false),
+        ("Distances", "d13", MIN_ARTEFACT_MM, MAX_ARTEFACT_MM, Value, false),
+        ("Distances", "d23", MIN_ARTEFACT_MM, MAX_ARTEFACT_MM, Value, false),
+        ("NewArtefact", "ball_diameter_mm", MIN_ARTEFACT_MM, MAX_ARTEFACT_MM, Value, false),
         ("PoseXyzAbc", "x_mm", -P, P, Value, false),
         ("PoseXyzAbc", "y_mm", -P, P, Value, false),
         ("PoseXyzAbc", "z_mm", -P, P, Value, false),
