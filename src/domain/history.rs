@@ -40,6 +40,9 @@ fn stored(t: SystemTime) -> String {
     humantime::format_rfc3339_millis(t).to_string()
 }
 
+/// 9999-12-31T23:59:59.999Z, the last instant RFC 3339 writes, in ms since 1970.
+const LAST_MS: u64 = 253_402_300_799_999;
+
 const FORMAT: &str = "an RFC 3339 date-time with its offset (2026-11-24T13:00:00Z, 2026-11-24T15:00:00+02:00) or a \
                       date (2026-11-24)";
 
@@ -97,7 +100,7 @@ pub fn parse_time(s: &str) -> Result<SystemTime, String> {
     let d = Duration::from_secs(offset_s.unsigned_abs());
     let utc = if offset_s >= 0 { t.checked_sub(d) } else { t.checked_add(d) };
     // Near either end of the span an offset can carry the instant outside it: held at the end.
-    let last = humantime::parse_rfc3339("9999-12-31T23:59:59.999Z").expect("a valid instant");
+    let last = SystemTime::UNIX_EPOCH + Duration::from_millis(LAST_MS);
     utc.map(|u| u.clamp(SystemTime::UNIX_EPOCH, last)).ok_or_else(bad)
 }
 

@@ -93,10 +93,7 @@ pub(super) async fn robot_set(
         .await?
         .ok_or_else(|| ApiError::unknown("parameter_set_id", format!("no parameter set '{set_id}'")))?;
     if compiled.row.robot_id != robot.id {
-        return Err(ApiError::unknown(
-            "parameter_set_id",
-            "this robot has no such parameter set: it belongs to another robot",
-        ));
+        return Err(ApiError::foreign_set("parameter_set_id"));
     }
     Ok(compiled)
 }

@@ -107,6 +107,11 @@ impl ApiError {
         ApiError::UnknownReference { detail: detail.into(), field: Some(field.into()) }
     }
 
+    /// `field` names a parameter set of another robot: for this robot, one it does not have.
+    pub fn foreign_set(field: &str) -> Self {
+        Self::unknown(field, "this robot has no such parameter set: it belongs to another robot")
+    }
+
     pub fn not_found(what: &'static str, id: &str) -> Self {
         ApiError::NotFound { what, id: id.to_string() }
     }

@@ -137,7 +137,7 @@ pub async fn drift(
         .await?
         .ok_or_else(|| ApiError::unknown("against", format!("no parameter set '{against}'")))?;
     if b.robot_id != a.robot_id {
-        return Err(ApiError::unknown("against", "this robot has no such parameter set: it belongs to another robot"));
+        return Err(ApiError::foreign_set("against"));
     }
     let report = drift_of(&doc_of(&a)?, &doc_of(&b)?, "against").map_err(|e| ApiError::domain(e, ""))?;
     Ok(Json(DriftOut { parameter_set: set_ref(&a), against: set_ref(&b), drift: report }))

@@ -432,10 +432,7 @@ pub async fn activate(
         ApiError::unknown("parameter_set_id", format!("no parameter set '{}'", body.parameter_set_id))
     })?;
     if row.robot_id != robot.id {
-        return Err(ApiError::unknown(
-            "parameter_set_id",
-            "this robot has no such parameter set: it belongs to another robot",
-        ));
+        return Err(ApiError::foreign_set("parameter_set_id"));
     }
     let mut tx = db::begin_write(&state.pool).await?;
     // Under the write lock: the set cannot be archived between the check and the activation.

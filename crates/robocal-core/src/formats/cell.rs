@@ -131,31 +131,23 @@ impl ArtefactSpec {
     /// pose-plan jobs share.
     pub fn to_artefact(&self) -> Result<Artefact, DomainError> {
         let d = &self.distances_mm;
-        use super::limits::MIN_ARTEFACT_MM;
+        use super::limits::{MAX_ARTEFACT_MM, MIN_ARTEFACT_MM, show};
+        // The plausible range first: a positive distance below it (5e-324 mm) would reach the
+        // triangle as 0 m. Not finite or not positive is the triangle's to say.
         for (field, v) in [("d12", d.d12), ("d13", d.d13), ("d23", d.d23)] {
-            if v.is_finite() && v > 0.0 && v < MIN_ARTEFACT_MM {
-                return Err(DomainError::new(
-                    format!("distances_mm.{field}"),
-                    format!("{} mm is below the plausible {MIN_ARTEFACT_MM} mm", super::limits::show(v)),
-                ));
-            }
+            let out = if v > MAX_ARTEFACT_MM {
+                format!("{} mm is beyond the plausible {MAX_ARTEFACT_MM} mm", show(v))
+            } else if v > 0.0 && v < MIN_ARTEFACT_MM {
+                format!("{} mm is below the plausible {MIN_ARTEFACT_MM} mm", show(v))
+            } else {
+                continue;
+            };
+            return Err(DomainError::new(format!("distances_mm.{field}"), out));
         }
         let triangle = BallTriangle::from_distances(d.d12 * MM, d.d13 * MM, d.d23 * MM).map_err(|e| match e {
             ArtefactError::Distance { field, reason } => DomainError::new(format!("distances_mm.{field}"), reason),
             other => DomainError::new("distances_mm", other.to_string()),
         })?;
-        for (field, v) in [("d12", d.d12), ("d13", d.d13), ("d23", d.d23)] {
-            if v > super::limits::MAX_ARTEFACT_MM {
-                return Err(DomainError::new(
-                    format!("distances_mm.{field}"),
-                    format!(
-                        "{} mm is beyond the plausible {} mm",
-                        super::limits::show(v),
-                        super::limits::MAX_ARTEFACT_MM
-                    ),
-                ));
-            }
-        }
         let diameter = self.ball_diameter_mm;
         if !(diameter.is_finite() && diameter > 0.0) {
             return Err(DomainError::new("ball_diameter_mm", "must be a positive number"));
@@ -163,17 +155,13 @@ impl ArtefactSpec {
         if diameter < MIN_ARTEFACT_MM {
             return Err(DomainError::new(
                 "ball_diameter_mm",
-                format!("{} mm is below the plausible {MIN_ARTEFACT_MM} mm", super::limits::show(diameter)),
+                format!("{} mm is below the plausible {MIN_ARTEFACT_MM} mm", show(diameter)),
             ));
         }
-        if diameter > super::limits::MAX_ARTEFACT_MM {
+        if diameter > MAX_ARTEFACT_MM {
             return Err(DomainError::new(
                 "ball_diameter_mm",
-                format!(
-                    "{} mm is beyond the plausible {} mm",
-                    super::limits::show(diameter),
-                    super::limits::MAX_ARTEFACT_MM
-                ),
+                format!("{} mm is beyond the plausible {MAX_ARTEFACT_MM} mm", show(diameter)),
             ));
         }
         Ok(Artefact { triangle, ball_diameter: diameter * MM })
