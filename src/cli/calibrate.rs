@@ -181,10 +181,21 @@ fn payload_note(id: &crate::identify::Identification) -> String {
             "; payload not declared (0 kg): identified {:.3} ± {:.3} kg at the tool's centre of mass (σ the larger of the fit's and the by-pose robust one; errors the model lacks still bias it; declare the payload when it is known)",
             id.set.values[i], s
         ),
-        None => format!(
-            "; payload not declared (0 kg) and not identifiable from these data ({}): compliance fitted with 0 kg — declare it",
-            id.status[i]
-        ),
+        None => {
+            let compliance = id.set.layout.params().iter().zip(&id.status).any(|(p, s)| {
+                matches!(p, crate::kinematics::Param::Joint(_, crate::kinematics::JointTerm::Compliance))
+                    && matches!(s, crate::identify::Status::Identified)
+            });
+            let consequence = if compliance {
+                "compliance fitted with 0 kg — declare it"
+            } else {
+                "no compliance fitted (see the compliances' status)"
+            };
+            format!(
+                "; payload not declared (0 kg) and not identifiable from these data ({}): {consequence}",
+                id.status[i]
+            )
+        }
     }
 }
 

@@ -94,6 +94,10 @@ pub struct CrossvalArgs {
     /// sigma_mm where it has one, the instrument model's otherwise.
     #[arg(long)]
     pub weighted: bool,
+    /// Refuse a fit whose residual RMS exceeds this many times the RMS the instrument's noise
+    /// predicts, as identify's (`inf`: never; a robot that repeats to millimetres only).
+    #[arg(long, default_value_t = crate::domain::identification::default_residual_ratio_limit())]
+    pub residual_ratio_limit: f64,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     #[command(flatten)]
@@ -173,6 +177,7 @@ pub(super) fn crossval(a: CrossvalArgs) -> Result<String, CliError> {
         kappa_limit: a.kappa_limit,
         rotation_weight_mm: a.rotation_weight_mm,
         weighted: a.weighted,
+        residual_ratio_limit: a.residual_ratio_limit,
         ..Default::default()
     };
     let base = spec.to_options(cell.model.dof()).map_err(option_error)?;

@@ -457,15 +457,24 @@ fn named(s: &search::Search, d: &Decomposition, effects: &[Effect]) -> String {
         .iter()
         .enumerate()
         .map(|(k, e)| {
-            // A group (every joint's backlash or compliance) says each term; a table its RMS; a
-            // cyclic pair its amplitude.
+            // A group (every joint's backlash or compliance) says each term, those it tells from
+            // zero first (the group is confirmed as a whole; a term within 2 σ of zero — a joint
+            // the data barely see — is no finding of its own); a table its RMS; a cyclic pair its
+            // amplitude.
             let value = if e.candidate.joint.is_none() && e.parameters.len() > 1 && e.candidate.kind != Kind::JointMap {
-                let terms: Vec<String> = e
-                    .parameters
-                    .iter()
-                    .map(|p| format!("{} {}", p.param, with_sd(p.value, p.std, p.param.unit())))
-                    .collect();
-                format!(" ({})", terms.join(", "))
+                let term = |p: &&ParamEstimate| format!("{} {}", p.param, with_sd(p.value, p.std, p.param.unit()));
+                let (told, near_zero): (Vec<&ParamEstimate>, Vec<&ParamEstimate>) =
+                    e.parameters.iter().partition(|p| p.std.is_none_or(|sd| p.value.abs() >= 2.0 * sd));
+                let mut text = told.iter().map(term).collect::<Vec<_>>().join(", ");
+                if !near_zero.is_empty() {
+                    let rest = near_zero.iter().map(term).collect::<Vec<_>>().join(", ");
+                    text = if text.is_empty() {
+                        format!("each within 2 σ of zero: {rest}")
+                    } else {
+                        format!("{text}; within 2 σ of zero: {rest}")
+                    };
+                }
+                format!(" ({text})")
             } else {
                 match e.estimate {
                     Some(v) => format!(" {}", with_sd(v, e.std, e.unit)),

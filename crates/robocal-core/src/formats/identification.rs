@@ -165,7 +165,11 @@ impl std::fmt::Display for crate::identify::FixedReason {
                 write!(f, "{name}: fixed, the model has no compliance (-compliance)")
             }
             DeclaredTcp { name } => write!(f, "{name}: fixed, the session declares its TCP (measured, e.g. on a CMM)"),
-            NoGravityTorque { name, axis } => write!(f, "{name}: no gravity torque on axis {axis}"),
+            NoGravityTorque { name, axis, massless: false } => write!(f, "{name}: no gravity torque on axis {axis}"),
+            NoGravityTorque { name, axis, massless: true } => write!(
+                f,
+                "{name}: no gravity torque on axis {axis} in this model (its links declare no mass and its tools no payload: give each joint's mass_kg and com_mm in the robot file to fit compliance)"
+            ),
             NoApproachDirection { name, axis } => write!(f, "{name}: no approach direction logged for axis {axis}"),
             NoTemperatureChange { name } => write!(f, "{name}: no temperature change in the data"),
             TcpOnLastAxis { name, axis } => {
@@ -194,6 +198,17 @@ impl std::fmt::Display for crate::identify::FixedReason {
                 std / MM,
                 bound / MM
             ),
+            UndeterminedAtSolution { name, std, bound, angle, with } => {
+                let (v, b, unit) = if *angle { (std / DEG, bound / DEG, "°") } else { (std / MM, bound / MM, " mm") };
+                write!(
+                    f,
+                    "{name}: not determined by these data (standard deviation {v:.3}{unit} at the solution, beyond {b:.0}{unit}"
+                )?;
+                if let Some((other, r)) = with {
+                    write!(f, "; correlation {r:+.3} with {other}")?;
+                }
+                write!(f, "): held at its start value")
+            }
             PayloadInsignificant { mass_kg, std_kg, sigmas } => write!(
                 f,
                 "payload not determined by these data ({mass_kg:.3} ± {std_kg:.3} kg, below {sigmas} σ): held at the declared 0 kg"

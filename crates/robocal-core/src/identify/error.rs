@@ -79,7 +79,7 @@ pub enum IdentifyError {
     /// The residual is too large for the noise the instrument predicts: ρ = `rms`/`expected` exceeds
     /// [`super::IdentifyOptions::residual_ratio_limit`].
     #[error(
-        "residual RMS {} mm against an expected ~{} mm ({ratio:.0} times, above the limit of {limit:.0}): the model does not describe these data (check the TCPs, the sessions' frames, outliers); largest residuals: {}",
+        "residual RMS {} mm against an expected ~{} mm ({ratio:.0} times, above the limit of {limit:.0}): the model does not describe these data (check the TCPs, the sessions' frames, outliers), or the robot does not repeat to this level (then the residual is spread over every pose, not in a few: raise the residual-ratio limit to fit anyway); largest residuals: {}",
         mm(*rms), mm(*expected), worst_list(worst)
     )]
     Misfit {

@@ -38,6 +38,9 @@ pub enum FixedReason {
         name: String,
         /// The axis, 1-based.
         axis: usize,
+        /// Because the model carries no mass at all: its links declare none and its tools no
+        /// payload (a custom robot without `mass_kg`), not because of the axis's direction.
+        massless: bool,
     },
     /// A direction-of-motion term of an axis whose approach direction is not in the data.
     NoApproachDirection {
@@ -91,6 +94,22 @@ pub enum FixedReason {
         bound: f64,
         /// The parameter is an angle: `std` and `bound` in rad, not m.
         angle: bool,
+    },
+    /// Free at the start and in the fit, but its standard deviation at the solution (as reported:
+    /// the larger of the classic and the cluster-robust) is above `bound` (metres, or radians
+    /// when `angle`): one direction with other parameters (`with`) that the data barely see.
+    /// Held at its start value and the rest refitted.
+    UndeterminedAtSolution {
+        /// The parameter's name.
+        name: String,
+        /// Its standard deviation at the solution (m, or rad when `angle`).
+        std: f64,
+        /// The limit `std` exceeds, as for [`FixedReason::Undetermined`].
+        bound: f64,
+        /// The parameter is an angle: `std` and `bound` in rad, not m.
+        angle: bool,
+        /// The free parameter most correlated with it, and the correlation.
+        with: Option<(String, f64)>,
     },
     /// An unknown payload whose mass is not significant: `mass_kg ± std_kg`, below `sigmas` σ.
     PayloadInsignificant {
@@ -173,6 +192,7 @@ impl FixedReason {
             | NoEffect { name }
             | Dependent { name, .. }
             | Undetermined { name, .. }
+            | UndeterminedAtSolution { name, .. }
             | ComplianceInsignificant { name, .. } => Some(name),
             PayloadInsignificant { .. } | PayloadUnsettled { .. } | NotInProblem => None,
         }

@@ -1,4 +1,11 @@
-//! Compliances the data do not determine are held, not fitted.
+//! Parameters the data do not determine are held, not fitted: an unknown payload, geometric
+//! parameters whose standard deviation at the solution is beyond the undetermined bound (below),
+//! and compliances.
+//!
+//! A geometric parameter is judged at the start by a sweep that bounds its σ from below
+//! ([`super::identifiability::select_given_noise`]); two that are nearly one direction pass it one
+//! by one. At the solution each free one's σ (as reported) is compared with the bound (1°, 10 mm):
+//! the worst beyond it is held at its start value, the rest refitted, and the test repeated.
 //!
 //! A compliance c_j acts through the holding torque τ_j of its joint. When the measured poses
 //! barely change τ_j (the wrist joints of an arm carrying no payload: a few N·m from the wrist's
@@ -26,7 +33,7 @@
 //! than the set it started from (residual 0.429 against 0.383 mm, issue 24).
 
 use super::fixed::FixedReason;
-use super::identifiability::Status;
+use super::identifiability::{Status, undetermined_bound};
 use super::problem::{GlobalParam, Problem};
 use super::quality::Quality;
 use super::solver::{self, Fit, SolveError, SolverOptions};
@@ -35,6 +42,11 @@ use crate::kinematics::{JointTerm, Param};
 /// A fitted compliance must differ from its nominal value by more than this many of its standard
 /// deviations to be kept (the same rule as an undeclared payload's mass).
 pub const COMPLIANCE_SIGNIFICANCE: f64 = 3.0;
+
+/// A geometric parameter is held at the solution ([`undetermined_geometry`]) only when its
+/// correlation with another free parameter reaches this: |r| ≥ 0.99, a variance inflated at least
+/// fifty-fold by that near-dependence (θ5 and a5 of an SMR 0.2 mm off the flange axis: 1.000).
+pub const COLLINEAR: f64 = 0.99;
 
 /// An unknown payload's identified mass must exceed this many of its standard deviations to be
 /// kept (see [`super::IdentifyOptions::identify_payload`]).
@@ -63,6 +75,9 @@ enum Undetermined {
     /// An unknown payload whose mass is not above [`PAYLOAD_SIGNIFICANCE`] of its σ (one-sided:
     /// a negative mass is not determined either).
     Payload(usize, usize, f64),
+    /// A geometric parameter whose standard deviation at the solution exceeds its bound
+    /// ([`super::identifiability::UNDETERMINED_ANGLE_RAD`], `UNDETERMINED_LENGTH_M`).
+    Geometry(usize, usize),
     /// A compliance whose difference from its nominal is below [`COMPLIANCE_SIGNIFICANCE`] of its σ.
     Compliance(usize, usize, f64),
 }
@@ -85,23 +100,39 @@ pub(super) fn hold_undetermined(
         let mut q = Quality::of(fit, f.problem.obs.len(), f.rows);
         q.make_robust(fit, f.rows, f.pose_of_obs, f.n_poses);
         let next = undetermined_payload(f, fit, free, &q)
+            .or_else(|| undetermined_geometry(f.problem, free, &q))
             .or_else(|| f.compliances.then(|| weakest_compliance(f.problem, fit, free, &q)).flatten());
         let Some(next) = next else { return Ok(q) };
         let (c, g) = match next {
-            Undetermined::Payload(c, g, _) | Undetermined::Compliance(c, g, _) => (c, g),
+            Undetermined::Payload(c, g, _) | Undetermined::Geometry(c, g) | Undetermined::Compliance(c, g, _) => (c, g),
         };
         let mut held: Vec<usize> = free.clone();
         held.remove(c);
+        if held.is_empty() {
+            return Ok(q);
+        }
         let mut x = fit.x.clone();
         x[g] = f.x0[g];
         let refit = match (&next, solver::solve(f.problem, &held, &x, f.solver)) {
             (_, Ok(refit)) => refit,
             (Undetermined::Payload(..), Err(e)) => return Err(e),
-            (Undetermined::Compliance(..), Err(_)) => return Ok(q),
+            // The fit that stands is then judged as it is (its κ, above the limit, refuses it
+            // naming the weak combination).
+            (Undetermined::Geometry(..) | Undetermined::Compliance(..), Err(_)) => return Ok(q),
         };
         status[g] = Status::Fixed(match next {
             Undetermined::Payload(_, _, m) => {
                 FixedReason::PayloadInsignificant { mass_kg: m, std_kg: q.std[c], sigmas: PAYLOAD_SIGNIFICANCE }
+            }
+            Undetermined::Geometry(..) => {
+                let (bound, angle) = undetermined_bound(f.problem, g).expect("a geometric parameter");
+                FixedReason::UndeterminedAtSolution {
+                    name: f.problem.name(g),
+                    std: q.std[c],
+                    bound,
+                    angle,
+                    with: strongest_correlation(f.problem, free, &q, c),
+                }
             }
             Undetermined::Compliance(_, _, t) => FixedReason::ComplianceInsignificant {
                 name: f.problem.name(g),
@@ -127,6 +158,43 @@ fn undetermined_payload(f: &Fitted<'_>, fit: &Fit, free: &[usize], q: &Quality) 
     let (m, sd) = (fit.x[g], q.std[c]);
     let determined = m > PAYLOAD_SIGNIFICANCE * sd; // false for a NaN σ too
     (!determined).then_some(Undetermined::Payload(c, g, m))
+}
+
+/// The free geometric parameter whose standard deviation at the solution (as reported: the larger
+/// of the classic and the cluster-robust) exceeds its bound by the largest factor, with its column,
+/// global index and that factor. The sweep of [`super::identifiability::select_given_noise`]
+/// bounds each σ from below by the parameters kept before it; two parameters that are nearly one
+/// direction only together (θ5 and a5 of a UR5 whose SMR sits 0.2 mm off the flange axis: σ 4.5°
+/// and 8.6 mm, κ 20,000) pass it one by one. Holding the worst leaves the other determined
+/// (there: a5 0.09 ± 0.02 mm, κ 181).
+fn undetermined_geometry(problem: &Problem, free: &[usize], q: &Quality) -> Option<Undetermined> {
+    free.iter()
+        .enumerate()
+        .filter_map(|(c, &g)| {
+            let (bound, _) = undetermined_bound(problem, g)?;
+            let ratio = q.std[c] / bound;
+            // A σ that is not finite is not determined either.
+            let ratio = if ratio.is_nan() { f64::INFINITY } else { ratio };
+            // Only a σ that a near-dependence makes large: a residual far above the instrument's
+            // (a gross reading, a wrong TCP) inflates every σ, and the fit is then refused as a
+            // misfit or for its outliers, naming them — holding parameter after parameter would
+            // hide that.
+            let collinear = strongest_correlation(problem, free, q, c).is_some_and(|(_, r)| r.abs() >= COLLINEAR);
+            (ratio > 1.0 && collinear).then_some((c, g, ratio))
+        })
+        .max_by(|a, b| a.2.total_cmp(&b.2))
+        .map(|(c, g, _)| Undetermined::Geometry(c, g))
+}
+
+/// The free parameter most correlated with column `c`, with the correlation (the one it is one
+/// direction with), when there is another.
+fn strongest_correlation(problem: &Problem, free: &[usize], q: &Quality, c: usize) -> Option<(String, f64)> {
+    (0..free.len())
+        .filter(|&k| k != c)
+        .map(|k| (k, q.correlation[(c, k)]))
+        .filter(|(_, r)| r.is_finite())
+        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+        .map(|(k, r)| (problem.name(free[k]), r))
 }
 
 /// The free compliance with the smallest |estimate − nominal|/σ below the threshold (with its

@@ -80,7 +80,7 @@ pub const UNDETERMINED_LENGTH_M: f64 = 0.01;
 /// geometric parameters (the others — compliances, effect terms, thermal, payload — have no
 /// such scale and are judged by rank alone).
 /// `(bound, is an angle)`.
-fn undetermined_bound(problem: &Problem, g: usize) -> Option<(f64, bool)> {
+pub(super) fn undetermined_bound(problem: &Problem, g: usize) -> Option<(f64, bool)> {
     let angle = Some((UNDETERMINED_ANGLE_RAD, true));
     let length = Some((UNDETERMINED_LENGTH_M, false));
     match problem.params[g] {
@@ -255,7 +255,9 @@ fn no_effect_reason(problem: &Problem, g: usize) -> FixedReason {
     match problem.params[g] {
         GlobalParam::Robot(i) => match problem.layout.params()[i] {
             Param::Joint(j, JointTerm::Compliance) | Param::Joint(j, JointTerm::ComplianceCubic) => {
-                FixedReason::NoGravityTorque { name, axis: j + 1 }
+                let massless = problem.model.links.iter().all(|l| l.mass == 0.0)
+                    && problem.tools.iter().all(|t| t.tool.mass == 0.0);
+                FixedReason::NoGravityTorque { name, axis: j + 1, massless }
             }
             Param::Joint(j, JointTerm::Backlash) => FixedReason::NoApproachDirection { name, axis: j + 1 },
             Param::Thermal => FixedReason::NoTemperatureChange { name },

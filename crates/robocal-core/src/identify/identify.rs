@@ -83,7 +83,7 @@ fn payload_mass(problem: &Problem) -> Option<usize> {
 ///
 /// // Axis 1 is vertical: gravity never loads it, so its compliance is held, and said why.
 /// let c1 = at(Param::Joint(0, JointTerm::Compliance));
-/// assert_eq!(id.status[c1], Status::Fixed(FixedReason::NoGravityTorque { name: "c1".into(), axis: 1 }));
+/// assert_eq!(id.status[c1], Status::Fixed(FixedReason::NoGravityTorque { name: "c1".into(), axis: 1, massless: false }));
 /// assert_eq!(id.status[c1].to_string(), "c1: no gravity torque on axis 1");
 ///
 /// // a2 (the upper arm's length) is identified to a few micrometres of the true robot's.
