@@ -193,6 +193,13 @@ fn a_reflector_a_fraction_of_a_millimetre_off_the_flange_axis_is_identified() {
         assert!(!length || s <= 10.0 * MM, "{name} σ {} mm", s / MM);
     }
     assert!((1.0..60.0).contains(&id.quality.residual_ratio), "ratio {}", id.quality.residual_ratio);
+    // Every parameter held as not determined stands at its start value (nominal here), as its
+    // status says — not where the fit had taken it along the valley before it was held.
+    for (i, st) in id.status.iter().enumerate() {
+        if st.to_string().contains("not determined by these data") {
+            assert_eq!(id.set.values[i], id.set.nominal[i], "{st}");
+        }
+    }
     let Prepared { problem, x0, .. } = prepare(&cell, &opts).unwrap();
     let reference = plain_lm(&problem, &id.free, &x0);
     let ours: f64 = id.linearised().1.iter().map(|v| v * v).sum();

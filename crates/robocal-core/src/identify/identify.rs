@@ -135,6 +135,7 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
     // no effect there and is judged at the solution too.
     rejudge_at_solution(
         &problem,
+        &x0,
         opts,
         payload_unknown,
         &fixed,
@@ -209,6 +210,7 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
 #[allow(clippy::too_many_arguments)]
 fn rejudge_at_solution(
     problem: &Problem,
+    x0: &[f64],
     opts: &IdentifyOptions,
     payload_unknown: bool,
     fixed: &std::collections::HashMap<usize, FixedReason>,
@@ -247,7 +249,12 @@ fn rejudge_at_solution(
     let (again, mut again_status) = identifiability::select_given_noise(problem, &j, &judged, sigma);
     if again != *free && !again.is_empty() {
         let mass = payload_unknown.then(|| payload_mass(problem)).flatten().filter(|g| again.contains(g));
-        match solver::solve(problem, &again, &fit.x, &opts.solver) {
+        // A parameter held now goes back to its start value, as its status says: where the fit
+        // took it along a valley the data barely see is no estimate (a Barrett WAM's a6 and d6,
+        // one SMR near the last axis, wandered to −6.3 and −35.8 mm; held there, they left α6 a
+        // seemingly determined 65.6° for a nominal 90°).
+        let from = back_to_start(&fit.x, x0, free, &again);
+        match solver::solve(problem, &again, &from, &opts.solver) {
             Ok(f) => (*fit, *free, *status) = (f, again, again_status),
             // An unknown payload whose fit crawls (a valley with the compliances) is not
             // determined by these data: the fit without it stands, and says so.
@@ -255,7 +262,7 @@ fn rejudge_at_solution(
                 let g = mass.expect("checked");
                 let without: Vec<usize> = again.iter().copied().filter(|&c| c != g).collect();
                 if without != *free {
-                    *fit = solver::solve(problem, &without, &fit.x, &opts.solver)?;
+                    *fit = solver::solve(problem, &without, &from, &opts.solver)?;
                 }
                 again_status[g] = Status::Fixed(FixedReason::PayloadUnsettled { error: e.to_string() });
                 (*free, *status) = (without, again_status);
@@ -264,6 +271,16 @@ fn rejudge_at_solution(
         }
     }
     Ok(())
+}
+
+/// `x` with every parameter of `free` that `kept` no longer holds free back at its start value in
+/// `x0` (what a held parameter's status promises).
+fn back_to_start(x: &[f64], x0: &[f64], free: &[usize], kept: &[usize]) -> Vec<f64> {
+    let mut from = x.to_vec();
+    for g in free.iter().copied().filter(|g| !kept.contains(g)) {
+        from[g] = x0[g];
+    }
+    from
 }
 
 /// Every tool's TCP as fitted, with its standard deviations and statuses.
@@ -438,10 +455,7 @@ fn judge_where_it_stopped(
     }
     // The held parameters go back to their start values: where the fit wandered in their valley
     // is no estimate, and the free parameters they were dependent on take up the difference.
-    let mut from = last;
-    for g in free.iter().copied().filter(|g| !again.contains(g)) {
-        from[g] = x0[g];
-    }
+    let from = back_to_start(&last, x0, free, &again);
     let Ok(fit) = solver::solve(problem, &again, &from, solver_opts) else {
         return Err(error.into());
     };
