@@ -217,8 +217,11 @@ pub(super) fn validate(a: ValidateArgs) -> Result<String, CliError> {
         Some(run) => Reference::Truth(run),
         None => Reference::Measured,
     };
-    // What the set was fitted on (its file records it): a session among them is in-sample.
-    let fit = crate::domain::validation::fit_data(&doc, &[]);
+    // What the set was fitted on (its file records it): a session among them is in-sample, unless
+    // it only bears a fitted session's name — a run imported apart names its reflectors as the
+    // calibration run did — which the set's fingerprints of its fitted measurements tell.
+    let mut fit = crate::domain::validation::fit_data(&doc, &[]);
+    fit.set_apart_other_data(&cell);
     let report =
         validate_fitted(&doc.set, &cell, &sessions, reference, Some(&fit)).map_err(|e| validate_error(&a, e))?;
     let uncertainty = crate::domain::validity::HeldOutUncertainty::of_report(&doc, &cell, &report)

@@ -944,3 +944,55 @@ fn compliances_of_a_robot_without_masses_say_what_to_declare() {
     let c1 = id.set.layout.index_of(Param::Joint(0, JointTerm::Compliance)).unwrap();
     assert_eq!(id.status[c1].to_string(), "c1: no gravity torque on axis 1");
 }
+
+/// A calibration run and a validation run imported apart both name their reflectors
+/// `reflector-1`, …: validating the first run's set on the second is held out, though the names
+/// match (it was reported "in-sample, … were in its fit" — a UR5's 20 random test poses against
+/// its 1,000 grid poses); each reflector is still predicted with its own fitted TCP. The set's
+/// fingerprint of what it was fitted on tells the runs apart; the fitted run itself stays
+/// in-sample.
+#[test]
+fn a_run_imported_apart_is_held_out_though_its_sessions_bear_the_fitted_names() {
+    let dir = common::fresh_dir("two-runs");
+    let run = |args: Vec<&str>| std::process::Command::new(env!("CARGO_BIN_EXE_robocal")).args(args).output().unwrap();
+    let mut cells = Vec::new();
+    for (seed, purpose) in [(21, "identification"), (22, "validation")] {
+        let o = TrackerRunOptions { seed, poses: 150, removed: 0, ..Default::default() };
+        let (joints, files) = tracker_run(&o).unwrap().write(&dir, &format!("run{seed}"), 6).unwrap();
+        let cell = dir.join(format!("run{seed}.json"));
+        let f: Vec<&str> = files.iter().flat_map(|f| ["--positions", f.to_str().unwrap()]).collect();
+        let out = run([
+            vec!["import", "three-reflector", "--robot", "irb120", "--joints", joints.to_str().unwrap()],
+            f,
+            vec!["--purpose", purpose, "--out", cell.to_str().unwrap()],
+        ]
+        .concat());
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        cells.push(cell);
+    }
+    let params = dir.join("params.json");
+    let out = run(vec!["identify", cells[0].to_str().unwrap(), "--out", params.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let validate = |cell: &std::path::Path, extra: &[&str]| {
+        let v = dir.join("v.json");
+        let mut args = vec!["validate", params.to_str().unwrap(), cell.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--out", v.to_str().unwrap()]);
+        let out = run(args);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_str::<serde_json::Value>(&std::fs::read_to_string(&v).unwrap()).unwrap()
+    };
+    let other = validate(&cells[1], &[]);
+    let statement = other["held_out_statement"].as_str().unwrap();
+    assert_eq!(other["held_out"], true, "{statement}");
+    assert!(
+        statement.contains("reflector-1, reflector-2, reflector-3 here bear the name of a fitted session"),
+        "{statement}"
+    );
+    // Predicted with each reflector's fitted TCP: the pose-to-pose scale, not the plate's 150 mm.
+    let mean = other["mean_mm"].as_f64().unwrap();
+    assert!(mean < 1.0, "held-out mean {mean} mm");
+    let own = validate(&cells[0], &["--session", "reflector-1"]);
+    assert_eq!(own["held_out"], false);
+    assert!(own["held_out_statement"].as_str().unwrap().starts_with("in-sample, not held out"), "{own}");
+}

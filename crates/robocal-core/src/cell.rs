@@ -203,6 +203,7 @@ impl Cell {
     }
 }
 
+pub mod fingerprint;
 pub mod order;
 pub mod poses;
 

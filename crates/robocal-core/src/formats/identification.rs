@@ -42,18 +42,27 @@ pub fn run_identification(
 /// ascending) — what a validation checks to tell a held-out figure from an in-sample one.
 pub fn fit_measurements(id: &Identification) -> Vec<FitMeasurements> {
     let names = &id.problem.session_names;
-    let mut per: Vec<Vec<usize>> = vec![Vec::new(); names.len()];
+    let dof = id.set.dof();
+    let mut per: Vec<Vec<&crate::identify::problem::Obs>> = vec![Vec::new(); names.len()];
     for o in &id.problem.obs {
-        per[o.session].push(o.index);
+        per[o.session].push(o);
     }
     names
         .iter()
         .zip(per)
-        .filter(|(_, ix)| !ix.is_empty())
-        .map(|(name, mut ix)| {
-            ix.sort_unstable();
-            ix.dedup();
-            FitMeasurements { session: name.clone(), indices: ix, other: Default::default() }
+        .filter(|(_, obs)| !obs.is_empty())
+        .map(|(name, mut obs)| {
+            obs.sort_by_key(|o| o.index);
+            obs.dedup_by_key(|o| o.index);
+            let digest = crate::cell::fingerprint::of_entries(
+                obs.iter().map(|o| (o.index, &o.state.q[..dof], o.measured_position())),
+            );
+            FitMeasurements {
+                session: name.clone(),
+                indices: obs.iter().map(|o| o.index).collect(),
+                digest: Some(digest),
+                other: Default::default(),
+            }
         })
         .collect()
 }

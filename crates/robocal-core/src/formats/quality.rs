@@ -145,6 +145,12 @@ pub struct FitMeasurements {
     /// 0-based indices of its measurements fitted on, ascending (the service writes the stored
     /// indices).
     pub indices: Vec<usize>,
+    /// The fingerprint of those measurements' content (`cell::fingerprint`: 32 hexadecimal
+    /// digits), which tells them from other measurements in a session of the same name; absent in
+    /// files of earlier versions (the session's name alone then decides).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "openapi", schema(min_length = 32, max_length = 32, pattern = "^[0-9a-f]{32}$"))]
+    pub digest: Option<String>,
     /// Keys this version does not know, kept as they came.
     #[serde(flatten)]
     #[cfg_attr(feature = "openapi", schema(value_type = std::collections::HashMap<String, AnyJson>))]

@@ -444,10 +444,22 @@ pub fn held_out_statement(r: &ValidationReport) -> String {
             .into();
     }
     match &r.fit {
-        Some(f) if f.recorded => format!(
-            "held out: the set was fitted on {}, none of the sessions validated here",
-            if f.sessions.is_empty() { "no recorded session".into() } else { list(&f.sessions) }
-        ),
+        Some(f) if f.recorded => {
+            let other: Vec<String> = f.other_data.iter().filter(|s| r.sessions.contains(s)).cloned().collect();
+            let also = if other.is_empty() {
+                String::new()
+            } else {
+                let (bear, hold) = if other.len() == 1 { ("bears", "holds") } else { ("bear", "hold") };
+                format!(
+                    " ({} here {bear} the name of a fitted session but {hold} other measurements than it was fitted on)",
+                    list(&other)
+                )
+            };
+            format!(
+                "held out: the set was fitted on {}, none of the sessions validated here{also}",
+                if f.sessions.is_empty() { "no recorded session".into() } else { list(&f.sessions) }
+            )
+        }
         _ => format!(
             "held out as far as is known: the set does not record what it was fitted on (a table typed in or \
             imported); validated on {}",
@@ -475,6 +487,13 @@ pub fn fit_data(doc: &super::ParameterSetDoc, also: &[String]) -> FitData {
     }
     // A session the store names but the document's list does not: fitted on whole.
     measurements.retain(|name, _| sessions.contains(name));
+    let digests = q
+        .and_then(|q| q.fit_measurements.as_ref())
+        .into_iter()
+        .flatten()
+        .filter(|m| sessions.contains(&m.session))
+        .filter_map(|m| Some((m.session.clone(), m.digest.clone()?)))
+        .collect();
     let mut tcps = std::collections::BTreeMap::new();
     for t in q.and_then(|q| q.tools.as_ref()).into_iter().flatten() {
         let (p, r) = (t.tcp_mm, t.tcp_rotation_deg);
@@ -483,7 +502,7 @@ pub fn fit_data(doc: &super::ParameterSetDoc, also: &[String]) -> FitData {
             tcps.insert(s.clone(), tcp);
         }
     }
-    FitData { recorded: !sessions.is_empty(), sessions, measurements, tcps }
+    FitData { recorded: !sessions.is_empty(), sessions, measurements, tcps, digests, other_data: Vec::new() }
 }
 
 /// The report as the CLI prints it.

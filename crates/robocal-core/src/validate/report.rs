@@ -157,6 +157,13 @@ pub struct FitData {
     /// plate of reflectors has one TCP per reflector while the set's chain carries only the first:
     /// each session is predicted with its own.
     pub tcps: BTreeMap<String, [f64; 6]>,
+    /// Per fitted session, the fingerprint of the measurements fitted ([`crate::cell::fingerprint`]),
+    /// where the set records one.
+    pub digests: BTreeMap<String, String>,
+    /// Sessions of the validated cell that bear a fitted session's name but hold other
+    /// measurements than it was fitted on (their fingerprints differ): not in-sample
+    /// ([`FitData::set_apart_other_data`]). Their TCP is still the fitted session's.
+    pub other_data: Vec<String>,
 }
 
 impl FitData {
@@ -165,9 +172,16 @@ impl FitData {
         FitData::default()
     }
 
-    /// Whether the set was fitted on (some of) this session's measurements.
+    /// Whether the set was fitted on (some of) this session's measurements: a fitted session's
+    /// name, unless the cell's session of that name holds other data ([`FitData::other_data`]).
     pub(crate) fn has_session(&self, name: &str) -> bool {
-        self.sessions.iter().any(|s| s == name)
+        self.sessions.iter().any(|s| s == name) && !self.other_data.iter().any(|s| s == name)
+    }
+
+    /// The fitted sessions that are the validated cell's sessions of the same name (all of them
+    /// but [`FitData::other_data`]).
+    pub fn fitted_here(&self) -> Vec<String> {
+        self.sessions.iter().filter(|s| self.has_session(s)).cloned().collect()
     }
 
     /// The TCP the fit identified for `session`'s tool ([`Cell::identified_tcp`]).
@@ -178,6 +192,33 @@ impl FitData {
     /// Whether the fit used measurement `index` of session `name`.
     pub(crate) fn has_measurement(&self, name: &str, index: usize) -> bool {
         self.has_session(name) && self.measurements.get(name).is_none_or(|ix| ix.binary_search(&index).is_ok())
+    }
+
+    /// Set apart the sessions of `cell` that bear a fitted session's name but not its data: where
+    /// the set records a fingerprint of what it was fitted on and the same measurements of the
+    /// cell's session of that name (by index) fingerprint otherwise — a calibration run and a
+    /// validation run imported apart both name their sessions `reflector-1`, … — the session is
+    /// not the one fitted, so its figures are not in-sample. It keeps the fitted session's TCP (the
+    /// same reflector, by name). Returns those sessions' names (also kept in
+    /// [`FitData::other_data`]). Where no fingerprint is recorded the name alone decides, as before.
+    pub fn set_apart_other_data(&mut self, cell: &Cell) -> Vec<String> {
+        let other: Vec<String> = self
+            .sessions
+            .iter()
+            .filter(|name| {
+                let (Some(recorded), Some(session)) = (self.digests.get(*name), cell.session(name)) else {
+                    return false;
+                };
+                let indices: Vec<usize> = match self.measurements.get(*name) {
+                    Some(ix) => ix.clone(),
+                    None => (0..session.measurements.len()).collect(),
+                };
+                crate::cell::fingerprint::of_session(cell, session, &indices).as_ref() != Some(recorded)
+            })
+            .cloned()
+            .collect();
+        self.other_data.extend(other.iter().cloned());
+        other
     }
 }
 
@@ -464,8 +505,8 @@ impl ValidationReport {
     /// Whether this validation is held out ([`is_held_out`]): with no fit data given, whether it
     /// holds a validation session.
     pub fn held_out(&self) -> bool {
-        let fitted = self.fit.as_ref().map_or(&[][..], |f| &f.sessions[..]);
-        is_held_out(&self.sessions, &self.purposes, fitted)
+        let fitted = self.fit.as_ref().map(FitData::fitted_here).unwrap_or_default();
+        is_held_out(&self.sessions, &self.purposes, &fitted)
     }
 
     /// The validated sessions the set was fitted on, in selection order.
