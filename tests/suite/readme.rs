@@ -249,3 +249,27 @@ fn the_api_walkthrough_runs_against_a_server() {
         assert!(stdout.contains(section), "{section}: {stdout}");
     }
 }
+
+/// The README's custom robot example (a UR5, standard DH) is a robot file as written: it parses,
+/// carries β on the joints after its parallel axes and every link's mass, and its nominal flange
+/// at zero joints lies where the standard table puts it: (a2 + a3, −(d4 + d6), d1 − d5) =
+/// (−817.25, −191.45, −5.491) mm.
+#[test]
+fn the_readme_custom_robot_example_is_a_robot_file() {
+    let text = readme();
+    let start = text.find("{\"name\": \"ur5\"").expect("the UR5 example");
+    let end = start + text[start..].find("\n```").expect("its block's end");
+    let v: serde_json::Value = serde_json::from_str(&text[start..end]).unwrap();
+    let model = robocal::domain::robot::RobotSpec::from_json_value(&v).unwrap().to_model().unwrap();
+    let with_beta: Vec<usize> = (0..6).filter(|&j| model.links[j].beta.is_some()).collect();
+    assert_eq!(with_beta, vec![2, 3]);
+    assert!(model.links.iter().all(|l| l.mass > 0.0));
+    let set = robocal::kinematics::ParameterSet::nominal(model, robocal::kinematics::Tool::flange(), [0.0; 6]);
+    let f = set.nominal_chain().fk(&robocal::kinematics::JointState::new(&[0.0; 6]));
+    let mm = f.t / robocal::units::MM;
+    // Standard DH at q = 0: x = a2 + a3, y = −(d4 + d6), z = d1 − d5.
+    let expected = [-425.0 - 392.25, -(109.15 + 82.3), 89.159 - 94.65];
+    for k in 0..3 {
+        assert!((mm[k] - expected[k]).abs() < 1e-9, "flange {mm:?}, expected {expected:?}");
+    }
+}

@@ -996,3 +996,22 @@ fn a_run_imported_apart_is_held_out_though_its_sessions_bear_the_fitted_names() 
     assert_eq!(own["held_out"], false);
     assert!(own["held_out_statement"].as_str().unwrap().starts_with("in-sample, not held out"), "{own}");
 }
+
+/// A custom robot file with parallel axes and no `beta_deg` (a UR5's standard DH table as first
+/// written for its public data set) fits no β there; the identification says so, naming the
+/// joints and what to give, and the preset, which declares β, says nothing.
+#[test]
+fn parallel_axes_without_beta_are_said() {
+    let o = TrackerRunOptions { seed: 6, poses: 150, removed: 0, ..Default::default() };
+    let dir = common::fresh_dir("no-beta");
+    let (joints, files) = tracker_run(&o).unwrap().write(&dir, "run", 6).unwrap();
+    let mut model = irb120();
+    model.preset = None;
+    model.links[2].beta = None;
+    let cell = three_reflector::import(&joints, &files, model, Purpose::Identification).unwrap().cell;
+    let id = identify(&cell, &options("", &[])).unwrap();
+    let said = "axes 2 and 3 are nominally parallel and joint 3 carries no Hayati β in this robot's model";
+    assert!(id.notes.iter().any(|n| n.starts_with(said) && n.contains("\"beta_deg\": 0")), "{:?}", id.notes);
+    let id = identify(&import(&joints, &files), &options("", &[])).unwrap();
+    assert!(!id.notes.iter().any(|n| n.contains("Hayati β")), "{:?}", id.notes);
+}

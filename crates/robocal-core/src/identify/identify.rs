@@ -113,6 +113,9 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
     }
 
     let mut notes = Vec::new();
+    if opts.model.beta {
+        notes.extend(parallel_axes_without_beta(&cell.model));
+    }
     // Parameters held where a first fit stopped: not freed again below.
     let mut held_where_stopped = Vec::new();
     let mut fit = match solver::solve(&problem, &free, &x0, &opts.solver) {
@@ -271,6 +274,30 @@ fn rejudge_at_solution(
         }
     }
     Ok(())
+}
+
+/// A sentence for each joint whose axis is nominally parallel to the previous one (a twist of 0 or
+/// 180°) and that carries no Hayati β in the robot's model: the modified DH row cannot then tilt
+/// it about the direction its twist does not cover, and a custom robot file says so with
+/// `beta_deg` (the presets do: the IRB 120's joint 3, the UR10's 3 and 4).
+fn parallel_axes_without_beta(model: &crate::kinematics::RobotModel) -> Vec<String> {
+    model
+        .links
+        .iter()
+        .enumerate()
+        .skip(1)
+        .filter(|(_, l)| l.beta.is_none() && l.alpha.sin().abs() < 1e-9)
+        .map(|(j, _)| {
+            format!(
+                "axes {} and {} are nominally parallel and joint {} carries no Hayati β in this robot's model: a tilt of axis {} about the direction its twist does not cover cannot be fitted (give joint {} \"beta_deg\": 0 in the robot file)",
+                j,
+                j + 1,
+                j + 1,
+                j + 1,
+                j + 1
+            )
+        })
+        .collect()
 }
 
 /// `x` with every parameter of `free` that `kept` no longer holds free back at its start value in
