@@ -219,9 +219,9 @@ pub(super) fn validate(a: ValidateArgs) -> Result<String, CliError> {
     };
     // What the set was fitted on (its file records it): a session among them is in-sample, unless
     // it only bears a fitted session's name — a run imported apart names its reflectors as the
-    // calibration run did — which the set's fingerprints of its fitted measurements tell.
+    // calibration run did — which the set's fingerprints of its fitted readings tell.
     let mut fit = crate::domain::validation::fit_data(&doc, &[]);
-    fit.set_apart_other_data(&cell);
+    fit.match_readings(&cell);
     let report =
         validate_fitted(&doc.set, &cell, &sessions, reference, Some(&fit)).map_err(|e| validate_error(&a, e))?;
     let uncertainty = crate::domain::validity::HeldOutUncertainty::of_report(&doc, &cell, &report)

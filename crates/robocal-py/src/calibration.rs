@@ -321,10 +321,10 @@ pub fn validate(
         _ => validation_sessions(cell),
     };
     let (report, uncertainty) = py.detach(|| {
-        // A session named as a fitted one but holding other data (a run imported apart) is not
-        // in-sample: the set's fingerprints tell.
+        // A session named as a fitted one but holding other readings (a run imported apart) is not
+        // in-sample: the set's fingerprints of its fitted readings tell.
         let mut fit = fit_data(doc, &[]);
-        fit.set_apart_other_data(cell);
+        fit.match_readings(cell);
         let report = validate_fitted(&doc.set, cell, &sessions, Reference::Measured, Some(&fit))
             .map_err(|e| validate_error(e, named))?;
         let uncertainty = HeldOutUncertainty::of_report(doc, cell, &report)

@@ -54,13 +54,12 @@ pub fn fit_measurements(id: &Identification) -> Vec<FitMeasurements> {
         .map(|(name, mut obs)| {
             obs.sort_by_key(|o| o.index);
             obs.dedup_by_key(|o| o.index);
-            let digest = crate::cell::fingerprint::of_entries(
-                obs.iter().map(|o| (o.index, &o.state.q[..dof], o.measured_position())),
-            );
+            let fingerprints =
+                obs.iter().map(|o| crate::cell::fingerprint::of_reading(&o.state.q[..dof], &o.measured_position()));
             FitMeasurements {
                 session: name.clone(),
                 indices: obs.iter().map(|o| o.index).collect(),
-                digest: Some(digest),
+                fingerprints: Some(fingerprints.collect()),
                 other: Default::default(),
             }
         })

@@ -145,12 +145,13 @@ pub struct FitMeasurements {
     /// 0-based indices of its measurements fitted on, ascending (the service writes the stored
     /// indices).
     pub indices: Vec<usize>,
-    /// The fingerprint of those measurements' content (`cell::fingerprint`: 32 hexadecimal
-    /// digits), which tells them from other measurements in a session of the same name; absent in
-    /// files of earlier versions (the session's name alone then decides).
+    /// The fingerprint of each of those measurements' content, in the order of `indices`
+    /// (`cell::fingerprint`: 16 hexadecimal digits each), which tells them from other readings in a
+    /// session of the same name; absent in files of earlier versions (the session's name and the
+    /// indices alone then decide).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[cfg_attr(feature = "openapi", schema(min_length = 32, max_length = 32, pattern = "^[0-9a-f]{32}$"))]
-    pub digest: Option<String>,
+    #[cfg_attr(feature = "openapi", schema(value_type = Option<Vec<String>>))]
+    pub fingerprints: Option<Vec<String>>,
     /// Keys this version does not know, kept as they came.
     #[serde(flatten)]
     #[cfg_attr(feature = "openapi", schema(value_type = std::collections::HashMap<String, AnyJson>))]

@@ -487,12 +487,12 @@ pub fn fit_data(doc: &super::ParameterSetDoc, also: &[String]) -> FitData {
     }
     // A session the store names but the document's list does not: fitted on whole.
     measurements.retain(|name, _| sessions.contains(name));
-    let digests = q
+    let fingerprints = q
         .and_then(|q| q.fit_measurements.as_ref())
         .into_iter()
         .flatten()
         .filter(|m| sessions.contains(&m.session))
-        .filter_map(|m| Some((m.session.clone(), m.digest.clone()?)))
+        .filter_map(|m| Some((m.session.clone(), m.fingerprints.clone()?.into_iter().collect())))
         .collect();
     let mut tcps = std::collections::BTreeMap::new();
     for t in q.and_then(|q| q.tools.as_ref()).into_iter().flatten() {
@@ -502,7 +502,7 @@ pub fn fit_data(doc: &super::ParameterSetDoc, also: &[String]) -> FitData {
             tcps.insert(s.clone(), tcp);
         }
     }
-    FitData { recorded: !sessions.is_empty(), sessions, measurements, tcps, digests, other_data: Vec::new() }
+    FitData { recorded: !sessions.is_empty(), sessions, measurements, tcps, fingerprints, other_data: Vec::new() }
 }
 
 /// The report as the CLI prints it.

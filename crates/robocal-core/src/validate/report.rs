@@ -157,12 +157,12 @@ pub struct FitData {
     /// plate of reflectors has one TCP per reflector while the set's chain carries only the first:
     /// each session is predicted with its own.
     pub tcps: BTreeMap<String, [f64; 6]>,
-    /// Per fitted session, the fingerprint of the measurements fitted ([`crate::cell::fingerprint`]),
-    /// where the set records one.
-    pub digests: BTreeMap<String, String>,
-    /// Sessions of the validated cell that bear a fitted session's name but hold other
-    /// measurements than it was fitted on (their fingerprints differ): not in-sample
-    /// ([`FitData::set_apart_other_data`]). Their TCP is still the fitted session's.
+    /// Per fitted session, the fingerprints of the readings fitted ([`crate::cell::fingerprint`]),
+    /// where the set records them.
+    pub fingerprints: BTreeMap<String, std::collections::BTreeSet<String>>,
+    /// Sessions of the validated cell that bear a fitted session's name but hold none of the
+    /// readings it was fitted on: not in-sample ([`FitData::match_readings`]). Their TCP is still
+    /// the fitted session's.
     pub other_data: Vec<String>,
 }
 
@@ -194,29 +194,30 @@ impl FitData {
         self.has_session(name) && self.measurements.get(name).is_none_or(|ix| ix.binary_search(&index).is_ok())
     }
 
-    /// Set apart the sessions of `cell` that bear a fitted session's name but not its data: where
-    /// the set records a fingerprint of what it was fitted on and the same measurements of the
-    /// cell's session of that name (by index) fingerprint otherwise — a calibration run and a
-    /// validation run imported apart both name their sessions `reflector-1`, … — the session is
-    /// not the one fitted, so its figures are not in-sample. It keeps the fitted session's TCP (the
-    /// same reflector, by name). Returns those sessions' names (also kept in
-    /// [`FitData::other_data`]). Where no fingerprint is recorded the name alone decides, as before.
-    pub fn set_apart_other_data(&mut self, cell: &Cell) -> Vec<String> {
-        let other: Vec<String> = self
-            .sessions
-            .iter()
-            .filter(|name| {
-                let (Some(recorded), Some(session)) = (self.digests.get(*name), cell.session(name)) else {
-                    return false;
-                };
-                let indices: Vec<usize> = match self.measurements.get(*name) {
-                    Some(ix) => ix.clone(),
-                    None => (0..session.measurements.len()).collect(),
-                };
-                crate::cell::fingerprint::of_session(cell, session, &indices).as_ref() != Some(recorded)
-            })
-            .cloned()
-            .collect();
+    /// Match the fitted readings in `cell` by their content, where the set records fingerprints:
+    /// each fitted session's measurements become those of the cell's session of that name whose
+    /// readings the fit used (whatever their indices — the service's stored numbering, a job's
+    /// without the excluded ones, another run's), and a session none of whose readings was fitted
+    /// — a calibration run and a validation run imported apart both name their sessions
+    /// `reflector-1`, … — is not in-sample at all. It keeps the fitted session's TCP (the same
+    /// reflector, by name). Returns those sessions' names (also kept in [`FitData::other_data`]).
+    /// Where no fingerprint is recorded the name and the indices decide, as before.
+    pub fn match_readings(&mut self, cell: &Cell) -> Vec<String> {
+        let mut other = Vec::new();
+        for (name, fitted) in &self.fingerprints {
+            let Some(session) = cell.session(name) else { continue };
+            let found: Vec<usize> = session
+                .measurements
+                .iter()
+                .enumerate()
+                .filter(|(_, m)| crate::cell::fingerprint::of_measurement(cell, m).is_some_and(|f| fitted.contains(&f)))
+                .map(|(i, _)| i)
+                .collect();
+            if found.is_empty() {
+                other.push(name.clone());
+            }
+            self.measurements.insert(name.clone(), found);
+        }
         self.other_data.extend(other.iter().cloned());
         other
     }
