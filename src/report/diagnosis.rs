@@ -330,6 +330,16 @@ fn where_section(s: &mut String, d: &DiagnosisOut) {
             &[false, true, true, true, true, true],
         ));
     }
+    match &w.order_drift {
+        Some(d) => s.push_str(&format!(
+            "<p{}>Along the measuring order, {}.</p>",
+            if d.found { " class=\"warn\"" } else { "" },
+            esc(&d.statement)
+        )),
+        None => s.push_str(
+            "<p class=\"note\">Along the measuring order: not tested (the stops' places in the run are unknown — no times, no one sequence numbering, not one session listed as measured — or fewer than 40 stops).</p>",
+        ),
+    }
 }
 
 /// The evidence for each named effect, one figure each.

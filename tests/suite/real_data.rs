@@ -1015,3 +1015,37 @@ fn parallel_axes_without_beta_are_said() {
     let id = identify(&import(&joints, &files), &options("", &[])).unwrap();
     assert!(!id.notes.iter().any(|n| n.contains("Hayati β")), "{:?}", id.notes);
 }
+
+/// A warm-up that nothing logs is said where the model misses, not named as a term of the robot:
+/// a twin warming up along its run (a stop every 10 s, the thermal effect, no time or temperature
+/// in the files) and the same run cold. The warm run's held-out errors drift along the measuring
+/// order (p at the permutations' floor), the summary says so with what to log; the cold run's do
+/// not, and its summary says nothing of it. (The trend's size and σ against a known drift:
+/// `diagnose::drift`'s unit tests.)
+#[test]
+fn an_unlogged_warm_up_is_said_as_a_drift_along_the_measuring_order() {
+    let run = |effects: &str, stop_s: f64| {
+        diagnose_twin_with(TrackerRunOptions {
+            seed: 2,
+            poses: 600,
+            removed: 6,
+            stop_s,
+            effects: robocal::sim::effects::Effects::parse(effects, 6).unwrap(),
+            ..Default::default()
+        })
+    };
+    let warm = run("thermal:rise_c=20:tau_s=1800", 10.0);
+    let d = warm.location.order_drift.as_ref().expect("tested: the import numbers the stops");
+    assert!(d.found() && d.p <= 0.002 && d.order_locality > 0.9, "{d:?}");
+    assert!(
+        warm.verdict.summary.contains("held-out errors drift along the measuring order"),
+        "{}",
+        warm.verdict.summary
+    );
+    assert!(warm.verdict.summary.contains("log time_s and temperature_c"), "{}", warm.verdict.summary);
+    let cold = run("", 0.0);
+    let c = cold.location.order_drift.as_ref().expect("tested");
+    assert!(!c.found(), "{c:?}");
+    assert!(!cold.verdict.summary.contains("along the measuring order"), "{}", cold.verdict.summary);
+    assert!(d.first_to_last.norm() > 3.0 * c.first_to_last.norm().max(d.first_to_last_std.norm()), "{d:?} {c:?}");
+}

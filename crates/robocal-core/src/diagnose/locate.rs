@@ -76,6 +76,9 @@ pub struct Where {
     pub voxels_tested: usize,
     /// The voxels above the floor (Benjamini–Hochberg q below `fdr`), largest mean error first.
     pub voxels: Vec<Voxel>,
+    /// Whether the errors drift along the measuring order ([`super::drift`]); `None` where the
+    /// run positions are unknown or too few.
+    pub order_drift: Option<super::drift::OrderDrift>,
 }
 
 /// Smallest number of positions in a tested voxel.
@@ -211,5 +214,6 @@ pub fn locate(
         voxel_size,
         voxels_tested: tested.len(),
         voxels,
+        order_drift: None,
     }
 }

@@ -19,6 +19,7 @@
 //! identification poses themselves.
 
 pub mod cv;
+pub mod drift;
 mod evidence;
 pub(crate) mod floor;
 pub mod library;
@@ -549,6 +550,9 @@ pub fn diagnose_with_progress(
         let named: Vec<ParamEstimate> = verdict.effects.iter().flat_map(|e| e.parameters.iter().cloned()).collect();
         verdict.summary.push_str(&held_payload_with_named(&work, &model, accepted.as_ref(), &named));
     }
+    if let Some(d) = location.order_drift.as_ref().filter(|d| d.found()) {
+        verdict.summary.push_str(&format!("; {}", d.statement()));
+    }
     search::timing("verdict + accepted", t0);
     if !opts.transfer.is_empty() {
         progress(0.95, "transfer to other sessions");
@@ -676,7 +680,7 @@ impl Tested {
             let pts: Vec<Vector3<f64>> = self.obs.iter().map(|&o| pr_target(&s.stages[0], o)).collect();
             auto_voxel(&pts)
         };
-        locate::locate(
+        let mut w = locate::locate(
             &s.stages[0],
             &s.baselines[0],
             &self.floor,
@@ -686,8 +690,58 @@ impl Tested {
             base,
             voxel,
             opts.fdr,
-        )
+        );
+        w.order_drift = order_drift(&s.stages[0].problem, cell, &s.baselines[0], opts.seed);
+        w
     }
+}
+
+/// The drift test ([`drift`]) on the starting model's held-out errors, where every tested
+/// observation has a place in one run: its logged time, else its sequence number (one numbering:
+/// no number names two configurations), else its index in the one tested session's list when
+/// that is in measuring order.
+fn order_drift(
+    pr: &crate::identify::problem::Problem,
+    cell: &Cell,
+    heldout: &cv::Heldout,
+    seed: u64,
+) -> Option<drift::OrderDrift> {
+    use crate::cell::MeasuringOrder;
+    let dof = pr.model.dof();
+    let measurement = |o: usize| {
+        let ob = &pr.obs[o];
+        cell.sessions.get(ob.session).and_then(|s| s.measurements.get(ob.index))
+    };
+    let ms: Vec<&crate::cell::Measurement> =
+        heldout.errors.iter().map(|(o, _)| measurement(*o)).collect::<Option<Vec<_>>>()?;
+    let (source, at): (drift::RunPosition, Vec<f64>) =
+        if let Some(t) = ms.iter().map(|m| m.time_s).collect::<Option<Vec<f64>>>() {
+            (drift::RunPosition::Time, t)
+        } else if let Some(n) = ms.iter().map(|m| m.sequence).collect::<Option<Vec<u64>>>() {
+            let mut named: std::collections::HashMap<u64, &[f64]> = Default::default();
+            for (k, m) in n.iter().zip(&ms) {
+                let q = named.entry(*k).or_insert(&m.q);
+                if q.iter().zip(&m.q).any(|(a, b)| (a - b).abs() > 1e-9) {
+                    return None;
+                }
+            }
+            (drift::RunPosition::Sequence, n.iter().map(|&k| k as f64).collect())
+        } else {
+            let mut sessions = heldout.errors.iter().map(|(o, _)| pr.obs[*o].session);
+            let first = sessions.next()?;
+            let listed = matches!(cell.sessions.get(first)?.order, MeasuringOrder::Measured | MeasuringOrder::Unknown);
+            if !listed || sessions.any(|s| s != first) {
+                return None;
+            }
+            (drift::RunPosition::FileOrder, heldout.errors.iter().map(|(o, _)| pr.obs[*o].index as f64).collect())
+        };
+    let readings = heldout
+        .errors
+        .iter()
+        .zip(at)
+        .map(|((o, e), t)| (t, pr.obs[*o].state.q[..dof].to_vec(), pr.target_position(&pr.obs[*o]), *e))
+        .collect();
+    drift::order_drift(&drift::stops(readings), source, seed)
 }
 
 /// The start model's error split: the floor (what no model removes), the unmodelled gap (held

@@ -416,6 +416,45 @@ pub struct WhereOut {
     pub against: Vec<AgainstOut>,
     /// Workspace voxels tested against the floor.
     pub voxels: VoxelsOut,
+    /// Whether the errors drift along the measuring order (`diagnose::drift`): a warm-up or a
+    /// settling tracker or base, unlogged. `null` where the stops' places in the run are unknown
+    /// (no times, no one sequence numbering, not one session listed as measured) or fewer than
+    /// 40 stops are tested.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub order_drift: Option<OrderDriftOut>,
+}
+
+/// A drift of the starting model's held-out errors along the measuring order, beyond what the
+/// configuration explains: a Freedman–Lane permutation test of cubic Legendre terms of each stop's
+/// place in the run, with sin and cos of every joint in the reduced model.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct OrderDriftOut {
+    /// Whether a drift is said: p below 0.01 and the order not carrying the configuration
+    /// (`order_on_configuration_r2` at most 0.2 and `order_locality` at least 0.8).
+    pub found: bool,
+    /// Where the places in the run came from: `time_s`, `sequence` or `file_order`.
+    pub source: String,
+    /// Stops tested (the readings at one stop averaged).
+    pub stops: usize,
+    /// Permutation p-value of "the errors do not depend on the place in the run".
+    pub p: f64,
+    /// Permutations drawn.
+    pub permutations: usize,
+    /// The fitted trend's mean over the last tenth of the stops minus over the first tenth, X, Y,
+    /// Z of {W}, mm.
+    pub first_to_last_mm: [f64; 3],
+    /// Its standard deviation per axis, mm.
+    pub first_to_last_std_mm: [f64; 3],
+    /// Adjusted R² of the place in the run on the configuration (sin and cos of every joint):
+    /// above 0.2 the order follows the pose and no drift is claimed.
+    pub order_on_configuration_r2: f64,
+    /// Mean joint distance between consecutive stops over that between any two: about 1 in random
+    /// order; below 0.8 (a sweep, a grid, an order planned for short moves) neighbouring poses'
+    /// alike errors make a trend along the order and no drift is claimed.
+    pub order_locality: f64,
+    /// What it says, in a sentence.
+    pub statement: String,
 }
 
 /// A candidate's held-out figures: the model plus the candidate against the model alone, on the
@@ -647,6 +686,18 @@ fn where_out(w: &Where) -> WhereOut {
                 })
                 .collect(),
         },
+        order_drift: w.order_drift.as_ref().map(|d| OrderDriftOut {
+            found: d.found(),
+            source: d.source.as_str().to_string(),
+            stops: d.stops,
+            p: d.p,
+            permutations: d.permutations,
+            first_to_last_mm: [0, 1, 2].map(|k| d.first_to_last[k] / MM),
+            first_to_last_std_mm: [0, 1, 2].map(|k| d.first_to_last_std[k] / MM),
+            order_on_configuration_r2: d.order_on_configuration_r2,
+            order_locality: d.order_locality,
+            statement: d.statement(),
+        }),
     }
 }
 
