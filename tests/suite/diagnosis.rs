@@ -126,7 +126,7 @@ fn ur10_fine_joint_structure_on_joints_1_to_3() {
     assert!(last.p95 <= 0.40 * MM, "held-out p95 after the effects {:.4} mm", last.p95 / MM);
     // Carried to the other series (base and probe refitted there): nearly every pose of B and D
     // lies outside series C's joint ranges, so the tables are extrapolated there, and the report
-    // says so. On D they still help (0.487 → 0.449 mm); on B they cost 0.011 mm (0.442 → 0.453),
+    // says so. On D they still help (0.487 → 0.449 mm); on B they cost 0.010 mm (0.442 → 0.452),
     // since C's wrist compliances, which the data do not determine, are held (BENCHMARKS.md,
     // "Compliances the data do not determine, held").
     for (s, worse_by_at_most) in [("series-B", 0.03 * MM), ("series-D", 0.0)] {

@@ -376,7 +376,8 @@ impl Diagnosis {
         to_python(py, &self.out.decomposition)
     }
 
-    /// Where the model misses: per axis, against the joints, the workspace voxels.
+    /// Where the model misses: per axis, against the joints, the workspace voxels, and whether the
+    /// errors drift along the measuring order (`order_drift`).
     #[getter]
     fn location<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         to_python(py, &self.out.location)
