@@ -1049,3 +1049,40 @@ fn an_unlogged_warm_up_is_said_as_a_drift_along_the_measuring_order() {
     assert!(!cold.verdict.summary.contains("along the measuring order"), "{}", cold.verdict.summary);
     assert!(d.first_to_last.norm() > 3.0 * c.first_to_last.norm().max(d.first_to_last_std.norm()), "{d:?} {c:?}");
 }
+
+/// A unit mistake is refused by the import, before a payload centre is registered on it: joints
+/// written in radians and positions written in metres, each from a twin whose files in degrees and
+/// millimetres import. (Before, both imported, the radian one with a "centre of mass at (−266.7,
+/// −6.1, 589.5) mm … at the reflectors' centroid" that meant nothing, and `identify` refused.)
+#[test]
+fn an_import_refuses_joints_in_radians_and_positions_in_metres() {
+    let o = TrackerRunOptions { seed: 3, poses: 60, removed: 0, ..Default::default() };
+    let dir = common::fresh_dir("real-data-units");
+    let (joints, files) = tracker_run(&o).unwrap().write(&dir, "run", 6).unwrap();
+    // Every line of numbers scaled by `k`, comments kept.
+    let scaled = |from: &std::path::Path, to: &str, k: f64| {
+        let text: String = std::fs::read_to_string(from)
+            .unwrap()
+            .lines()
+            .map(|l| match l.split_whitespace().map(str::parse::<f64>).collect::<Result<Vec<_>, _>>() {
+                Ok(v) if !v.is_empty() => {
+                    v.iter().map(|x| format!("{:.9}", x * k)).collect::<Vec<_>>().join(" ") + "\n"
+                }
+                _ => format!("{l}\n"),
+            })
+            .collect();
+        let path = dir.join(to);
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let refused = |joints: &std::path::Path, files: &[PathBuf]| {
+        three_reflector::import(joints, files, irb120(), Purpose::Identification).err().map(|e| e.to_string())
+    };
+    assert_eq!(refused(&joints, &files), None, "the files as written import");
+    let radians = scaled(&joints, "rad.txt", DEG);
+    let e = refused(&radians, &files).expect("joints in radians refused");
+    assert!(e.contains("session 'reflector-1': its joint readings are in radians, not degrees"), "{e}");
+    let metres: Vec<PathBuf> = files.iter().enumerate().map(|(i, f)| scaled(f, &format!("m{i}.txt"), 1e-3)).collect();
+    let e = refused(&joints, &metres).expect("positions in metres refused");
+    assert!(e.contains("Check the positions' unit") && e.contains("metres 0.001"), "{e}");
+}

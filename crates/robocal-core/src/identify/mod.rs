@@ -37,6 +37,7 @@ pub use pool::{DetmaxPool, select_detmax};
 pub use prepare::{Prepared, map_priors, prepare, row_sigmas, table_priors, weight_by_instrument};
 pub use problem::{GlobalParam, MeasurementSelection, Prior, Problem, ProblemError, tool_blocks};
 pub use quality::Quality;
+pub use scale::check_units;
 pub use solver::{Fit, SolveError, SolverOptions};
 
 impl std::fmt::Display for Status {

@@ -16,6 +16,17 @@ const MIN_NOMINAL_SPREAD: f64 = 0.05;
 /// (×10, ×25.4, ×1000 and their inverses).
 const MAX_SPREAD_RATIO: f64 = 3.0;
 
+/// The unit check of an identification ([`IdentifyError::PositionScale`],
+/// [`IdentifyError::JointUnit`]) on its own, on the nominal robot with the default options: for an
+/// importer, to refuse a file before anything is written. `Ok` also when the check cannot be set
+/// up (an identification then says why).
+pub fn check_units(cell: &Cell) -> Result<(), IdentifyError> {
+    match super::prepare(cell, &super::IdentifyOptions::default()) {
+        Ok(p) => check_position_scale(&p.problem, &p.x0, cell),
+        Err(_) => Ok(()),
+    }
+}
+
 /// Per session of measured points or poses: the RMS distance of the measured positions from their
 /// centroid against that of the nominal robot's declared TCP (the flange where none is declared) at
 /// the same joint readings, which neither the base pose nor the instrument's frame changes. Refused when they differ by more than
