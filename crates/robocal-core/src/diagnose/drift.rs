@@ -14,7 +14,7 @@
 //! of the reduced model e ~ Z over the stops (Freedman–Lane), so neither normality nor equal
 //! variances are assumed, and the reflectors of one stop, which share its error, move together.
 //! Written here rather than taken from a crate: no maintained Rust crate does a Freedman–Lane
-//! permutation test, and the linear algebra is nalgebra's.
+//! permutation test; the linear algebra is nalgebra's and, for the bases, faer's.
 //!
 //! Where the measuring order follows the configuration (a planner's sweep over the joints, a grid
 //! in Cartesian space), an error of the pose the configuration basis does not span would look like
@@ -196,26 +196,12 @@ fn configuration(s: &Stop, centre: &Vector3<f64>, scale: f64) -> Vec<f64> {
     z
 }
 
-/// Orthonormal basis of the column space of `a` (modified Gram–Schmidt; columns whose remainder is
-/// below 1e-10 of their norm are dropped).
+/// Orthonormal basis of the column space of `a` (the diagnosis's thin-SVD kernel on faer,
+/// `linalg::orthonormal_basis`; directions below 1e-10 of the largest dropped).
 fn orthonormal(a: &DMatrix<f64>) -> DMatrix<f64> {
-    let mut cols: Vec<nalgebra::DVector<f64>> = Vec::new();
-    for j in 0..a.ncols() {
-        let mut v = a.column(j).into_owned();
-        let norm0 = v.norm();
-        for c in &cols {
-            let d = c.dot(&v);
-            v -= c * d;
-        }
-        let n = v.norm();
-        if n > 1e-10 * norm0.max(f64::MIN_POSITIVE) {
-            cols.push(v / n);
-        }
-    }
-    if cols.is_empty() {
-        return DMatrix::zeros(a.nrows(), 0);
-    }
-    DMatrix::from_columns(&cols)
+    let m = faer::Mat::<f64>::from_fn(a.nrows(), a.ncols(), |i, j| a[(i, j)]);
+    let q = super::linalg::orthonormal_basis(m.as_ref(), 1e-10);
+    DMatrix::from_fn(q.nrows(), q.ncols(), |i, j| q[(i, j)])
 }
 
 /// `a` minus its projection on the orthonormal columns of `q`.

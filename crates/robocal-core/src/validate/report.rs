@@ -199,11 +199,10 @@ impl FitData {
     /// readings the fit used (whatever their indices — the service's stored numbering, a job's
     /// without the excluded ones, another run's), and a session none of whose readings was fitted
     /// — a calibration run and a validation run imported apart both name their sessions
-    /// `reflector-1`, … — is not in-sample at all. It keeps the fitted session's TCP (the same
-    /// reflector, by name). Returns those sessions' names (also kept in [`FitData::other_data`]).
-    /// Where no fingerprint is recorded the name and the indices decide, as before.
-    pub fn match_readings(&mut self, cell: &Cell) -> Vec<String> {
-        let mut other = Vec::new();
+    /// `reflector-1`, … — is not in-sample at all: its name goes to [`FitData::other_data`]. It
+    /// keeps the fitted session's TCP (the same reflector, by name). Where no fingerprint is
+    /// recorded the name and the indices decide, as before.
+    pub fn match_readings(&mut self, cell: &Cell) {
         for (name, fitted) in &self.fingerprints {
             let Some(session) = cell.session(name) else { continue };
             let found: Vec<usize> = session
@@ -214,12 +213,10 @@ impl FitData {
                 .map(|(i, _)| i)
                 .collect();
             if found.is_empty() {
-                other.push(name.clone());
+                self.other_data.push(name.clone());
             }
             self.measurements.insert(name.clone(), found);
         }
-        self.other_data.extend(other.iter().cloned());
-        other
     }
 }
 
