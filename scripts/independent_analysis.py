@@ -191,6 +191,12 @@ def simulate(args):
     M = gravity_moments(alpha, a, d, off, beta2, q, mass, com, payload_kg, payload_com)
     theta = q + comp * M + direction * hyst + rng.normal(0, args.jitter_deg * D, (n, 6))
     theta[:, 1] += quad2 * M[:, 1] * np.abs(M[:, 1]) / 400.0
+    # An unlogged warm-up along the run (0 by default): joint 2's zero creeps by drift_deg and the
+    # tracker's reading by drift_mm in a random direction, as 1 − e^(−3t) of the run's share t.
+    warm = 1.0 - np.exp(-3.0 * np.arange(n) / max(n - 1, 1))
+    theta[:, 1] += args.drift_deg * D * warm
+    drift_dir = np.random.default_rng(args.seed + 7919).normal(size=3)
+    drift_dir /= np.linalg.norm(drift_dir)
     R, o = chain(alpha, a, d, off, beta2, theta)
     Rw = Rb  # base → tracker rotation; tracker origin in the base is tracker_in_base
     readings = []
@@ -199,7 +205,7 @@ def simulate(args):
         p_tr = (p_base - tracker_in_base) @ Rw  # the tracker frame: Rwᵀ (p − t)
         r = np.linalg.norm(p_base - tracker_in_base, axis=1)
         sig = 20e-6 + 5e-6 * r
-        readings.append(p_tr + rng.normal(0, 1, (n, 3)) * sig[:, None])
+        readings.append(p_tr + rng.normal(0, 1, (n, 3)) * sig[:, None] + args.drift_mm * 1e-3 * warm[:, None] * drift_dir)
     readings = np.stack(readings, 1)
     # A few readings lost (line of sight), a few rows deleted as outliers by the authors.
     lost = rng.random((n, 3)) < args.lost
@@ -221,7 +227,8 @@ def simulate(args):
     truth = dict(seed=args.seed, stops=n, kept=int(keep.sum()), payload_kg=payload_kg,
                  payload_com_mm=(payload_com * 1000).tolist(), smr_mm=(smr * 1000).tolist(),
                  compliance_deg_per_nm=(comp / D).tolist(), hysteresis_deg=(hyst / D).tolist(),
-                 jitter_deg=args.jitter_deg, quadratic_deg=args.quadratic, beta2_deg=beta2 / D,
+                 jitter_deg=args.jitter_deg, quadratic_deg=args.quadratic,
+                 drift_mm=args.drift_mm, drift_deg=args.drift_deg, beta2_deg=beta2 / D,
                  mass_kg=mass.tolist())
     with open(os.path.join(args.out_dir, 'truth.json'), 'w') as f:
         json.dump(truth, f, indent=1)
@@ -426,6 +433,10 @@ def main():
     s.add_argument('--hysteresis-deg', default='1=0.02,2=0.025,3=0.03,4=0.02,5=0.03,6=0.02')
     s.add_argument('--order', choices=['random', 'sweep'], default='random')
     s.add_argument('--tilt-deg', type=float, default=2.0, help='the tracker frame tilted by about this')
+    s.add_argument('--drift-mm', type=float, default=0.0,
+                   help="an unlogged warm-up: the tracker's readings creep by this along the run")
+    s.add_argument('--drift-deg', type=float, default=0.0,
+                   help="an unlogged warm-up: joint 2's zero creeps by this along the run")
     s.add_argument('--quadratic', type=float, default=0.0,
                    help='joint-2 deflection quadratic in its torque: deg at 20 N·m')
     a = sub.add_parser('analyse')

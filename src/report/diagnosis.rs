@@ -206,7 +206,13 @@ fn candidates_section(s: &mut String, d: &DiagnosisOut) {
             fixed(c.bic_gain, 1),
             h.map_or("—".into(), |h| mm(h.gain_mean_mm)),
             h.and_then(|h| h.p).map_or("—".into(), p_value),
-            h.map_or("—".into(), |h| if h.confirmed { "confirmed".into() } else { "not confirmed".into() }),
+            h.map_or("—".into(), |h| match (&h.beyond_smoother_and_drift, h.confirmed) {
+                (Some(b), true) => {
+                    format!("confirmed beyond the smoother and a drift (p {})", b.p.map_or("—".into(), p_value))
+                }
+                (_, true) => "confirmed".into(),
+                _ => "not confirmed".into(),
+            }),
         ]
     };
     let header = [

@@ -210,7 +210,7 @@ fn remove(q: &DMatrix<f64>, a: &DMatrix<f64>) -> DMatrix<f64> {
 }
 
 /// Legendre polynomials P1…P3 at u ∈ [−1, 1].
-fn legendre(u: f64) -> [f64; DEGREE] {
+pub(crate) fn legendre(u: f64) -> [f64; DEGREE] {
     [u, 0.5 * (3.0 * u * u - 1.0), 0.5 * (5.0 * u * u * u - 3.0 * u)]
 }
 
@@ -309,7 +309,7 @@ pub fn order_drift(stops: &[Stop], source: RunPosition, seed: u64) -> Option<Ord
 }
 
 /// Mean joint distance between consecutive stops (in run order) over the mean between any two.
-fn locality(stops: &[Stop]) -> f64 {
+pub(crate) fn locality(stops: &[Stop]) -> f64 {
     let mut order: Vec<&Stop> = stops.iter().collect();
     order.sort_by(|a, b| a.at.total_cmp(&b.at));
     let dist = |a: &Stop, b: &Stop| {

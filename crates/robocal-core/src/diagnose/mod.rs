@@ -697,44 +697,16 @@ impl Tested {
 }
 
 /// The drift test ([`drift`]) on the starting model's held-out errors, where every tested
-/// observation has a place in one run: its logged time, else its sequence number (one numbering:
-/// no number names two configurations), else its index in the one tested session's list when
-/// that is in measuring order.
+/// observation has a place in one run ([`run_positions`]).
 fn order_drift(
     pr: &crate::identify::problem::Problem,
     cell: &Cell,
     heldout: &cv::Heldout,
     seed: u64,
 ) -> Option<drift::OrderDrift> {
-    use crate::cell::MeasuringOrder;
     let dof = pr.model.dof();
-    let measurement = |o: usize| {
-        let ob = &pr.obs[o];
-        cell.sessions.get(ob.session).and_then(|s| s.measurements.get(ob.index))
-    };
-    let ms: Vec<&crate::cell::Measurement> =
-        heldout.errors.iter().map(|(o, _)| measurement(*o)).collect::<Option<Vec<_>>>()?;
-    let (source, at): (drift::RunPosition, Vec<f64>) =
-        if let Some(t) = ms.iter().map(|m| m.time_s).collect::<Option<Vec<f64>>>() {
-            (drift::RunPosition::Time, t)
-        } else if let Some(n) = ms.iter().map(|m| m.sequence).collect::<Option<Vec<u64>>>() {
-            let mut named: std::collections::HashMap<u64, &[f64]> = Default::default();
-            for (k, m) in n.iter().zip(&ms) {
-                let q = named.entry(*k).or_insert(&m.q);
-                if q.iter().zip(&m.q).any(|(a, b)| (a - b).abs() > 1e-9) {
-                    return None;
-                }
-            }
-            (drift::RunPosition::Sequence, n.iter().map(|&k| k as f64).collect())
-        } else {
-            let mut sessions = heldout.errors.iter().map(|(o, _)| pr.obs[*o].session);
-            let first = sessions.next()?;
-            let listed = matches!(cell.sessions.get(first)?.order, MeasuringOrder::Measured | MeasuringOrder::Unknown);
-            if !listed || sessions.any(|s| s != first) {
-                return None;
-            }
-            (drift::RunPosition::FileOrder, heldout.errors.iter().map(|(o, _)| pr.obs[*o].index as f64).collect())
-        };
+    let obs: Vec<usize> = heldout.errors.iter().map(|(o, _)| *o).collect();
+    let (source, at) = run_positions(pr, cell, &obs)?;
     let readings = heldout
         .errors
         .iter()
@@ -742,6 +714,42 @@ fn order_drift(
         .map(|((o, e), t)| (t, pr.obs[*o].state.q[..dof].to_vec(), pr.target_position(&pr.obs[*o]), *e))
         .collect();
     drift::order_drift(&drift::stops(readings), source, seed)
+}
+
+/// Each of the observations `obs`' place in one run: its logged time, else its sequence number
+/// (one numbering: no number names two configurations), else its index in the one session's list
+/// when that is in measuring order. `None` when they have no common place in a run.
+pub(crate) fn run_positions(
+    pr: &crate::identify::problem::Problem,
+    cell: &Cell,
+    obs: &[usize],
+) -> Option<(drift::RunPosition, Vec<f64>)> {
+    use crate::cell::MeasuringOrder;
+    let measurement = |o: usize| {
+        let ob = pr.obs.get(o)?;
+        cell.sessions.get(ob.session).and_then(|s| s.measurements.get(ob.index))
+    };
+    let ms: Vec<&crate::cell::Measurement> = obs.iter().map(|&o| measurement(o)).collect::<Option<Vec<_>>>()?;
+    if let Some(t) = ms.iter().map(|m| m.time_s).collect::<Option<Vec<f64>>>() {
+        Some((drift::RunPosition::Time, t))
+    } else if let Some(n) = ms.iter().map(|m| m.sequence).collect::<Option<Vec<u64>>>() {
+        let mut named: std::collections::HashMap<u64, &[f64]> = Default::default();
+        for (k, m) in n.iter().zip(&ms) {
+            let q = named.entry(*k).or_insert(&m.q);
+            if q.iter().zip(&m.q).any(|(a, b)| (a - b).abs() > 1e-9) {
+                return None;
+            }
+        }
+        Some((drift::RunPosition::Sequence, n.iter().map(|&k| k as f64).collect()))
+    } else {
+        let mut sessions = obs.iter().map(|&o| pr.obs[o].session);
+        let first = sessions.next()?;
+        let listed = matches!(cell.sessions.get(first)?.order, MeasuringOrder::Measured | MeasuringOrder::Unknown);
+        if !listed || sessions.any(|s| s != first) {
+            return None;
+        }
+        Some((drift::RunPosition::FileOrder, obs.iter().map(|&o| pr.obs[o].index as f64).collect()))
+    }
 }
 
 /// The start model's error split: the floor (what no model removes), the unmodelled gap (held

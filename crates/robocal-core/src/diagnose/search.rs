@@ -39,7 +39,10 @@
 //!   said, the rest left unexplained — and below `partial_share` the verdict is
 //!   `unknown_effect`. A look-alike takes a third of an out-of-library effect; a name needs most.
 //! - **Relative size**: a candidate confirmed on held-out poses must also lower the held-out
-//!   mean by `min_rel_gain` of itself: the data's own scatter is the scale of a real cause.
+//!   mean by `min_rel_gain` of itself: the data's own scatter is the scale of a real cause. A
+//!   direction-of-motion term below it is confirmed when, held out, it predicts beyond the
+//!   smoother and a drift along the run together, in a random measuring order
+//!   ([`Evaluated::apart`]).
 //!
 //! The thresholds' false-alarm rate is measured on simulated no-effect cells by
 //! `robocal bench-diagnosis` (BENCHMARKS.md), not assumed.
@@ -93,6 +96,13 @@ pub struct SearchOptions {
     /// residual changes from pose to pose and nothing predicts it; a term that takes a sliver of
     /// it (a couple of per cent) is a real correlation — the drift of an unlogged temperature
     /// along a planned sequence, a backlash whose directions were lost — but not a cause to name.
+    /// One exception: a direction-of-motion term (backlash), which depends on the path and not on
+    /// the pose, is confirmed below this when, held out on the same folds, it still predicts
+    /// significantly better than the smoother together with a drift along the run (P1…P3 of the
+    /// run position times every joint's angle and the three axes of {W}), in a measuring order
+    /// whose consecutive stops are as far apart as any two (the drift test's locality guard):
+    /// what is left for it then is neither a smooth function of the configuration nor of the time
+    /// ([`Evaluated::apart`]).
     pub min_rel_gain: f64,
     /// Smallest gap closure — (RMS before − RMS after)/(RMS before − the floor's RMS) — that a
     /// candidate inside the smoother's span must reach to be named. Such a term is one of the
@@ -163,6 +173,10 @@ pub struct Evaluated {
     /// lowering the held-out mean by less than `min_rel_gain` of it. A real cause too small to
     /// name, which a summary must not call absent.
     pub too_small: bool,
+    /// For a direction-of-motion term below `min_rel_gain` that is confirmed all the same: its
+    /// held-out comparison beyond the smoother and a drift along the run
+    /// ([`SearchOptions::min_rel_gain`]). `None` for every other candidate.
+    pub apart: Option<Paired>,
 }
 
 /// Why a round ended the search, or what it accepted.
@@ -270,6 +284,8 @@ pub struct Search {
     pub accepted: Vec<Candidate>,
     /// Library candidates these data cannot test (from the first round).
     pub unavailable: Vec<Unavailable>,
+    /// The smallest relative held-out gain a name needs ([`SearchOptions::min_rel_gain`]).
+    pub min_rel_gain: f64,
 }
 
 /// Run the search from `start` (the current model on the pooled data).
@@ -339,7 +355,7 @@ pub fn search(
             }
         }
     }
-    Ok(Search { stages, baselines, refits, rounds, accepted, unavailable })
+    Ok(Search { stages, baselines, refits, rounds, accepted, unavailable, min_rel_gain: opts.min_rel_gain })
 }
 
 /// `f` over `items` on up to `threads` scoped threads; results in item order.
@@ -497,6 +513,118 @@ pub(crate) fn smoother_columns(stage: &Stage, g: &Mat<f64>) -> Mat<f64> {
     out
 }
 
+/// A direction-of-motion term that confirms on held-out poses but lowers the held-out mean by
+/// less than `min_rel_gain` is confirmed after all when it predicts better than the smoother and a
+/// drift along the run together, held out on the same folds (Wilcoxon over poses at `level`).
+///
+/// Why a backlash alone: its regressor is the sign of each joint's last move, a property of the
+/// path. In random order that sign leans with the pose (a stop high in a joint's range was more
+/// likely reached moving up), so a smooth error of the configuration lends it a sliver of gain —
+/// the look-alike the relative size guards against; and along a planned sweep it follows the
+/// time, so a drift lends it one too. Beyond both, what it predicts is its own. Twins without
+/// hysteresis but with out-of-library deflections, sweeps and warm-ups (BENCHMARKS.md, "Weak
+/// hysteresis named") measure the rate at which this names a backlash that is not there.
+#[allow(clippy::too_many_arguments)]
+fn apart_direction_terms(
+    cell: &Cell,
+    stage: &Stage,
+    cvb: &CvBase<'_>,
+    g: &Mat<f64>,
+    (sm, sm_pen): (&Mat<f64>, &Mat<f64>),
+    screened: &[Screened],
+    columns: &[(Mat<f64>, Option<Mat<f64>>)],
+    evaluated: &mut [Evaluated],
+    level: f64,
+) {
+    let small: Vec<usize> = (0..evaluated.len())
+        .filter(|&k| evaluated[k].too_small && screened[evaluated[k].index].candidate.kind == Kind::Backlash)
+        .collect();
+    if small.is_empty() {
+        return;
+    }
+    // Where consecutive stops are neighbours (a sweep, a grid), the sign of each move follows the
+    // neighbourhood and the errors of neighbouring poses are alike: a direction term takes a
+    // sliver of that pose-to-pose structure, which neither the smoother nor a drift spans. So
+    // the exception holds only in an order whose consecutive stops are as far apart as any two
+    // (the drift test's own locality guard); without a known order, not at all.
+    let Some((d, locality)) = drift_columns(cell, stage, g) else {
+        return;
+    };
+    if locality < super::drift::LOCALITY_LIMIT {
+        return;
+    }
+    let d_pen = ridge(&d, 1e-6);
+    let (alt, alt_pen) = (hcat(sm, &d), block_diag(Some(sm_pen), sm.ncols(), Some(&d_pen), d.ncols()));
+    let alt_heldout = cvb.heldout(Some((&alt, Some(&alt_pen))));
+    for k in small {
+        let e = &mut evaluated[k];
+        let (c, c_pen) = &columns[e.index];
+        let joint = hcat(c, &alt);
+        let pen = block_diag(c_pen.as_ref(), c.ncols(), Some(&alt_pen), alt.ncols());
+        let beyond = paired(&alt_heldout, &cvb.heldout(Some((&joint, Some(&pen)))));
+        if beyond.p.is_some_and(|p| p < level) && beyond.gain_mean > 0.0 {
+            e.confirmed = true;
+            e.too_small = false;
+            e.apart = Some(beyond);
+        }
+    }
+}
+
+/// Columns of a drift along the run: each position row's axis of {W} and each joint's angle
+/// (`g`), times the Legendre polynomials P1…P3 of the observation's place in the run scaled to
+/// [−1, 1] ([`super::run_positions`]), with the order's locality ([`super::drift::locality`]);
+/// `None` when the observations have no place in one run.
+fn drift_columns(cell: &Cell, stage: &Stage, g: &Mat<f64>) -> Option<(Mat<f64>, f64)> {
+    let pr = &stage.problem;
+    let obs: Vec<usize> = (0..pr.obs.len()).collect();
+    let (_, at) = super::run_positions(pr, cell, &obs)?;
+    let (lo, hi) = at.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &t| (l.min(t), h.max(t)));
+    if !(hi - lo).is_finite() || hi <= lo {
+        return None;
+    }
+    let dof = pr.model.dof();
+    let zero = nalgebra::Vector3::zeros();
+    let stops =
+        super::drift::stops(pr.obs.iter().zip(&at).map(|(o, &t)| (t, o.state.q[..dof].to_vec(), zero, zero)).collect());
+    if stops.len() < 2 {
+        return None;
+    }
+    let locality = super::drift::locality(&stops);
+    let per = 3 + dof;
+    let degree = super::drift::legendre(0.0).len();
+    let mut out = Mat::<f64>::zeros(stage.n_rows(), degree * per);
+    for (o, t) in pr.obs.iter().zip(&at) {
+        let p = super::drift::legendre(2.0 * (t - lo) / (hi - lo) - 1.0);
+        for (k, pk) in p.iter().enumerate() {
+            for a in 0..o.rows.min(3) {
+                out[(o.row + a, k * per + a)] = o.weight[a] * pk;
+            }
+            for j in 0..dof {
+                for r in o.row..o.row + o.rows {
+                    out[(r, k * per + 3 + j)] = g[(r, j)] * pk;
+                }
+            }
+        }
+    }
+    Some((out, locality))
+}
+
+/// The columns of `a` then those of `b` (same rows).
+pub(crate) fn hcat(a: &Mat<f64>, b: &Mat<f64>) -> Mat<f64> {
+    let m = a.ncols();
+    Mat::<f64>::from_fn(a.nrows(), m + b.ncols(), |r, c| if c < m { a[(r, c)] } else { b[(r, c - m)] })
+}
+
+/// The block-diagonal penalty of columns concatenated by [`hcat`]: `a` (of `na` columns; zero
+/// when `None`) then `b` (of `nb`).
+pub(crate) fn block_diag(a: Option<&Mat<f64>>, na: usize, b: Option<&Mat<f64>>, nb: usize) -> Mat<f64> {
+    Mat::<f64>::from_fn(na + nb, na + nb, |i, k| match (i < na, k < na) {
+        (true, true) => a.map_or(0.0, |p| p[(i, k)]),
+        (false, false) => b.map_or(0.0, |p| p[(i - na, k - na)]),
+        _ => 0.0,
+    })
+}
+
 /// A small ridge for the smoother (its columns overlap the model's and each other's).
 fn ridge(c: &Mat<f64>, rel: f64) -> Mat<f64> {
     let m = c.ncols();
@@ -602,7 +730,7 @@ fn run_round(
         let (cols, pen) = &columns[i];
         cvb.heldout(Some((cols, pen.as_ref())))
     });
-    let evaluated: Vec<Evaluated> = order
+    let mut evaluated: Vec<Evaluated> = order
         .iter()
         .zip(heldouts)
         .map(|(&i, heldout)| {
@@ -612,7 +740,7 @@ fn run_round(
             let large = vs_model.gain_mean >= opts.min_rel_gain * base_mean;
             let confirmed = significant && large;
             let too_small = significant && !large && vs_model.gain_mean > 0.0;
-            Evaluated { index: i, heldout, vs_model, share, confirmed, too_small }
+            Evaluated { index: i, heldout, vs_model, share, confirmed, too_small, apart: None }
         })
         .collect();
 
@@ -629,6 +757,7 @@ fn run_round(
     // call unknown than a candidate of that size is one to name (and a candidate too small to
     // name may predict more of it than the smoother does).
     let smoother_large = smoother.gain_mean >= opts.min_rel_gain * base_mean;
+    apart_direction_terms(cell, stage, &cvb, &g, (&sm, &sm_pen), &screened, &columns, &mut evaluated, level);
 
     timing("smoother", t0);
     let t0 = std::time::Instant::now();

@@ -492,8 +492,28 @@ fn named(s: &search::Search, d: &Decomposition, effects: &[Effect]) -> String {
                 }
                 _ => String::new(),
             };
-            format!("{}{value}{held}", e.candidate.label())
+            format!("{}{value}{held}{}", e.candidate.label(), apart_clause(s, k))
         })
         .collect::<Vec<_>>()
         .join("; ")
+}
+
+/// For the k-th named effect when it was confirmed below `min_rel_gain` (a direction-of-motion
+/// term beyond the smoother and a drift along the run): a clause saying so, with its figures;
+/// "" otherwise.
+fn apart_clause(s: &search::Search, k: usize) -> String {
+    let Some((round, i)) =
+        s.rounds.iter().filter_map(|r| if let Decision::Accept(i) = r.decision { Some((r, i)) } else { None }).nth(k)
+    else {
+        return String::new();
+    };
+    let Some(apart) = round.evaluated.iter().find(|e| e.index == i).and_then(|e| e.apart.as_ref()) else {
+        return String::new();
+    };
+    format!(
+        ", smaller than the {:.0} % of the held-out mean a name otherwise needs, but beyond a smooth function of the configuration and a drift along the run it still predicts held-out poses better (p = {:.1e}, mean {} lower)",
+        100.0 * s.min_rel_gain,
+        apart.p.unwrap_or(f64::NAN),
+        mm(apart.gain_mean)
+    )
 }

@@ -472,8 +472,25 @@ pub struct HeldoutOut {
     /// Share of the held-out variance above the floor it explains.
     pub share: f64,
     /// Whether it confirms: Wilcoxon p below the confirmation level (Bonferroni over the round's
-    /// cross-validated candidates), RMS and mean gains above their thresholds.
+    /// cross-validated candidates), RMS and mean gains above their thresholds — or, for a
+    /// direction-of-motion term below the relative-gain threshold, `beyond_smoother_and_drift`.
     pub confirmed: bool,
+    /// A direction-of-motion term (backlash) confirmed below the relative gain a name otherwise
+    /// needs: its held-out comparison, on the same folds, of the smoother and a drift along the run
+    /// with and without it (absent for every other candidate).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub beyond_smoother_and_drift: Option<BeyondOut>,
+}
+
+/// A held-out comparison of a candidate added to an alternative model against that model alone.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct BeyondOut {
+    /// One-sided Wilcoxon signed-rank p-value over poses that the candidate lowers the per-pose
+    /// squared error beyond the alternative.
+    pub p: Option<f64>,
+    /// Mean |e| of the alternative minus that with the candidate too, mm.
+    pub gain_mean_mm: f64,
 }
 
 /// One candidate of one round: its score test on the round's model and, when cross-validated,
@@ -785,6 +802,10 @@ pub fn diagnosis_out(d: &Diagnosis) -> DiagnosisOut {
                     p: e.vs_model.p,
                     share: e.share,
                     confirmed: e.confirmed,
+                    beyond_smoother_and_drift: e
+                        .apart
+                        .as_ref()
+                        .map(|a| BeyondOut { p: a.p, gain_mean_mm: a.gain_mean / MM }),
                 }),
                 absorbed_by: absorbed(&s.absorbed_by),
             });

@@ -49,17 +49,8 @@ pub(super) fn decide(
         encompassing(stage, &rp, &unabsorbed(stage, sm.cols), &columns[best.index].0) > opts.confirm_p.log10()
     };
     let (bc, bp) = &columns[best.index];
-    let joint_cols = Mat::<f64>::from_fn(stage.n_rows(), bc.ncols() + sm.cols.ncols(), |r, c| {
-        if c < bc.ncols() { bc[(r, c)] } else { sm.cols[(r, c - bc.ncols())] }
-    });
-    let joint_pen = Mat::<f64>::from_fn(joint_cols.ncols(), joint_cols.ncols(), |i, k| {
-        let m = bc.ncols();
-        match (i < m, k < m) {
-            (true, true) => bp.as_ref().map_or(0.0, |p| p[(i, k)]),
-            (false, false) => sm.pen[(i - m, k - m)],
-            _ => 0.0,
-        }
-    });
+    let joint_cols = hcat(bc, sm.cols);
+    let joint_pen = block_diag(bp.as_ref(), bc.ncols(), Some(sm.pen), sm.cols.ncols());
     let joint = cvb.heldout(Some((&joint_cols, Some(&joint_pen))));
     let gain = |h: &Heldout| rms2(base) - rms2(h);
     let explainable = gain(&best.heldout).max(gain(&joint)).max(gain(sm.heldout));
