@@ -604,7 +604,7 @@ fn a_weak_hysteresis_beyond_the_smoother_and_a_drift_is_named() {
     let beyond = json
         .candidates
         .iter()
-        .filter_map(|c| c.heldout.as_ref()?.beyond_smoother_and_drift.as_ref())
+        .filter_map(|c| c.heldout.as_ref().filter(|h| h.confirmed)?.beyond_smoother_and_drift.as_ref())
         .next()
         .expect("the comparison beyond the smoother and a drift, in the JSON");
     assert!(beyond.p.is_some_and(|p| p < 0.01) && beyond.gain_mean_mm > 0.0, "{beyond:?}");

@@ -47,7 +47,7 @@ pub use floor::Floor;
 use library::{Candidate, Kind, Unavailable};
 pub use locate::{Against, Axis, Voxel, Where};
 pub use screen::Score;
-pub use search::{Decision, Evaluated, Round, Screened, SearchOptions};
+pub use search::{Apart, Decision, Evaluated, Round, Screened, SearchOptions};
 pub use verdict::experiment;
 use verdict::verdict;
 

@@ -173,10 +173,35 @@ pub struct Evaluated {
     /// lowering the held-out mean by less than `min_rel_gain` of it. A real cause too small to
     /// name, which a summary must not call absent.
     pub too_small: bool,
-    /// For a direction-of-motion term below `min_rel_gain` that is confirmed all the same: its
-    /// held-out comparison beyond the smoother and a drift along the run
+    /// For a direction-of-motion term below `min_rel_gain`: whether it stands apart from the
+    /// smoother and a drift along the run, and so is confirmed all the same
     /// ([`SearchOptions::min_rel_gain`]). `None` for every other candidate.
-    pub apart: Option<Paired>,
+    pub apart: Option<Apart>,
+}
+
+/// A direction-of-motion term below `min_rel_gain`, against the smoother and a drift along the
+/// run ([`SearchOptions::min_rel_gain`]).
+#[derive(Clone, Debug)]
+pub enum Apart {
+    /// It predicts held-out poses significantly better than both together: confirmed.
+    Beyond(Paired),
+    /// It does not (the held-out comparison, of both with and without it).
+    NotBeyond(Paired),
+    /// Not tested: consecutive stops are neighbours (this locality, below the drift test's
+    /// [`super::drift::LOCALITY_LIMIT`]).
+    NeighbourOrder(f64),
+    /// Not tested: the observations have no place in one run.
+    NoOrder,
+}
+
+impl Apart {
+    /// The held-out comparison, when it was made.
+    pub fn comparison(&self) -> Option<&Paired> {
+        match self {
+            Apart::Beyond(p) | Apart::NotBeyond(p) => Some(p),
+            _ => None,
+        }
+    }
 }
 
 /// Why a round ended the search, or what it accepted.
@@ -547,11 +572,12 @@ fn apart_direction_terms(
     // sliver of that pose-to-pose structure, which neither the smoother nor a drift spans. So
     // the exception holds only in an order whose consecutive stops are as far apart as any two
     // (the drift test's own locality guard); without a known order, not at all.
+    let mark = |evaluated: &mut [Evaluated], a: Apart| small.iter().for_each(|&k| evaluated[k].apart = Some(a.clone()));
     let Some((d, locality)) = drift_columns(cell, stage, g) else {
-        return;
+        return mark(evaluated, Apart::NoOrder);
     };
     if locality < super::drift::LOCALITY_LIMIT {
-        return;
+        return mark(evaluated, Apart::NeighbourOrder(locality));
     }
     let d_pen = ridge(&d, 1e-6);
     let (alt, alt_pen) = (hcat(sm, &d), block_diag(Some(sm_pen), sm.ncols(), Some(&d_pen), d.ncols()));
@@ -565,7 +591,9 @@ fn apart_direction_terms(
         if beyond.p.is_some_and(|p| p < level) && beyond.gain_mean > 0.0 {
             e.confirmed = true;
             e.too_small = false;
-            e.apart = Some(beyond);
+            e.apart = Some(Apart::Beyond(beyond));
+        } else {
+            e.apart = Some(Apart::NotBeyond(beyond));
         }
     }
 }

@@ -238,9 +238,21 @@ fn too_small(lr: &search::Round) -> Option<&search::Evaluated> {
 
 /// "cyclic j2 h2, predicts held-out poses better (p = …) but lowers the held-out mean by only …
 /// (… %)", the share of `base` (the mean it was judged against, m).
+/// A direction term's clause says why the exception for such terms did not name it.
 fn too_small_clause(lr: &search::Round, e: &search::Evaluated, base: f64) -> String {
+    let why = match &e.apart {
+        Some(search::Apart::NotBeyond(b)) => format!(
+            " and, beyond a smooth function of the configuration and a drift along the run, not significantly better (p = {:.1e})",
+            b.p.unwrap_or(f64::NAN)
+        ),
+        Some(search::Apart::NeighbourOrder(locality)) => format!(
+            " in an order whose consecutive stops are neighbours (locality {locality:.2}), where the sign of each move follows the neighbourhood"
+        ),
+        Some(search::Apart::NoOrder) => " with no measuring order to test it against a drift".into(),
+        _ => String::new(),
+    };
     format!(
-        "{}, predicts held-out poses better (p = {:.1e}) but lowers the held-out mean by only {} ({:.1} %)",
+        "{}, predicts held-out poses better (p = {:.1e}) but lowers the held-out mean by only {} ({:.1} %){why}",
         lr.screened[e.index].candidate.label(),
         e.vs_model.p.unwrap_or(f64::NAN),
         mm(e.vs_model.gain_mean),
@@ -507,7 +519,9 @@ fn apart_clause(s: &search::Search, k: usize) -> String {
     else {
         return String::new();
     };
-    let Some(apart) = round.evaluated.iter().find(|e| e.index == i).and_then(|e| e.apart.as_ref()) else {
+    let Some(search::Apart::Beyond(apart)) =
+        round.evaluated.iter().find(|e| e.index == i).and_then(|e| e.apart.as_ref())
+    else {
         return String::new();
     };
     format!(

@@ -475,9 +475,10 @@ pub struct HeldoutOut {
     /// cross-validated candidates), RMS and mean gains above their thresholds — or, for a
     /// direction-of-motion term below the relative-gain threshold, `beyond_smoother_and_drift`.
     pub confirmed: bool,
-    /// A direction-of-motion term (backlash) confirmed below the relative gain a name otherwise
-    /// needs: its held-out comparison, on the same folds, of the smoother and a drift along the run
-    /// with and without it (absent for every other candidate).
+    /// A direction-of-motion term (backlash) below the relative gain a name otherwise needs: its
+    /// held-out comparison, on the same folds, of the smoother and a drift along the run with and
+    /// without it, which confirms it when significant (absent for every other candidate, and where
+    /// the measuring order is unknown or moves between neighbouring poses).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub beyond_smoother_and_drift: Option<BeyondOut>,
 }
@@ -805,6 +806,7 @@ pub fn diagnosis_out(d: &Diagnosis) -> DiagnosisOut {
                     beyond_smoother_and_drift: e
                         .apart
                         .as_ref()
+                        .and_then(|a| a.comparison())
                         .map(|a| BeyondOut { p: a.p, gain_mean_mm: a.gain_mean / MM }),
                 }),
                 absorbed_by: absorbed(&s.absorbed_by),
