@@ -211,7 +211,10 @@ fn candidates_section(s: &mut String, d: &DiagnosisOut) {
                     format!("confirmed beyond the smoother and a drift (p {})", b.p.map_or("—".into(), p_value))
                 }
                 (_, true) => "confirmed".into(),
-                _ => "not confirmed".into(),
+                (Some(b), false) => {
+                    format!("not confirmed (beyond the smoother and a drift: p {})", b.p.map_or("—".into(), p_value))
+                }
+                (None, false) => "not confirmed".into(),
             }),
         ]
     };

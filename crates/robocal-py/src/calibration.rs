@@ -383,7 +383,9 @@ impl Diagnosis {
         to_python(py, &self.out.location)
     }
 
-    /// Every candidate of every round with its screening statistics and held-out figures.
+    /// Every candidate of every round with its screening statistics and held-out figures; a
+    /// direction term below the relative gain a name needs also carries its comparison beyond the
+    /// smoother and a drift along the run (`heldout.beyond_smoother_and_drift`).
     #[getter]
     fn candidates<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         to_python(py, &self.out.candidates)

@@ -573,7 +573,10 @@ class Diagnosis:
     @property
     def candidates(self) -> list[dict[str, Any]]:
         """Every candidate of every round: score statistic, Holm p-value, separability, and the
-        held-out figures of the confirmed ones."""
+        held-out figures of the confirmed ones; a direction term (backlash) below the relative
+        gain a name needs also carries ``heldout.beyond_smoother_and_drift`` (its held-out
+        comparison beyond the smoother and a drift along the run, which confirms it when
+        significant)."""
 
     @property
     def shrink(self) -> list[dict[str, Any]]:
