@@ -209,6 +209,14 @@ fn remove(q: &DMatrix<f64>, a: &DMatrix<f64>) -> DMatrix<f64> {
     a - q * (q.transpose() * a)
 }
 
+/// The map of places in the run onto [−1, 1] (first to last); `None` when they are all the same or
+/// not finite.
+pub(crate) fn unit_scale(at: impl Iterator<Item = f64>) -> Option<impl Fn(f64) -> f64> {
+    let (lo, hi) = at.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), t| (l.min(t), h.max(t)));
+    let span = hi - lo;
+    (span > 0.0 && span.is_finite()).then_some(move |t: f64| 2.0 * (t - lo) / span - 1.0)
+}
+
 /// Legendre polynomials P1…P3 at u ∈ [−1, 1].
 pub(crate) fn legendre(u: f64) -> [f64; DEGREE] {
     [u, 0.5 * (3.0 * u * u - 1.0), 0.5 * (5.0 * u * u * u - 3.0 * u)]
@@ -221,11 +229,7 @@ pub fn order_drift(stops: &[Stop], source: RunPosition, seed: u64) -> Option<Ord
     if m < MIN_STOPS {
         return None;
     }
-    let (lo, hi) = stops.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), s| (l.min(s.at), h.max(s.at)));
-    if hi - lo <= 0.0 || !(hi - lo).is_finite() {
-        return None;
-    }
-    let u = |at: f64| 2.0 * (at - lo) / (hi - lo) - 1.0;
+    let u = unit_scale(stops.iter().map(|s| s.at))?;
     let centre = stops.iter().map(|s| s.position).sum::<Vector3<f64>>() / m as f64;
     let scale = (stops.iter().map(|s| (s.position - centre).norm_squared()).sum::<f64>() / m as f64).sqrt().max(1e-9);
     let rows: Vec<Vec<f64>> = stops.iter().map(|s| configuration(s, &centre, scale)).collect();

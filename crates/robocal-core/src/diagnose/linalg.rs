@@ -7,6 +7,12 @@
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatRef, Par, Side};
 
+/// The columns of `a` then those of `b` (same rows).
+pub(crate) fn hcat(a: &Mat<f64>, b: &Mat<f64>) -> Mat<f64> {
+    let m = a.ncols();
+    Mat::<f64>::from_fn(a.nrows(), m + b.ncols(), |r, c| if c < m { a[(r, c)] } else { b[(r, c - m)] })
+}
+
 /// AᵀB.
 pub(crate) fn at_b(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Mat<f64> {
     let mut out = Mat::<f64>::zeros(a.ncols(), b.ncols());

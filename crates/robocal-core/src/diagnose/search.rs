@@ -51,7 +51,7 @@ use faer::Mat;
 
 use super::cv::{CvBase, Folds, Heldout, Paired, cross_validate, paired};
 use super::library::{Candidate, Context, Kind, Unavailable, candidates, scan_multiplicity, scan_quarters};
-use super::linalg::{at_b, canonical_correlation, orthonormal_basis};
+use super::linalg::{at_b, canonical_correlation, hcat, orthonormal_basis};
 use super::refit::{refit_disagrees, refit_heldout};
 use super::screen::{Basis, Score, score, score_gram, table_penalty};
 use super::stage::Stage;
@@ -606,10 +606,7 @@ fn drift_columns(cell: &Cell, stage: &Stage, g: &Mat<f64>) -> Option<(Mat<f64>, 
     let pr = &stage.problem;
     let obs: Vec<usize> = (0..pr.obs.len()).collect();
     let (_, at) = super::run_positions(pr, cell, &obs)?;
-    let (lo, hi) = at.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &t| (l.min(t), h.max(t)));
-    if !(hi - lo).is_finite() || hi <= lo {
-        return None;
-    }
+    let u = super::drift::unit_scale(at.iter().copied())?;
     let dof = pr.model.dof();
     let zero = nalgebra::Vector3::zeros();
     let stops =
@@ -622,7 +619,7 @@ fn drift_columns(cell: &Cell, stage: &Stage, g: &Mat<f64>) -> Option<(Mat<f64>, 
     let degree = super::drift::legendre(0.0).len();
     let mut out = Mat::<f64>::zeros(stage.n_rows(), degree * per);
     for (o, t) in pr.obs.iter().zip(&at) {
-        let p = super::drift::legendre(2.0 * (t - lo) / (hi - lo) - 1.0);
+        let p = super::drift::legendre(u(*t));
         for (k, pk) in p.iter().enumerate() {
             for a in 0..o.rows.min(3) {
                 out[(o.row + a, k * per + a)] = o.weight[a] * pk;
@@ -635,12 +632,6 @@ fn drift_columns(cell: &Cell, stage: &Stage, g: &Mat<f64>) -> Option<(Mat<f64>, 
         }
     }
     Some((out, locality))
-}
-
-/// The columns of `a` then those of `b` (same rows).
-pub(crate) fn hcat(a: &Mat<f64>, b: &Mat<f64>) -> Mat<f64> {
-    let m = a.ncols();
-    Mat::<f64>::from_fn(a.nrows(), m + b.ncols(), |r, c| if c < m { a[(r, c)] } else { b[(r, c - m)] })
 }
 
 /// The block-diagonal penalty of columns concatenated by [`hcat`]: `a` (of `na` columns; zero

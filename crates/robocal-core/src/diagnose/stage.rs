@@ -5,7 +5,7 @@
 
 use faer::Mat;
 
-use super::linalg::{a_b, at_b, at_v, orthonormal_basis, psd_solve};
+use super::linalg::{a_b, at_b, at_v, hcat, orthonormal_basis, psd_solve};
 
 use crate::cell::Cell;
 use crate::identify::{
@@ -210,9 +210,7 @@ impl Stage {
         let proj = a_b(qpad.as_ref(), at_b(qpad.as_ref(), an.as_ref()).as_ref());
         let rest = Mat::<f64>::from_fn(n, m_new, |r, c| an[(r, c)] - proj[(r, c)]);
         let qn = orthonormal_basis(rest.as_ref(), 1e-10);
-        let q = Mat::<f64>::from_fn(n, qpad.ncols() + qn.ncols(), |r, c| {
-            if c < qpad.ncols() { qpad[(r, c)] } else { qn[(r, c - qpad.ncols())] }
-        });
+        let q = hcat(&qpad, &qn);
         let set = self.extended_set(&problem, params, &x);
         let rss = r[..problem.n_obs_rows].iter().map(|v| v * v).sum();
         Ok(Stage {

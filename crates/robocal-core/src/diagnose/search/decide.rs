@@ -200,8 +200,8 @@ fn lookalike(
 /// log10 p of the score test of `cols` on the model plus the (unabsorbed) columns `alt`.
 fn encompassing(stage: &Stage, rp: &[f64], alt: &Mat<f64>, cols: &Mat<f64>) -> f64 {
     let ua = orthonormal_basis(alt.as_ref(), 1e-9);
-    let (n, p, k) = (stage.n_rows(), stage.q.ncols(), ua.ncols());
-    let q = Mat::<f64>::from_fn(n, p + k, |r, c| if c < p { stage.q[(r, c)] } else { ua[(r, c - p)] });
+    let k = ua.ncols();
+    let q = hcat(&stage.q, &ua);
     let r = Basis::project(ua.as_ref(), rp);
     let rss = r[..stage.n_obs_rows()].iter().map(|v| v * v).sum();
     let basis = Basis { q: q.as_ref(), r: &r, rss, n: stage.n_obs_rows(), p: stage.p() + k };
