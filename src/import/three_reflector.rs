@@ -85,7 +85,7 @@ pub fn import_with_payload(
     let mut imported = read_files(joints, positions, model, purpose)?;
     // A unit mistake (joints in radians, positions in metres or inches) is refused here, as
     // identify would refuse it, before a payload centre is registered on it and a cell written.
-    crate::identify::check_units(&imported.cell).map_err(|e| ImportError::Input(e.to_string()))?;
+    crate::identify::check_readings(&imported.cell).map_err(|e| ImportError::Input(e.to_string()))?;
     let (mass, com) = match payload {
         Payload::Unknown => (0.0, None),
         Payload::Declared { mass_kg, com } => (mass_kg, com),

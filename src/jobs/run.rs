@@ -340,6 +340,11 @@ pub fn identify_error(e: IdentifyError) -> JobError {
             title: "The measured positions are not on the robot's scale (a unit mistake)",
             detail,
         },
+        IdentifyError::JointConvention { .. } => JobError::Numerical {
+            kind: "joint-convention",
+            title: "The joint readings follow another convention than the robot model",
+            detail,
+        },
         IdentifyError::JointUnit { .. } => {
             JobError::Numerical { kind: "joint-unit", title: "The joint readings are in radians, not degrees", detail }
         }

@@ -1132,3 +1132,88 @@ fn an_import_refuses_joints_in_radians_and_positions_in_metres() {
     let e = refused(&joints, &metres).expect("positions in metres refused");
     assert!(e.contains("Check the positions' unit") && e.contains("metres 0.001"), "{e}");
 }
+
+/// Joint readings in another convention than the robot model (issue 24, item 1: "when a fit truly
+/// fails, the error says why"): before, a twin whose joint 2 read 90° more imported and
+/// identified — θ2 −179.9° for a nominal −90°, residual 0.56 mm where the right readings give
+/// 0.33, the payload "below 3 σ" at −4.2 ± 0.09 kg — and read as a calibration. Now the import and
+/// the identification refuse it and name the change that makes the nominal robot fit: a turn, a
+/// coupling (a Fanuc J3 read against the horizontal), a pair of turns (a shoulder and an elbow
+/// counted from other zeros). A robot model with a wrong length, which no change of the readings
+/// explains, is still fitted, with a note. The robot's limits are opened so that only the
+/// convention check can refuse.
+#[test]
+fn joint_readings_in_another_convention_are_refused_with_the_change_that_explains_them() {
+    use robocal::identify::IdentifyError;
+    use robocal::identify::convention::ReadingChange;
+    use std::f64::consts::FRAC_PI_2;
+    let mut robot = irb120();
+    robot.preset = None;
+    robot.name = "irb120, limits opened".into();
+    for l in &mut robot.links {
+        l.limits = [-400.0 * DEG, 400.0 * DEG];
+    }
+    let o = TrackerRunOptions { seed: 5, poses: 200, removed: 0, ..Default::default() };
+    let dir = common::fresh_dir("real-data-convention");
+    let (joints, files) = tracker_run(&o).unwrap().write(&dir, "run", 6).unwrap();
+    // The joints file with each line's readings (deg) changed by `edit`.
+    let edited = |tag: &str, edit: &dyn Fn(&mut [f64])| {
+        let text: String = std::fs::read_to_string(&joints)
+            .unwrap()
+            .lines()
+            .map(|l| match l.split_whitespace().map(str::parse::<f64>).collect::<Result<Vec<_>, _>>() {
+                Ok(mut v) if !v.is_empty() => {
+                    edit(&mut v);
+                    v.iter().map(|x| format!("{x:.6}")).collect::<Vec<_>>().join(" ") + "\n"
+                }
+                _ => format!("{l}\n"),
+            })
+            .collect();
+        let path = dir.join(format!("{tag}.txt"));
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let import_with = |robot: &robocal::kinematics::model::RobotModel, joints: &std::path::Path| {
+        three_reflector::import(joints, &files, robot.clone(), Purpose::Identification).map(|i| i.cell)
+    };
+    let cell = import_with(&robot, &joints).expect("the readings as written import");
+    let id = identify(&cell, &options("", &[])).unwrap();
+    assert!(!id.notes.iter().any(|n| n.contains("missed them by")), "{:?}", id.notes);
+
+    // Refused by the import, the change named.
+    for (tag, edit, named) in [
+        ("turn", &(|q: &mut [f64]| q[1] += 90.0) as &dyn Fn(&mut [f64]), "with joint 2 as q2 − 90° by"),
+        ("coupled", &|q: &mut [f64]| q[2] += q[1], "with joint 3 as q3 − q2 by"),
+        (
+            "pair",
+            &|q: &mut [f64]| (q[1], q[2]) = (q[1] - 90.0, q[2] + 90.0),
+            "with joint 2 as q2 + 90° and joint 3 as q3 − 90° by",
+        ),
+    ] {
+        let e = import_with(&robot, &edited(tag, edit)).err().map(|e| e.to_string()).expect(tag);
+        assert!(e.contains("do not follow the robot model's conventions") && e.contains(named), "{tag}: {e}");
+    }
+
+    // Refused by the identification of a cell that never saw the import's check: the finding
+    // holds the change, and with it the nominal robot misses as with the readings as written.
+    let mut turned = cell.clone();
+    turned.sessions.iter_mut().flat_map(|s| &mut s.measurements).for_each(|m| m.q[1] += FRAC_PI_2);
+    let Err(IdentifyError::JointConvention { finding }) = identify(&turned, &options("", &[])) else {
+        panic!("a quarter turn of joint 2 refused");
+    };
+    assert_eq!(finding.changes(), [ReadingChange::Joint { joint: 1, flip: false, offset: -FRAC_PI_2 }]);
+    let registered = robocal::identify::prepare(&cell, &options("", &[])).unwrap().start_rms.unwrap();
+    assert!(finding.rms > 0.1, "{} m", finding.rms);
+    assert!((finding.rms_changed - registered).abs() < 1e-6 * registered.max(1e-3), "{finding:?} {registered}");
+
+    // A robot model whose a2 is 30 mm long: the nominal robot misses by more than the bound, no
+    // change of the readings explains it, and the fit finds the length, saying how far it started.
+    let mut long = robot.clone();
+    long.links[2].a += 30.0 * MM;
+    let cell = import_with(&long, &joints).expect("a wrong length is no convention");
+    let id = identify(&cell, &options("", &[])).unwrap();
+    let note = id.notes.iter().find(|n| n.contains("missed them by")).expect("the start's miss said");
+    assert!(note.contains("no quarter turn, sign or coupling"), "{note}");
+    let a2 = id.set.layout.index_of(Param::A(2)).unwrap();
+    assert!((id.set.values[a2] - 0.270).abs() < 0.5 * MM, "a2 {} mm", id.set.values[a2] / MM);
+}

@@ -251,6 +251,7 @@ pub(crate) fn identify_error(e: IdentifyError) -> Error {
         IdentifyError::Outliers { .. } => "outliers",
         IdentifyError::PositionScale { .. } => "position_scale",
         IdentifyError::JointUnit { .. } => "joint_unit",
+        IdentifyError::JointConvention { .. } => "joint_convention",
     };
     Error::Identification { kind, message }
 }

@@ -217,6 +217,14 @@ impl std::fmt::Display for crate::identify::FixedReason {
                 }
                 write!(f, "): held at its start value")
             }
+            // A mass below zero by more than the same σ is no payload at all: the model misses
+            // something that the mass's torques absorb, and the statement says so rather than
+            // calling a significant negative estimate "below 3 σ".
+            PayloadInsignificant { mass_kg, std_kg, sigmas } if *mass_kg < -sigmas * std_kg => write!(
+                f,
+                "payload not determined by these data: it reads {mass_kg:.3} ± {std_kg:.3} kg, negative by {:.1} σ, which no payload weighs — the model misses something that the payload's torques absorb (an effect it lacks, or joint readings in another convention than the robot file): held at the declared 0 kg",
+                -mass_kg / std_kg
+            ),
             PayloadInsignificant { mass_kg, std_kg, sigmas } => write!(
                 f,
                 "payload not determined by these data ({mass_kg:.3} ± {std_kg:.3} kg, below {sigmas} σ): held at the declared 0 kg"

@@ -128,6 +128,18 @@ pub enum IdentifyError {
         /// The same with the readings taken as radians, m.
         nominal_radians: f64,
     },
+    /// The joint readings follow another convention than the robot model: the nominal robot
+    /// registered on the measured positions misses them by a good part of its size, and a quarter
+    /// turn, a sign or a coupling of some joints' readings brings it back to a real robot's few
+    /// millimetres ([`super::convention`]). Refused before it is fitted.
+    #[error(
+        "the joint readings do not follow the robot model's conventions: the nominal robot, registered on the measured positions, misses them by {} mm RMS, and with {} by {} mm. {}: a fit would take the difference into the joint offsets, twists and lengths by quarter turns and signs, and compute the gravity torques, the joint limits and the links' masses at the wrong angles",
+        mm(finding.rms), finding.describe(), mm(finding.rms_changed), finding.remedy()
+    )]
+    JointConvention {
+        /// What was found.
+        finding: super::convention::ConventionFinding,
+    },
     /// Gross outliers the robust loss did not down-weight: measurements whose z (the RMS over their
     /// rows of e/√(σ² + τ²), τ² the spread the model leaves beyond the instrument) exceeds `factor`
     /// times the larger of the median z and 1.

@@ -111,7 +111,8 @@ pub enum FixedReason {
         /// The free parameter most correlated with it, and the correlation.
         with: Option<(String, f64)>,
     },
-    /// An unknown payload whose mass is not significant: `mass_kg ± std_kg`, below `sigmas` σ.
+    /// An unknown payload whose mass is not significantly above zero: `mass_kg ± std_kg`, below
+    /// `sigmas` σ (or negative, which its statement says apart).
     PayloadInsignificant {
         /// The fitted payload mass, kg.
         mass_kg: f64,
@@ -196,5 +197,29 @@ impl FixedReason {
             | ComplianceInsignificant { name, .. } => Some(name),
             PayloadInsignificant { .. } | PayloadUnsettled { .. } | NotInProblem => None,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::FixedReason;
+
+    /// A payload held at 0 kg says why: a mass within 3 σ of zero is not determined; a mass
+    /// below zero by more than 3 σ is no payload, and is not called "below 3 σ" (an IRB 120 twin
+    /// whose joint 3 was read 90° off gave −4.245 ± 0.091 kg, stated as "below 3 σ").
+    #[test]
+    fn a_payload_held_says_whether_it_was_small_or_impossible() {
+        let held =
+            |mass_kg: f64, std_kg: f64| FixedReason::PayloadInsignificant { mass_kg, std_kg, sigmas: 3.0 }.to_string();
+        let small = held(0.064, 0.175);
+        assert!(small.contains("(0.064 ± 0.175 kg, below 3 σ)"), "{small}");
+        let slightly_negative = held(-0.3, 0.175);
+        assert!(slightly_negative.contains("below 3 σ"), "{slightly_negative}");
+        let impossible = held(-4.245, 0.091);
+        assert!(
+            impossible.contains("reads -4.245 ± 0.091 kg, negative by 46.6 σ, which no payload weighs")
+                && !impossible.contains("below 3 σ"),
+            "{impossible}"
+        );
     }
 }

@@ -3,6 +3,7 @@
 //! identifiability, conditioning and observability, honest uncertainties, DETMAX pose selection.
 
 pub mod base;
+pub mod convention;
 pub mod crossval;
 pub mod detmax;
 pub(crate) mod identifiability;
@@ -37,7 +38,7 @@ pub use pool::{DetmaxPool, select_detmax};
 pub use prepare::{Prepared, map_priors, prepare, row_sigmas, table_priors, weight_by_instrument};
 pub use problem::{GlobalParam, MeasurementSelection, Prior, Problem, ProblemError, tool_blocks};
 pub use quality::Quality;
-pub use scale::check_units;
+pub use scale::check_readings;
 pub use solver::{Fit, SolveError, SolverOptions};
 
 impl std::fmt::Display for Status {

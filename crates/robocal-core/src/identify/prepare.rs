@@ -32,6 +32,9 @@ pub struct Prepared {
     pub fixed: HashMap<usize, FixedReason>,
     /// The payload is unknown (every tool declares 0 kg) and identified as `tool_mass`.
     pub payload_unknown: bool,
+    /// The starting registration's RMS miss on the nominal robot (m), when the base or a TCP was
+    /// registered: what [`super::convention`] looks into.
+    pub start_rms: Option<f64>,
 }
 
 /// A model with backlash terms acts through each measurement's approach direction (the sign of
@@ -57,7 +60,7 @@ pub fn with_approach(cell: &Cell, models: &[&ModelOptions]) -> Option<(Cell, Vec
 pub fn prepare(cell: &Cell, opts: &IdentifyOptions) -> Result<Prepared, IdentifyError> {
     let (layout, payload_unknown) = layout_of(cell, opts)?;
     let picks = opts.selection.picks(cell)?;
-    let (base, registration) = starting_base(cell, &picks)?;
+    let (base, registration, start_rms) = starting_base(cell, &picks)?;
     let mut problem = Problem::new(cell, layout, base, &opts.selection, opts.rotation_weight)?;
     if let Some(noise) = &opts.noise {
         noise.check().map_err(IdentifyError::option)?;
@@ -73,7 +76,7 @@ pub fn prepare(cell: &Cell, opts: &IdentifyOptions) -> Result<Prepared, Identify
         let priors = anchor_priors(&problem, &free, &x0, a, opts.noise.is_some());
         problem.add_priors(priors);
     }
-    Ok(Prepared { problem, x0, free, status, base, fixed, payload_unknown })
+    Ok(Prepared { problem, x0, free, status, base, fixed, payload_unknown, start_rms })
 }
 
 /// The parameter layout: the robot's full layout, the model's effect terms, the payload's mass
@@ -104,20 +107,27 @@ fn layout_of(cell: &Cell, opts: &IdentifyOptions) -> Result<(ParamLayout, bool),
 
 /// The base, and the TCPs to identify, from the nominal robot: registered in turn when a TCP is
 /// unknown (the registration is returned for their start values), else the cell's guess or one
-/// registration.
-fn starting_base(cell: &Cell, picks: &[(usize, usize)]) -> Result<([f64; 6], Option<Registration>), IdentifyError> {
+/// registration; with the registration's RMS miss when one was made.
+#[allow(clippy::type_complexity)]
+fn starting_base(
+    cell: &Cell,
+    picks: &[(usize, usize)],
+) -> Result<([f64; 6], Option<Registration>, Option<f64>), IdentifyError> {
     let (blocks, session_tool) = tool_blocks(cell, picks);
     let registration = if blocks.iter().any(|b| b.identify_tcp && b.tool.tcp[..3] == [0.0; 3]) {
         Some(register_base_and_tcps(cell, picks, &blocks, &session_tool, cell.base_guess)?)
     } else {
         None
     };
-    let base = match (cell.base_guess, &registration) {
-        (Some(b), _) => b,
-        (None, Some(r)) => r.base,
-        (None, None) => estimate_base_of(cell, picks)?.0,
+    let (base, rms) = match (cell.base_guess, &registration) {
+        (Some(b), r) => (b, r.as_ref().map(|r| r.rms)),
+        (None, Some(r)) => (r.base, Some(r.rms)),
+        (None, None) => {
+            let (b, rms) = estimate_base_of(cell, picks)?;
+            (b, Some(rms))
+        }
     };
-    Ok((base, registration))
+    Ok((base, registration, rms))
 }
 
 /// The starting point: the nominal values, or the start parameter set's (its base excepted) for

@@ -16,14 +16,36 @@ const MIN_NOMINAL_SPREAD: f64 = 0.05;
 /// (×10, ×25.4, ×1000 and their inverses).
 const MAX_SPREAD_RATIO: f64 = 3.0;
 
-/// The unit check of an identification ([`IdentifyError::PositionScale`],
-/// [`IdentifyError::JointUnit`]) on its own, on the nominal robot with the default options: for an
-/// importer, to refuse a file before anything is written. `Ok` also when the check cannot be set
-/// up (an identification then says why).
-pub fn check_units(cell: &Cell) -> Result<(), IdentifyError> {
-    match super::prepare(cell, &super::IdentifyOptions::default()) {
-        Ok(p) => check_position_scale(&p.problem, &p.x0, cell),
+/// The checks of an identification's readings before anything is fitted — units
+/// ([`IdentifyError::PositionScale`], [`IdentifyError::JointUnit`]) and joint conventions
+/// ([`IdentifyError::JointConvention`]) — on their own, on the nominal robot with the default
+/// options: for an importer, to refuse a file before anything is written. `Ok` also when the
+/// checks cannot be set up (an identification then says why).
+pub fn check_readings(cell: &Cell) -> Result<(), IdentifyError> {
+    let opts = super::IdentifyOptions::default();
+    match super::prepare(cell, &opts) {
+        Ok(p) => {
+            check_position_scale(&p.problem, &p.x0, cell)?;
+            check_convention(cell, &opts, p.start_rms).map(|_| ())
+        }
         Err(_) => Ok(()),
+    }
+}
+
+/// The joint-convention check ([`super::convention`]) of a starting registration that missed by
+/// `start_rms`: refused when another convention of the readings explains the miss, a note when
+/// nothing does, nothing within the bound.
+pub(crate) fn check_convention(
+    cell: &Cell,
+    opts: &super::IdentifyOptions,
+    start_rms: Option<f64>,
+) -> Result<Option<String>, IdentifyError> {
+    // Below the bound's floor nothing is looked into, so the picks are not even needed.
+    let Some(rms) = start_rms.filter(|&r| r > super::convention::SUSPICIOUS_M) else { return Ok(None) };
+    let picks = opts.selection.picks(cell)?;
+    match super::convention::search(cell, &picks, rms) {
+        Some(finding) => Err(IdentifyError::JointConvention { finding }),
+        None => Ok(super::convention::unexplained_note(cell, &picks, rms)),
     }
 }
 

@@ -42,7 +42,9 @@ class IdentificationError(Exception):
     typical residual; the message names them as ``session:index``), ``"position_scale"`` (a
     session's positions spread over another scale than the nominal robot at its joint readings: a
     unit mistake, e.g. centimetres read as mm), ``"joint_unit"`` (a session's joint readings are
-    radians, not degrees), ``"registration"`` (no base
+    radians, not degrees), ``"joint_convention"`` (the joint readings follow another convention
+    than the robot model: a quarter turn, a sign or a coupling of some joints' readings, named in
+    the message, makes the nominal robot fit the positions), ``"registration"`` (no base
     guess and the measured points cannot place the base), ``"option"`` or ``"problem"``.
     Not a ValueError: the arguments were well-formed, the data cannot answer.
     """
