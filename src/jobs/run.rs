@@ -340,6 +340,11 @@ pub fn identify_error(e: IdentifyError) -> JobError {
             title: "The measured positions are not on the robot's scale (a unit mistake)",
             detail,
         },
+        IdentifyError::RowsShifted { .. } => JobError::Numerical {
+            kind: "rows-shifted",
+            title: "The measured positions are not paired with their joint readings",
+            detail,
+        },
         IdentifyError::JointConvention { .. } => JobError::Numerical {
             kind: "joint-convention",
             title: "The joint readings follow another convention than the robot model",

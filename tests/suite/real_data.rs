@@ -856,7 +856,9 @@ fn crossval_cli(tag: &str, edit: impl Fn(&mut Vec<String>)) -> (i32, String, Str
         vec!["--out", cell.to_str().unwrap()],
     ]
     .concat());
-    assert!(import.status.success(), "{}", String::from_utf8_lossy(&import.stderr));
+    if !import.status.success() {
+        return (import.status.code().unwrap(), String::new(), String::from_utf8_lossy(&import.stderr).to_string());
+    }
     let sessions = "reflector-1,reflector-2,reflector-3";
     let out = run(vec![
         "crossval",
@@ -894,11 +896,17 @@ fn crossval_cli_fails_when_only_the_reference_is_scored_and_advises_on_outliers(
     assert!(!out.contains("(exclude ") && !out.contains("(huber "), "{out}");
     assert!(err.contains("error: no fitted model was scored (default: every fit refused;"), "{err}");
 
-    // Reflector-2's file off by one line: every fit refused, the reference's too.
-    let (code, out, err) = crossval_cli("cv-refused", |rows| rows.rotate_left(1));
+    // Reflector-2's file in reverse order, which no shift of its lines pairs: every fit refused,
+    // the reference's too.
+    let (code, out, err) = crossval_cli("cv-refused", |rows| rows.reverse());
     assert_eq!(code, 1, "{out}\n{err}");
     assert!(out.lines().filter(|l| l.contains(" refused: ")).count() >= 2, "{out}");
     assert!(err.contains("every fit refused, the \"before\" reference's too;"), "{err}");
+    // Off by one line, it is refused at the import, with the shift named (before: imported, and
+    // every fit of the cross-validation refused).
+    let (code, out, err) = crossval_cli("cv-shifted", |rows| rows.rotate_left(1));
+    assert_ne!(code, 0, "{out}\n{err}");
+    assert!(err.contains("each measured position of 'reflector-2' fits the joint readings of the stop after"), "{err}");
 }
 
 /// A robot that repeats to millimetres only (a cable-driven Barrett WAM's public tracker data:
@@ -1216,4 +1224,44 @@ fn joint_readings_in_another_convention_are_refused_with_the_change_that_explain
     assert!(note.contains("no quarter turn, sign or coupling"), "{note}");
     let a2 = id.set.layout.index_of(Param::A(2)).unwrap();
     assert!((id.set.values[a2] - 0.270).abs() < 0.5 * MM, "a2 {} mm", id.set.values[a2] / MM);
+}
+
+/// Positions paired with the wrong line of joint readings — a line deleted from one file only,
+/// a header counted as data — imported as a run whose residual is hundreds of millimetres, and
+/// `identify` refused it as a misfit that advised checking the TCPs, the frames and outliers.
+/// Now the import names the shift: every file against the joints, or one reflector's file alone.
+#[test]
+fn positions_paired_with_another_line_of_joints_are_refused_with_the_shift() {
+    let o = TrackerRunOptions { seed: 6, poses: 200, removed: 0, ..Default::default() };
+    let dir = common::fresh_dir("real-data-pairing");
+    let (joints, files) = tracker_run(&o).unwrap().write(&dir, "run", 6).unwrap();
+    // The file with its data lines from `skip` on, `pad` copies of its last line added.
+    let cut = |from: &std::path::Path, tag: &str, skip: usize, drop_last: usize, pad: usize| {
+        let text = std::fs::read_to_string(from).unwrap();
+        let (comments, data): (Vec<&str>, Vec<&str>) = text.lines().partition(|l| l.starts_with('#'));
+        let mut lines: Vec<&str> = comments;
+        let kept = &data[skip..data.len() - drop_last];
+        lines.extend(kept);
+        lines.extend(std::iter::repeat_n(*kept.last().unwrap(), pad));
+        let to = dir.join(format!("{tag}-{}", from.file_name().unwrap().to_str().unwrap()));
+        std::fs::write(&to, lines.join("\n") + "\n").unwrap();
+        to
+    };
+    let refused = |joints: &std::path::Path, files: &[PathBuf]| {
+        three_reflector::import(joints, files, irb120(), Purpose::Identification).err().map(|e| e.to_string())
+    };
+    assert_eq!(refused(&joints, &files), None, "the files as written import");
+    // The joints file lost its first line, every positions file its last.
+    let e = refused(&cut(&joints, "all", 1, 0, 0), &files.iter().map(|f| cut(f, "all", 0, 1, 0)).collect::<Vec<_>>())
+        .expect("every file shifted against the joints");
+    assert!(
+        e.contains("not paired with their joint readings")
+            && e.contains("each measured position of every session fits the joint readings of the stop before"),
+        "{e}"
+    );
+    // Reflector 2's file alone lost its first line (its last repeated to keep the count).
+    let mut one = files.clone();
+    one[1] = cut(&files[1], "one", 1, 0, 1);
+    let e = refused(&joints, &one).expect("one file shifted");
+    assert!(e.contains("each measured position of 'reflector-2' fits the joint readings of the stop after"), "{e}");
 }

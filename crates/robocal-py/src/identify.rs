@@ -252,6 +252,7 @@ pub(crate) fn identify_error(e: IdentifyError) -> Error {
         IdentifyError::PositionScale { .. } => "position_scale",
         IdentifyError::JointUnit { .. } => "joint_unit",
         IdentifyError::JointConvention { .. } => "joint_convention",
+        IdentifyError::RowsShifted { .. } => "rows_shifted",
     };
     Error::Identification { kind, message }
 }

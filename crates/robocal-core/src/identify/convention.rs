@@ -210,21 +210,22 @@ pub(crate) fn suspicious_above(cell: &Cell, picks: &[(usize, usize)]) -> Option<
 /// changed: both registered in turn when a TCP is unknown, else the base alone; `None` when the
 /// cell has a base guess and no unknown TCP (nothing is registered) or the registration fails.
 pub(crate) fn start_miss(cell: &Cell, picks: &[(usize, usize)], changes: &[ReadingChange]) -> Option<f64> {
-    let changed;
-    let cell = if changes.is_empty() {
-        cell
-    } else {
-        let mut c = cell.clone();
-        for &(s, i) in picks {
-            let q = &mut c.sessions[s].measurements[i].q;
-            let read = q.clone();
-            for ch in changes {
-                q[ch.joint()] = ch.angle(&read);
-            }
+    if changes.is_empty() {
+        return registration_miss(cell, picks);
+    }
+    let mut c = cell.clone();
+    for &(s, i) in picks {
+        let q = &mut c.sessions[s].measurements[i].q;
+        let read = q.clone();
+        for ch in changes {
+            q[ch.joint()] = ch.angle(&read);
         }
-        changed = c;
-        &changed
-    };
+    }
+    registration_miss(&c, picks)
+}
+
+/// The starting registration's RMS miss (m) of the picked measurements as they are.
+fn registration_miss(cell: &Cell, picks: &[(usize, usize)]) -> Option<f64> {
     let (blocks, session_tool) = tool_blocks(cell, picks);
     if blocks.iter().any(|b| b.identify_tcp && b.tool.tcp[..3] == [0.0; 3]) {
         register_base_and_tcps(cell, picks, &blocks, &session_tool, cell.base_guess).ok().map(|r| r.rms)
@@ -320,6 +321,119 @@ fn complexity(cs: &[ReadingChange]) -> usize {
     cs.iter()
         .map(|c| if matches!(c, ReadingChange::Joint { flip: true, offset, .. } if *offset != 0.0) { 2 } else { 1 })
         .sum()
+}
+
+/// Measured positions paired with the joint readings of another line: each position of
+/// `sessions` fits the readings `shift` stops later (earlier when negative).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PairingFinding {
+    /// RMS miss of the nominal robot registered on the positions as paired, m.
+    pub rms: f64,
+    /// The same with the positions paired `shift` stops on, m.
+    pub rms_shifted: f64,
+    /// The sessions whose positions are shifted (all of them when every file is).
+    pub sessions: Vec<String>,
+    /// Whether every session of the picks is shifted (the joints file is the odd one out).
+    pub all: bool,
+    /// Stops on: the position measured at stop n fits the readings of stop n + `shift`.
+    pub shift: i64,
+}
+
+/// Most stops a pairing is shifted by when looked into.
+pub const MAX_SHIFT: i64 = 3;
+
+/// The picks with each measurement of `shifted` sessions given the joint readings of the stop
+/// `shift` on in its session (by sequence number when the session has them, else by its list);
+/// one without such a stop is left out.
+fn shifted(cell: &Cell, picks: &[(usize, usize)], shifted: &[usize], shift: i64) -> (Cell, Vec<(usize, usize)>) {
+    let mut c = cell.clone();
+    let mut kept = Vec::with_capacity(picks.len());
+    // Per shifted session, its measurements by sequence number.
+    let by_sequence: std::collections::HashMap<(usize, i64), usize> = shifted
+        .iter()
+        .flat_map(|&s| {
+            cell.sessions[s]
+                .measurements
+                .iter()
+                .enumerate()
+                .filter_map(move |(j, m)| m.sequence.map(|n| ((s, n as i64), j)))
+        })
+        .collect();
+    for &(s, i) in picks {
+        if !shifted.contains(&s) {
+            kept.push((s, i));
+            continue;
+        }
+        let ms = &cell.sessions[s].measurements;
+        let from = match ms[i].sequence {
+            Some(n) => by_sequence.get(&(s, n as i64 + shift)).copied(),
+            None => usize::try_from(i as i64 + shift).ok().filter(|&j| j < ms.len()),
+        };
+        if let Some(j) = from {
+            c.sessions[s].measurements[i].q = ms[j].q.clone();
+            kept.push((s, i));
+        }
+    }
+    (c, kept)
+}
+
+/// Look into a starting registration that missed by `rms` (m) for positions paired with the wrong
+/// line of joint readings — a header counted in one file, a line deleted from one file only: every
+/// session shifted together by up to [`MAX_SHIFT`] stops either way, then each alone. `None` when
+/// the miss is within [`suspicious_above`] or no shift brings it under the bound and to a third.
+pub(crate) fn search_pairing(cell: &Cell, picks: &[(usize, usize)], rms: f64) -> Option<PairingFinding> {
+    let bound = suspicious_above(cell, picks)?;
+    if rms <= bound {
+        return None;
+    }
+    let mut sessions: Vec<usize> = picks.iter().map(|p| p.0).collect();
+    sessions.dedup();
+    sessions.sort_unstable();
+    sessions.dedup();
+    let mut options: Vec<Vec<usize>> = vec![sessions.clone()];
+    if sessions.len() > 1 {
+        options.extend(sessions.iter().map(|&s| vec![s]));
+    }
+    // Scored on a sample, as the conventions are; the best judged on every pick.
+    let every = picks.len().div_ceil(SAMPLE).max(1);
+    let sample: Vec<(usize, usize)> = picks.iter().copied().step_by(every).collect();
+    let miss = |picks: &[(usize, usize)], o: &[usize], k: i64| {
+        let (c, kept) = shifted(cell, picks, o, k);
+        (kept.len() >= picks.len() / 2).then(|| registration_miss(&c, &kept)).flatten()
+    };
+    let shifts = (1..=MAX_SHIFT).flat_map(|k| [-k, k]);
+    let (o, shift, _) = options
+        .iter()
+        .flat_map(|o| shifts.clone().map(move |k| (o, k)))
+        .filter_map(|(o, k)| miss(&sample, o, k).map(|r| (o, k, r)))
+        .min_by(|a, b| a.2.total_cmp(&b.2))?;
+    let r = miss(picks, o, shift)?;
+    (r <= bound && r <= rms / 3.0).then(|| PairingFinding {
+        rms,
+        rms_shifted: r,
+        sessions: o.iter().map(|&s| cell.sessions[s].name.clone()).collect(),
+        all: o.len() == sessions.len(),
+        shift,
+    })
+}
+
+impl PairingFinding {
+    /// `each measured position of every session fits the joint readings of the stop before`.
+    pub fn describe(&self) -> String {
+        let whose = if self.all {
+            "every session".to_string()
+        } else {
+            self.sessions.iter().map(|s| format!("'{s}'")).collect::<Vec<_>>().join(", ")
+        };
+        let k = self.shift.unsigned_abs();
+        let when = match (k, self.shift < 0) {
+            (1, true) => "the stop before".to_string(),
+            (1, false) => "the stop after".to_string(),
+            (k, true) => format!("{k} stops before"),
+            (k, false) => format!("{k} stops after"),
+        };
+        format!("each measured position of {whose} fits the joint readings of {when}")
+    }
 }
 
 /// The note of a starting registration that missed by more than [`suspicious_above`] with no

@@ -140,6 +140,17 @@ pub enum IdentifyError {
         /// What was found.
         finding: super::convention::ConventionFinding,
     },
+    /// Measured positions paired with the joint readings of another stop ([`super::convention`]):
+    /// shifted by a line or a few, the nominal robot fits them as a real robot does. Refused
+    /// before it is fitted.
+    #[error(
+        "the measured positions are not paired with their joint readings: the nominal robot, registered on them, misses them by {} mm RMS, but {} by {} mm. Align the files line for line (a header or a line deleted in one file only shifts the rest) and import again",
+        mm(finding.rms), finding.describe(), mm(finding.rms_shifted)
+    )]
+    RowsShifted {
+        /// What was found.
+        finding: super::convention::PairingFinding,
+    },
     /// Gross outliers the robust loss did not down-weight: measurements whose z (the RMS over their
     /// rows of e/√(σ² + τ²), τ² the spread the model leaves beyond the instrument) exceeds `factor`
     /// times the larger of the median z and 1.

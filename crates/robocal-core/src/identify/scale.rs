@@ -17,7 +17,8 @@ const MIN_NOMINAL_SPREAD: f64 = 0.05;
 const MAX_SPREAD_RATIO: f64 = 3.0;
 
 /// The checks of an identification's readings before anything is fitted — units
-/// ([`IdentifyError::PositionScale`], [`IdentifyError::JointUnit`]) and joint conventions
+/// ([`IdentifyError::PositionScale`], [`IdentifyError::JointUnit`]), the pairing of positions
+/// with readings ([`IdentifyError::RowsShifted`]) and joint conventions
 /// ([`IdentifyError::JointConvention`]) — on their own, on the nominal robot with the default
 /// options: for an importer, to refuse a file before anything is written. `Ok` also when the
 /// checks cannot be set up (an identification then says why).
@@ -32,9 +33,10 @@ pub fn check_readings(cell: &Cell) -> Result<(), IdentifyError> {
     }
 }
 
-/// The joint-convention check ([`super::convention`]) of a starting registration that missed by
-/// `start_rms`: refused when another convention of the readings explains the miss, a note when
-/// nothing does, nothing within the bound.
+/// The pairing and joint-convention checks ([`super::convention`]) of a starting registration
+/// that missed by `start_rms`: refused when positions paired a few stops on, or another
+/// convention of the readings, explain the miss; a note when nothing does; nothing within the
+/// bound.
 pub(crate) fn check_convention(
     cell: &Cell,
     opts: &super::IdentifyOptions,
@@ -43,6 +45,9 @@ pub(crate) fn check_convention(
     // Below the bound's floor nothing is looked into, so the picks are not even needed.
     let Some(rms) = start_rms.filter(|&r| r > super::convention::SUSPICIOUS_M) else { return Ok(None) };
     let picks = opts.selection.picks(cell)?;
+    if let Some(finding) = super::convention::search_pairing(cell, &picks, rms) {
+        return Err(IdentifyError::RowsShifted { finding });
+    }
     match super::convention::search(cell, &picks, rms) {
         Some(finding) => Err(IdentifyError::JointConvention { finding }),
         None => Ok(super::convention::unexplained_note(cell, &picks, rms)),

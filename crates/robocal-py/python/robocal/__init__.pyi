@@ -44,7 +44,8 @@ class IdentificationError(Exception):
     unit mistake, e.g. centimetres read as mm), ``"joint_unit"`` (a session's joint readings are
     radians, not degrees), ``"joint_convention"`` (the joint readings follow another convention
     than the robot model: a quarter turn, a sign or a coupling of some joints' readings, named in
-    the message, makes the nominal robot fit the positions), ``"registration"`` (no base
+    the message, makes the nominal robot fit the positions), ``"rows_shifted"`` (the positions
+    fit the joint readings of another stop: lines shifted between files), ``"registration"`` (no base
     guess and the measured points cannot place the base), ``"option"`` or ``"problem"``.
     Not a ValueError: the arguments were well-formed, the data cannot answer.
     """
