@@ -82,7 +82,10 @@ pub fn import_with_payload(
             ));
         }
     }
-    let mut imported = read_files(joints, positions, model, purpose)?;
+    let mut imported = match read_files(joints, positions, model.clone(), purpose) {
+        Ok(imported) => imported,
+        Err(e) => return Err(convention_beyond_limits(joints, positions, &model, purpose, e)),
+    };
     // A unit mistake (joints in radians, positions in metres or inches) is refused here, as
     // identify would refuse it, before a payload centre is registered on it and a cell written.
     crate::identify::check_readings(&imported.cell).map_err(|e| ImportError::Input(e.to_string()))?;
@@ -112,6 +115,33 @@ pub fn import_with_payload(
         Payload::Declared { .. } => format!("payload {mass} kg, centre of mass at {at}"),
     });
     Ok(imported)
+}
+
+/// A file refused (`e`) that reads with the robot's limits opened, and whose readings then follow
+/// another convention than the robot model (`identify::convention`): the refusal adds the change
+/// that explains them, since a joint counted from another zero is what most often puts readings
+/// beyond a joint's limits. Any other refusal is returned as it is.
+fn convention_beyond_limits(
+    joints: &Path,
+    positions: &[PathBuf],
+    model: &RobotModel,
+    purpose: Purpose,
+    e: ImportError,
+) -> ImportError {
+    let mut opened = model.clone();
+    for l in &mut opened.links {
+        l.limits = [-720.0 * DEG, 720.0 * DEG];
+    }
+    let Ok(read) = read_files(joints, positions, opened, purpose) else { return e };
+    match crate::identify::check_readings(&read.cell) {
+        Err(c @ crate::identify::IdentifyError::JointConvention { .. }) => {
+            let c = c.to_string();
+            let mut first = c.chars();
+            let c = first.next().map(|f| f.to_uppercase().collect::<String>() + first.as_str()).unwrap_or(c);
+            ImportError::Input(format!("{e}. {c}"))
+        }
+        _ => e,
+    }
 }
 
 /// The centroid of the reflectors' positions on the flange, from the alternating registration

@@ -1202,6 +1202,16 @@ fn joint_readings_in_another_convention_are_refused_with_the_change_that_explain
         assert!(e.contains("do not follow the robot model's conventions") && e.contains(named), "{tag}: {e}");
     }
 
+    // With the preset's limits the quarter turn puts readings beyond joint 2's: the refusal says
+    // that, and the change that explains them.
+    let e = import_with(&irb120(), &dir.join("turn.txt")).err().map(|e| e.to_string()).unwrap();
+    assert!(
+        e.contains("is outside joint 2's limits")
+            && e.contains(". The joint readings do not follow")
+            && e.contains("with joint 2 as q2 − 90° by"),
+        "{e}"
+    );
+
     // Refused by the identification of a cell that never saw the import's check: the finding
     // holds the change, and with it the nominal robot misses as with the readings as written.
     let mut turned = cell.clone();

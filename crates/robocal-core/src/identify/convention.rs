@@ -184,9 +184,9 @@ impl ConventionFinding {
     /// the readings only.
     pub fn remedy(&self) -> &'static str {
         if self.changes().iter().all(|c| matches!(c, ReadingChange::Joint { flip: false, .. })) {
-            "Convert the readings, or write the turns into the robot model's zero offsets (theta_deg), and identify again"
+            "Convert the readings, or write the turns into the robot model's zero offsets (theta_deg), then import or identify again"
         } else {
-            "Convert the readings (a sign or a coupling has no place in the robot model's table) and identify again"
+            "Convert the readings (a sign or a coupling has no place in the robot model's table), then import or identify again"
         }
     }
 }
