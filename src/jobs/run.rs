@@ -345,6 +345,11 @@ pub fn identify_error(e: IdentifyError) -> JobError {
             title: "The measured positions are not paired with their joint readings",
             detail,
         },
+        IdentifyError::MirroredFrame { .. } => JobError::Numerical {
+            kind: "mirrored-frame",
+            title: "The measured positions are mirrored against the robot",
+            detail,
+        },
         IdentifyError::JointConvention { .. } => JobError::Numerical {
             kind: "joint-convention",
             title: "The joint readings follow another convention than the robot model",

@@ -1147,7 +1147,8 @@ fn an_import_refuses_joints_in_radians_and_positions_in_metres() {
 /// 0.33, the payload "below 3 σ" at −4.2 ± 0.09 kg — and read as a calibration. Now the import and
 /// the identification refuse it and name the change that makes the nominal robot fit: a turn, a
 /// coupling (a Fanuc J3 read against the horizontal), a pair of turns (a shoulder and an elbow
-/// counted from other zeros). A robot model with a wrong length, which no change of the readings
+/// counted from other zeros); positions in a mirrored frame are named as such. A robot model with a
+/// wrong length, which no change of the readings
 /// explains, is still fitted, with a note. The robot's limits are opened so that only the
 /// convention check can refuse.
 #[test]
@@ -1201,6 +1202,36 @@ fn joint_readings_in_another_convention_are_refused_with_the_change_that_explain
         let e = import_with(&robot, &edited(tag, edit)).err().map(|e| e.to_string()).expect(tag);
         assert!(e.contains("do not follow the robot model's conventions") && e.contains(named), "{tag}: {e}");
     }
+
+    // Positions with one axis reversed (a left-handed frame): the mirror named first, the joint
+    // signs that fit as well after it — not three joints' signs alone, a confident wrong name
+    // for the likelier mistake.
+    let mirrored: Vec<PathBuf> = files
+        .iter()
+        .enumerate()
+        .map(|(k, f)| {
+            let text: String = std::fs::read_to_string(f)
+                .unwrap()
+                .lines()
+                .map(|l| match l.split_whitespace().map(str::parse::<f64>).collect::<Result<Vec<_>, _>>() {
+                    Ok(v) if v.len() == 3 => format!("{} {} {}\n", v[0], -v[1], v[2]),
+                    _ => format!("{l}\n"),
+                })
+                .collect();
+            let to = dir.join(format!("mirrored-{k}.txt"));
+            std::fs::write(&to, text).unwrap();
+            to
+        })
+        .collect();
+    let e = three_reflector::import(&joints, &mirrored, robot.clone(), Purpose::Identification)
+        .err()
+        .map(|e| e.to_string())
+        .expect("mirrored positions refused");
+    assert!(
+        e.contains("the measured positions are mirrored against the robot")
+            && e.contains("the joints read otherwise: joint 1 as −q1 and joint 4 as −q4 and joint "),
+        "{e}"
+    );
 
     // With the preset's limits the quarter turn puts readings beyond joint 2's: the refusal says
     // that, and the change that explains them.

@@ -253,6 +253,7 @@ pub(crate) fn identify_error(e: IdentifyError) -> Error {
         IdentifyError::JointUnit { .. } => "joint_unit",
         IdentifyError::JointConvention { .. } => "joint_convention",
         IdentifyError::RowsShifted { .. } => "rows_shifted",
+        IdentifyError::MirroredFrame { .. } => "mirrored_frame",
     };
     Error::Identification { kind, message }
 }

@@ -200,10 +200,7 @@ pub(crate) fn suspicious_above(cell: &Cell, picks: &[(usize, usize)]) -> Option<
     if p.len() < 10 {
         return None;
     }
-    let n = p.len() as f64;
-    let centroid = p.iter().sum::<nalgebra::Vector3<f64>>() / n;
-    let spread = (p.iter().map(|x| (x - centroid).norm_squared()).sum::<f64>() / n).sqrt();
-    Some(SUSPICIOUS_M.max(SUSPICIOUS_SHARE * spread))
+    Some(SUSPICIOUS_M.max(SUSPICIOUS_SHARE * super::scale::spread(p.into_iter())))
 }
 
 /// The starting registration's RMS miss (m) for the picked measurements with the readings
@@ -236,6 +233,11 @@ fn registration_miss(cell: &Cell, picks: &[(usize, usize)]) -> Option<f64> {
     }
 }
 
+/// At most [`SAMPLE`] of the picks, evenly spaced: what candidates are scored on.
+fn sample(picks: &[(usize, usize)]) -> Vec<(usize, usize)> {
+    picks.iter().copied().step_by(picks.len().div_ceil(SAMPLE).max(1)).collect()
+}
+
 /// Another step's miss within this share of the best one's is as good (two conventions the
 /// positions cannot tell apart).
 pub const EQUALLY: f64 = 0.02;
@@ -253,8 +255,7 @@ pub(crate) fn search(cell: &Cell, picks: &[(usize, usize)], rms: f64) -> Option<
     }
     // The candidates are scored on a sample of the measurements (the registration's RMS settles
     // long before thousands), the finding judged on all of them.
-    let every = picks.len().div_ceil(SAMPLE).max(1);
-    let sample: Vec<(usize, usize)> = picks.iter().copied().step_by(every).collect();
+    let sample = sample(picks);
     let picks = sample.as_slice();
     let candidates = ReadingChange::candidates(cell.model.dof());
     let mut steps: Vec<Step> = Vec::new();
@@ -395,8 +396,7 @@ pub(crate) fn search_pairing(cell: &Cell, picks: &[(usize, usize)], rms: f64) ->
         options.extend(sessions.iter().map(|&s| vec![s]));
     }
     // Scored on a sample, as the conventions are; the best judged on every pick.
-    let every = picks.len().div_ceil(SAMPLE).max(1);
-    let sample: Vec<(usize, usize)> = picks.iter().copied().step_by(every).collect();
+    let sample = sample(picks);
     let miss = |picks: &[(usize, usize)], o: &[usize], k: i64| {
         let (c, kept) = shifted(cell, picks, o, k);
         (kept.len() >= picks.len() / 2).then(|| registration_miss(&c, &kept)).flatten()
@@ -434,6 +434,61 @@ impl PairingFinding {
         };
         format!("each measured position of {whose} fits the joint readings of {when}")
     }
+}
+
+/// Positions measured in a mirrored (left-handed) frame: with one axis reversed the nominal robot
+/// fits them. A robot symmetric about its first joint's plane fits them as well with some joints'
+/// signs reversed (1, 4 and 6 of an IRB 120): the positions cannot tell the two apart, and a
+/// frame exported with an axis reversed is the likelier mistake.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MirrorFinding {
+    /// RMS miss of the nominal robot registered on the positions as given, m.
+    pub rms: f64,
+    /// The same with one axis of the positions reversed, m.
+    pub rms_mirrored: f64,
+    /// The change of the joint readings that explains them as well, when one does.
+    pub joints: Option<ConventionFinding>,
+}
+
+impl MirrorFinding {
+    /// The alternative the positions cannot tell from the mirror, or nothing.
+    pub fn alternative(&self) -> String {
+        match &self.joints {
+            Some(j) if j.rms_changed <= self.rms_mirrored * (1.0 + EQUALLY) => {
+                let taken: Vec<String> =
+                    j.changes().iter().map(|c| format!("joint {} as {c}", c.joint() + 1)).collect();
+                format!(
+                    " (or, which these positions cannot tell apart, the joints read otherwise: {}, {} mm)",
+                    taken.join(" and "),
+                    super::error::mm(j.rms_changed)
+                )
+            }
+            _ => String::new(),
+        }
+    }
+}
+
+/// Look into a starting registration that missed by `rms` (m) for positions in a mirrored frame:
+/// every picked position with its x reversed (any reflection is that one and a rotation, which
+/// the registration finds). Only for measured points: `None` when a pick observes a pose or a
+/// ball, when the miss is within [`suspicious_above`], or when the mirror does not bring it under
+/// the bound and to a third.
+pub(crate) fn search_mirror(cell: &Cell, picks: &[(usize, usize)], rms: f64) -> Option<MirrorFinding> {
+    use crate::cell::Observation;
+    let bound = suspicious_above(cell, picks)?;
+    if rms <= bound
+        || picks.iter().any(|&(s, i)| !matches!(cell.sessions[s].measurements[i].observation, Observation::Position(_)))
+    {
+        return None;
+    }
+    let mut mirrored = cell.clone();
+    for &(s, i) in picks {
+        if let Observation::Position(p) = &mut mirrored.sessions[s].measurements[i].observation {
+            p.x = -p.x;
+        }
+    }
+    let r = registration_miss(&mirrored, picks)?;
+    (r <= bound && r <= rms / 3.0).then(|| MirrorFinding { rms, rms_mirrored: r, joints: search(cell, picks, rms) })
 }
 
 /// The note of a starting registration that missed by more than [`suspicious_above`] with no

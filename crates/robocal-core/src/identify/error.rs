@@ -151,6 +151,16 @@ pub enum IdentifyError {
         /// What was found.
         finding: super::convention::PairingFinding,
     },
+    /// Positions measured in a mirrored frame ([`super::convention`]): with one axis reversed the
+    /// nominal robot fits them as a real robot does. Refused before it is fitted.
+    #[error(
+        "the measured positions are mirrored against the robot: the nominal robot, registered on them, misses them by {} mm RMS, and with one of their axes reversed by {} mm{}. The instrument's frame is left-handed (an axis exported with the other sign): reverse one axis of the positions, then import or identify again",
+        mm(finding.rms), mm(finding.rms_mirrored), finding.alternative()
+    )]
+    MirroredFrame {
+        /// What was found.
+        finding: super::convention::MirrorFinding,
+    },
     /// Gross outliers the robust loss did not down-weight: measurements whose z (the RMS over their
     /// rows of e/√(σ² + τ²), τ² the spread the model leaves beyond the instrument) exceeds `factor`
     /// times the larger of the median z and 1.
@@ -235,7 +245,7 @@ pub(crate) fn outliers_found(outliers: &[Worst], factor: f64) -> String {
     )
 }
 
-fn mm(v: f64) -> String {
+pub(super) fn mm(v: f64) -> String {
     let v = v / crate::units::MM;
     if v >= 10.0 {
         format!("{v:.1}")

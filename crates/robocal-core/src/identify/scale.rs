@@ -18,7 +18,8 @@ const MAX_SPREAD_RATIO: f64 = 3.0;
 
 /// The checks of an identification's readings before anything is fitted — units
 /// ([`IdentifyError::PositionScale`], [`IdentifyError::JointUnit`]), the pairing of positions
-/// with readings ([`IdentifyError::RowsShifted`]) and joint conventions
+/// with readings ([`IdentifyError::RowsShifted`]), a mirrored frame
+/// ([`IdentifyError::MirroredFrame`]) and joint conventions
 /// ([`IdentifyError::JointConvention`]) — on their own, on the nominal robot with the default
 /// options: for an importer, to refuse a file before anything is written. `Ok` also when the
 /// checks cannot be set up (an identification then says why).
@@ -34,8 +35,8 @@ pub fn check_readings(cell: &Cell) -> Result<(), IdentifyError> {
 }
 
 /// The pairing and joint-convention checks ([`super::convention`]) of a starting registration
-/// that missed by `start_rms`: refused when positions paired a few stops on, or another
-/// convention of the readings, explain the miss; a note when nothing does; nothing within the
+/// that missed by `start_rms`: refused when positions paired a few stops on, a mirrored frame,
+/// or another convention of the readings explain the miss; a note when nothing does; nothing within the
 /// bound.
 pub(crate) fn check_convention(
     cell: &Cell,
@@ -47,6 +48,9 @@ pub(crate) fn check_convention(
     let picks = opts.selection.picks(cell)?;
     if let Some(finding) = super::convention::search_pairing(cell, &picks, rms) {
         return Err(IdentifyError::RowsShifted { finding });
+    }
+    if let Some(finding) = super::convention::search_mirror(cell, &picks, rms) {
+        return Err(IdentifyError::MirroredFrame { finding });
     }
     match super::convention::search(cell, &picks, rms) {
         Some(finding) => Err(IdentifyError::JointConvention { finding }),
@@ -114,7 +118,7 @@ pub(crate) fn check_position_scale(problem: &Problem, x0: &[f64], cell: &Cell) -
 }
 
 /// RMS distance of points from their centroid, m.
-fn spread(points: impl Iterator<Item = nalgebra::Vector3<f64>>) -> f64 {
+pub(crate) fn spread(points: impl Iterator<Item = nalgebra::Vector3<f64>>) -> f64 {
     let p: Vec<_> = points.collect();
     let n = p.len().max(1) as f64;
     let centroid = p.iter().sum::<nalgebra::Vector3<f64>>() / n;

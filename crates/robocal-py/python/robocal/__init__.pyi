@@ -45,7 +45,8 @@ class IdentificationError(Exception):
     radians, not degrees), ``"joint_convention"`` (the joint readings follow another convention
     than the robot model: a quarter turn, a sign or a coupling of some joints' readings, named in
     the message, makes the nominal robot fit the positions), ``"rows_shifted"`` (the positions
-    fit the joint readings of another stop: lines shifted between files), ``"registration"`` (no base
+    fit the joint readings of another stop: lines shifted between files), ``"mirrored_frame"`` (the
+    positions fit with one axis reversed: a left-handed instrument frame), ``"registration"`` (no base
     guess and the measured points cannot place the base), ``"option"`` or ``"problem"``.
     Not a ValueError: the arguments were well-formed, the data cannot answer.
     """
