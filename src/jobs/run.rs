@@ -310,58 +310,35 @@ pub fn selection(s: &SelectSpec) -> Result<DetmaxSelection, JobError> {
 /// Numerical trouble as its own problem kind; input trouble as 422.
 pub fn identify_error(e: IdentifyError) -> JobError {
     let detail = e.to_string();
-    match e {
-        IdentifyError::RankDeficient { .. } => {
-            JobError::Numerical { kind: "rank-deficient", title: "Rank-deficient fit", detail }
+    let (kind, title) = match e {
+        IdentifyError::RankDeficient { .. } => ("rank-deficient", "Rank-deficient fit"),
+        IdentifyError::IllConditioned { .. } => ("ill-conditioned", "Ill-conditioned fit (κ above the limit)"),
+        IdentifyError::Underdetermined { .. } => ("underdetermined", "Fewer residuals than parameters"),
+        IdentifyError::Solve(SolveError::Diverged { .. }) => ("divergence", "The fit diverged"),
+        IdentifyError::Solve(SolveError::IterationLimit { .. }) => ("no-convergence", "The fit did not converge"),
+        IdentifyError::Registration(_) => ("registration", "The base could not be registered"),
+        IdentifyError::Misfit { .. } => ("misfit", "The model does not describe these data"),
+        IdentifyError::Outliers { .. } => ("outliers", "Outlier measurements"),
+        IdentifyError::PositionScale { .. } => {
+            ("position-scale", "The measured positions are not on the robot's scale (a unit mistake)")
         }
-        IdentifyError::IllConditioned { .. } => {
-            JobError::Numerical { kind: "ill-conditioned", title: "Ill-conditioned fit (κ above the limit)", detail }
+        IdentifyError::RowsShifted { .. } => {
+            ("rows-shifted", "The measured positions are not paired with their joint readings")
         }
-        IdentifyError::Underdetermined { .. } => {
-            JobError::Numerical { kind: "underdetermined", title: "Fewer residuals than parameters", detail }
+        IdentifyError::MirroredFrame { .. } => {
+            ("mirrored-frame", "The measured positions are mirrored against the robot")
         }
-        IdentifyError::Solve(SolveError::Diverged { .. }) => {
-            JobError::Numerical { kind: "divergence", title: "The fit diverged", detail }
+        IdentifyError::JointConvention { .. } => {
+            ("joint-convention", "The joint readings follow another convention than the robot model")
         }
-        IdentifyError::Solve(SolveError::IterationLimit { .. }) => {
-            JobError::Numerical { kind: "no-convergence", title: "The fit did not converge", detail }
+        IdentifyError::JointUnit { .. } => ("joint-unit", "The joint readings are in radians, not degrees"),
+        IdentifyError::StartRobot { .. } => {
+            return JobError::Invalid { detail, field: Some("parameter_set_id".into()) };
         }
-        IdentifyError::Registration(_) => {
-            JobError::Numerical { kind: "registration", title: "The base could not be registered", detail }
-        }
-        IdentifyError::Misfit { .. } => {
-            JobError::Numerical { kind: "misfit", title: "The model does not describe these data", detail }
-        }
-        IdentifyError::Outliers { .. } => {
-            JobError::Numerical { kind: "outliers", title: "Outlier measurements", detail }
-        }
-        IdentifyError::PositionScale { .. } => JobError::Numerical {
-            kind: "position-scale",
-            title: "The measured positions are not on the robot's scale (a unit mistake)",
-            detail,
-        },
-        IdentifyError::RowsShifted { .. } => JobError::Numerical {
-            kind: "rows-shifted",
-            title: "The measured positions are not paired with their joint readings",
-            detail,
-        },
-        IdentifyError::MirroredFrame { .. } => JobError::Numerical {
-            kind: "mirrored-frame",
-            title: "The measured positions are mirrored against the robot",
-            detail,
-        },
-        IdentifyError::JointConvention { .. } => JobError::Numerical {
-            kind: "joint-convention",
-            title: "The joint readings follow another convention than the robot model",
-            detail,
-        },
-        IdentifyError::JointUnit { .. } => {
-            JobError::Numerical { kind: "joint-unit", title: "The joint readings are in radians, not degrees", detail }
-        }
-        IdentifyError::StartRobot { .. } => JobError::Invalid { detail, field: Some("parameter_set_id".into()) },
-        IdentifyError::Option { .. } => JobError::Invalid { field: e.field_path(), detail },
-        IdentifyError::Problem(_) => JobError::Invalid { detail, field: None },
-    }
+        IdentifyError::Option { .. } => return JobError::Invalid { field: e.field_path(), detail },
+        IdentifyError::Problem(_) => return JobError::Invalid { detail, field: None },
+    };
+    JobError::Numerical { kind, title, detail }
 }
 
 /// An identification's failure with the measurements it names (outliers, the worst residuals of

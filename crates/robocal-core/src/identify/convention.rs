@@ -242,21 +242,15 @@ fn sample(picks: &[(usize, usize)]) -> Vec<(usize, usize)> {
 /// positions cannot tell apart).
 pub const EQUALLY: f64 = 0.02;
 
-/// Look into a starting registration that missed by `rms` (m): `None` when the miss is within
-/// [`suspicious_above`], or when no change of the readings explains it (see the module's
+/// Look into a starting registration that missed by `rms` (m), beyond `bound`
+/// ([`suspicious_above`]): `None` when no change of the readings explains it (see the module's
 /// documentation). Each step takes the single change that misses least, or, when none halves
 /// the miss, the pair of changes to two joints that does (a quarter turn of a shoulder and the
 /// opposite one of the elbow move the wrist together).
-pub(crate) fn search(cell: &Cell, picks: &[(usize, usize)], rms: f64) -> Option<ConventionFinding> {
-    let all = picks;
-    let bound = suspicious_above(cell, picks)?;
-    if rms <= bound {
-        return None;
-    }
+pub(crate) fn search(cell: &Cell, picks: &[(usize, usize)], rms: f64, bound: f64) -> Option<ConventionFinding> {
     // The candidates are scored on a sample of the measurements (the registration's RMS settles
     // long before thousands), the finding judged on all of them.
     let sample = sample(picks);
-    let picks = sample.as_slice();
     let candidates = ReadingChange::candidates(cell.model.dof());
     let mut steps: Vec<Step> = Vec::new();
     let mut taken: Vec<ReadingChange> = Vec::new();
@@ -265,14 +259,14 @@ pub(crate) fn search(cell: &Cell, picks: &[(usize, usize)], rms: f64) -> Option<
         let open: Vec<ReadingChange> =
             candidates.iter().copied().filter(|c| taken.iter().all(|d| d.joint() != c.joint())).collect();
         let singles: Vec<Vec<ReadingChange>> = open.iter().map(|c| vec![*c]).collect();
-        let mut step = best_of(cell, picks, &taken, singles, now);
+        let mut step = best_of(cell, &sample, &taken, singles, now);
         if step.is_none() && taken.len() + 2 <= MAX_CHANGES {
             let pairs: Vec<Vec<ReadingChange>> = open
                 .iter()
                 .enumerate()
                 .flat_map(|(i, a)| open[i + 1..].iter().filter(|b| b.joint() != a.joint()).map(|b| vec![*a, *b]))
                 .collect();
-            step = best_of(cell, picks, &taken, pairs, now);
+            step = best_of(cell, &sample, &taken, pairs, now);
         }
         let Some((step, r)) = step else { break };
         taken.extend(step.changes.iter().copied());
@@ -282,7 +276,7 @@ pub(crate) fn search(cell: &Cell, picks: &[(usize, usize)], rms: f64) -> Option<
     if steps.is_empty() {
         return None;
     }
-    let now = start_miss(cell, all, &taken)?;
+    let now = start_miss(cell, picks, &taken)?;
     (now <= bound && now <= rms / 3.0).then_some(ConventionFinding { rms, rms_changed: now, steps })
 }
 
@@ -381,12 +375,8 @@ fn shifted(cell: &Cell, picks: &[(usize, usize)], shifted: &[usize], shift: i64)
 /// Look into a starting registration that missed by `rms` (m) for positions paired with the wrong
 /// line of joint readings — a header counted in one file, a line deleted from one file only: every
 /// session shifted together by up to [`MAX_SHIFT`] stops either way, then each alone. `None` when
-/// the miss is within [`suspicious_above`] or no shift brings it under the bound and to a third.
-pub(crate) fn search_pairing(cell: &Cell, picks: &[(usize, usize)], rms: f64) -> Option<PairingFinding> {
-    let bound = suspicious_above(cell, picks)?;
-    if rms <= bound {
-        return None;
-    }
+/// no shift brings it under `bound` and to a third.
+pub(crate) fn search_pairing(cell: &Cell, picks: &[(usize, usize)], rms: f64, bound: f64) -> Option<PairingFinding> {
     let mut sessions: Vec<usize> = picks.iter().map(|p| p.0).collect();
     sessions.dedup();
     sessions.sort_unstable();
@@ -471,14 +461,10 @@ impl MirrorFinding {
 /// Look into a starting registration that missed by `rms` (m) for positions in a mirrored frame:
 /// every picked position with its x reversed (any reflection is that one and a rotation, which
 /// the registration finds). Only for measured points: `None` when a pick observes a pose or a
-/// ball, when the miss is within [`suspicious_above`], or when the mirror does not bring it under
-/// the bound and to a third.
-pub(crate) fn search_mirror(cell: &Cell, picks: &[(usize, usize)], rms: f64) -> Option<MirrorFinding> {
+/// ball, or when the mirror does not bring the miss under `bound` and to a third.
+pub(crate) fn search_mirror(cell: &Cell, picks: &[(usize, usize)], rms: f64, bound: f64) -> Option<MirrorFinding> {
     use crate::cell::Observation;
-    let bound = suspicious_above(cell, picks)?;
-    if rms <= bound
-        || picks.iter().any(|&(s, i)| !matches!(cell.sessions[s].measurements[i].observation, Observation::Position(_)))
-    {
+    if picks.iter().any(|&(s, i)| !matches!(cell.sessions[s].measurements[i].observation, Observation::Position(_))) {
         return None;
     }
     let mut mirrored = cell.clone();
@@ -488,19 +474,40 @@ pub(crate) fn search_mirror(cell: &Cell, picks: &[(usize, usize)], rms: f64) -> 
         }
     }
     let r = registration_miss(&mirrored, picks)?;
-    (r <= bound && r <= rms / 3.0).then(|| MirrorFinding { rms, rms_mirrored: r, joints: search(cell, picks, rms) })
+    (r <= bound && r <= rms / 3.0).then(|| MirrorFinding {
+        rms,
+        rms_mirrored: r,
+        joints: search(cell, picks, rms, bound),
+    })
 }
 
-/// The note of a starting registration that missed by more than [`suspicious_above`] with no
-/// change of the readings explaining it; `None` within the bound.
-pub(crate) fn unexplained_note(cell: &Cell, picks: &[(usize, usize)], rms: f64) -> Option<String> {
-    let bound = suspicious_above(cell, picks)?;
-    (rms > bound).then(|| {
-        format!(
-            "the nominal robot, registered on the measured positions, missed them by {:.1} mm RMS at the start (a real robot's nominal model misses by a few mm): no quarter turn, sign or coupling of up to four joints' readings explains it, so the fit started far from the robot; check the robot model's lengths and the declared TCPs against its parameters' changes from nominal",
-            rms / crate::units::MM
-        )
-    })
+/// The checks of a starting registration that missed by `start_rms` (m), in turn: positions paired
+/// a few stops on, a mirrored frame, another convention of the joint readings — refused when one
+/// explains the miss. A miss beyond [`suspicious_above`] that none explains gives a note for the
+/// identification; within it, nothing is looked into.
+pub(crate) fn check(
+    cell: &Cell,
+    opts: &super::IdentifyOptions,
+    start_rms: Option<f64>,
+) -> Result<Option<String>, super::IdentifyError> {
+    use super::IdentifyError;
+    // Below the bound's floor nothing is looked into, so the picks are not even needed.
+    let Some(rms) = start_rms.filter(|&r| r > SUSPICIOUS_M) else { return Ok(None) };
+    let picks = opts.selection.picks(cell)?;
+    let Some(bound) = suspicious_above(cell, &picks).filter(|&b| rms > b) else { return Ok(None) };
+    if let Some(finding) = search_pairing(cell, &picks, rms, bound) {
+        return Err(IdentifyError::RowsShifted { finding });
+    }
+    if let Some(finding) = search_mirror(cell, &picks, rms, bound) {
+        return Err(IdentifyError::MirroredFrame { finding });
+    }
+    if let Some(finding) = search(cell, &picks, rms, bound) {
+        return Err(IdentifyError::JointConvention { finding });
+    }
+    Ok(Some(format!(
+        "the nominal robot, registered on the measured positions, missed them by {:.1} mm RMS at the start (a real robot's nominal model misses by a few mm): no quarter turn, sign or coupling of up to four joints' readings explains it, so the fit started far from the robot; check the robot model's lengths and the declared TCPs against its parameters' changes from nominal",
+        rms / crate::units::MM
+    )))
 }
 
 #[cfg(test)]

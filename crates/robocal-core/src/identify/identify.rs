@@ -108,7 +108,7 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
 fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, IdentifyError> {
     let Prepared { problem, x0, mut free, mut status, base, fixed, payload_unknown, start_rms } = prepare(cell, opts)?;
     super::scale::check_position_scale(&problem, &x0, cell)?;
-    let start_note = super::scale::check_convention(cell, opts, start_rms)?;
+    let start_note = super::convention::check(cell, opts, start_rms)?;
     if problem.n_obs_rows + problem.priors.len() <= free.len() {
         return Err(IdentifyError::Underdetermined { rows: problem.n_obs_rows, params: free.len() });
     }

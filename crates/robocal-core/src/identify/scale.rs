@@ -28,33 +28,9 @@ pub fn check_readings(cell: &Cell) -> Result<(), IdentifyError> {
     match super::prepare(cell, &opts) {
         Ok(p) => {
             check_position_scale(&p.problem, &p.x0, cell)?;
-            check_convention(cell, &opts, p.start_rms).map(|_| ())
+            super::convention::check(cell, &opts, p.start_rms).map(|_| ())
         }
         Err(_) => Ok(()),
-    }
-}
-
-/// The pairing and joint-convention checks ([`super::convention`]) of a starting registration
-/// that missed by `start_rms`: refused when positions paired a few stops on, a mirrored frame,
-/// or another convention of the readings explain the miss; a note when nothing does; nothing within the
-/// bound.
-pub(crate) fn check_convention(
-    cell: &Cell,
-    opts: &super::IdentifyOptions,
-    start_rms: Option<f64>,
-) -> Result<Option<String>, IdentifyError> {
-    // Below the bound's floor nothing is looked into, so the picks are not even needed.
-    let Some(rms) = start_rms.filter(|&r| r > super::convention::SUSPICIOUS_M) else { return Ok(None) };
-    let picks = opts.selection.picks(cell)?;
-    if let Some(finding) = super::convention::search_pairing(cell, &picks, rms) {
-        return Err(IdentifyError::RowsShifted { finding });
-    }
-    if let Some(finding) = super::convention::search_mirror(cell, &picks, rms) {
-        return Err(IdentifyError::MirroredFrame { finding });
-    }
-    match super::convention::search(cell, &picks, rms) {
-        Some(finding) => Err(IdentifyError::JointConvention { finding }),
-        None => Ok(super::convention::unexplained_note(cell, &picks, rms)),
     }
 }
 
