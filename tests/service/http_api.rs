@@ -484,6 +484,31 @@ async fn targets_and_exclusions_through_the_service() {
     app.stop().await;
 }
 
+/// A cell PC posts a run whose joint 5 was read with the other sign. The robot has a base guess
+/// and the session its declared tool, so nothing was registered and the starting checks were
+/// skipped: the fit took the sign into the model. Now the job fails as a joint convention, the
+/// change named, and no parameter set is stored.
+#[tokio::test]
+async fn readings_in_another_convention_fail_the_job_with_the_change_named() {
+    let app = TestApp::default().await;
+    let rid = robot(&app, "cell").await;
+    let aid = artefact(&app, "plate").await;
+    let mut cell = small_cell(3);
+    let t = cell.sessions.iter().position(|s| s.name == "trical-1").unwrap();
+    cell.sessions[t].measurements.iter_mut().for_each(|m| m.joints_deg[4] = -m.joints_deg[4]);
+    upload(&app, &rid, &aid, &cell).await;
+    let path = format!("/v1/robots/{rid}/identifications");
+    let j = app.wait(&app.post(&path, &json!({"sessions": ["trical-1"]})).await.body).await;
+    assert_eq!(j["state"], "failed", "{j}");
+    assert_eq!(j["error"]["type"], "urn:robocal:problem:joint-convention", "{j}");
+    let detail = j["error"]["detail"].as_str().unwrap();
+    assert!(
+        detail.contains("do not follow the robot model's conventions") && detail.contains("joint 5 as −q5"),
+        "{detail}"
+    );
+    assert!(app.get(&format!("/v1/robots/{rid}/parameter-sets")).await.body.as_array().unwrap().is_empty());
+}
+
 /// The loop: identification, its refusal with the reason, validation, history, activation,
 /// export, import, compensation — and the server's parameter set is the CLI's, bit for bit.
 #[tokio::test]

@@ -1267,6 +1267,62 @@ fn joint_readings_in_another_convention_are_refused_with_the_change_that_explain
     assert!((id.set.values[a2] - 0.270).abs() < 0.5 * MM, "a2 {} mm", id.set.values[a2] / MM);
 }
 
+/// A cell PC posts its measurements with the robot's base guess and its tools' TCPs: nothing was
+/// registered, so the starting checks used to be skipped, and joint 2 read a quarter turn off
+/// converged to θ2 −179.9° and 0.56 mm where the right readings give 0.33 mm. The checks now
+/// set the guess aside and look at the registration; a guess typed wrong (a 37.5° error in the
+/// base's rotation) is weighed against the registration, and the fit starts from the better.
+#[test]
+fn a_cell_with_a_base_guess_and_declared_tools_is_checked_as_an_import_is() {
+    use robocal::identify::IdentifyError;
+    use robocal::identify::convention::ReadingChange;
+    use std::f64::consts::FRAC_PI_2;
+    let mut robot = irb120();
+    robot.preset = None;
+    for l in &mut robot.links {
+        l.limits = [-400.0 * DEG, 400.0 * DEG];
+    }
+    let o = TrackerRunOptions { seed: 5, poses: 200, removed: 0, ..Default::default() };
+    let dir = common::fresh_dir("real-data-guess");
+    let (joints, files) = tracker_run(&o).unwrap().write(&dir, "run", 6).unwrap();
+    let cell = three_reflector::import(&joints, &files, robot, Purpose::Identification).unwrap().cell;
+    let id = identify(&cell, &options("", &[])).unwrap();
+    // The cell as a cell PC posts it: the identified base as its guess, each reflector's TCP
+    // declared and not identified.
+    let mut posted = cell.clone();
+    let base: Vec<f64> = (0..6).map(|k| id.set.value(Param::Base(k)).unwrap()).collect();
+    posted.base_guess = Some(base.clone().try_into().unwrap());
+    for s in &mut posted.sessions {
+        let t = id.tools.iter().find(|t| t.sessions.contains(&s.name)).unwrap();
+        s.tool.tcp = t.tool.tcp;
+        s.identify_tcp = false;
+    }
+    let right = identify(&posted, &options("", &[])).unwrap();
+    assert!(!right.notes.iter().any(|n| n.contains("base guess") || n.contains("missed them")), "{:?}", right.notes);
+    let rms = right.quality.rms_residual;
+    assert!((rms - id.quality.rms_residual).abs() < 0.02 * rms, "{rms} against {}", id.quality.rms_residual);
+
+    let mut turned = posted.clone();
+    turned.sessions.iter_mut().flat_map(|s| &mut s.measurements).for_each(|m| m.q[1] += FRAC_PI_2);
+    match identify(&turned, &options("", &[])) {
+        Err(IdentifyError::JointConvention { finding }) => {
+            assert_eq!(finding.changes(), [ReadingChange::Joint { joint: 1, flip: false, offset: -FRAC_PI_2 }])
+        }
+        other => panic!("a quarter turn of joint 2 with a base guess: {:?}", other.map(|i| i.quality.rms_residual)),
+    }
+
+    let mut typo = posted.clone();
+    typo.base_guess.as_mut().unwrap()[3] -= 37.5 * DEG;
+    let from_typo = identify(&typo, &options("", &[])).unwrap();
+    let note = from_typo.notes.iter().find(|n| n.contains("the base guess missed")).expect("the guess set aside, said");
+    assert!(note.contains("the fit started from the registration"), "{note}");
+    assert!(
+        (from_typo.quality.rms_residual - rms).abs() < 1e-6 * rms,
+        "{} against {rms}",
+        from_typo.quality.rms_residual
+    );
+}
+
 /// Positions paired with the wrong line of joint readings — a line deleted from one file only,
 /// a header counted as data — imported as a run whose residual is hundreds of millimetres, and
 /// `identify` refused it as a misfit that advised checking the TCPs, the frames and outliers.

@@ -182,6 +182,19 @@ fn nearest_rotation(m: &Matrix3<f64>) -> Option<Matrix3<f64>> {
 
 /// The (nominal TCP position with the base at identity, observed position) pairs of the picked
 /// measurements that have an observed position, in pick order.
+/// The RMS distance (m) between the nominal robot's TCP positions with the base at `base` and the
+/// observed positions of the picked measurements: how far a base guess starts from them. `None`
+/// when no picked measurement observes a position.
+pub(crate) fn miss_at(cell: &Cell, picks: &[(usize, usize)], base: &[f64; 6]) -> Option<f64> {
+    let (model, observed) = point_pairs(cell, picks);
+    if model.is_empty() {
+        return None;
+    }
+    let b = Frame::from_xyzabc(base);
+    let sum: f64 = model.iter().zip(&observed).map(|(m, o)| (b.transform_point(m) - o).norm_squared()).sum();
+    Some((sum / model.len() as f64).sqrt())
+}
+
 fn point_pairs(cell: &Cell, picks: &[(usize, usize)]) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
     let chains: Vec<_> = cell
         .sessions

@@ -205,7 +205,8 @@ pub(crate) fn suspicious_above(cell: &Cell, picks: &[(usize, usize)]) -> Option<
 
 /// The starting registration's RMS miss (m) for the picked measurements with the readings
 /// changed: both registered in turn when a TCP is unknown, else the base alone; `None` when the
-/// cell has a base guess and no unknown TCP (nothing is registered) or the registration fails.
+/// cell has a base guess and no unknown TCP (nothing is registered: [`check`] sets the guess
+/// aside first) or the registration fails.
 pub(crate) fn start_miss(cell: &Cell, picks: &[(usize, usize)], changes: &[ReadingChange]) -> Option<f64> {
     if changes.is_empty() {
         return registration_miss(cell, picks);
@@ -495,6 +496,16 @@ pub(crate) fn check(
     let Some(rms) = start_rms.filter(|&r| r > SUSPICIOUS_M) else { return Ok(None) };
     let picks = opts.selection.picks(cell)?;
     let Some(bound) = suspicious_above(cell, &picks).filter(|&b| rms > b) else { return Ok(None) };
+    // The readings are judged on registrations, never on a base guess: a guess is for the
+    // readings as they should have been (and the miss was the registration's when the guess
+    // missed more: [`super::prepare`]).
+    let unguessed;
+    let cell = if cell.base_guess.is_some() {
+        unguessed = Cell { base_guess: None, ..cell.clone() };
+        &unguessed
+    } else {
+        cell
+    };
     if let Some(finding) = search_pairing(cell, &picks, rms, bound) {
         return Err(IdentifyError::RowsShifted { finding });
     }

@@ -106,14 +106,15 @@ pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, I
 }
 
 fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, IdentifyError> {
-    let Prepared { problem, x0, mut free, mut status, base, fixed, payload_unknown, start_rms } = prepare(cell, opts)?;
+    let Prepared { problem, x0, mut free, mut status, base, fixed, payload_unknown, start_rms, start_note } =
+        prepare(cell, opts)?;
     super::scale::check_position_scale(&problem, &x0, cell)?;
-    let start_note = super::convention::check(cell, opts, start_rms)?;
+    let check_note = super::convention::check(cell, opts, start_rms)?;
     if problem.n_obs_rows + problem.priors.len() <= free.len() {
         return Err(IdentifyError::Underdetermined { rows: problem.n_obs_rows, params: free.len() });
     }
 
-    let mut notes: Vec<String> = start_note.into_iter().collect();
+    let mut notes: Vec<String> = start_note.into_iter().chain(check_note).collect();
     if opts.model.beta {
         notes.extend(parallel_axes_without_beta(&cell.model));
     }

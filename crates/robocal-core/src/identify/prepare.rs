@@ -5,7 +5,7 @@ use std::collections::HashMap;
 
 use faer::Mat;
 
-use super::base::{Registration, estimate_base_of, register_base_and_tcps};
+use super::base::{Registration, estimate_base_of, miss_at, register_base_and_tcps};
 use super::noise::NoiseModel;
 use super::problem::{GlobalParam, Prior, Problem, tool_blocks};
 use super::{
@@ -32,9 +32,11 @@ pub struct Prepared {
     pub fixed: HashMap<usize, FixedReason>,
     /// The payload is unknown (every tool declares 0 kg) and identified as `tool_mass`.
     pub payload_unknown: bool,
-    /// The starting registration's RMS miss on the nominal robot (m), when the base or a TCP was
-    /// registered: what [`super::convention`] looks into.
+    /// The nominal robot's RMS miss on the measured positions from where the fit starts (m): what
+    /// [`super::convention`] looks into. `None` when no position is observed.
     pub start_rms: Option<f64>,
+    /// Why the fit did not start from the cell's base guess, when it did not.
+    pub start_note: Option<String>,
 }
 
 /// A model with backlash terms acts through each measurement's approach direction (the sign of
@@ -60,7 +62,7 @@ pub fn with_approach(cell: &Cell, models: &[&ModelOptions]) -> Option<(Cell, Vec
 pub fn prepare(cell: &Cell, opts: &IdentifyOptions) -> Result<Prepared, IdentifyError> {
     let (layout, payload_unknown) = layout_of(cell, opts)?;
     let picks = opts.selection.picks(cell)?;
-    let (base, registration, start_rms) = starting_base(cell, &picks)?;
+    let Start { base, registration, rms: start_rms, note: start_note } = starting_base(cell, &picks)?;
     let mut problem = Problem::new(cell, layout, base, &opts.selection, opts.rotation_weight)?;
     if let Some(noise) = &opts.noise {
         noise.check().map_err(IdentifyError::option)?;
@@ -76,7 +78,7 @@ pub fn prepare(cell: &Cell, opts: &IdentifyOptions) -> Result<Prepared, Identify
         let priors = anchor_priors(&problem, &free, &x0, a, opts.noise.is_some());
         problem.add_priors(priors);
     }
-    Ok(Prepared { problem, x0, free, status, base, fixed, payload_unknown, start_rms })
+    Ok(Prepared { problem, x0, free, status, base, fixed, payload_unknown, start_rms, start_note })
 }
 
 /// The parameter layout: the robot's full layout, the model's effect terms, the payload's mass
@@ -105,29 +107,70 @@ fn layout_of(cell: &Cell, opts: &IdentifyOptions) -> Result<(ParamLayout, bool),
     Ok((layout, payload_unknown))
 }
 
+/// Where the fit starts: the base, the registration of the TCPs to identify (their start
+/// values), the starting miss of the nominal robot on the positions (m) and, when a base guess
+/// was set aside, why.
+pub(crate) struct Start {
+    base: [f64; 6],
+    registration: Option<Registration>,
+    rms: Option<f64>,
+    note: Option<String>,
+}
+
 /// The base, and the TCPs to identify, from the nominal robot: registered in turn when a TCP is
-/// unknown (the registration is returned for their start values), else the cell's guess or one
-/// registration; with the registration's RMS miss when one was made.
-#[allow(clippy::type_complexity)]
-fn starting_base(
-    cell: &Cell,
-    picks: &[(usize, usize)],
-) -> Result<([f64; 6], Option<Registration>, Option<f64>), IdentifyError> {
+/// unknown, else the cell's guess or one registration; with the nominal robot's RMS miss on the
+/// positions from there.
+///
+/// A base guess is a start, not a measurement: one that misses the positions beyond what a real
+/// robot's nominal model does ([`super::convention::suspicious_above`]: a frame typed with the
+/// wrong angle, the readings in another convention) is weighed against the registration without
+/// it, and the fit starts from whichever misses less. The miss that [`super::convention::check`]
+/// then looks into is the registration's, so a cell posted with a base guess and its tools' TCPs
+/// is checked as an import is.
+fn starting_base(cell: &Cell, picks: &[(usize, usize)]) -> Result<Start, IdentifyError> {
     let (blocks, session_tool) = tool_blocks(cell, picks);
-    let registration = if blocks.iter().any(|b| b.identify_tcp && b.tool.tcp[..3] == [0.0; 3]) {
-        Some(register_base_and_tcps(cell, picks, &blocks, &session_tool, cell.base_guess)?)
-    } else {
-        None
+    let unknown_tcp = blocks.iter().any(|b| b.identify_tcp && b.tool.tcp[..3] == [0.0; 3]);
+    let from = |guess: Option<[f64; 6]>| -> Result<Start, IdentifyError> {
+        let start = |base, rms, registration| Start { base, registration, rms, note: None };
+        Ok(match (guess, unknown_tcp) {
+            (guess, true) => {
+                let r = register_base_and_tcps(cell, picks, &blocks, &session_tool, guess)?;
+                start(guess.unwrap_or(r.base), Some(r.rms), Some(r))
+            }
+            (Some(b), false) => start(b, miss_at(cell, picks, &b), None),
+            (None, false) => {
+                let (b, rms) = estimate_base_of(cell, picks)?;
+                start(b, Some(rms), None)
+            }
+        })
     };
-    let (base, rms) = match (cell.base_guess, &registration) {
-        (Some(b), r) => (b, r.as_ref().map(|r| r.rms)),
-        (None, Some(r)) => (r.base, Some(r.rms)),
-        (None, None) => {
-            let (b, rms) = estimate_base_of(cell, picks)?;
-            (b, Some(rms))
+    let guessed = from(cell.base_guess)?;
+    let (Some(rms), Some(bound)) = (guessed.rms, super::convention::suspicious_above(cell, picks)) else {
+        return Ok(guessed);
+    };
+    if cell.base_guess.is_none() || rms <= bound {
+        return Ok(guessed);
+    }
+    match from(None) {
+        Ok(free) if free.rms.is_some_and(|r| r < rms) => {
+            let r = free.rms.unwrap_or(rms);
+            let note = format!(
+                "the base guess missed the measured positions by {} mm RMS on the nominal robot, where the nominal robot registered on them misses by {} mm: the fit started from the registration (check the base guess: {} mm, {}°)",
+                super::error::mm(rms),
+                super::error::mm(r),
+                fmt3(&cell.base_guess.unwrap_or_default()[..3], 1.0 / crate::units::MM),
+                fmt3(&cell.base_guess.unwrap_or_default()[3..], 1f64.to_degrees()),
+            );
+            Ok(Start { note: Some(note), ..free })
         }
-    };
-    Ok((base, registration, rms))
+        _ => Ok(guessed),
+    }
+}
+
+/// Three values scaled and rounded to 0.1, in parentheses.
+fn fmt3(v: &[f64], scale: f64) -> String {
+    let s: Vec<String> = v.iter().map(|x| format!("{:.1}", x * scale)).collect();
+    format!("({})", s.join(", "))
 }
 
 /// The starting point: the nominal values, or the start parameter set's (its base excepted) for
