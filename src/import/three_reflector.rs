@@ -271,9 +271,12 @@ fn approach_through_unread_stops(
 /// A line of a file: its 1-based number and its text, trimmed.
 type PoseLine<'a> = (u64, &'a str);
 
-/// The pose lines of a file with their 1-based line numbers: comments (`#`) and blank lines out.
+/// The pose lines of a file with their 1-based line numbers: comments (`#`) and blank lines out,
+/// and the byte-order mark a spreadsheet writes before the first line.
 fn pose_lines(text: &str) -> Vec<PoseLine<'_>> {
-    text.lines()
+    text.strip_prefix('\u{feff}')
+        .unwrap_or(text)
+        .lines()
         .enumerate()
         .map(|(i, l)| (i as u64 + 1, l.trim()))
         .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
@@ -321,6 +324,22 @@ fn comma_hint(text: &str) -> String {
     }
 }
 
+/// Why a line may hold another count of values than `expected`: decimal commas read as
+/// separators ([`comma_hint`]), else one value too many whose first reads as a whole number — a
+/// line or point number (a spreadsheet's index column), which the files do not hold.
+fn count_hint(text: &str, fields: &[String], expected: usize) -> String {
+    let commas = comma_hint(text);
+    let counter = fields.first().is_some_and(|f| !f.is_empty() && f.bytes().all(|b| b.is_ascii_digit()));
+    if commas.is_empty() && fields.len() == expected + 1 && counter {
+        format!(
+            " (the first, {}, reads as a line or point number: the file holds the values alone, so remove that column)",
+            fields[0]
+        )
+    } else {
+        commas
+    }
+}
+
 /// A finite number written with a decimal point.
 fn number(field: &str) -> Result<f64, String> {
     match field.parse::<f64>() {
@@ -337,7 +356,12 @@ fn joint_values(path: &Path, line: u64, text: &str, model: &RobotModel) -> Resul
         return Err(ImportError::line(
             path,
             line,
-            format!("expected {} joint values, got {}{}", model.dof(), fields.len(), comma_hint(text)),
+            format!(
+                "expected {} joint values, got {}{}",
+                model.dof(),
+                fields.len(),
+                count_hint(text, &fields, model.dof())
+            ),
         ));
     }
     let mut q = Vec::with_capacity(fields.len());
@@ -372,7 +396,7 @@ fn position(path: &Path, line: u64, text: &str) -> Result<Option<Vector3<f64>>, 
             format!(
                 "expected x y z (3 values, or `nan nan nan` / `-` when not visible), got {}{}",
                 fields.len(),
-                comma_hint(text)
+                count_hint(text, &fields, 3)
             ),
         ));
     }
@@ -410,6 +434,21 @@ mod tests {
     fn comments_and_blank_lines_are_not_poses() {
         let lines = pose_lines("# header\n\n1 2 3\r\n  # indented comment\n   \n4 5 6\n");
         assert_eq!(lines, vec![(3, "1 2 3"), (6, "4 5 6")]);
+        // A byte-order mark before a comment leaves it a comment (it read as a column header).
+        assert_eq!(pose_lines("\u{feff}# x y z, mm\r\n1 2 3\r\n"), vec![(2, "1 2 3")]);
+    }
+
+    #[test]
+    fn an_index_column_is_named() {
+        let e = joint_values(Path::new("j.txt"), 2, "1 11.5 -14.1 -23.7 -158.4 -12.6 -38.1", &irb120())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("expected 6 joint values, got 7 (the first, 1, reads as a line or point number"), "{e}");
+        let e = position(Path::new("r.txt"), 2, "17;1742,8;-1070,9;320,4").unwrap_err().to_string();
+        assert!(e.contains("got 4 (the first, 17, reads as a line or point number"), "{e}");
+        // Too few values, or a first value with a decimal point: no such hint.
+        let e = position(Path::new("r.txt"), 2, "1742.8 -1070.9 320.4 0.02").unwrap_err().to_string();
+        assert!(!e.contains("line or point number"), "{e}");
     }
 
     #[test]
