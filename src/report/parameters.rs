@@ -85,6 +85,15 @@ pub fn quality_rows(quality: &Quality) -> Vec<Vec<String>> {
         push("RMS the instrument predicts", format!("{} mm", mm(v)), "");
     }
     if let Some(v) = quality.residual_ratio {
+        // The ratio leaves out the outliers a robust loss down-weighted: say what it is of when
+        // that is not the RMS above.
+        let of = quality
+            .expected_rms_mm
+            .map(|e| v * e)
+            .filter(|r| r.is_finite() && quality.rms_residual_mm.is_some_and(|all| (r - all).abs() > 0.005 * all));
+        if let Some(r) = of {
+            push("residual RMS, outliers left out", format!("{} mm", mm(r)), "what the ratio below is of");
+        }
         push("residual / predicted", fixed(v, 2), "near 1: the residual is the instrument's noise");
     }
     if let Some(v) = quality.sigma_mm {

@@ -1323,6 +1323,85 @@ fn a_cell_with_a_base_guess_and_declared_tools_is_checked_as_an_import_is() {
     );
 }
 
+/// A tracker following three reflectors can lock onto the neighbouring one: that stop's line in
+/// reflector 1's file holds reflector 2's position and the other way round. The refusal named
+/// them as outliers, 150 mm off, and its `--exclude` listed only the five it showed (followed, it
+/// was refused again for the rest). Now each says which target's TCP it fits at its own joints,
+/// the remedy lists every one, and with the ratio printed beside a robust fit's RMS it says what
+/// the ratio is of.
+#[test]
+fn readings_of_the_neighbouring_reflector_are_named_and_all_listed() {
+    use robocal::identify::{IdentifyError, outliers_message};
+    let o = TrackerRunOptions { seed: 8, poses: 200, removed: 0, ..Default::default() };
+    let dir = common::fresh_dir("real-data-swapped");
+    let (joints, files) = tracker_run(&o).unwrap().write(&dir, "run", 6).unwrap();
+    let read = |f: &PathBuf| std::fs::read_to_string(f).unwrap().lines().map(str::to_owned).collect::<Vec<_>>();
+    let (mut one, mut two) = (read(&files[0]), read(&files[1]));
+    let data: Vec<usize> = (0..one.len()).filter(|&i| !one[i].starts_with('#')).collect();
+    // Four stops whose readings of reflectors 1 and 2 were swapped (their 0-based measurement
+    // index: every stop is visible to both in this run).
+    let stops = [11, 57, 120, 163];
+    for &k in &stops {
+        let l = data[k];
+        std::mem::swap(&mut one[l], &mut two[l]);
+    }
+    let swapped = [dir.join("s1.txt"), dir.join("s2.txt"), files[2].clone()];
+    std::fs::write(&swapped[0], one.join("\n") + "\n").unwrap();
+    std::fs::write(&swapped[1], two.join("\n") + "\n").unwrap();
+    let clean = three_reflector::import(&joints, &files, irb120(), Purpose::Identification).unwrap().cell;
+    let cell = three_reflector::import(&joints, &swapped, irb120(), Purpose::Identification).unwrap().cell;
+
+    let (outliers, factor) = match identify(&cell, &options("", &[])) {
+        Err(IdentifyError::Outliers { outliers, factor }) => (outliers, factor),
+        other => panic!(
+            "swapped readings refused as outliers: {:?}",
+            other.map(|i| i.quality.rms_residual).map_err(|e| e.to_string())
+        ),
+    };
+    let mut named: Vec<(String, usize)> = outliers.iter().map(|w| (w.session.clone(), w.index)).collect();
+    named.sort();
+    let mut expected: Vec<(String, usize)> =
+        stops.iter().flat_map(|&k| [("reflector-1".to_string(), k), ("reflector-2".to_string(), k)]).collect();
+    expected.sort();
+    assert_eq!(named, expected);
+    for w in &outliers {
+        let other = if w.session == "reflector-1" { "reflector-2" } else { "reflector-1" };
+        let (s, d) = w.fits_other.as_ref().unwrap_or_else(|| panic!("{w:?}"));
+        // The fit they biased predicts the other reflector within a few mm, against 150 mm off.
+        assert!(s == other && *d < w.residual / 20.0, "{w:?}");
+    }
+    let message = outliers_message(&outliers, factor, "--exclude", "--huber");
+    assert!(message.contains(" and 3 more. 8 of them fit another target's TCP"), "{message}");
+    let refs = message.split("(--exclude ").nth(1).unwrap().split(')').next().unwrap();
+    assert_eq!(refs.split(',').count(), 8, "{message}");
+
+    // Left out as the message says, the fit is the clean files' less those readings.
+    let mut opts = options("", &[]);
+    opts.selection.exclude = outliers.iter().map(|w| (w.session.clone(), w.index)).collect();
+    let left_out = identify(&cell, &opts).unwrap();
+    let reference = identify(&clean, &opts).unwrap();
+    let rms = reference.quality.rms_residual;
+    assert!((left_out.quality.rms_residual - rms).abs() < 1e-9 * rms, "{} {rms}", left_out.quality.rms_residual);
+    // A 5 mm error is an outlier of its own: no other target is named for it.
+    let mut off = clean.clone();
+    if let robocal::cell::Observation::Position(p) = &mut off.sessions[2].measurements[40].observation {
+        p.z += 5.0 * MM;
+    }
+    let Err(IdentifyError::Outliers { outliers, .. }) = identify(&off, &options("", &[])) else { panic!("5 mm off") };
+    assert!(outliers.len() == 1 && outliers[0].fits_other.is_none(), "{outliers:?}");
+
+    // With the Huber loss the swapped readings stay in the RMS, not in the ratio: the command
+    // says what the ratio is of.
+    let path = dir.join("swapped.json");
+    std::fs::write(&path, serde_json::to_string(&robocal::domain::cell::CellFile::from_cell(&cell)).unwrap()).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(["identify", path.to_str().unwrap(), "--huber", "2.5", "--out", dir.join("p.json").to_str().unwrap()])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && text.contains("mm with its outliers left out ("), "{text}");
+}
+
 /// Positions paired with the wrong line of joint readings — a line deleted from one file only,
 /// a header counted as data — imported as a run whose residual is hundreds of millimetres, and
 /// `identify` refused it as a misfit that advised checking the TCPs, the frames and outliers.

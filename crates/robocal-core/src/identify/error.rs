@@ -223,12 +223,19 @@ pub struct Worst {
     /// How many times the typical measurement's residual it is, each row against its σ and the
     /// spread the model leaves ([`IdentifyError::Outliers`]).
     pub ratio: f64,
+    /// Another target's session whose fitted TCP, at this measurement's own joint readings, the
+    /// measured position fits, and by how much (m): the instrument measured that target here (a
+    /// tracker that locked onto the neighbouring reflector). `None` when none fits.
+    pub fits_other: Option<(String, f64)>,
 }
 
 /// The outlier refusal, its two remedies named as the front end spells its options (`exclude`
 /// and `huber` in a request or in Python, `--exclude` and `--huber` on the command line).
+///
+/// The remedy lists every outlier, not only the ones shown: followed, it must not be refused for
+/// the rest.
 pub fn outliers_message(outliers: &[Worst], factor: f64, exclude: &str, huber: &str) -> String {
-    let refs = outliers.iter().take(5).map(|w| format!("{}:{}", w.session, w.index)).collect::<Vec<_>>().join(",");
+    let refs = outliers.iter().map(|w| format!("{}:{}", w.session, w.index)).collect::<Vec<_>>().join(",");
     format!(
         "{}; leave them out ({exclude} {refs}) or fit with the Huber loss ({huber} 2.5)",
         outliers_found(outliers, factor)
@@ -238,12 +245,25 @@ pub fn outliers_message(outliers: &[Worst], factor: f64, exclude: &str, huber: &
 /// The outliers of a refusal without its remedies, for a caller whose remedies differ (a
 /// cross-validation has neither `exclude` nor `huber`).
 pub(crate) fn outliers_found(outliers: &[Worst], factor: f64) -> String {
+    let more = outliers.len().saturating_sub(SHOWN);
+    let more = if more > 0 { format!(" and {more} more") } else { String::new() };
+    let others = outliers.iter().filter(|w| w.fits_other.is_some()).count();
+    let others = if others > 0 {
+        format!(
+            ". {others} of them fit another target's TCP at their own joint readings (the ones listed say which): the instrument measured that target there (a tracker that locked onto the neighbouring reflector), so those readings belong in that target's file"
+        )
+    } else {
+        String::new()
+    };
     format!(
-        "{} outlier measurement(s), each more than {factor:.0} times the typical residual: {}",
+        "{} outlier measurement(s), each more than {factor:.0} times the typical residual: {}{more}{others}",
         outliers.len(),
         worst_list(outliers)
     )
 }
+
+/// Measurements a refusal lists by name.
+const SHOWN: usize = 5;
 
 pub(super) fn mm(v: f64) -> String {
     let v = v / crate::units::MM;
@@ -258,8 +278,14 @@ pub(super) fn mm(v: f64) -> String {
 
 fn worst_list(w: &[Worst]) -> String {
     w.iter()
-        .take(5)
-        .map(|w| format!("{}[{}] {} mm ({:.1} times the typical)", w.session, w.index, mm(w.residual), w.ratio))
+        .take(SHOWN)
+        .map(|w| {
+            let other = match &w.fits_other {
+                Some((s, d)) => format!("; it fits {s}'s TCP by {} mm", mm(*d)),
+                None => String::new(),
+            };
+            format!("{}[{}] {} mm ({:.1} times the typical{other})", w.session, w.index, mm(w.residual), w.ratio)
+        })
         .collect::<Vec<_>>()
         .join(", ")
 }

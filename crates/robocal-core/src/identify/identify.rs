@@ -400,6 +400,12 @@ fn judge_fit(
     let fitness = Fitness::of(problem, cell, &noise, fit, opts.outlier_factor);
     quality.expected_rms = fitness.expected_rms;
     quality.residual_ratio = fitness.ratio;
+    // Gross outliers first: they bias the fit, and so the residual of the rest, which may then
+    // read as a misfit (eight readings of the neighbouring reflector among 600: 80 times the
+    // instrument's noise); left out, the rest is judged again.
+    if !fitness.outliers.is_empty() {
+        return Err(IdentifyError::Outliers { outliers: fitness.outliers, factor: opts.outlier_factor });
+    }
     if fitness.ratio > opts.residual_ratio_limit {
         return Err(IdentifyError::Misfit {
             rms: fitness.rms,
@@ -408,9 +414,6 @@ fn judge_fit(
             limit: opts.residual_ratio_limit,
             worst: fitness.worst.clone(),
         });
-    }
-    if !fitness.outliers.is_empty() {
-        return Err(IdentifyError::Outliers { outliers: fitness.outliers, factor: opts.outlier_factor });
     }
 
     let combination = || {
@@ -506,6 +509,10 @@ fn judge_where_it_stopped(
 /// Measurements listed in [`Identification::worst`].
 pub const WORST_REPORTED: usize = 5;
 
+/// A measurement "fits another target" when that target's TCP, at its joint readings, predicts its
+/// position within this many times the fit's RMS.
+const OTHER_TARGET_RMS: f64 = 5.0;
+
 /// The residual of a fit against the noise the instrument model predicts.
 struct Fitness {
     /// RMS over the measurements (outliers left out) of |residual|, m.
@@ -579,6 +586,7 @@ impl Fitness {
                 index: o.index,
                 residual: per[i].0.sqrt(),
                 ratio: per[i].2 / typical,
+                fits_other: None,
             }
         };
         let mut order: Vec<usize> = (0..per.len()).collect();
@@ -594,12 +602,38 @@ impl Fitness {
         }
         let n = n.max(1) as f64;
         let (rms, expected_rms) = ((ee / n).sqrt(), (ss / n).sqrt());
+        // A measurement far off whose position another target's TCP, at its own joint readings,
+        // predicts within what the model misses anyway (a few times the RMS), and at most a third
+        // of its own residual: that target was measured there.
+        let fits_other = |i: usize| {
+            let o = &problem.obs[i];
+            if o.is_ball() || problem.tools.len() < 2 {
+                return None;
+            }
+            let own = per[i].0.sqrt();
+            let measured = o.measured_position();
+            (0..problem.tools.len())
+                .filter(|&t| t != o.tool)
+                .map(|t| (t, (chains[t].fk(&o.state).t - measured).norm()))
+                .filter(|&(_, d)| d <= (OTHER_TARGET_RMS * rms).min(own / 3.0))
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .map(|(t, d)| (problem.tools[t].sessions[0].clone(), d))
+        };
+        let with_other = |mut w: Worst, i: usize| {
+            w.fits_other = fits_other(i);
+            w
+        };
         Fitness {
             rms,
             expected_rms,
             ratio: if expected_rms > 0.0 { rms / expected_rms } else { f64::INFINITY },
-            worst: order.iter().take(WORST_REPORTED).map(|&i| worst_of(i)).collect(),
-            outliers: order.iter().copied().filter(|&i| is_outlier(i) && fit.weights[i] >= 1.0).map(worst_of).collect(),
+            worst: order.iter().take(WORST_REPORTED).map(|&i| with_other(worst_of(i), i)).collect(),
+            outliers: order
+                .iter()
+                .copied()
+                .filter(|&i| is_outlier(i) && fit.weights[i] >= 1.0)
+                .map(|i| with_other(worst_of(i), i))
+                .collect(),
         }
     }
 }

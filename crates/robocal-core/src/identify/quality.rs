@@ -47,7 +47,9 @@ pub struct Quality {
     /// RMS of the noise the instrument model and the measurements' own σ predict for the
     /// measurement residuals (outliers left out), m; 0 until the identification sets it.
     pub expected_rms: f64,
-    /// The residual RMS over `expected_rms` (1 when model and noise model are right).
+    /// The residual RMS over `expected_rms` (1 when model and noise model are right), both with
+    /// the outliers left out: with a robust loss that down-weighted some, this is not
+    /// `rms_residual / expected_rms`.
     pub residual_ratio: f64,
 }
 
