@@ -195,20 +195,25 @@ fn read_files(
             });
         }
         let mut measurements = Vec::with_capacity(lines.len());
-        let mut hidden = Vec::new();
+        let (mut hidden, mut zeros) = (Vec::new(), Vec::new());
         for (pose, ((line, text), q)) in lines.iter().zip(&poses).enumerate() {
             match position(path, *line, text)? {
                 None => hidden.push(*line),
-                Some(p) => measurements.push(Measurement {
-                    q: q.clone(),
-                    observation: Observation::Position(p),
-                    temperature_c: None,
-                    time_s: None,
-                    sequence: Some(pose as u64),
-                    approach: None,
-                    indicators: None,
-                    sigma: None,
-                }),
+                Some(p) => {
+                    if p == Vector3::zeros() {
+                        zeros.push(*line);
+                    }
+                    measurements.push(Measurement {
+                        q: q.clone(),
+                        observation: Observation::Position(p),
+                        temperature_c: None,
+                        time_s: None,
+                        sequence: Some(pose as u64),
+                        approach: None,
+                        indicators: None,
+                        sigma: None,
+                    })
+                }
             }
         }
         let mut note = format!("{name}: {} measurements from {}", measurements.len(), path.display());
@@ -217,6 +222,16 @@ fn read_files(
                 "; not visible at {} pose(s) (line(s) {}), skipped",
                 hidden.len(),
                 line_list(&hidden)
+            ));
+        }
+        // A reflector at the instrument's own origin cannot be measured: zeros are what some
+        // exports write for a reading not taken. Read as written (the fit then refuses them as
+        // outliers metres off), and said here, where the remedy is.
+        if !zeros.is_empty() {
+            note.push_str(&format!(
+                "; {} line(s) read exactly 0 0 0, the instrument's own origin (line(s) {}): if the instrument writes zeros for a reading it did not take, write `nan nan nan` there",
+                zeros.len(),
+                line_list(&zeros)
             ));
         }
         notes.push(note);
@@ -547,6 +562,18 @@ mod tests {
         assert!(notes.contains("jh.csv line 1 read as a column header and skipped: J1,J2,J3,J4,J5,J6"), "{notes}");
         assert!(notes.contains("rh.csv line 1 read as a column header and skipped: X;Y;Z"), "{notes}");
         assert!(!plain.notes.join("\n").contains("header"), "{:?}", plain.notes);
+        assert!(!plain.notes.join("\n").contains("0 0 0"), "{:?}", plain.notes);
+        // Zeros where a reading was not taken: read as written, said with their lines.
+        let zeros = read_files(
+            &write("jz.txt", &plain_j),
+            &[write("rz.txt", "500 20 300\n0.000 0.000 0.000\n")],
+            irb120(),
+            Purpose::Identification,
+        )
+        .unwrap();
+        assert_eq!(zeros.cell.sessions[0].measurements.len(), 2);
+        let notes = zeros.notes.join("\n");
+        assert!(notes.contains("1 line(s) read exactly 0 0 0, the instrument's own origin (line(s) 2)"), "{notes}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
