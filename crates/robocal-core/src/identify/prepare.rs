@@ -145,21 +145,17 @@ fn starting_base(cell: &Cell, picks: &[(usize, usize)]) -> Result<Start, Identif
         })
     };
     let guessed = from(cell.base_guess)?;
-    let (Some(rms), Some(bound)) = (guessed.rms, super::convention::suspicious_above(cell, picks)) else {
-        return Ok(guessed);
-    };
-    if cell.base_guess.is_none() || rms <= bound {
-        return Ok(guessed);
-    }
+    let Some(guess) = cell.base_guess else { return Ok(guessed) };
+    let suspicious = super::convention::suspicious_above(cell, picks);
+    let Some(rms) = guessed.rms.filter(|&r| suspicious.is_some_and(|b| r > b)) else { return Ok(guessed) };
     match from(None) {
         Ok(free) if free.rms.is_some_and(|r| r < rms) => {
-            let r = free.rms.unwrap_or(rms);
             let note = format!(
                 "the base guess missed the measured positions by {} mm RMS on the nominal robot, where the nominal robot registered on them misses by {} mm: the fit started from the registration (check the base guess: {} mm, {}°)",
                 super::error::mm(rms),
-                super::error::mm(r),
-                fmt3(&cell.base_guess.unwrap_or_default()[..3], 1.0 / crate::units::MM),
-                fmt3(&cell.base_guess.unwrap_or_default()[3..], 1f64.to_degrees()),
+                super::error::mm(free.rms.unwrap_or(rms)),
+                fmt3(&guess[..3], 1.0 / crate::units::MM),
+                fmt3(&guess[3..], 1f64.to_degrees()),
             );
             Ok(Start { note: Some(note), ..free })
         }
