@@ -479,17 +479,26 @@ impl CrossvalReport {
                 sessions.push(&m.session);
             }
         }
-        // A handful is named in full; hundreds (a file off by a line) are a data problem, not outliers.
+        // A handful is named; the command to check the fit without them lists every one (with
+        // five of ten it is refused again for the rest), up to a number that points at the data
+        // rather than at outliers (a shared TCP, sessions in different frames).
         const SHOWN: usize = 5;
+        const LISTED: usize = 50;
+        let n = self.outliers.len();
         let named: Vec<String> =
             self.outliers.iter().take(SHOWN).map(|m| format!("{}[{}]", m.session, m.index)).collect();
-        let refs: Vec<String> =
-            self.outliers.iter().take(SHOWN).map(|m| format!("{}:{}", m.session, m.index)).collect();
-        let more = match self.outliers.len() {
-            n if n > SHOWN => format!(
-                " and {} more (so many point at the data: a file off by a line, a shared TCP, sessions in different frames)",
+        let refs: Vec<String> = self
+            .outliers
+            .iter()
+            .take(if n > LISTED { SHOWN } else { n })
+            .map(|m| format!("{}:{}", m.session, m.index))
+            .collect();
+        let more = match n {
+            n if n > LISTED => format!(
+                " and {} more (so many point at the data: a shared TCP, sessions in different frames; the command below names the first {SHOWN})",
                 n - SHOWN
             ),
+            n if n > SHOWN => format!(" and {} more", n - SHOWN),
             _ => String::new(),
         };
         format!(

@@ -1400,6 +1400,14 @@ fn readings_of_the_neighbouring_reflector_are_named_and_all_listed() {
         .unwrap();
     let text = String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success() && text.contains("mm with its outliers left out ("), "{text}");
+    // Cross-validation's advice: the command that checks the fit without them lists all eight.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(["crossval", path.to_str().unwrap(), "--session", "reflector-1,reflector-2,reflector-3"])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout).to_string();
+    let refs = text.split("--exclude ").nth(1).and_then(|t| t.split('`').next()).unwrap_or_else(|| panic!("{text}"));
+    assert_eq!(refs.split(',').count(), 8, "{text}");
 }
 
 /// Positions paired with the wrong line of joint readings — a line deleted from one file only,
