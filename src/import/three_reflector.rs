@@ -461,7 +461,7 @@ mod tests {
         assert!(e.contains("expected 6 joint values, got 7 (the first, 1, reads as a line or point number"), "{e}");
         let e = position(Path::new("r.txt"), 2, "17;1742,8;-1070,9;320,4").unwrap_err().to_string();
         assert!(e.contains("got 4 (the first, 17, reads as a line or point number"), "{e}");
-        // Too few values, or a first value with a decimal point: no such hint.
+        // A value too many whose first has a decimal point: no such hint.
         let e = position(Path::new("r.txt"), 2, "1742.8 -1070.9 320.4 0.02").unwrap_err().to_string();
         assert!(!e.contains("line or point number"), "{e}");
     }

@@ -180,8 +180,6 @@ fn nearest_rotation(m: &Matrix3<f64>) -> Option<Matrix3<f64>> {
     Some(u * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * v_t)
 }
 
-/// The (nominal TCP position with the base at identity, observed position) pairs of the picked
-/// measurements that have an observed position, in pick order.
 /// The RMS distance (m) between the nominal robot's TCP positions with the base at `base` and the
 /// observed positions of the picked measurements: how far a base guess starts from them. `None`
 /// when no picked measurement observes a position.
@@ -195,6 +193,8 @@ pub(crate) fn miss_at(cell: &Cell, picks: &[(usize, usize)], base: &[f64; 6]) ->
     Some((sum / model.len() as f64).sqrt())
 }
 
+/// The (nominal TCP position with the base at identity, observed position) pairs of the picked
+/// measurements that have an observed position, in pick order.
 fn point_pairs(cell: &Cell, picks: &[(usize, usize)]) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
     let chains: Vec<_> = cell
         .sessions
