@@ -31,7 +31,7 @@ fn calibrated(cell: &Cell, sessions: &[&str]) -> Identification {
 
 fn run(cell: &Cell, id: &Identification, opts: &DiagnoseOptions) -> String {
     let identified: Vec<bool> = id.status.iter().map(|s| matches!(s, robocal::identify::Status::Identified)).collect();
-    let input = Input { cell, set: &id.set, identified: Some(identified), fixed: Vec::new() };
+    let input = Input { cell, set: &id.set, identified: Some(identified), fixed: Vec::new(), excluded: Vec::new() };
     let d = diagnose(&input, opts).expect("diagnosis");
     d.verdict.summary
 }

@@ -313,6 +313,7 @@ pub struct DiagnoseArgs {
     pub validation: Option<String>,
     /// Measurements left out of every fit and every test, `session:index` (0-based),
     /// comma-separated: the outliers an identification refused (as given to `identify --exclude`).
+    /// Those the set's identification left out are left out without this (recorded in the set).
     #[arg(long)]
     pub exclude: Option<String>,
     /// Folds of the grouped cross-validation.

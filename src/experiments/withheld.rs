@@ -463,7 +463,7 @@ fn score(
         Err(e) => return fail(format!("identification: {e}")),
     };
     let identified: Vec<bool> = id.status.iter().map(|s| *s == crate::identify::Status::Identified).collect();
-    let input = Input { cell, set: &id.set, identified: Some(identified), fixed: Vec::new() };
+    let input = Input { cell, set: &id.set, identified: Some(identified), fixed: Vec::new(), excluded: Vec::new() };
     let o = DiagnoseOptions { seed, ..opts.clone() };
     let d = match diagnose(&input, &o) {
         Ok(d) => d,

@@ -357,7 +357,7 @@ fn stored_identify_error(e: IdentifyError, indices: &StoredIndices) -> IdentifyE
 }
 
 /// A parameter-set document's quality report with the measurements it names (`worst`,
-/// `downweighted`) by their stored index.
+/// `downweighted`, `fit_measurements`, `excluded`) by their stored index.
 fn stored_quality(doc: &mut ParameterSetDoc, indices: &StoredIndices) {
     let Some(q) = doc.quality.as_mut() else { return };
     for w in q.worst.iter_mut().flatten() {
@@ -366,10 +366,22 @@ fn stored_quality(doc: &mut ParameterSetDoc, indices: &StoredIndices) {
     for d in q.downweighted.iter_mut().flatten() {
         d.index = indices.stored(&d.session, d.index);
     }
-    for f in q.fit_measurements.iter_mut().flatten() {
+    for f in q.fit_measurements.iter_mut().flatten().chain(q.excluded.iter_mut().flatten()) {
         for i in f.indices.iter_mut() {
             *i = indices.stored(&f.session, *i);
         }
+    }
+}
+
+/// The readings a set's identification left out (`quality.excluded`, stored indices) by their
+/// index in the job's cell; those excluded in the store since are not in the cell and go.
+fn cell_excluded(doc: &mut ParameterSetDoc, indices: &StoredIndices) {
+    let Some(q) = doc.quality.as_mut() else { return };
+    for f in q.excluded.iter_mut().flatten() {
+        let kept: Vec<(usize, usize)> =
+            f.indices.iter().enumerate().filter_map(|(k, &i)| Some((k, indices.cell(&f.session, i)?))).collect();
+        f.fingerprints = f.fingerprints.take().map(|p| kept.iter().filter_map(|&(k, _)| p.get(k).cloned()).collect());
+        f.indices = kept.into_iter().map(|(_, i)| i).collect();
     }
 }
 
@@ -457,8 +469,9 @@ pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64, &'static str) + Sync)) ->
             })
         }
         Inputs::Diagnosis { job, set_json, cell, indices, sessions } => {
-            let doc = ParameterSetDoc::from_json(&set_json)
+            let mut doc = ParameterSetDoc::from_json(&set_json)
                 .map_err(|e| JobError::Internal(format!("stored parameter set: {e}")))?;
+            cell_excluded(&mut doc, &indices);
             let cell_si = cell.to_cell().map_err(|e| JobError::domain(e, "stored cell"))?;
             // The sessions by the names the cell gives them. The held-out refits run on this
             // worker's thread (`threads: 1`, the default): a worker is one solver thread.
@@ -477,7 +490,11 @@ pub fn compute(inputs: Inputs, progress: &(dyn Fn(f64, &'static str) + Sync)) ->
                 other => diagnose_error(other),
             })?;
             progress(0.95, "storing");
-            let out = diagnosis_out(&d);
+            let mut out = diagnosis_out(&d);
+            // The readings left out, by their stored index (as the request and the set name them).
+            for m in &mut out.sessions.excluded {
+                m.index = indices.stored(&m.session, m.index);
+            }
             Ok(Output::Diagnosis {
                 parameter_set_id: job.parameter_set_id,
                 sessions_json: json!({"identification": sessions.identification, "validation": sessions.validation})

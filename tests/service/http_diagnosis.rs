@@ -243,3 +243,50 @@ async fn without_an_effect_there_is_nothing_to_accept_and_bad_requests_name_the_
 
     app.stop().await;
 }
+
+/// A set identified with a reading left out by its request (`exclude`, as a refused fit advises),
+/// another excluded in the store before it so that the cell's indices differ from the stored
+/// ones. The set records what it left out by the stored index; the diagnosis leaves the same
+/// reading out, names it by that index and says so. Before, the diagnosis fitted and tested it.
+#[tokio::test]
+async fn a_diagnosis_leaves_out_the_reading_the_sets_identification_left_out() {
+    let app = TestApp::default().await;
+    let c = cell("", 5);
+    let rid = robot(&app, "r").await;
+    let aid = artefact(&app, "plate").await;
+    let ids = upload(&app, &rid, &aid, &c).await;
+    let sid = ids.iter().find(|(n, _)| n == "trical-1").unwrap().1.clone();
+    let r = app
+        .raw(
+            axum::http::Method::PATCH,
+            &format!("/v1/sessions/{sid}/measurements/3"),
+            Some("application/json"),
+            serde_json::to_vec(&json!({"excluded": true, "reason": "nest not cleaned"})).unwrap(),
+            &[],
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    let body = json!({"sessions": ["trical-1"], "exclude": [{"session": "trical-1", "index": 12}]});
+    let j = app.wait(&app.post(&format!("/v1/robots/{rid}/identifications"), &body).await.body).await;
+    assert_eq!(j["state"], "succeeded", "{j}");
+    let set_id = j["result"]["parameter_set_id"].as_str().unwrap().to_string();
+    let set = app.get(&format!("/v1/parameter-sets/{set_id}")).await;
+    let q = &set.body["parameter_set"]["quality"];
+    assert_eq!(q["excluded"][0]["session"], "trical-1", "{q}");
+    assert_eq!(q["excluded"][0]["indices"], json!([12]), "the stored index: {q}");
+    assert_eq!(q["excluded"][0]["fingerprints"].as_array().map(Vec::len), Some(1), "{q}");
+    let fitted: Vec<u64> =
+        q["fit_measurements"][0]["indices"].as_array().unwrap().iter().map(|i| i.as_u64().unwrap()).collect();
+    assert!(!fitted.contains(&3) && !fitted.contains(&12) && fitted.contains(&13), "{fitted:?}");
+
+    let j = diagnose(&app, &set_id, &json!({"identification": ["trical-1"], "validation": [], "folds": 4})).await;
+    assert_eq!(j["state"], "succeeded", "{j}");
+    let d = app.get(&format!("/v1/diagnoses/{}", j["result"]["diagnosis_id"].as_str().unwrap())).await;
+    let report = &d.body["report"];
+    assert_eq!(report["sessions"]["excluded"], json!([{"session": "trical-1", "index": 12}]), "{report}");
+    let notes: Vec<&str> = report["notes"].as_array().unwrap().iter().filter_map(Value::as_str).collect();
+    assert!(
+        notes.iter().any(|n| n.starts_with("1 reading that the parameter set's identification left out")),
+        "{notes:?}"
+    );
+}

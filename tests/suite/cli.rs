@@ -667,7 +667,8 @@ fn positions_in_another_unit_are_refused_with_the_unit_named() {
 
 /// `diagnose --exclude` leaves an outlier out of every fit and every test, as `identify
 /// --exclude` leaves it out of the set: a reading 20 mm off, fitted and scored, makes the held-out
-/// maximum 20 mm; excluded, it is neither, and a bad exclusion is refused naming the option.
+/// maximum 20 mm; excluded, it is neither, and a bad exclusion is refused naming the option. The
+/// set records what its identification left out, and `diagnose` leaves that out unasked.
 #[test]
 fn diagnose_leaves_out_the_readings_it_is_told_to() {
     let dir = std::env::temp_dir().join(format!("robocal-cli-diag-exclude-{}", std::process::id()));
@@ -682,18 +683,27 @@ fn diagnose_leaves_out_the_readings_it_is_told_to() {
     let params = dir.join("params.json").to_string_lossy().to_string();
     let (ok, _, err) = robocal(&["identify", &bad, "--exclude", &outlier, "--out", &params]);
     assert!(ok, "{err}");
-    let diagnose = |extra: &[&str]| {
-        let mut args = vec!["diagnose", &params, &bad, "--validation", "none", "--threads", "2"];
+    // The same set without its record of what it left out (a file of an earlier version).
+    let mut unrecorded: Value = serde_json::from_str(&std::fs::read_to_string(&params).unwrap()).unwrap();
+    assert_eq!(unrecorded["quality"]["excluded"][0]["indices"], serde_json::json!([7]), "recorded");
+    unrecorded["quality"].as_object_mut().unwrap().remove("excluded");
+    let blind = dir.join("unrecorded.json").to_string_lossy().to_string();
+    std::fs::write(&blind, unrecorded.to_string()).unwrap();
+    let diagnose = |set: &str, extra: &[&str]| {
+        let mut args = vec!["diagnose", set, &bad, "--validation", "none", "--threads", "2"];
         args.extend_from_slice(extra);
         let (ok, d, err) = robocal(&args);
         assert!(ok, "{err}");
         let start = &d["shrink"][0];
-        (start["n"].as_u64().unwrap(), start["max_mm"].as_f64().unwrap())
+        (start["n"].as_u64().unwrap(), start["max_mm"].as_f64().unwrap(), d["sessions"]["excluded"].clone())
     };
-    let (n_all, max_all) = diagnose(&[]);
-    let (n, max) = diagnose(&["--exclude", &outlier]);
-    assert!(max_all > 15.0, "the outlier scored: {max_all} mm");
+    let (n_all, max_all, none) = diagnose(&blind, &[]);
+    let (n, max, named) = diagnose(&blind, &["--exclude", &outlier]);
+    assert!(max_all > 15.0 && none.is_null(), "the outlier scored: {max_all} mm");
     assert!(max < 2.0 && n < n_all, "excluded: {n} readings (of {n_all}), max {max} mm");
+    let listed = serde_json::json!([{"session": name, "index": 7}]);
+    assert_eq!(named, listed);
+    assert_eq!(diagnose(&params, &[]), (n, max, listed), "the set's record leaves it out unasked");
     let (ok, _, err) = robocal(&["diagnose", &params, &bad, "--exclude", &format!("{name}:600")]);
     assert!(!ok && err.contains("exclude") && err.contains("600"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);

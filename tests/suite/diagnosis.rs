@@ -87,7 +87,8 @@ fn ur10_fine_joint_structure_on_joints_1_to_3() {
     id_opts.selection.sessions = vec!["series-C".into()];
     let id = identify(&cell, &id_opts).unwrap();
     let identified: Vec<bool> = id.status.iter().map(|s| matches!(s, robocal::identify::Status::Identified)).collect();
-    let input = Input { cell: &cell, set: &id.set, identified: Some(identified), fixed: Vec::new() };
+    let input =
+        Input { cell: &cell, set: &id.set, identified: Some(identified), fixed: Vec::new(), excluded: Vec::new() };
     let opts = DiagnoseOptions {
         identification: vec!["series-C".into()],
         validation: Some(Vec::new()),
@@ -154,7 +155,8 @@ fn compensation_with_an_accepted_effect_lands_on_the_virtual_robot() {
     let cell = sim.cell;
     let id = identify(&cell, &IdentifyOptions::default()).unwrap();
     let identified: Vec<bool> = id.status.iter().map(|s| matches!(s, robocal::identify::Status::Identified)).collect();
-    let input = Input { cell: &cell, set: &id.set, identified: Some(identified), fixed: Vec::new() };
+    let input =
+        Input { cell: &cell, set: &id.set, identified: Some(identified), fixed: Vec::new(), excluded: Vec::new() };
     let d = diagnose(&input, &DiagnoseOptions::default()).unwrap();
     assert_eq!(d.verdict.status, Status::Named, "{}", d.verdict.summary);
     let accepted = d.accepted.as_ref().expect("an accepted model").set.clone();
@@ -287,7 +289,7 @@ fn a_shuffled_session_gives_no_backlash_direction() {
         let id = identify(cell, &IdentifyOptions::default()).unwrap();
         let identified: Vec<bool> =
             id.status.iter().map(|s| matches!(s, robocal::identify::Status::Identified)).collect();
-        let input = Input { cell, set: &id.set, identified: Some(identified), fixed: Vec::new() };
+        let input = Input { cell, set: &id.set, identified: Some(identified), fixed: Vec::new(), excluded: Vec::new() };
         diagnose(&input, &DiagnoseOptions::default()).unwrap()
     };
     let d = run(&cell);

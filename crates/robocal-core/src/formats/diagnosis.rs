@@ -151,6 +151,11 @@ pub struct SessionsOut {
     pub tested: String,
     /// K of the grouped K-fold cross-validation.
     pub folds: usize,
+    /// Readings left out of every fit and every test: those the request named and those the
+    /// parameter set's identification was told to leave out (the service names them by their
+    /// stored index).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub excluded: Vec<super::identify_options::MeasurementRef>,
 }
 
 /// What a diagnosis concludes.
@@ -848,6 +853,7 @@ pub fn diagnosis_out(d: &Diagnosis) -> DiagnosisOut {
         })
         .collect();
     let mut notes = d.approach_notes.clone();
+    notes.extend(d.excluded_note.clone());
     if let Some(n) = &d.start_note {
         notes.push(format!(
             "the starting model does not converge on the pooled data ({n}); it is linearised at the given parameter set"
@@ -877,6 +883,14 @@ pub fn diagnosis_out(d: &Diagnosis) -> DiagnosisOut {
             validation: d.validation.clone(),
             tested: if d.validation.is_empty() { "identification".into() } else { "validation".into() },
             folds: d.folds,
+            excluded: d
+                .excluded
+                .iter()
+                .map(|(session, index)| super::identify_options::MeasurementRef {
+                    session: session.clone(),
+                    index: *index,
+                })
+                .collect(),
         },
         transfer: d
             .transfer

@@ -198,7 +198,8 @@ impl DiagnoseSpec {
 }
 
 /// The diagnosis's input from a parameter-set document: which parameters its identification
-/// fitted (status `identified`) and which the user held fixed (kept so).
+/// fitted (status `identified`), which the user held fixed (kept so), and which readings it was
+/// told to leave out (left out).
 pub fn input_of<'a>(cell: &'a crate::cell::Cell, doc: &'a ParameterSetDoc) -> Input<'a> {
     let known = doc.status.iter().any(|s| s.is_some());
     let identified = known.then(|| doc.status.iter().map(|s| s.as_deref() == Some("identified")).collect());
@@ -211,5 +212,16 @@ pub fn input_of<'a>(cell: &'a crate::cell::Cell, doc: &'a ParameterSetDoc) -> In
         .filter(|(_, s)| s.as_deref().is_some_and(|s| s.contains("fixed by the user")))
         .map(|(p, _)| p.to_string())
         .collect();
-    Input { cell, set: &doc.set, identified, fixed }
+    let excluded = doc
+        .quality
+        .iter()
+        .flat_map(|q| q.excluded.iter().flatten())
+        .flat_map(|f| {
+            f.indices
+                .iter()
+                .enumerate()
+                .map(|(k, &i)| (f.session.clone(), i, f.fingerprints.as_ref().and_then(|p| p.get(k).cloned())))
+        })
+        .collect();
+    Input { cell, set: &doc.set, identified, fixed, excluded }
 }

@@ -66,6 +66,43 @@ pub fn fit_measurements(id: &Identification) -> Vec<FitMeasurements> {
         .collect()
 }
 
+/// The measurements an identification was told to leave out, per session in the order first
+/// named (0-based indices, ascending, each with its fingerprint); `None` when none was.
+pub fn excluded_measurements(id: &Identification) -> Option<Vec<FitMeasurements>> {
+    let mut per: Vec<FitMeasurements> = Vec::new();
+    for (session, index, fingerprint) in &id.excluded {
+        let at = match per.iter().position(|f| &f.session == session) {
+            Some(at) => at,
+            None => {
+                per.push(FitMeasurements {
+                    session: session.clone(),
+                    fingerprints: Some(Vec::new()),
+                    ..Default::default()
+                });
+                per.len() - 1
+            }
+        };
+        let f = &mut per[at];
+        if f.indices.contains(index) {
+            continue;
+        }
+        f.indices.push(*index);
+        // A ball of a cell without its artefact has no position to fingerprint: the index alone
+        // then names it.
+        match (fingerprint, f.fingerprints.as_mut()) {
+            (Some(p), Some(ps)) => ps.push(p.clone()),
+            _ => f.fingerprints = None,
+        }
+    }
+    for f in &mut per {
+        let mut order: Vec<usize> = (0..f.indices.len()).collect();
+        order.sort_by_key(|&k| f.indices[k]);
+        f.fingerprints = f.fingerprints.take().map(|ps| order.iter().map(|&k| ps[k].clone()).collect());
+        f.indices = order.iter().map(|&k| f.indices[k]).collect();
+    }
+    (!per.is_empty()).then_some(per)
+}
+
 /// The parameter-set document of an identification; `selection` describes how the measurements
 /// were chosen (e.g. DETMAX settings), carried into the quality report.
 pub fn identification_doc(id: &Identification, sessions: &[String], selection: Option<Value>) -> ParameterSetDoc {
@@ -94,6 +131,7 @@ pub fn identification_doc(id: &Identification, sessions: &[String], selection: O
     let quality = Quality {
         sessions: Some(sessions.to_vec()),
         fit_measurements: Some(fit_measurements(id)),
+        excluded: excluded_measurements(id),
         selection,
         n_measurements: Some(q.n_configs),
         n_rows: Some(q.n_rows),

@@ -50,6 +50,12 @@ pub struct Quality {
     /// `sessions` was fitted on whole.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fit_measurements: Option<Vec<FitMeasurements>>,
+    /// The measurements the identification was told to leave out (its `exclude`: the outliers a
+    /// fit refused), per session, with their fingerprints: a diagnosis of this set leaves the same
+    /// readings out, found by their content. Absent when none was left out (and in files of
+    /// earlier versions, which did not record them).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub excluded: Option<Vec<FitMeasurements>>,
     /// How the measurements were chosen when a selection ran (DETMAX: `method`, `n`, `seed`,
     /// `pool`, the selection index before and after, exchanges, …); absent when all were used.
     #[cfg_attr(feature = "openapi", schema(value_type = Option<Object>))]
@@ -136,13 +142,14 @@ pub struct Quality {
     pub other: Map<String, Value>,
 }
 
-/// The measurements of one session an identification fitted on.
+/// The measurements of one session an identification fitted on (in `excluded`: was told to
+/// leave out).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct FitMeasurements {
     /// The session's name.
     pub session: String,
-    /// 0-based indices of its measurements fitted on, ascending (the service writes the stored
+    /// 0-based indices of those measurements, ascending (the service writes the stored
     /// indices).
     pub indices: Vec<usize>,
     /// The fingerprint of each of those measurements' content, in the order of `indices`

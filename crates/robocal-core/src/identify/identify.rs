@@ -44,6 +44,10 @@ pub struct Identification {
     pub iterations: usize,
     /// Observations down-weighted by the robust loss: (session, index, weight).
     pub downweighted: Vec<(String, usize, f64)>,
+    /// The readings the options left out (`selection.exclude`: outliers), in the options' order:
+    /// (session, index, the reading's [`crate::cell::fingerprint`] — `None` for a ball of a cell
+    /// without its artefact). What a diagnosis of the set leaves out too.
+    pub excluded: Vec<(String, usize, Option<String>)>,
     /// The measurements with the largest residuals against their expected noise, largest first
     /// (at most [`WORST_REPORTED`]).
     pub worst: Vec<Worst>,
@@ -192,6 +196,16 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
         .filter(|(_, w)| **w < 1.0)
         .map(|(o, w)| (problem.session_names[o.session].clone(), o.index, *w))
         .collect();
+    // `picks` checked every excluded reading is in the cell.
+    let excluded = opts
+        .selection
+        .exclude
+        .iter()
+        .filter_map(|(name, i)| {
+            let m = cell.session(name)?.measurements.get(*i)?;
+            Some((name.clone(), *i, crate::cell::fingerprint::of_measurement(cell, m)))
+        })
+        .collect();
     Ok(Identification {
         worst,
         set,
@@ -201,6 +215,7 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
         free_names: free.iter().map(|&g| problem.name(g)).collect(),
         iterations: fit.iterations,
         downweighted,
+        excluded,
         quality,
         x: fit.x,
         notes,
