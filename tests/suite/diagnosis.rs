@@ -142,6 +142,23 @@ fn ur10_fine_joint_structure_on_joints_1_to_3() {
         );
         let range = get("final").range.clone().expect("a range split");
         assert!(range.inside_share < 0.01, "{s}: {:.3} of the poses inside C's ranges", range.inside_share);
+        // The verdict's summary carries both figures and the share outside, as the transfer
+        // table has them: "series-B 0.4418 mm → 0.4525 mm (+0.0107 mm, 100 % of its poses …".
+        let said = format!(
+            "{s} {:.4} mm → {:.4} mm ({:+.4} mm, {:.0} % of its poses outside the identification's joint ranges)",
+            a.mean / MM,
+            b.mean / MM,
+            (b.mean - a.mean) / MM,
+            100.0 * (1.0 - range.inside_share)
+        );
+        assert!(v.summary.contains(&said), "{said} not in: {}", v.summary);
+        // The closing remark only where the final mean is the larger.
+        let remark = v.summary.contains("did not improve that session");
+        let any_worse = ["series-B", "series-D"].iter().any(|s| {
+            let get = |m: &str| d.transfer.iter().find(|t| t.session == *s && t.model == m).unwrap();
+            get("final").errors.as_ref().unwrap().mean > get("start").errors.as_ref().unwrap().mean
+        });
+        assert_eq!(remark, any_worse, "{}", v.summary);
     }
 }
 
