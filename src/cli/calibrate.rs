@@ -99,8 +99,9 @@ pub struct ValidateArgs {
     pub json: bool,
 }
 
-/// `--exclude session:index,…` of identify and diagnose, each parsed; errors name the option.
-fn exclusions(arg: &Option<String>) -> Result<Vec<crate::domain::identification::MeasurementRef>, CliError> {
+/// `--exclude session:index,…` of identify, diagnose and crossval, each parsed; errors name the
+/// option.
+pub(super) fn exclusions(arg: &Option<String>) -> Result<Vec<crate::domain::identification::MeasurementRef>, CliError> {
     use crate::domain::identification::MeasurementRef;
     list(arg).iter().map(|m| MeasurementRef::parse(m, "exclude")).collect::<Result<_, _>>().map_err(option_error)
 }

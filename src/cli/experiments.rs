@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::progress::Progress;
-use super::reports::{CrossvalReport, StudyReport};
+use super::reports::{CrossvalReport, MeasurementFigure, StudyReport};
 use super::{CliError, DetmaxArgs, ThreadsArgs, list, load_cell, option_error, write, write_report, wrote};
 
 #[derive(Args, Debug)]
@@ -66,6 +66,10 @@ pub struct CrossvalArgs {
     /// Draws per size.
     #[arg(long, default_value_t = 10)]
     pub draws: usize,
+    /// Readings left out of every fit and every score, `session:index` (0-based),
+    /// comma-separated: the outliers a refused fit named (as given to `identify --exclude`).
+    #[arg(long)]
+    pub exclude: Option<String>,
     /// Sessions to transfer the whole-session model to, refitting only base and tools there.
     #[arg(long)]
     pub transfer: Option<String>,
@@ -172,7 +176,25 @@ pub(super) fn crossval(a: CrossvalArgs) -> Result<String, CliError> {
     use crate::domain::identification::{IdentifySpec, kappa_limit};
     use crate::identify::crossval::{CrossvalOptions, Variant, crossval_with_progress};
     let cell = load_cell(&a.cell)?;
+    let exclude = super::calibrate::exclusions(&a.exclude)?;
+    let (split, transfer) = (list(&Some(a.session.clone())), list(&a.transfer));
+    for m in &exclude {
+        let Some(s) = cell.session(&m.session).filter(|_| split.contains(&m.session) || transfer.contains(&m.session))
+        else {
+            return Err(CliError::arg(
+                "--exclude",
+                format!("'{}' is not one of the sessions split (--session) or transferred to (--transfer)", m.session),
+            ));
+        };
+        if m.index >= s.measurements.len() {
+            return Err(CliError::arg(
+                "--exclude",
+                format!("session '{}' has {} measurements (0-based), not {}", m.session, s.measurements.len(), m.index),
+            ));
+        }
+    }
     let spec = IdentifySpec {
+        exclude: exclude.clone(),
         fix: list(&a.fix),
         kappa_limit: a.kappa_limit,
         rotation_weight_mm: a.rotation_weight_mm,
@@ -196,11 +218,11 @@ pub(super) fn crossval(a: CrossvalArgs) -> Result<String, CliError> {
         variants.push(Variant { name, options });
     }
     let opts = CrossvalOptions {
-        sessions: list(&Some(a.session.clone())),
+        sessions: split,
         folds: a.folds,
         sizes,
         draws: a.draws,
-        transfer: list(&a.transfer),
+        transfer,
         transfer_fixed: list(&a.transfer_fix),
         transfer_kappa_limit: a.transfer_kappa_limit,
         variants,
@@ -217,7 +239,16 @@ pub(super) fn crossval(a: CrossvalArgs) -> Result<String, CliError> {
     drop(bar);
     let elapsed = started.elapsed().as_secs_f64();
 
-    let report = CrossvalReport::new(&cv, a.seed, a.folds, a.draws, elapsed, threads);
+    let mut report = CrossvalReport::new(&cv, a.seed, a.folds, a.draws, elapsed, threads);
+    report.excluded =
+        exclude.iter().map(|m| MeasurementFigure { session: m.session.clone(), index: m.index }).collect();
+    if !exclude.is_empty() {
+        report.notes.push(format!(
+            "{} reading(s) left out of every fit and every score (--exclude): {}",
+            exclude.len(),
+            exclude.iter().map(|m| format!("{}[{}]", m.session, m.index)).collect::<Vec<_>>().join(", ")
+        ));
+    }
     let mut text = report.text();
     text.push_str(&report.outlier_advice(&a.cell.display().to_string()));
     if let Some(out) = &a.out {

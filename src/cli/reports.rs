@@ -45,6 +45,9 @@ pub struct CrossvalReport {
     /// The readings refused fits named as outliers (session, index in the session).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub outliers: Vec<MeasurementFigure>,
+    /// The readings left out of every fit and every score (`--exclude`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub excluded: Vec<MeasurementFigure>,
     /// Wall-clock seconds and worker threads: the text's, not the document's.
     #[serde(skip)]
     pub seconds: f64,
@@ -340,6 +343,7 @@ impl CrossvalReport {
                 .iter()
                 .map(|(session, index)| MeasurementFigure { session: session.clone(), index: *index })
                 .collect(),
+            excluded: Vec::new(),
             seconds,
             threads,
         }
@@ -467,8 +471,8 @@ impl CrossvalReport {
     }
 
     /// What a user of this command can do about the outliers refused fits named (`cell`: the cell
-    /// file's path): crossval scores every reading and has neither identify's `--exclude` nor its
-    /// `--huber`.
+    /// file's path): run again with them left out (with those this run left out), or see the fit
+    /// without them or with identify's `--huber`.
     pub fn outlier_advice(&self, cell: &str) -> String {
         if self.outliers.is_empty() {
             return String::new();
@@ -493,6 +497,10 @@ impl CrossvalReport {
             .take(if n > LISTED { SHOWN } else { n })
             .map(|m| format!("{}:{}", m.session, m.index))
             .collect();
+        // The next run leaves out what this one did, and these.
+        let mut all: Vec<String> = self.excluded.iter().map(|m| format!("{}:{}", m.session, m.index)).collect();
+        all.extend(refs.iter().filter(|r| !all.contains(r)).cloned().collect::<Vec<_>>());
+        let split = self.session.clone();
         let more = match n {
             n if n > LISTED => format!(
                 " and {} more (so many point at the data: a shared TCP, sessions in different frames; the command below names the first {SHOWN})",
@@ -502,10 +510,11 @@ impl CrossvalReport {
             _ => String::new(),
         };
         format!(
-            "\noutliers named by the refused fits: {}{more}. crossval scores every reading and cannot leave one out or fit with the Huber loss: see the fit without them with `robocal identify {cell} --sessions {} --exclude {}` (or `--huber 2.5`); to cross-validate without them, remove them from the cell file (three-reflector data: write their rows as `nan nan nan` in the positions file and import again)\n",
+            "\noutliers named by the refused fits: {}{more}. Cross-validate without them with `robocal crossval {cell} --session {split} --exclude {}` (and the other options of this run); see the fit without them with `robocal identify {cell} --sessions {} --exclude {}` (or `--huber 2.5`)\n",
             named.join(", "),
+            all.join(","),
             sessions.join(","),
-            refs.join(",")
+            all.join(",")
         )
     }
 }

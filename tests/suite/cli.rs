@@ -420,6 +420,12 @@ fn simulate_identify_validate_study() {
         (vec!["crossval", &cell, "--session", "nope"], "no session named 'nope'"),
         (vec!["crossval", &cell, "--session", "trical-1", "--sizes", "x"], "--sizes"),
         (vec!["crossval", &cell, "--session", "trical-1", "--transfer-kappa-limit", "0"], "--transfer-kappa-limit"),
+        (vec!["crossval", &cell, "--session", "trical-1", "--exclude", "trical-1"], "--exclude"),
+        (
+            vec!["crossval", &cell, "--session", "trical-1", "--exclude", "tracker-n1:0"],
+            "'tracker-n1' is not one of the sessions split",
+        ),
+        (vec!["crossval", &cell, "--session", "trical-1", "--exclude", "trical-1:100000"], "not 100000"),
     ] {
         let (ok, _, err) = robocal(&args);
         assert!(!ok && err.contains(name), "{args:?}: {err}");

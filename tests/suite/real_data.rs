@@ -1392,6 +1392,39 @@ fn readings_of_the_neighbouring_reflector_are_named_and_all_listed() {
     let text = String::from_utf8_lossy(&out.stdout).to_string();
     let refs = text.split("--exclude ").nth(1).and_then(|t| t.split('`').next()).unwrap_or_else(|| panic!("{text}"));
     assert_eq!(refs.split(',').count(), 8, "{text}");
+    // Its first remedy, run as printed: cross-validated without them, each reflector's figure as
+    // the clean files' less those readings.
+    let command = text.split("`robocal ").nth(1).and_then(|t| t.split('`').next()).unwrap_or_else(|| panic!("{text}"));
+    assert!(command.starts_with("crossval "), "{command}");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(command.split_whitespace())
+        .args(["--out", dir.join("cv.json").to_str().unwrap()])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && text.contains("8 reading(s) left out of every fit and every score"), "{text}");
+    let cv: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("cv.json")).unwrap()).unwrap();
+    assert_eq!(cv["excluded"].as_array().map(Vec::len), Some(8), "{cv}");
+    assert!(cv.get("outliers").is_none(), "none refused again: {cv}");
+    // The same command on the clean files: the same figures, to the last digit written.
+    let clean_path = dir.join("clean.json");
+    std::fs::write(&clean_path, serde_json::to_string(&robocal::domain::cell::CellFile::from_cell(&clean)).unwrap())
+        .unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(command.replace(path.to_str().unwrap(), clean_path.to_str().unwrap()).split_whitespace())
+        .args(["--out", dir.join("cv-clean.json").to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let reference: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("cv-clean.json")).unwrap()).unwrap();
+    let pooled = |v: &serde_json::Value| {
+        v["kfold"].as_array().unwrap().iter().find(|k| k["model"] == "default").unwrap()["pooled"]["mean_mm"]
+            .as_f64()
+            .unwrap()
+    };
+    let want = pooled(&reference);
+    assert!((pooled(&cv) - want).abs() < 1e-6, "{} against the clean files' {want} mm", pooled(&cv));
 }
 
 /// A run of 200 stops whose readings of reflectors 1 and 2 were swapped at four stops (a tracker
