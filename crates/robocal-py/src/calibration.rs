@@ -468,7 +468,7 @@ impl Diagnosis {
     parameter_set, cell, *, identification=None, validation=None, folds=5, seed=1, trical_um=None,
     tracker_um=None, tracker_um_per_m=None, repeatability_um=None, rotation_mrad=None, alpha=None,
     confirm_p=None, map_step_deg=0, voxel_mm=None, transfer=None, transfer_kappa_limit=1e4,
-    transfer_fix=None, threads=None
+    transfer_fix=None, threads=None, exclude=None
 ))]
 #[allow(clippy::too_many_arguments)] // Python keyword arguments, one per CLI flag
 pub fn diagnose(
@@ -492,6 +492,7 @@ pub fn diagnose(
     transfer_kappa_limit: f64,
     transfer_fix: Option<Vec<String>>,
     threads: Option<usize>,
+    exclude: Option<Vec<(String, usize)>>,
 ) -> PyResult<Diagnosis> {
     let d = NoiseSpec::default();
     let defaults = DiagnoseSpec::default();
@@ -526,6 +527,7 @@ pub fn diagnose(
         Some(t) => t,
         None => std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
     };
+    opts.exclude = exclude.unwrap_or_default();
     let doc = &parameter_set.doc;
     let cell = &cell.cell;
     let (out, accepted) = py
@@ -541,6 +543,10 @@ pub fn diagnose(
 /// the input's; an identification that fails on the pooled data, the core's message.
 fn diagnose_error(e: DiagnoseError) -> Error {
     match e {
+        // A reading `exclude` names that the cell lacks: the argument's.
+        DiagnoseError::Option(message) if message.starts_with("exclude: ") => {
+            Error::input("exclude", message.trim_start_matches("exclude: "))
+        }
         DiagnoseError::Option(message) => Error::Diagnosis { message },
         DiagnoseError::Identify(inner) => match identify_error(inner) {
             Error::Identification { kind, message } => {

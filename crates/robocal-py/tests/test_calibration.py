@@ -212,6 +212,8 @@ def test_bad_arguments_name_the_field(cell, fitted):
     assert field(d, tracker_um=-1.0).endswith("tracker_um")
     with pytest.raises(DiagnosisError, match="nope"):
         diagnose(ps, cell, identification=["nope"])
+    assert field(d, exclude=[("tracker-id", 100000)]) == "exclude"
+    assert field(d, exclude=[("nope", 0)]) == "exclude"
     with pytest.raises(OSError):
         Cell.load("/nonexistent/cell.json")
     other = Robot.preset("irb120").fk(poses(1, seed=1))  # a Robot is not a cell
@@ -240,3 +242,25 @@ def test_the_same_documents_as_the_cli(cell, tmp_path):
     assert diagnosis.status == "named"
     assert cli.strip() == diagnosis.to_json()
     assert (tmp_path / "accepted.json").read_text().rstrip("\n") == diagnosis.accepted().to_json()
+
+
+def test_a_diagnosis_leaves_out_what_the_sets_identification_left_out(cell):
+    """identify_cell(exclude=…) records the readings it left out in the set; diagnose leaves the
+    same ones out unasked, as diagnose(exclude=…) does with a set that does not record them."""
+    left = [("tracker-id", 5), ("tracker-id", 17)]
+    recorded = identify_cell(cell, model="-compliance", exclude=left).parameter_set
+    quality = json.loads(recorded.to_json())["quality"]
+    assert quality["excluded"][0]["session"] == "tracker-id"
+    assert quality["excluded"][0]["indices"] == [5, 17]
+    assert len(quality["excluded"][0]["fingerprints"]) == 2
+    # Both sets as their files carry them (12 significant digits), so that only the record differs.
+    recorded = ParameterSet.from_json(recorded.to_json())
+    unasked = diagnose(recorded, cell, threads=1).as_dict()
+    assert unasked["sessions"]["excluded"] == [{"session": s, "index": i} for s, i in left]
+    assert any(n.startswith("2 readings that the parameter set's identification left out") for n in unasked["notes"])
+    # The same set without its record, told: the same figures.
+    bare = json.loads(recorded.to_json())
+    del bare["quality"]["excluded"]
+    told = diagnose(ParameterSet.from_json(json.dumps(bare)), cell, threads=1, exclude=left).as_dict()
+    assert told["shrink"] == unasked["shrink"] and told["verdict"] == unasked["verdict"]
+    assert told["sessions"]["excluded"] == unasked["sessions"]["excluded"]

@@ -643,6 +643,7 @@ def diagnose(
     transfer_kappa_limit: float = 1e4,
     transfer_fix: Sequence[str] | None = None,
     threads: int | None = None,
+    exclude: Sequence[tuple[str, int]] | None = None,
 ) -> Diagnosis:
     """``robocal diagnose``: where and why the set's model still misses. The model the set was
     identified with is refitted on the ``identification`` sessions (default: all of them) and
@@ -651,7 +652,10 @@ def diagnose(
     poses by the refitted model, and named only when their figures agree. The instrument model
     (``trical_um``, ``tracker_um`` + ``tracker_um_per_m``, ``repeatability_um``,
     ``rotation_mrad``), ``alpha``, ``confirm_p``, ``map_step_deg`` and ``voxel_mm`` default as
-    in the CLI; ``transfer`` names sessions of other set-ups to carry the models to. ``threads``
-    (default: every core) does not change the answer. Raises InputError naming the argument
+    in the CLI; ``transfer`` names sessions of other set-ups to carry the models to.
+    ``exclude``: readings ``(session, index)`` left out of every fit and every test, as
+    ``--exclude``; those the set's identification left out (``identify_cell(exclude=…)``, recorded
+    in the set) are left out without it. ``threads`` (default: every core) does not change the
+    answer. Raises InputError naming the argument
     (``folds``, ``alpha``, ``tracker_um``, ``threads``…), DiagnosisError, or IdentificationError
     when the refit fails. Runs without the GIL."""
