@@ -1026,9 +1026,6 @@ fn accepted_identification(s: &search::Search, work: &Cell, model: &IdentifyOpti
     identify(work, &o).ok().or_else(|| s.stages.last().and_then(|st| st.fit.as_ref().ok().cloned()))
 }
 
-/// The start model, each intermediate model of the search and the final one carried to each
-/// transfer session (base and tool refitted there), with their errors and how many of its poses
-/// lie inside the identified joint ranges.
 /// The final model against the starting one on each transfer session, as a clause of the verdict:
 /// held-out poses of the identification's own set-up confirm a term where it was measured, and a
 /// session of another day or set-up tests whether it carries. On the UR10 the joint tables named on
@@ -1083,6 +1080,9 @@ fn transfer_clause(transfer: &[Transfer]) -> Option<String> {
     ))
 }
 
+/// The start model, each intermediate model of the search and the final one carried to each
+/// transfer session (base and tool refitted there), with their errors and how many of its poses
+/// lie inside the identified joint ranges.
 fn transfers(
     input: &Input<'_>,
     opts: &DiagnoseOptions,
