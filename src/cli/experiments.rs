@@ -235,20 +235,21 @@ pub(super) fn crossval(a: CrossvalArgs) -> Result<String, CliError> {
         kappa_limit(k, "transfer_kappa_limit").map_err(option_error)?;
     }
     let bar = Progress::new("identifications", 0);
-    let cv = crossval_with_progress(&cell, &opts, &bar.callback())?;
+    let mut cv = crossval_with_progress(&cell, &opts, &bar.callback())?;
+    // Said in the text, the JSON and the HTML report alike.
+    if !exclude.is_empty() {
+        cv.notes.push(format!(
+            "{} reading(s) left out of every fit and every score (--exclude): {}",
+            exclude.len(),
+            exclude.iter().map(|m| format!("{}[{}]", m.session, m.index)).collect::<Vec<_>>().join(", ")
+        ));
+    }
     drop(bar);
     let elapsed = started.elapsed().as_secs_f64();
 
     let mut report = CrossvalReport::new(&cv, a.seed, a.folds, a.draws, elapsed, threads);
     report.excluded =
         exclude.iter().map(|m| MeasurementFigure { session: m.session.clone(), index: m.index }).collect();
-    if !exclude.is_empty() {
-        report.notes.push(format!(
-            "{} reading(s) left out of every fit and every score (--exclude): {}",
-            exclude.len(),
-            exclude.iter().map(|m| format!("{}[{}]", m.session, m.index)).collect::<Vec<_>>().join(", ")
-        ));
-    }
     let mut text = report.text();
     text.push_str(&report.outlier_advice(&a.cell.display().to_string()));
     if let Some(out) = &a.out {

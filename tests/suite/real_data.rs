@@ -1398,11 +1398,13 @@ fn readings_of_the_neighbouring_reflector_are_named_and_all_listed() {
     assert!(command.starts_with("crossval "), "{command}");
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_robocal"))
         .args(command.split_whitespace())
-        .args(["--out", dir.join("cv.json").to_str().unwrap()])
+        .args(["--out", dir.join("cv.json").to_str().unwrap(), "--report", dir.join("cv.html").to_str().unwrap()])
         .output()
         .unwrap();
     let text = String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success() && text.contains("8 reading(s) left out of every fit and every score"), "{text}");
+    let html = std::fs::read_to_string(dir.join("cv.html")).unwrap();
+    assert!(html.contains("8 reading(s) left out of every fit and every score"), "the HTML report says so too");
     let cv: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("cv.json")).unwrap()).unwrap();
     assert_eq!(cv["excluded"].as_array().map(Vec::len), Some(8), "{cv}");
     assert!(cv.get("outliers").is_none(), "none refused again: {cv}");
