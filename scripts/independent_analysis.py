@@ -11,7 +11,9 @@ parallel axes 2–3, joint compliance under gravity with the masses of its Table
   that changes from pose to pose and that no term explains), a smooth error that no library term
   has (a joint-2 deflection quadratic in its torque), three SMRs on a plate at an unknown place on
   the flange, an unknown payload, the tracker anywhere and tilted, a few rows deleted and a few
-  readings lost. Written as the three-reflector text files `robocal import three-reflector` reads.
+  readings lost; the three SMRs measured at each stop, or (`--passes 3`) the run repeated for each
+  SMR, each visit of a pose with its own random turn. Written as the three-reflector text files
+  `robocal import three-reflector` reads.
 * `analyse` — the analysis the issue quotes as its reference: a plain Levenberg–Marquardt
   (scipy's MINPACK `lm`, forward finite differences), 5-fold cross-validation over poses with the
   errors of all three SMRs pooled, gravity torques from the nominal masses with a payload at the
@@ -23,7 +25,8 @@ parallel axes 2–3, joint compliance under gravity with the masses of its Table
     /tmp/ia/bin/python scripts/independent_analysis.py analyse /tmp/ia1 --payload-kg 1
 
 `compare.sh`-style use, with robocal on the same files, is in BENCHMARKS.md ("An independent
-analysis beside robocal"). Not part of CI: a study, a few minutes per twin.
+analysis beside robocal"). `.ci/run` runs `compare --check` on two 500-stop twins (one pass and
+three); other settings are a study, a few seconds to a minute per twin.
 """
 import argparse, json, math, os, re, sys
 import numpy as np
@@ -189,18 +192,30 @@ def simulate(args):
             j, v = spec.split('=')
             hyst[int(j) - 1] = float(v) * D
     M = gravity_moments(alpha, a, d, off, beta2, q, mass, com, payload_kg, payload_com)
-    theta = q + comp * M + direction * hyst + rng.normal(0, args.jitter_deg * D, (n, 6))
-    theta[:, 1] += quad2 * M[:, 1] * np.abs(M[:, 1]) / 400.0
-    # An unlogged warm-up along the run (0 by default): joint 2's zero creeps by drift_deg and the
-    # tracker's reading by drift_mm in a random direction, as 1 − e^(−3t) of the run's share t.
-    warm = 1.0 - np.exp(-3.0 * np.arange(n) / max(n - 1, 1))
-    theta[:, 1] += args.drift_deg * D * warm
+    # One pass (a stop measures the three SMRs, the tracker turning from one to the next) or three
+    # (the run repeated for each SMR, the tracker following one: the same poses in the same order,
+    # so the same directions, but each visit its own random turn, and the warm-up running on over
+    # the three passes). The first pass draws exactly what one pass does.
+    jitter_rng = np.random.default_rng(args.seed + 104729)
+    warm_of = lambda k: 1.0 - np.exp(-3.0 * k / max(args.passes * n - 1, 1))
+    thetas = []
+    for p in range(args.passes):
+        draw = rng if p == 0 else jitter_rng
+        theta = q + comp * M + direction * hyst + draw.normal(0, args.jitter_deg * D, (n, 6))
+        theta[:, 1] += quad2 * M[:, 1] * np.abs(M[:, 1]) / 400.0
+        # An unlogged warm-up along the run (0 by default): joint 2's zero creeps by drift_deg and
+        # the tracker's reading by drift_mm in a random direction, as 1 − e^(−3t) of the run's share t.
+        theta[:, 1] += args.drift_deg * D * warm_of(p * n + np.arange(n))
+        thetas.append(theta)
     drift_dir = np.random.default_rng(args.seed + 7919).normal(size=3)
     drift_dir /= np.linalg.norm(drift_dir)
-    R, o = chain(alpha, a, d, off, beta2, theta)
+    frames = [chain(alpha, a, d, off, beta2, t) for t in thetas]
     Rw = Rb  # base → tracker rotation; tracker origin in the base is tracker_in_base
     readings = []
-    for s in smr:
+    for i, s in enumerate(smr):
+        p = i if args.passes == 3 else 0
+        R, o = frames[p]
+        warm = warm_of(p * n + np.arange(n))
         p_base = o[:, 5] + R[:, 5] @ s
         p_tr = (p_base - tracker_in_base) @ Rw  # the tracker frame: Rwᵀ (p − t)
         r = np.linalg.norm(p_base - tracker_in_base, axis=1)
@@ -227,7 +242,7 @@ def simulate(args):
     truth = dict(seed=args.seed, stops=n, kept=int(keep.sum()), payload_kg=payload_kg,
                  payload_com_mm=(payload_com * 1000).tolist(), smr_mm=(smr * 1000).tolist(),
                  compliance_deg_per_nm=(comp / D).tolist(), hysteresis_deg=(hyst / D).tolist(),
-                 jitter_deg=args.jitter_deg, quadratic_deg=args.quadratic,
+                 jitter_deg=args.jitter_deg, quadratic_deg=args.quadratic, passes=args.passes,
                  drift_mm=args.drift_mm, drift_deg=args.drift_deg, beta2_deg=beta2 / D,
                  mass_kg=mass.tolist())
     with open(os.path.join(args.out_dir, 'truth.json'), 'w') as f:
@@ -432,6 +447,8 @@ def main():
     s.add_argument('--jitter-deg', type=float, default=0.015)
     s.add_argument('--hysteresis-deg', default='1=0.02,2=0.025,3=0.03,4=0.02,5=0.03,6=0.02')
     s.add_argument('--order', choices=['random', 'sweep'], default='random')
+    s.add_argument('--passes', type=int, choices=[1, 3], default=1,
+                   help='3: the run repeated for each SMR (each visit of a pose its own random turn)')
     s.add_argument('--tilt-deg', type=float, default=2.0, help='the tracker frame tilted by about this')
     s.add_argument('--drift-mm', type=float, default=0.0,
                    help="an unlogged warm-up: the tracker's readings creep by this along the run")

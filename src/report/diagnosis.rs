@@ -415,6 +415,9 @@ fn transfer_section(s: &mut String, d: &DiagnosisOut) {
                     r.map_or("—".into(), |r| format!("{:.0} %", 100.0 * r.inside_share)),
                     part(r.and_then(|r| r.inside.as_ref())),
                     part(r.and_then(|r| r.outside.as_ref())),
+                    t.change_from_start
+                        .as_ref()
+                        .map_or("—".into(), |c| format!("{:+.4} ± {:.4}", c.mean_mm, c.standard_error_mm)),
                     t.kappa_scaled.map_or("—".into(), sig),
                     esc(t.error.as_deref().unwrap_or("")),
                 ]
@@ -430,16 +433,19 @@ fn transfer_section(s: &mut String, d: &DiagnosisOut) {
                 "inside the identified joint ranges",
                 "mean inside (mm)",
                 "mean outside (mm)",
+                "change from start (mm)",
                 "κ scaled",
                 "refused",
             ],
             &rows,
-            &[false, false, true, true, true, true, true, true, false],
+            &[false, false, true, true, true, true, true, true, true, false],
         ));
         s.push_str(
             "<p>A pose is inside when every joint lies within the range the identification sessions \
              measured; outside, the model's joint terms (tables, harmonics, compliance) are \
-             extrapolated, and its error there tests that extrapolation.</p>\n",
+             extrapolated, and its error there tests that extrapolation. The change from start is \
+             the mean of the model's error minus the starting model's, reading by reading, ± its \
+             standard error from the change's means over runs of consecutive poses.</p>\n",
         );
     }
 }

@@ -142,23 +142,34 @@ fn ur10_fine_joint_structure_on_joints_1_to_3() {
         );
         let range = get("final").range.clone().expect("a range split");
         assert!(range.inside_share < 0.01, "{s}: {:.3} of the poses inside C's ranges", range.inside_share);
-        // The verdict's summary carries both figures and the share outside, as the transfer
-        // table has them: "series-B 0.4418 mm → 0.4525 mm (+0.0107 mm, 100 % of its poses …".
+        // The change paired pose by pose is the difference of the two means (the same readings),
+        // with a batch-means standard error over runs of consecutive poses.
+        let c = get("final").change.clone().expect("a paired change");
+        assert!((c.mean - (b.mean - a.mean)).abs() < 1e-12, "{s}: {c:?} against {a:?} → {b:?}");
+        assert_eq!((c.n, c.batches), (a.n, 20), "{s}");
+        assert!((0.002 * MM..0.05 * MM).contains(&c.se), "{s}: SE {:.4} mm", c.se / MM);
+        assert!(get("start").change.is_none());
+        // The verdict's summary carries both figures, the change with its SE and the share
+        // outside, as the transfer table has them: "series-B 0.4418 mm → 0.4525 mm (+0.0107 ±
+        // 0.0157 mm, 100 % of its poses …".
         let said = format!(
-            "{s} {:.4} mm → {:.4} mm ({:+.4} mm, {:.0} % of its poses outside the identification's joint ranges)",
+            "{s} {:.4} mm → {:.4} mm ({:+.4} ± {:.4} mm, {:.0} % of its poses outside the identification's joint ranges)",
             a.mean / MM,
             b.mean / MM,
-            (b.mean - a.mean) / MM,
+            c.mean / MM,
+            c.se / MM,
             100.0 * (1.0 - range.inside_share)
         );
         assert!(v.summary.contains(&said), "{said} not in: {}", v.summary);
-        // The closing remark only where the final mean is the larger.
-        let remark = v.summary.contains("did not improve that session");
-        let any_worse = ["series-B", "series-D"].iter().any(|s| {
-            let get = |m: &str| d.transfer.iter().find(|t| t.session == *s && t.model == m).unwrap();
-            get("final").errors.as_ref().unwrap().mean > get("start").errors.as_ref().unwrap().mean
+        // The closing remark names a session made worse only beyond twice the SE, and one whose
+        // change lies within it as such.
+        let worse = c.mean > 0.0 && c.beyond_2se();
+        assert_eq!(v.summary.contains(&format!("they made {s}")), worse, "{}", v.summary);
+        let level = v.summary.find(" the change is within twice its uncertainty").is_some_and(|end| {
+            let from = v.summary[..end].rfind("; on ").expect("the clause begins '; on '");
+            v.summary[from..end].contains(s)
         });
-        assert_eq!(remark, any_worse, "{}", v.summary);
+        assert_eq!(level, !c.beyond_2se(), "{}", v.summary);
     }
 }
 

@@ -422,7 +422,8 @@ impl Diagnosis {
         to_python(py, &self.out.evidence)
     }
 
-    /// The starting and the final model carried to the `transfer` sessions.
+    /// The starting, every intermediate and the final model carried to the `transfer` sessions,
+    /// with each one's change from the start (`change_from_start`, ± its batch-means SE).
     #[getter]
     fn transfer<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         to_python(py, &self.out.transfer)

@@ -189,6 +189,24 @@ def test_the_diagnosis_names_the_cyclic_error_on_joint_3(diagnosis, cell, fitted
     assert not again.held_out and again.mean_mm < validate(fitted.parameter_set, cell).mean_mm
 
 
+def test_a_transfer_says_its_change_from_the_start_with_a_standard_error(cell, fitted):
+    """Cross-validated on the identification session and carried to the other one (base and
+    tools refitted there): the cyclic error is in both, so the final model lowers the carried mean,
+    and the change is the two means' difference, paired reading by reading, with a batch-means
+    standard error over runs of consecutive poses (120 readings: 12 runs of 10)."""
+    d = diagnose(fitted.parameter_set, cell, identification=["tracker-id"], validation=[], transfer=["tracker-val"],
+                 threads=1)
+    assert d.status == "named", d.summary
+    rows = {t["model"]: t for t in d.transfer if t["session"] == "tracker-val"}
+    start, final = rows["start"], rows["final"]
+    assert "change_from_start" not in start
+    c = final["change_from_start"]
+    assert (c["n"], c["batches"]) == (120, 12)
+    assert c["mean_mm"] == pytest.approx(final["errors"]["mean_mm"] - start["errors"]["mean_mm"], abs=1e-4)
+    assert c["mean_mm"] < -2 * c["standard_error_mm"] < 0, c
+    assert f"{c['mean_mm']:+.4f} ± {c['standard_error_mm']:.4f} mm" in d.summary, d.summary
+
+
 def test_bad_arguments_name_the_field(cell, fitted):
     def field(call, **kw):
         with pytest.raises(InputError) as e:

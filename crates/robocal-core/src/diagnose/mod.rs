@@ -48,6 +48,7 @@ use library::{Candidate, Kind, Unavailable};
 pub use locate::{Against, Axis, Voxel, Where};
 pub use screen::Score;
 pub use search::{Apart, Decision, Evaluated, Round, Screened, SearchOptions};
+pub use stats::PairedChange;
 pub use verdict::experiment;
 use verdict::verdict;
 
@@ -349,6 +350,10 @@ pub struct Transfer {
     /// model (a table, a harmonic, a compliance) is only known where its joint was measured, and a
     /// transfer session outside those ranges tests extrapolation. `None` when the refit failed.
     pub range: Option<RangeSplit>,
+    /// The change of the mean error from the starting model's, pose by pose on the same readings,
+    /// with its standard error; `None` for the start itself, when either refit failed, or with
+    /// too few poses for the standard error.
+    pub change: Option<PairedChange>,
 }
 
 /// A transfer's errors inside and outside the identification's joint ranges.
@@ -1031,8 +1036,9 @@ fn accepted_identification(s: &search::Search, work: &Cell, model: &IdentifyOpti
 /// session of another day or set-up tests whether it carries. On the UR10 the joint tables named on
 /// series C, confirmed there (0.4319 → 0.1491 mm), read 0.4418 → 0.4525 mm on series B, every pose of
 /// which lies outside series C's range of joint 1: a summary that said only "confirmed" would be
-/// read as a calibration that holds there. `None` without a final model (no effect accepted) or
-/// transfer session.
+/// read as a calibration that holds there. Each change carries its batch-means standard error
+/// ([`PairedChange`]): B's +0.0107 ± 0.0157 mm is no change that the run can tell, D's −0.0380 ±
+/// 0.0168 mm is. `None` without a final model (no effect accepted) or transfer session.
 fn transfer_clause(transfer: &[Transfer]) -> Option<String> {
     let mm = |v: f64| format!("{:.4} mm", v / crate::units::MM);
     let mut sessions: Vec<&str> = transfer.iter().map(|t| t.session.as_str()).collect();
@@ -1055,8 +1061,11 @@ fn transfer_clause(transfer: &[Transfer]) -> Option<String> {
                             )
                         })
                         .unwrap_or_default();
-                    let change = (b.mean - a.mean) / crate::units::MM;
-                    format!("{name} {} → {} ({change:+.4} mm{outside})", mm(a.mean), mm(b.mean))
+                    let change = match &fin.change {
+                        Some(c) => format!("{:+.4} ± {:.4} mm", c.mean / crate::units::MM, c.se / crate::units::MM),
+                        None => format!("{:+.4} mm", (b.mean - a.mean) / crate::units::MM),
+                    };
+                    format!("{name} {} → {} ({change}{outside})", mm(a.mean), mm(b.mean))
                 }
                 (_, Err(e)) | (Err(e), _) => format!("{name} not carried ({e})"),
             })
@@ -1065,17 +1074,46 @@ fn transfer_clause(transfer: &[Transfer]) -> Option<String> {
     if parts.is_empty() {
         return None;
     }
-    let worse = transfer.iter().filter(|t| t.model == "final").any(|f| {
-        let start = transfer.iter().find(|t| t.session == f.session && t.model == "start");
-        matches!((start.map(|s| &s.errors), &f.errors), (Some(Ok(a)), Ok(b)) if b.mean > a.mean)
-    });
+    // What each final mean's change says, judged against twice its standard error where there is
+    // one; without one (too few poses) only its sign is known.
+    let finals: Vec<(&Transfer, f64, Option<&PairedChange>)> = transfer
+        .iter()
+        .filter(|t| t.model == "final")
+        .filter_map(|f| {
+            let start = transfer.iter().find(|t| t.session == f.session && t.model == "start")?;
+            match (&start.errors, &f.errors) {
+                (Ok(a), Ok(b)) => Some((f, b.mean - a.mean, f.change.as_ref())),
+                _ => None,
+            }
+        })
+        .collect();
+    let names = |keep: &dyn Fn(f64, Option<&PairedChange>) -> bool| -> Vec<&str> {
+        finals.iter().filter(|(_, d, c)| keep(*d, *c)).map(|(f, _, _)| f.session.as_str()).collect()
+    };
+    let worse = names(&|d, c| d > 0.0 && c.is_none_or(PairedChange::beyond_2se));
+    let level = names(&|_, c| c.is_some_and(|c| !c.beyond_2se()));
+    let mut remark = Vec::new();
+    if !worse.is_empty() {
+        remark.push(format!("they made {} worse", worse.join(", ")));
+    }
+    if !level.is_empty() {
+        remark.push(format!("on {} the change is within twice its uncertainty", level.join(", ")));
+    }
+    let sigma = if finals.iter().any(|(_, _, c)| c.is_some()) {
+        " (± one standard error of the change, paired pose by pose, from its means over runs of consecutive poses)"
+    } else {
+        ""
+    };
     Some(format!(
-        "carried to other sessions, base and tools refitted there, the mean error of the starting model → the final one: {}{}",
+        "carried to other sessions, base and tools refitted there, the mean error of the starting model → the final one: {}{sigma}{}",
         parts.join(", "),
-        if worse {
-            " — the named terms are confirmed on held-out poses of the identification's set-up; where the final mean is the larger, they did not improve that session (transfer[] has every intermediate model and the joint ranges)"
+        if remark.is_empty() {
+            String::new()
         } else {
-            ""
+            format!(
+                " — the named terms are confirmed on held-out poses of the identification's set-up; {} (transfer[] has every intermediate model and the joint ranges)",
+                remark.join("; ")
+            )
         }
     ))
 }
@@ -1113,6 +1151,9 @@ fn transfers(
                 accepted.map(|id| id.set.clone()).unwrap_or_else(|| s.stages.last().expect("a stage").set.clone());
             models.push(("final".to_string(), model.model.clone(), fin));
         }
+        // The start's |e| per reading (index in the session, in measuring order), which every
+        // later model's is paired with.
+        let mut start_readings: Option<Vec<(usize, f64)>> = None;
         for (name, m, set) in models {
             let mut o = IdentifyOptions {
                 model: m,
@@ -1129,20 +1170,40 @@ fn transfers(
                 validate(&id.set, work, std::slice::from_ref(t), Reference::Measured).map_err(|e| e.to_string()).map(
                     |r| {
                         let split = ranges.as_deref().map(|g| range_split(work, g, &r.residuals));
-                        (r.calibrated.position, k, split)
+                        let per_reading: Vec<(usize, f64)> =
+                            r.residuals.iter().map(|x| (x.index, x.error.norm())).collect();
+                        (r.calibrated.position, k, split, per_reading)
                     },
                 )
             });
+            let per_reading = r.as_ref().ok().map(|x| x.3.clone());
+            let change = match (&start_readings, &per_reading) {
+                (Some(a), Some(b)) if name != "start" => paired_change(a, b),
+                _ => None,
+            };
+            if name == "start" {
+                start_readings = per_reading;
+            }
             transfer.push(Transfer {
                 session: t.clone(),
                 model: name,
                 kappa_scaled: r.as_ref().ok().map(|x| x.1),
                 range: r.as_ref().ok().and_then(|x| x.2.clone()),
                 errors: r.map(|x| x.0),
+                change,
             });
         }
     }
     Ok(transfer)
+}
+
+/// A model's |e| paired with the start's on the readings both were validated on (by index in the
+/// session), in measuring order.
+fn paired_change(start: &[(usize, f64)], model: &[(usize, f64)]) -> Option<PairedChange> {
+    let of_start: std::collections::HashMap<usize, f64> = start.iter().copied().collect();
+    let mut d: Vec<(usize, f64)> = model.iter().filter_map(|(i, e)| of_start.get(i).map(|s| (*i, e - s))).collect();
+    d.sort_by_key(|x| x.0);
+    PairedChange::of(&d.iter().map(|x| x.1).collect::<Vec<_>>())
 }
 
 /// The held-out figures of the starting model with further parameters added (an oracle: the

@@ -1,11 +1,12 @@
 //! The tests the diagnosis decides with: tail probabilities of the F and χ² distributions that
 //! stay meaningful far in the tail (as log10 p), Holm's and Benjamini–Hochberg's corrections for
-//! many tests, and the one-sided Wilcoxon signed-rank test for paired held-out errors.
+//! many tests, the one-sided Wilcoxon signed-rank test for paired held-out errors, and the
+//! batch-means standard error of a paired change along a measuring run.
 //!
 //! statrs gives the distributions; what is written here is what it lacks: the log of a tail
 //! probability below f64's range (screening statistics of a strong effect reach p = 1e-2000,
 //! and the ranking and the report still need a number), the two step-down/step-up corrections,
-//! and the signed-rank test with its tie correction.
+//! the signed-rank test with its tie correction, and batch means (a few lines over the runs).
 
 use statrs::distribution::{ChiSquared, ContinuousCDF, FisherSnedecor, Normal};
 use statrs::function::gamma::ln_gamma;
@@ -122,6 +123,55 @@ pub(crate) fn wilcoxon_greater(d: &[f64]) -> Option<f64> {
     Some(Normal::standard().sf(z))
 }
 
+/// The change of a transfer's mean |e| from the starting model's, paired reading by reading.
+///
+/// The standard error is by batch means: the readings, in measuring order, cut into runs of
+/// consecutive poses, the change's mean in each run, and the spread of those means. Neighbouring
+/// poses of a run share their errors (a warm-up, a region of the workspace), so treating every
+/// pose as independent would understate it; runs of a few dozen poses absorb that.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PairedChange {
+    /// Mean of |e|(model) − |e|(start) over the readings both were validated on, m.
+    pub mean: f64,
+    /// Its standard error by batch means, m.
+    pub se: f64,
+    /// Readings paired.
+    pub n: usize,
+    /// Runs of consecutive readings the standard error is taken over.
+    pub batches: usize,
+}
+
+impl PairedChange {
+    /// Batch means need at least this many runs, each of at least `MIN_RUN` readings.
+    const MIN_BATCHES: usize = 5;
+    const MAX_BATCHES: usize = 20;
+    const MIN_RUN: usize = 10;
+
+    /// From the per-reading changes in measuring order; `None` when there are too few for
+    /// `MIN_BATCHES` runs.
+    pub fn of(d: &[f64]) -> Option<PairedChange> {
+        let n = d.len();
+        let batches = (n / Self::MIN_RUN).min(Self::MAX_BATCHES);
+        if batches < Self::MIN_BATCHES {
+            return None;
+        }
+        let means: Vec<f64> = (0..batches)
+            .map(|b| {
+                let run = &d[b * n / batches..(b + 1) * n / batches];
+                run.iter().sum::<f64>() / run.len() as f64
+            })
+            .collect();
+        let m = means.iter().sum::<f64>() / batches as f64;
+        let var = means.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (batches * (batches - 1)) as f64;
+        Some(PairedChange { mean: d.iter().sum::<f64>() / n as f64, se: var.sqrt(), n, batches })
+    }
+
+    /// Beyond twice its standard error.
+    pub fn beyond_2se(&self) -> bool {
+        self.mean.abs() > 2.0 * self.se
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -178,5 +228,58 @@ mod tests {
         let neg: Vec<f64> = d.iter().map(|v| -v).collect();
         assert!(wilcoxon_greater(&neg).unwrap() > 0.99);
         assert!(wilcoxon_greater(&[1.0; 5]).is_none());
+    }
+
+    /// Batch means against the two cases it must get right, over 400 runs each of 1,500 changes
+    /// with a true mean of zero: independent changes, where its error is σ/√n (and the
+    /// share beyond 2·SE is the t distribution's with 19 degrees of freedom, 6.0 %), and changes
+    /// that follow each other (AR(1), ρ = 0.9, as neighbouring poses' errors do), where the long-run
+    /// standard error is √((1 + ρ)/(1 − ρ)) = 4.36 times the independent one. The SE that treats
+    /// every pose as independent would call 2/3 of the second case's runs a change.
+    #[test]
+    fn batch_means_hold_their_coverage_when_neighbouring_poses_share_errors() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let n = 1500;
+        let (runs, rho) = (400, 0.9_f64);
+        let mut beyond = [0usize; 2];
+        let mut naive_beyond = 0;
+        let mut se_ratio = [0.0f64; 2];
+        for _ in 0..runs {
+            for (case, r) in [0.0, rho].into_iter().enumerate() {
+                let mut x = 0.0;
+                let d: Vec<f64> = (0..n)
+                    .map(|_| {
+                        let e: f64 = StandardNormal.sample(&mut rng);
+                        x = r * x + (1.0 - r * r).sqrt() * e;
+                        x
+                    })
+                    .collect();
+                let c = PairedChange::of(&d).expect("1500 readings");
+                assert_eq!((c.n, c.batches), (1500, 20));
+                // The long-run standard error of the mean of unit-variance AR(1) changes.
+                let truth = ((1.0 + r) / (1.0 - r)).sqrt() / (n as f64).sqrt();
+                se_ratio[case] += c.se / truth / runs as f64;
+                beyond[case] += usize::from(c.beyond_2se());
+                if case == 1 {
+                    let m = c.mean;
+                    let sd = (d.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
+                    naive_beyond += usize::from(m.abs() > 2.0 * sd / (n as f64).sqrt());
+                }
+            }
+        }
+        let share = |k: usize| k as f64 / runs as f64;
+        // 6.0 % expected; 400 runs give a binomial σ of 1.2 %.
+        assert!((0.025..=0.10).contains(&share(beyond[0])), "independent: {}", share(beyond[0]));
+        assert!((0.025..=0.12).contains(&share(beyond[1])), "AR(1): {}", share(beyond[1]));
+        assert!(share(naive_beyond) > 0.5, "the naive SE: {}", share(naive_beyond));
+        // E[s] of a χ with 19 degrees of freedom is 0.987 of σ; batches of 75 at ρ = 0.9 lose a
+        // little more to the correlation between neighbouring batches' ends.
+        assert!((0.93..=1.03).contains(&se_ratio[0]), "independent: mean SE/truth {}", se_ratio[0]);
+        assert!((0.85..=1.03).contains(&se_ratio[1]), "AR(1): mean SE/truth {}", se_ratio[1]);
+        // Too few readings for five runs of ten: no standard error rather than a wild one.
+        assert!(PairedChange::of(&[0.1; 49]).is_none());
+        assert_eq!(PairedChange::of(&[0.1; 50]).map(|c| c.batches), Some(5));
     }
 }

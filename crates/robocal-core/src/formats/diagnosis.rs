@@ -14,7 +14,7 @@ use crate::diagnose::locate::Where;
 use crate::diagnose::search::Decision;
 use crate::diagnose::{Diagnosis, Effect, Status};
 use crate::kinematics::{Param, Unit};
-use crate::units::{DEG, MM, OUT_DEG, round_to};
+use crate::units::{DEG, MM, OUT_DEG, OUT_MM, round_to};
 use crate::validate::stats::ErrorStats;
 
 /// A diagnosis report: what the calibrated model misses, where, and which named effects
@@ -121,6 +121,28 @@ pub struct TransferOut {
     /// refit failed (or from a diagnosis stored before this field).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub joint_range: Option<JointRangeSplitOut>,
+    /// The change of the mean error from the starting model's on the same session, paired reading
+    /// by reading, with its standard error. Absent for `start`, when a refit failed, with fewer
+    /// than 50 readings, or from a diagnosis stored before this field.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub change_from_start: Option<PairedChangeOut>,
+}
+
+/// A transfer's change of the mean |e| from the starting model's, paired reading by reading.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct PairedChangeOut {
+    /// Mean of |e|(model) − |e|(start) over the readings both were validated on, mm (negative: the
+    /// model is the better).
+    pub mean_mm: f64,
+    /// Its standard error, mm, by batch means: the readings in measuring order cut into `batches`
+    /// runs of consecutive poses, and the spread of the change's mean over the runs (neighbouring
+    /// poses share their errors, so the poses are not taken as independent).
+    pub standard_error_mm: f64,
+    /// Readings paired.
+    pub n: usize,
+    /// Runs of consecutive readings (5–20, each of at least 10 readings).
+    pub batches: usize,
 }
 
 /// A transfer's errors inside and outside the identification sessions' joint ranges.
@@ -911,6 +933,12 @@ pub fn diagnosis_out(d: &Diagnosis) -> DiagnosisOut {
                     outside_share_per_joint: r.outside_share_per_joint.iter().map(|v| round_to(*v, 1e-4)).collect(),
                     inside: r.inside.as_ref().map(stats),
                     outside: r.outside.as_ref().map(stats),
+                }),
+                change_from_start: t.change.as_ref().map(|c| PairedChangeOut {
+                    mean_mm: round_to(c.mean / MM, OUT_MM),
+                    standard_error_mm: round_to(c.se / MM, OUT_MM),
+                    n: c.n,
+                    batches: c.batches,
                 }),
             })
             .collect(),

@@ -603,7 +603,10 @@ class Diagnosis:
 
     @property
     def transfer(self) -> list[dict[str, Any]]:
-        """The starting and final models carried to the ``transfer`` sessions."""
+        """The starting, every intermediate and the final model carried to the ``transfer``
+        sessions: per session and model its errors (mm), ``joint_range`` and
+        ``change_from_start`` (``mean_mm``, ``standard_error_mm`` by batch means over runs of
+        consecutive poses, ``n``, ``batches``)."""
 
     @property
     def sessions(self) -> dict[str, Any]:
