@@ -100,10 +100,33 @@ fn verdict_section(s: &mut String, d: &DiagnosisOut) {
                 } else {
                     ("—".into(), "—".into())
                 };
+                // A group of terms over several joints (backlash j1–j6) has one estimate per
+                // term; `estimate` alone is its most significant term's, which read as the
+                // group's size would mislead: each term gets its line.
+                let group = e.parameters.len() > 1 && !matches!(e.which.name.as_str(), "cyclic" | "joint_map");
+                let (estimate, std) = if group {
+                    (
+                        e.parameters
+                            .iter()
+                            .map(|p| format!("{} {} {}", esc(&p.name), opt(Some(p.estimate), 4), esc(&p.unit)))
+                            .collect::<Vec<_>>()
+                            .join("<br>"),
+                        e.parameters
+                            .iter()
+                            .map(|p| p.std.map_or("—".into(), |x| format!("{} {}", sig(x), esc(&p.unit))))
+                            .collect::<Vec<_>>()
+                            .join("<br>"),
+                    )
+                } else {
+                    (
+                        format!("{} {}", opt(e.estimate, 4), esc(&e.unit)),
+                        e.std.map_or("—".into(), |x| format!("{} {}", sig(x), esc(&e.unit))),
+                    )
+                };
                 vec![
                     esc(&e.which.label),
-                    format!("{} {}", opt(e.estimate, 4), esc(&e.unit)),
-                    e.std.map_or("—".into(), |x| format!("{} {}", sig(x), esc(&e.unit))),
+                    estimate,
+                    std,
                     before_after,
                     closed,
                     e.confirm_p.map_or("—".into(), p_value),

@@ -319,3 +319,59 @@ fn the_diagnosis_decomposes_the_held_out_error() {
     // A variable that does not vary (τ1 of a vertical first axis) gets no panel.
     assert!(html.contains("q2 (deg)") && !html.contains("tau1 (N·m)"));
 }
+
+/// A group of terms over several joints (backlash on j1 and j2) is one named effect whose
+/// `estimate` is its most significant term's; the report lists each term with its σ, where one
+/// number would read as the group's size. A cyclic term keeps its one amplitude.
+#[test]
+fn a_group_effect_lists_each_of_its_terms() {
+    let mut v = diagnosis_json();
+    let which = |name: &str, label: &str, joint: Option<usize>| {
+        json!({"name": name, "label": label, "joint": joint, "from_joint": null, "harmonic": null,
+               "frequency_cpr": null, "scanned": false, "step_deg": null})
+    };
+    let effect = |which: serde_json::Value, estimate: f64, std: f64, params: serde_json::Value| {
+        let mut e = which;
+        let m = e.as_object_mut().unwrap();
+        for (k, x) in [
+            ("estimate", json!(estimate)),
+            ("std", json!(std)),
+            ("unit", json!("deg")),
+            ("parameters", params),
+            ("gain_mean_mm", json!(0.05)),
+            ("gain_rms_mm", json!(0.05)),
+            ("confirm_p", json!(1e-9)),
+            ("screen_log10_p", json!(-30.0)),
+            ("separability", json!(0.9)),
+        ] {
+            m.insert(k.into(), x);
+        }
+        e
+    };
+    let p =
+        |name: &str, estimate: f64, std: f64| json!({"name": name, "estimate": estimate, "std": std, "unit": "deg"});
+    v["verdict"]["effects"] = json!([
+        effect(
+            which("backlash", "backlash", None),
+            0.0253,
+            0.0011,
+            json!([p("backlash1", 0.0187, 0.0012), p("backlash2", 0.0253, 0.0011)])
+        ),
+        effect(
+            which("cyclic", "cyclic j3 h2", Some(3)),
+            0.0100,
+            0.0004,
+            json!([p("cyc3_h2_sin", 0.0060, 0.0004), p("cyc3_h2_cos", 0.0080, 0.0004)])
+        ),
+    ]);
+    let d: DiagnosisOut = serde_json::from_value(v).unwrap();
+    let html = diagnosis_report(&d);
+    self_contained(&html);
+    assert!(
+        html.contains("<td class=\"n\">backlash1 0.0187 deg<br>backlash2 0.0253 deg</td>"),
+        "each backlash term: {html}"
+    );
+    assert!(html.contains("0.0012 deg<br>"), "each term's σ");
+    assert!(html.contains("<td class=\"n\">0.0100 deg</td>"), "the cyclic amplitude alone");
+    assert!(!html.contains("cyc3_h2_sin"), "a cyclic term's sine and cosine are its amplitude");
+}

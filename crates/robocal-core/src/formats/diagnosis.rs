@@ -259,6 +259,8 @@ pub struct EffectOut {
     #[serde(flatten)]
     pub which: CandidateRef,
     /// The effect's size in `unit`: cyclic amplitude, backlash half-play, table RMS, α, kg, …
+    /// For a group of terms over several joints (`backlash` on j1–j6), its most significant
+    /// term's value (the largest |estimate|/σ); `parameters` has every term.
     pub estimate: Option<f64>,
     /// Standard deviation of `estimate`, in `unit`; `null` where not known (a suspect, a table).
     pub std: Option<f64>,
