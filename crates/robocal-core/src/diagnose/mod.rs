@@ -354,6 +354,10 @@ pub struct Transfer {
     /// with its standard error; `None` for the start itself, when either refit failed, or with
     /// too few poses for the standard error.
     pub change: Option<PairedChange>,
+    /// Base or tool parameters held in every model's refit on this session, beyond the options'
+    /// `transfer_fixed`: the session's data left them undetermined in some refit, and every model
+    /// is carried with the same registration. Empty when the refits agreed.
+    pub held: Vec<String>,
 }
 
 /// A transfer's errors inside and outside the identification's joint ranges.
@@ -1037,8 +1041,9 @@ fn accepted_identification(s: &search::Search, work: &Cell, model: &IdentifyOpti
 /// series C, confirmed there (0.4319 → 0.1491 mm), read 0.4418 → 0.4525 mm on series B, every pose of
 /// which lies outside series C's range of joint 1: a summary that said only "confirmed" would be
 /// read as a calibration that holds there. Each change carries its batch-means standard error
-/// ([`PairedChange`]): B's +0.0107 ± 0.0157 mm is no change that the run can tell, D's −0.0380 ±
-/// 0.0168 mm is. `None` without a final model (no effect accepted) or transfer session.
+/// ([`PairedChange`]): neither B's +0.0107 ± 0.0157 mm nor D's −0.0340 ± 0.0176 mm is a change
+/// the runs can tell from none. `None` without a final model (no effect accepted) or transfer
+/// session.
 fn transfer_clause(transfer: &[Transfer]) -> Option<String> {
     let mm = |v: f64| format!("{:.4} mm", v / crate::units::MM);
     let mut sessions: Vec<&str> = transfer.iter().map(|t| t.session.as_str()).collect();
@@ -1092,12 +1097,18 @@ fn transfer_clause(transfer: &[Transfer]) -> Option<String> {
     };
     let worse = names(&|d, c| d > 0.0 && c.is_none_or(PairedChange::beyond_2se));
     let level = names(&|_, c| c.is_some_and(|c| !c.beyond_2se()));
+    // "A", "A and B", "A, B and C".
+    let and = |v: &[&str]| match v {
+        [] => String::new(),
+        [a] => (*a).to_string(),
+        [rest @ .., last] => format!("{} and {last}", rest.join(", ")),
+    };
     let mut remark = Vec::new();
     if !worse.is_empty() {
-        remark.push(format!("they made {} worse", worse.join(", ")));
+        remark.push(format!("they made {} worse", and(&worse)));
     }
     if !level.is_empty() {
-        remark.push(format!("on {} the change is within twice its uncertainty", level.join(", ")));
+        remark.push(format!("on {} the change is within twice its uncertainty", and(&level)));
     }
     let sigma = if finals.iter().any(|(_, _, c)| c.is_some()) {
         " (± one standard error of the change, paired pose by pose, from its means over runs of consecutive poses)"
@@ -1151,50 +1162,83 @@ fn transfers(
                 accepted.map(|id| id.set.clone()).unwrap_or_else(|| s.stages.last().expect("a stage").set.clone());
             models.push(("final".to_string(), model.model.clone(), fin));
         }
-        // The start's |e| per reading (index in the session, in measuring order), which every
-        // later model's is paired with.
-        let mut start_readings: Option<Vec<(usize, f64)>> = None;
-        for (name, m, set) in models {
+        let carry = |m: &ModelOptions, set: &ParameterSet, held: &[String]| -> Result<Carried, String> {
+            let mut fixed = opts.transfer_fixed.clone();
+            fixed.extend(held.iter().filter(|h| !fixed.contains(h)).cloned().collect::<Vec<_>>());
             let mut o = IdentifyOptions {
-                model: m,
-                start: Some(set),
+                model: m.clone(),
+                start: Some(set.clone()),
                 only: vec!["base".into(), "tool".into()],
-                fixed: opts.transfer_fixed.clone(),
+                fixed,
                 kappa_limit: opts.transfer_kappa_limit,
                 rotation_weight: opts.rotation_weight,
                 ..unrefused()
             };
             o.selection.sessions = vec![t.clone()];
-            let r = identify(work, &o).map_err(|e| e.to_string()).and_then(|id| {
-                let k = id.quality.kappa_scaled;
-                validate(&id.set, work, std::slice::from_ref(t), Reference::Measured).map_err(|e| e.to_string()).map(
-                    |r| {
-                        let split = ranges.as_deref().map(|g| range_split(work, g, &r.residuals));
-                        let per_reading: Vec<(usize, f64)> =
-                            r.residuals.iter().map(|x| (x.index, x.error.norm())).collect();
-                        (r.calibrated.position, k, split, per_reading)
-                    },
-                )
+            let id = identify(work, &o).map_err(|e| e.to_string())?;
+            let r = validate(&id.set, work, std::slice::from_ref(t), Reference::Measured).map_err(|e| e.to_string())?;
+            Ok(Carried {
+                errors: r.calibrated.position,
+                kappa_scaled: id.quality.kappa_scaled,
+                range: ranges.as_deref().map(|g| range_split(work, g, &r.residuals)),
+                per_reading: r.residuals.iter().map(|x| (x.index, x.error.norm())).collect(),
+                free: id.free_names,
+            })
+        };
+        let mut carried: Vec<Result<Carried, String>> = models.iter().map(|(_, m, set)| carry(m, set, &[])).collect();
+        // One registration for every model: a base or tool parameter the session's data leave at
+        // the edge of determined (the UR10's probe z on series D, σ ≈ 10 mm) is held in some
+        // refits and free in others, and the models would be compared with different freedoms.
+        // What some refit held is held in all of them.
+        let free_sets: Vec<&Vec<String>> = carried.iter().filter_map(|c| c.as_ref().ok()).map(|c| &c.free).collect();
+        let held: Vec<String> = free_sets
+            .iter()
+            .flat_map(|f| f.iter())
+            .filter(|n| !free_sets.iter().all(|f| f.contains(n)))
+            .fold(Vec::new(), |mut v, n| {
+                if !v.contains(n) {
+                    v.push(n.clone());
+                }
+                v
             });
-            let per_reading = r.as_ref().ok().map(|x| x.3.clone());
-            let change = match (&start_readings, &per_reading) {
-                (Some(a), Some(b)) if name != "start" => paired_change(a, b),
+        if !held.is_empty() {
+            for (c, (_, m, set)) in carried.iter_mut().zip(&models) {
+                if c.as_ref().is_ok_and(|c| c.free.iter().any(|n| held.contains(n))) {
+                    *c = carry(m, set, &held);
+                }
+            }
+        }
+        // The start's |e| per reading (index in the session, in measuring order), which every
+        // later model's is paired with.
+        let start_readings = carried[0].as_ref().ok().map(|c| c.per_reading.clone());
+        for ((name, _, _), c) in models.into_iter().zip(carried) {
+            let change = match (&start_readings, &c) {
+                (Some(a), Ok(b)) if name != "start" => paired_change(a, &b.per_reading),
                 _ => None,
             };
-            if name == "start" {
-                start_readings = per_reading;
-            }
             transfer.push(Transfer {
                 session: t.clone(),
                 model: name,
-                kappa_scaled: r.as_ref().ok().map(|x| x.1),
-                range: r.as_ref().ok().and_then(|x| x.2.clone()),
-                errors: r.map(|x| x.0),
+                kappa_scaled: c.as_ref().ok().map(|x| x.kappa_scaled),
+                range: c.as_ref().ok().and_then(|x| x.range.clone()),
+                held: held.clone(),
+                errors: c.map(|x| x.errors),
                 change,
             });
         }
     }
     Ok(transfer)
+}
+
+/// A model carried to a transfer session: its errors there and what its refit left free.
+struct Carried {
+    errors: ErrorStats,
+    kappa_scaled: f64,
+    range: Option<RangeSplit>,
+    /// |e| per reading (index in the session).
+    per_reading: Vec<(usize, f64)>,
+    /// The refit's free parameters, by name.
+    free: Vec<String>,
 }
 
 /// A model's |e| paired with the start's on the readings both were validated on (by index in the

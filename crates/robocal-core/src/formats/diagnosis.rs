@@ -126,6 +126,11 @@ pub struct TransferOut {
     /// than 50 readings, or from a diagnosis stored before this field.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub change_from_start: Option<PairedChangeOut>,
+    /// Base or tool parameters held in every model's refit on this session beyond the options'
+    /// (`transfer_fix`): the session's data left them undetermined in some refit, so every model is
+    /// carried with the same registration. Absent when the refits agreed.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub held_in_every_refit: Vec<String>,
 }
 
 /// A transfer's change of the mean |e| from the starting model's, paired reading by reading.
@@ -883,6 +888,18 @@ pub fn diagnosis_out(d: &Diagnosis) -> DiagnosisOut {
             "the starting model does not converge on the pooled data ({n}); it is linearised at the given parameter set"
         ));
     }
+    let mut said: Vec<&str> = Vec::new();
+    for t in d.transfer.iter().filter(|t| !t.held.is_empty()) {
+        if !said.contains(&t.session.as_str()) {
+            said.push(&t.session);
+            notes.push(format!(
+                "{}: {} held at each model's value in every model's base-and-tools refit there — the session's data leave {} undetermined in some of the refits (standard deviation beyond the bound), and every model is carried with the same registration",
+                t.session,
+                t.held.join(", "),
+                if t.held.len() == 1 { "it" } else { "them" }
+            ));
+        }
+    }
     if d.verdict.status == Status::Named {
         notes.push(
             "accepting fits the final model on the identification and validation sessions together; its held-out figures are the shrink table's"
@@ -936,6 +953,7 @@ pub fn diagnosis_out(d: &Diagnosis) -> DiagnosisOut {
                     inside: r.inside.as_ref().map(stats),
                     outside: r.outside.as_ref().map(stats),
                 }),
+                held_in_every_refit: t.held.clone(),
                 change_from_start: t.change.as_ref().map(|c| PairedChangeOut {
                     mean_mm: round_to(c.mean / MM, OUT_MM),
                     standard_error_mm: round_to(c.se / MM, OUT_MM),
