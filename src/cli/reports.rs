@@ -499,8 +499,11 @@ impl CrossvalReport {
             .collect();
         // The next run leaves out what this one did, and these.
         let mut all: Vec<String> = self.excluded.iter().map(|m| format!("{}:{}", m.session, m.index)).collect();
-        all.extend(refs.iter().filter(|r| !all.contains(r)).cloned().collect::<Vec<_>>());
-        let split = self.session.clone();
+        for r in refs {
+            if !all.contains(&r) {
+                all.push(r);
+            }
+        }
         let more = match n {
             n if n > LISTED => format!(
                 " and {} more (so many point at the data: a shared TCP, sessions in different frames; the command below names the first {SHOWN})",
@@ -510,8 +513,9 @@ impl CrossvalReport {
             _ => String::new(),
         };
         format!(
-            "\noutliers named by the refused fits: {}{more}. Cross-validate without them with `robocal crossval {cell} --session {split} --exclude {}` (and the other options of this run); see the fit without them with `robocal identify {cell} --sessions {} --exclude {}` (or `--huber 2.5`)\n",
+            "\noutliers named by the refused fits: {}{more}. Cross-validate without them with `robocal crossval {cell} --session {} --exclude {}` (and the other options of this run); see the fit without them with `robocal identify {cell} --sessions {} --exclude {}` (or `--huber 2.5`)\n",
             named.join(", "),
+            self.session,
             all.join(","),
             sessions.join(","),
             all.join(",")
