@@ -7,7 +7,7 @@
 
 use super::html::{esc, figure, fixed, mm, opt, p_value, page, sig, table};
 use super::plot::{self, Panel, Segment};
-use crate::domain::diagnosis::{CandidateOut, CandidateRef, DiagnosisOut, EvidenceOut, StatsOut};
+use crate::domain::diagnosis::{CandidateOut, CandidateRef, DiagnosisOut, EvidenceOut, ParamOut, StatsOut};
 
 /// The decomposition, mm: (label, segments) rows of the stacked bar.
 ///
@@ -104,18 +104,12 @@ fn verdict_section(s: &mut String, d: &DiagnosisOut) {
                 // term; `estimate` alone is its most significant term's, which read as the
                 // group's size would mislead: each term gets its line.
                 let group = e.parameters.len() > 1 && !matches!(e.which.name.as_str(), "cyclic" | "joint_map");
+                let per_term =
+                    |cell: &dyn Fn(&ParamOut) -> String| e.parameters.iter().map(cell).collect::<Vec<_>>().join("<br>");
                 let (estimate, std) = if group {
                     (
-                        e.parameters
-                            .iter()
-                            .map(|p| format!("{} {} {}", esc(&p.name), opt(Some(p.estimate), 4), esc(&p.unit)))
-                            .collect::<Vec<_>>()
-                            .join("<br>"),
-                        e.parameters
-                            .iter()
-                            .map(|p| p.std.map_or("—".into(), |x| format!("{} {}", sig(x), esc(&p.unit))))
-                            .collect::<Vec<_>>()
-                            .join("<br>"),
+                        per_term(&|p| format!("{} {} {}", esc(&p.name), opt(Some(p.estimate), 4), esc(&p.unit))),
+                        per_term(&|p| p.std.map_or("—".into(), |x| format!("{} {}", sig(x), esc(&p.unit)))),
                     )
                 } else {
                     (

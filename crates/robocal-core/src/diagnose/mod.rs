@@ -1164,7 +1164,11 @@ fn transfers(
         }
         let carry = |m: &ModelOptions, set: &ParameterSet, held: &[String]| -> Result<Carried, String> {
             let mut fixed = opts.transfer_fixed.clone();
-            fixed.extend(held.iter().filter(|h| !fixed.contains(h)).cloned().collect::<Vec<_>>());
+            for h in held {
+                if !fixed.contains(h) {
+                    fixed.push(h.clone());
+                }
+            }
             let mut o = IdentifyOptions {
                 model: m.clone(),
                 start: Some(set.clone()),
@@ -1191,16 +1195,12 @@ fn transfers(
         // refits and free in others, and the models would be compared with different freedoms.
         // What some refit held is held in all of them.
         let free_sets: Vec<&Vec<String>> = carried.iter().filter_map(|c| c.as_ref().ok()).map(|c| &c.free).collect();
-        let held: Vec<String> = free_sets
-            .iter()
-            .flat_map(|f| f.iter())
-            .filter(|n| !free_sets.iter().all(|f| f.contains(n)))
-            .fold(Vec::new(), |mut v, n| {
-                if !v.contains(n) {
-                    v.push(n.clone());
-                }
-                v
-            });
+        let mut held: Vec<String> = Vec::new();
+        for n in free_sets.iter().flat_map(|f| f.iter()) {
+            if !held.contains(n) && !free_sets.iter().all(|f| f.contains(n)) {
+                held.push(n.clone());
+            }
+        }
         if !held.is_empty() {
             for (c, (_, m, set)) in carried.iter_mut().zip(&models) {
                 if c.as_ref().is_ok_and(|c| c.free.iter().any(|n| held.contains(n))) {

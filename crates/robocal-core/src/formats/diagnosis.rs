@@ -888,17 +888,14 @@ pub fn diagnosis_out(d: &Diagnosis) -> DiagnosisOut {
             "the starting model does not converge on the pooled data ({n}); it is linearised at the given parameter set"
         ));
     }
-    let mut said: Vec<&str> = Vec::new();
-    for t in d.transfer.iter().filter(|t| !t.held.is_empty()) {
-        if !said.contains(&t.session.as_str()) {
-            said.push(&t.session);
-            notes.push(format!(
-                "{}: {} held at each model's value in every model's base-and-tools refit there — the session's data leave {} undetermined in some of the refits (standard deviation beyond the bound), and every model is carried with the same registration",
-                t.session,
-                t.held.join(", "),
-                if t.held.len() == 1 { "it" } else { "them" }
-            ));
-        }
+    // Once per session: every model of a session carries the same `held`, and each has one start.
+    for t in d.transfer.iter().filter(|t| t.model == "start" && !t.held.is_empty()) {
+        notes.push(format!(
+            "{}: {} held at each model's value in every model's base-and-tools refit there — the session's data leave {} undetermined in some of the refits (standard deviation beyond the bound), and every model is carried with the same registration",
+            t.session,
+            t.held.join(", "),
+            if t.held.len() == 1 { "it" } else { "them" }
+        ));
     }
     if d.verdict.status == Status::Named {
         notes.push(
