@@ -1579,3 +1579,112 @@ fn positions_paired_with_another_line_of_joints_are_refused_with_the_shift() {
     let e = refused(&joints, &one).expect("one file shifted");
     assert!(e.contains("each measured position of 'reflector-2' fits the joint readings of the stop after"), "{e}");
 }
+
+/// A twin of joint sweeps, one joint moved at a time from one home pose (the layout of a public
+/// three-SMR tracker run of a Fanuc R-2000iC/165F: joint 1 swept over 9° only, joint 3 over 4°),
+/// on that robot's nominal geometry with a built robot's errors: a 360 mm plate, an offset turn
+/// of every joint per sweep (σ `offset_deg`: the sweeps were approached apart), a turn of 0.003°
+/// at every stop and 50 µm of tracker noise. Written as three-reflector files and imported.
+fn sweeps_twin(seed: u64, offset_deg: f64) -> Cell {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    use robocal::domain::robot::RobotSpec;
+    use robocal::kinematics::{JointState, ParameterSet, Tool};
+    let spec = serde_json::json!({"name": "r2000ic-165f-like", "convention": "standard", "joints": [
+        {"alpha_deg": -90, "a_mm": 312, "d_mm": 670, "limits_deg": [-185, 185]},
+        {"alpha_deg": 180, "a_mm": 1075, "d_mm": 0, "theta_deg": -90, "limits_deg": [-60, 76]},
+        {"alpha_deg": -90, "a_mm": 225, "d_mm": 0, "beta_deg": 0, "limits_deg": [-180, 180]},
+        {"alpha_deg": 90, "a_mm": 0, "d_mm": -1280, "limits_deg": [-360, 360]},
+        {"alpha_deg": -90, "a_mm": 0, "d_mm": 0, "limits_deg": [-125, 125]},
+        {"alpha_deg": 0, "a_mm": 0, "d_mm": -215, "limits_deg": [-360, 360]}]});
+    let model = RobotSpec::from_json_value(&spec).unwrap().to_model().unwrap();
+    let base = [4.36, 0.43, -1.35, 156.8 * DEG, 0.5 * DEG, -0.3 * DEG];
+    let mut truth = ParameterSet::nominal(model.clone(), Tool::flange(), base);
+    for (name, change) in [
+        ("alpha1", 0.03 * DEG),
+        ("a1", -0.8 * MM),
+        ("a2", 0.4 * MM),
+        ("a3", -0.6 * MM),
+        ("d4", -1.1 * MM),
+        ("theta2", -0.04 * DEG),
+        ("theta3", 0.03 * DEG),
+        ("theta4", 0.05 * DEG),
+        ("beta2", 0.02 * DEG),
+    ] {
+        let p = Param::parse(name).unwrap();
+        let v = truth.value(p).unwrap();
+        assert!(truth.set(p, v + change), "{name}");
+    }
+    let smrs = [[0.202, -0.056, -0.202], [-0.050, 0.250, -0.100], [0.150, 0.230, -0.320]];
+    let chains: Vec<_> = smrs
+        .iter()
+        .map(|s| truth.with_tool(Tool { tcp: [s[0], s[1], s[2], 0.0, 0.0, 0.0], ..Tool::flange() }).chain())
+        .collect();
+    // Home, then each joint swept alone through ten stops (degrees).
+    let home = [24.7, 18.5, 7.4, -81.4, -7.2, 172.8];
+    let sweeps: [(usize, f64, f64); 6] =
+        [(0, 19.6, 28.6), (1, -45.0, 49.0), (2, 5.6, 9.6), (3, -275.0, -50.0), (4, -62.0, 11.0), (5, -120.0, 350.0)];
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let offset = Normal::new(0.0, offset_deg * DEG).unwrap();
+    let (jitter, noise) = (Normal::new(0.0, 0.003 * DEG).unwrap(), Normal::new(0.0, 0.05 * MM).unwrap());
+    let (mut joints, mut positions) = (String::new(), vec![String::new(); 3]);
+    for (j, from, to) in sweeps {
+        let turn: Vec<f64> = (0..6).map(|_| offset.sample(&mut rng)).collect();
+        for k in 0..10 {
+            let mut q: Vec<f64> = home.iter().map(|v| v * DEG).collect();
+            q[j] = (from + (to - from) * k as f64 / 9.0) * DEG;
+            let line: Vec<String> = q.iter().map(|v| format!("{:.4}", v / DEG)).collect();
+            joints.push_str(&(line.join(" ") + "\n"));
+            let moved: Vec<f64> = q.iter().zip(&turn).map(|(v, t)| v + t + jitter.sample(&mut rng)).collect();
+            for (c, text) in chains.iter().zip(&mut positions) {
+                let p = c.fk(&JointState::new(&moved)).t;
+                let r: Vec<String> = (0..3).map(|i| format!("{:.4}", (p[i] + noise.sample(&mut rng)) / MM)).collect();
+                text.push_str(&(r.join(" ") + "\n"));
+            }
+        }
+    }
+    let dir = common::fresh_dir("sweeps");
+    let joints_path = dir.join("joints.txt");
+    std::fs::write(&joints_path, joints).unwrap();
+    let files: Vec<PathBuf> = positions
+        .iter()
+        .enumerate()
+        .map(|(k, text)| {
+            let path = dir.join(format!("smr{}.txt", k + 1));
+            std::fs::write(&path, text).unwrap();
+            path
+        })
+        .collect();
+    three_reflector::import(&joints_path, &files, model, Purpose::Identification).unwrap().cell
+}
+
+/// On joint sweeps base, a1, θ2 and the base's tilt are nearly one direction, several at once:
+/// base_x's σ at the solution is beyond the 10 mm bound while its strongest pairwise correlation
+/// stays below 0.99, the test the hold at the solution asked for, so the fit stood at κ just above
+/// the limit and was refused. On the public Fanuc run one cross-validation fold in five was
+/// refused so (base_x σ 20 mm, correlation 0.9899), and `crossval` scored nothing. A fit that
+/// would be refused for its κ now holds its parameter beyond the bound whatever its pairwise
+/// correlations, and says so.
+#[test]
+fn joint_sweeps_hold_what_several_parameters_together_leave_undetermined() {
+    for (seed, offset_deg) in [(2, 0.04), (3, 0.03), (7, 0.03)] {
+        let cell = sweeps_twin(seed, offset_deg);
+        let mut o = options("", &[]);
+        // 0.03–0.04° per sweep at a 2.4 m reach leaves a residual of 1–2 mm, 35–65 times the
+        // instrument's: a robot that does not repeat between sweeps.
+        o.residual_ratio_limit = f64::INFINITY;
+        let id = identify(&cell, &o).unwrap_or_else(|e| panic!("seed {seed}: {e}"));
+        assert!(id.quality.kappa_scaled <= o.kappa_limit, "seed {seed}: κ {}", id.quality.kappa_scaled);
+        let held: Vec<String> =
+            id.status.iter().map(|s| s.to_string()).filter(|s| s.contains("at the solution")).collect();
+        let pairwise = |s: &str| -> f64 {
+            let r = s.split("correlation ").nth(1).unwrap().split(' ').next().unwrap();
+            r.parse::<f64>().unwrap().abs()
+        };
+        assert!(
+            held.iter().any(|s| s.starts_with("base_x: not determined by these data") && pairwise(s) < 0.99),
+            "seed {seed}: {held:?}"
+        );
+        assert!(held.iter().all(|s| s.ends_with("held at its start value")), "seed {seed}: {held:?}");
+    }
+}

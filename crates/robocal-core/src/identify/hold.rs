@@ -68,6 +68,8 @@ pub(super) struct Fitted<'a> {
     /// Hold the compliances the data do not determine too
     /// ([`super::IdentifyOptions::hold_undetermined_compliance`]).
     pub compliances: bool,
+    /// The κ above which the fit is refused ([`super::IdentifyOptions::kappa_limit`]).
+    pub kappa_limit: f64,
 }
 
 /// What the next round holds: (column in `free`, global index, its statistic).
@@ -100,7 +102,7 @@ pub(super) fn hold_undetermined(
         let mut q = Quality::of(fit, f.problem.obs.len(), f.rows);
         q.make_robust(fit, f.rows, f.pose_of_obs, f.n_poses);
         let next = undetermined_payload(f, fit, free, &q)
-            .or_else(|| undetermined_geometry(f.problem, free, &q))
+            .or_else(|| undetermined_geometry(f.problem, free, &q, q.kappa_scaled > f.kappa_limit))
             .or_else(|| f.compliances.then(|| weakest_compliance(f.problem, fit, free, &q)).flatten());
         let Some(next) = next else { return Ok(q) };
         let (c, g) = match next {
@@ -167,7 +169,20 @@ fn undetermined_payload(f: &Fitted<'_>, fit: &Fit, free: &[usize], q: &Quality) 
 /// direction only together (θ5 and a5 of a UR5 whose SMR sits 0.2 mm off the flange axis: σ 4.5°
 /// and 8.6 mm, κ 20,000) pass it one by one. Holding the worst leaves the other determined
 /// (there: a5 0.09 ± 0.02 mm, κ 181).
-fn undetermined_geometry(problem: &Problem, free: &[usize], q: &Quality) -> Option<Undetermined> {
+///
+/// A fit whose κ is above the limit (`ill_conditioned`) would be refused; there the σ beyond
+/// its bound suffices, whatever its pairwise correlations. A near-dependence of several
+/// parameters leaves every pairwise correlation below [`COLLINEAR`] and still puts the fit
+/// beyond the limit: a Fanuc R-2000iC's joint sweeps (a 9° sweep of joint 1; base, a1, θ2 and
+/// the base tilt nearly one direction) gave base_x σ 20 mm with its strongest pairwise
+/// correlation 0.9899 in one fold of five, 0.9900–0.9904 in the others, so one fold's fit was
+/// refused at κ 2,662 while the rest held base_x and converged at κ 466–510.
+fn undetermined_geometry(
+    problem: &Problem,
+    free: &[usize],
+    q: &Quality,
+    ill_conditioned: bool,
+) -> Option<Undetermined> {
     free.iter()
         .enumerate()
         .filter_map(|(c, &g)| {
@@ -180,7 +195,7 @@ fn undetermined_geometry(problem: &Problem, free: &[usize], q: &Quality) -> Opti
             // misfit or for its outliers, naming them — holding parameter after parameter would
             // hide that.
             let collinear = strongest_correlation(problem, free, q, c).is_some_and(|(_, r)| r.abs() >= COLLINEAR);
-            (ratio > 1.0 && collinear).then_some((c, g, ratio))
+            (ratio > 1.0 && (collinear || ill_conditioned)).then_some((c, g, ratio))
         })
         .max_by(|a, b| a.2.total_cmp(&b.2))
         .map(|(c, g, _)| Undetermined::Geometry(c, g))

@@ -169,6 +169,7 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
         solver: &opts.solver,
         payload: payload_unknown.then(|| payload_mass(&problem)).flatten(),
         compliances: opts.hold_undetermined_compliance,
+        kappa_limit: opts.kappa_limit,
     };
     let mut quality = super::hold::hold_undetermined(&f, &mut fit, &mut free, &mut status)?;
     if opts.noise.is_some() {
