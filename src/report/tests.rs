@@ -375,3 +375,26 @@ fn a_group_effect_lists_each_of_its_terms() {
     assert!(html.contains("<td class=\"n\">0.0100 deg</td>"), "the cyclic amplitude alone");
     assert!(!html.contains("cyc3_h2_sin"), "a cyclic term's sine and cosine are its amplitude");
 }
+
+/// A partial verdict's effect is a suspect, not added to the model: the table says so and calls
+/// its number the screening's estimate. It was listed under "Named effects" (a twice-per-turn
+/// term of joint 1 fitted over a 9° sweep: "cyclic j1 h2 5.8623 deg", no σ).
+#[test]
+fn a_suspect_is_not_listed_as_a_named_effect() {
+    let mut v = diagnosis_json();
+    v["verdict"]["status"] = json!("partial");
+    v["verdict"]["effects"] = json!([{"name": "cyclic", "label": "cyclic j1 h2", "joint": 1, "from_joint": null,
+        "harmonic": 2, "frequency_cpr": 2.0, "scanned": false, "step_deg": null, "estimate": 5.8623, "std": null,
+        "unit": "deg", "parameters": [{"name": "cyc1_h2_sin", "estimate": -4.374, "std": null, "unit": "deg"},
+        {"name": "cyc1_h2_cos", "estimate": -3.903, "std": null, "unit": "deg"}], "gain_mean_mm": 0.17,
+        "gain_rms_mm": 0.17, "confirm_p": 7e-4, "screen_log10_p": -37.8, "separability": 0.005}]);
+    let d: DiagnosisOut = serde_json::from_value(v.clone()).unwrap();
+    let html = diagnosis_report(&d);
+    self_contained(&html);
+    assert!(!html.contains("Named effects"), "{html}");
+    assert!(html.contains("Suspected, not named") && html.contains("screening estimate"), "{html}");
+    // Named, the same table keeps its title.
+    v["verdict"]["status"] = json!("named");
+    let named = diagnosis_report(&serde_json::from_value(v).unwrap());
+    assert!(named.contains("Named effects") && !named.contains("Suspected, not named"));
+}

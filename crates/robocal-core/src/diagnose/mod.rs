@@ -238,7 +238,8 @@ pub struct Effect {
 pub struct Verdict {
     /// What the diagnosis concludes.
     pub status: Status,
-    /// Named effects, most important (first accepted) first; for `not_separable`, the suspects.
+    /// Named effects, most important (first accepted) first. For any other status, the suspects:
+    /// not added to the model, each with the screening's one-step linear estimate and no σ.
     pub effects: Vec<Effect>,
     /// The verdict in a sentence or two, for the report.
     pub summary: String,

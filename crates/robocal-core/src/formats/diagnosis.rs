@@ -193,7 +193,8 @@ pub struct VerdictOut {
     pub status: Status,
     /// The verdict in a sentence or two.
     pub summary: String,
-    /// Named effects, most important first; for `not_separable`, the suspects.
+    /// Named effects, most important first. For any other status, the suspects: not added to the
+    /// model, each `estimate` is the screening's one-step linear estimate and has no σ.
     pub effects: Vec<EffectOut>,
     /// For `not_separable`: a look-alike the data cannot tell from the best candidate; `null`
     /// otherwise.
