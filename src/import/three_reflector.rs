@@ -88,7 +88,12 @@ pub fn import_with_payload(
     };
     // A unit mistake (joints in radians, positions in metres or inches) is refused here, as
     // identify would refuse it, before a payload centre is registered on it and a cell written.
-    crate::identify::check_readings(&imported.cell).map_err(|e| ImportError::Input(e.to_string()))?;
+    // A miss no change of the readings explains (a wrong length in the robot file, readings in a
+    // convention further off than the search goes) is imported, and said: it was dropped here,
+    // and a Fanuc's sweeps read with five joints in another convention imported silently, then
+    // `identify` refused "7 outliers" up to 172 mm.
+    let note = crate::identify::check_readings(&imported.cell).map_err(|e| ImportError::Input(e.to_string()))?;
+    imported.notes.extend(note);
     let (mass, com) = match payload {
         Payload::Unknown => (0.0, None),
         Payload::Declared { mass_kg, com } => (mass_kg, com),

@@ -516,7 +516,7 @@ pub(crate) fn check(
         return Err(IdentifyError::JointConvention { finding });
     }
     Ok(Some(format!(
-        "the nominal robot, registered on the measured positions, missed them by {:.1} mm RMS at the start (a real robot's nominal model misses by a few mm): no quarter turn, sign or coupling of up to four joints' readings explains it, so the fit started far from the robot; check the robot model's lengths and the declared TCPs against its parameters' changes from nominal",
+        "the nominal robot, registered on the measured positions, missed them by {:.1} mm RMS at the start (a real robot's nominal model misses by a few mm): no quarter turn, sign or coupling of up to four joints' readings explains it, so a fit starts far from the robot; check the robot model's lengths and the declared TCPs (after a fit, against its parameters' changes from nominal)",
         rms / crate::units::MM
     )))
 }

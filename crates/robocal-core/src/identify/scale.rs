@@ -22,15 +22,17 @@ const MAX_SPREAD_RATIO: f64 = 3.0;
 /// ([`IdentifyError::MirroredFrame`]) and joint conventions
 /// ([`IdentifyError::JointConvention`]) — on their own, on the nominal robot with the default
 /// options: for an importer, to refuse a file before anything is written. `Ok` also when the
-/// checks cannot be set up (an identification then says why).
-pub fn check_readings(cell: &Cell) -> Result<(), IdentifyError> {
+/// checks cannot be set up (an identification then says why); `Ok(Some(note))` when the nominal
+/// robot misses the positions by far more than a real robot's few millimetres and no change of
+/// the readings explains it (a wrong length in a robot file): the importer says so.
+pub fn check_readings(cell: &Cell) -> Result<Option<String>, IdentifyError> {
     let opts = super::IdentifyOptions::default();
     match super::prepare(cell, &opts) {
         Ok(p) => {
             check_position_scale(&p.problem, &p.x0, cell)?;
-            super::convention::check(cell, &opts, p.start_rms).map(|_| ())
+            super::convention::check(cell, &opts, p.start_rms)
         }
-        Err(_) => Ok(()),
+        Err(_) => Ok(None),
     }
 }
 
