@@ -15,7 +15,8 @@
 //! reading means another angle. When the miss exceeds [`SUSPICIOUS_M`] and [`SUSPICIOUS_SHARE`] of
 //! the positions' spread, each change of one joint's reading ([`ReadingChange`]) is tried on the
 //! nominal robot — a pair of them to two joints when no single one helps — the best kept while it
-//! at least halves the miss, up to [`MAX_CHANGES`]; the readings are refused ([`super::IdentifyError::JointConvention`]) only
+//! at least halves the miss, up to [`MAX_CHANGES`] — and, when that explains nothing, every set of
+//! reversed joints with every turn of joints 2 and 3 at once (`whole_convention`); the readings are refused ([`super::IdentifyError::JointConvention`]) only
 //! when the changes bring the miss back under the same bound and to a third of what it was. A
 //! miss that no change explains (a wrong link length in a robot file, a wrong declared TCP) is
 //! left to the fit and said in its notes.
@@ -274,11 +275,69 @@ pub(crate) fn search(cell: &Cell, picks: &[(usize, usize)], rms: f64, bound: f64
         steps.push(step);
         now = r;
     }
-    if steps.is_empty() {
-        return None;
+    if !steps.is_empty() {
+        let now = start_miss(cell, picks, &taken)?;
+        if now <= bound && now <= rms / 3.0 {
+            return Some(ConventionFinding { rms, rms_changed: now, steps });
+        }
     }
-    let now = start_miss(cell, picks, &taken)?;
-    (now <= bound && now <= rms / 3.0).then_some(ConventionFinding { rms, rms_changed: now, steps })
+    whole_convention(cell, picks, &sample, rms, bound)
+}
+
+/// Changes that only explain the miss all together, which no stepwise search finds: the readings
+/// of a controller and a DH table can differ as a KUKA's do, joints 1, 4 and 6 reversed, joint 2
+/// a quarter turn one way and joint 3 the other. On a Fanuc's sweeps read so, the five changes
+/// added one at a time left the miss at 173, 157, 177 and 117 mm (153 mm as read) and took it to
+/// 1.2 mm only together, while a wrong single change ("joint 3 as q3 + 90°", 43 mm) halved it and
+/// the greedy search stopped there. Tried when that search explains nothing: every set of
+/// reversed joints with every quarter or half turn of joints 2 and 3 (2ᵈᵒᶠ · 16 registrations on
+/// the sample), the best kept on the same terms as a search's finding.
+fn whole_convention(
+    cell: &Cell,
+    picks: &[(usize, usize)],
+    sample: &[(usize, usize)],
+    rms: f64,
+    bound: f64,
+) -> Option<ConventionFinding> {
+    use std::f64::consts::{FRAC_PI_2, PI};
+    let dof = cell.model.dof();
+    let turned: Vec<usize> = (1..dof.min(3)).collect();
+    let turns = [0.0, FRAC_PI_2, -FRAC_PI_2, PI];
+    let mut tried: Vec<(Vec<ReadingChange>, f64)> = Vec::new();
+    for flips in 0u32..(1 << dof) {
+        for t in 0..turns.len().pow(turned.len() as u32) {
+            let offset_of = |j: usize| {
+                turned
+                    .iter()
+                    .position(|&k| k == j)
+                    .map_or(0.0, |i| turns[(t / turns.len().pow(i as u32)) % turns.len()])
+            };
+            let changes: Vec<ReadingChange> = (0..dof)
+                .filter_map(|joint| {
+                    let (flip, offset) = (flips & (1 << joint) != 0, offset_of(joint));
+                    (flip || offset != 0.0).then_some(ReadingChange::Joint { joint, flip, offset })
+                })
+                .collect();
+            if changes.is_empty() {
+                continue;
+            }
+            if let Some(r) = start_miss(cell, sample, &changes) {
+                tried.push((changes, r));
+            }
+        }
+    }
+    let best = tried.iter().map(|t| t.1).min_by(f64::total_cmp)?;
+    let mut equal: Vec<(Vec<ReadingChange>, f64)> =
+        tried.into_iter().filter(|(_, r)| *r <= best * (1.0 + EQUALLY)).collect();
+    equal.sort_by(|a, b| complexity(&a.0).cmp(&complexity(&b.0)).then(a.1.total_cmp(&b.1)));
+    let mut it = equal.into_iter();
+    let (changes, _) = it.next()?;
+    let now = start_miss(cell, picks, &changes)?;
+    (now <= bound && now <= rms / 3.0).then(|| ConventionFinding {
+        rms,
+        rms_changed: now,
+        steps: vec![Step { changes, equally: it.map(|(o, _)| o).collect() }],
+    })
 }
 
 /// The option (one change or a pair) added to `taken` that misses least, with the others within
@@ -516,7 +575,7 @@ pub(crate) fn check(
         return Err(IdentifyError::JointConvention { finding });
     }
     Ok(Some(format!(
-        "the nominal robot, registered on the measured positions, missed them by {:.1} mm RMS at the start (a real robot's nominal model misses by a few mm): no quarter turn, sign or coupling of up to four joints' readings explains it, so a fit starts far from the robot; check the robot model's lengths and the declared TCPs (after a fit, against its parameters' changes from nominal)",
+        "the nominal robot, registered on the measured positions, missed them by {:.1} mm RMS at the start (a real robot's nominal model misses by a few mm): no quarter turn, sign or coupling of up to four joints' readings explains it, nor reversed joints with turns of joints 2 and 3 all together, so a fit starts far from the robot; check the robot model's lengths and the declared TCPs (after a fit, against its parameters' changes from nominal)",
         rms / crate::units::MM
     )))
 }
