@@ -326,18 +326,9 @@ fn whole_convention(
             }
         }
     }
-    let best = tried.iter().map(|t| t.1).min_by(f64::total_cmp)?;
-    let mut equal: Vec<(Vec<ReadingChange>, f64)> =
-        tried.into_iter().filter(|(_, r)| *r <= best * (1.0 + EQUALLY)).collect();
-    equal.sort_by(|a, b| complexity(&a.0).cmp(&complexity(&b.0)).then(a.1.total_cmp(&b.1)));
-    let mut it = equal.into_iter();
-    let (changes, _) = it.next()?;
-    let now = start_miss(cell, picks, &changes)?;
-    (now <= bound && now <= rms / 3.0).then(|| ConventionFinding {
-        rms,
-        rms_changed: now,
-        steps: vec![Step { changes, equally: it.map(|(o, _)| o).collect() }],
-    })
+    let (step, _) = simplest_of_best(tried)?;
+    let now = start_miss(cell, picks, &step.changes)?;
+    (now <= bound && now <= rms / 3.0).then(|| ConventionFinding { rms, rms_changed: now, steps: vec![step] })
 }
 
 /// The option (one change or a pair) added to `taken` that misses least, with the others within
@@ -356,12 +347,17 @@ fn best_of(
             start_miss(cell, picks, &trial).map(|r| (o, r))
         })
         .collect();
-    let best = tried.iter().map(|t| t.1).min_by(f64::total_cmp)?;
-    if best >= now / 2.0 {
+    if tried.iter().map(|t| t.1).min_by(f64::total_cmp)? >= now / 2.0 {
         return None;
     }
-    // Of the options as good as the best, the simplest is taken (a turn before a sign with a
-    // turn), then the closest; the rest are its equals.
+    simplest_of_best(tried)
+}
+
+/// Of the options tried (each with its miss) as good as the best one (within [`EQUALLY`]), the
+/// simplest (a turn before a sign with a turn), then the closest, as a step whose equals are the
+/// rest; with its miss. `None` when nothing was tried.
+fn simplest_of_best(tried: Vec<(Vec<ReadingChange>, f64)>) -> Option<(Step, f64)> {
+    let best = tried.iter().map(|t| t.1).min_by(f64::total_cmp)?;
     let mut equal: Vec<(Vec<ReadingChange>, f64)> =
         tried.into_iter().filter(|(_, r)| *r <= best * (1.0 + EQUALLY)).collect();
     equal.sort_by(|a, b| complexity(&a.0).cmp(&complexity(&b.0)).then(a.1.total_cmp(&b.1)));
