@@ -192,7 +192,7 @@ fn payload_note(id: &crate::identify::Identification) -> String {
     }
     match id.std[i] {
         Some(s) => format!(
-            "; payload not declared (0 kg): identified {:.3} ± {:.3} kg at the tool's centre of mass (σ the larger of the fit's and the by-pose robust one; errors the model lacks still bias it; declare the payload when it is known)",
+            "; payload not declared (0 kg): identified {:.3} ± {:.3} kg at the tool's centre of mass (σ the larger of the fit's and the by-pose robust one, with that centre of mass and the robot file's link masses taken as exact: an error in them, or an effect the model lacks, biases it beyond σ; declare the payload when it is known)",
             id.set.values[i], s
         ),
         None => {
