@@ -1019,7 +1019,7 @@ fn held_payload_with_named(
         .collect();
     let with = if moved.is_empty() { String::new() } else { format!(", and with it {}", moved.join(", ")) };
     format!(
-        "; with the named terms the data determine the payload the identification held at 0 kg: {:.3} ± {sd:.3} kg{with} (identify with them to use it)",
+        "; with the named terms the data determine the payload the identification held at 0 kg: {:.3} ± {sd:.3} kg{with} (σ with the tool's centre of mass and the robot file's link masses taken as exact; identify with them to use it)",
         id.set.values[i]
     )
 }

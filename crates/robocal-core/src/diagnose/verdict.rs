@@ -217,7 +217,7 @@ fn payload_change(s: &search::Search) -> String {
         return String::new();
     }
     format!(
-        "; with the named terms the payload reads {after:.3} ± {sd_after:.3} kg (the model without them: {before:.3} ± {sd_before:.3} kg; identify with them to use it)"
+        "; with the named terms the payload reads {after:.3} ± {sd_after:.3} kg (the model without them: {before:.3} ± {sd_before:.3} kg; σ with the tool's centre of mass and the robot file's link masses taken as exact; identify with them to use it)"
     )
 }
 
