@@ -140,7 +140,15 @@ pub(super) fn identify(a: IdentifyArgs) -> Result<String, CliError> {
         }
         Some(other) => return Err(CliError::arg("--select", format!("'{other}' is not a selection method (detmax)"))),
     };
-    let (id, doc) = run_identification(&cell, opts, select, &|| ())?;
+    let detmax = select.is_some();
+    let (id, doc) = run_identification(&cell, opts.clone(), select, &|| ())?;
+    // The payload again with its centre of mass at the flange: its mass is only read beside where
+    // it sits (not for a DETMAX selection, whose subset the second fit would not share).
+    let flange = if payload_identified(&id) && !detmax {
+        crate::identify::payload_at_flange(&cell, &opts).ok().flatten()
+    } else {
+        None
+    };
     let q = &id.quality;
     write(&a.out, &doc.to_json_pretty())?;
     let mut reported = String::new();
@@ -167,7 +175,7 @@ pub(super) fn identify(a: IdentifyArgs) -> Result<String, CliError> {
         without_outliers(q),
         q.residual_ratio,
         q.expected_rms / MM
-    ) + &payload_note(&id)
+    ) + &payload_note(&id, flange)
         + &id.notes.iter().map(|n| format!("; {n}")).collect::<String>()
         + &reported)
 }
@@ -184,17 +192,37 @@ fn without_outliers(q: &crate::identify::Quality) -> String {
     }
 }
 
-/// What was done about a payload the sessions do not declare (0 kg), in one sentence.
-fn payload_note(id: &crate::identify::Identification) -> String {
+/// Whether the identification identified a payload the sessions do not declare.
+fn payload_identified(id: &crate::identify::Identification) -> bool {
+    id.set.tool.mass == 0.0
+        && id.set.layout.index_of(crate::kinematics::Param::ToolMass).is_some_and(|i| id.std[i].is_some())
+}
+
+/// What was done about a payload the sessions do not declare (0 kg), in one sentence; `flange`:
+/// the mass, σ and residual RMS identified with the centre of mass at the flange instead
+/// ([`crate::identify::payload_at_flange`]).
+fn payload_note(id: &crate::identify::Identification, flange: Option<(f64, Option<f64>, f64)>) -> String {
     let Some(i) = id.set.layout.index_of(crate::kinematics::Param::ToolMass) else { return String::new() };
     if id.set.tool.mass != 0.0 {
         return String::new();
     }
     match id.std[i] {
-        Some(s) => format!(
-            "; payload not declared (0 kg): identified {:.3} ± {:.3} kg at the tool's centre of mass (σ the larger of the fit's and the by-pose robust one, with that centre of mass and the robot file's link masses taken as exact: an error in them, or an effect the model lacks, biases it beyond σ; declare the payload when it is known)",
-            id.set.values[i], s
-        ),
+        Some(s) => {
+            let rms = |r: f64| format!("residual RMS {:.4} mm against {:.4} mm", r / MM, id.quality.rms_residual / MM);
+            let at_flange = match flange {
+                Some((m, Some(sf), r)) => format!("; with it at the flange instead, {m:.3} ± {sf:.3} kg ({})", rms(r)),
+                Some((m, None, r)) => {
+                    format!("; with it at the flange instead, {m:.3} kg, not determined ({})", rms(r))
+                }
+                None => String::new(),
+            };
+            format!(
+                "; payload not declared (0 kg): identified {:.3} ± {:.3} kg at the tool's centre of mass, {:.1} mm from the flange{at_flange} (σ the larger of the fit's and the by-pose robust one, each for the centre of mass it assumes, with the robot file's link masses taken as exact; an effect the model lacks biases it beyond σ; declare the payload when it is known)",
+                id.set.values[i],
+                s,
+                id.set.tool.com.norm() / MM
+            )
+        }
         None => {
             let compliance = id.set.layout.params().iter().zip(&id.status).any(|(p, s)| {
                 matches!(p, crate::kinematics::Param::Joint(_, crate::kinematics::JointTerm::Compliance))
