@@ -143,9 +143,10 @@ pub(super) fn identify(a: IdentifyArgs) -> Result<String, CliError> {
     let detmax = select.is_some();
     let (id, doc) = run_identification(&cell, opts.clone(), select, &|| ())?;
     // The payload again with its centre of mass at the flange: its mass is only read beside where
-    // it sits (not for a DETMAX selection, whose subset the second fit would not share).
-    let flange = if payload_identified(&id) && !detmax {
-        crate::identify::payload_at_flange(&cell, &opts).ok().flatten()
+    // it sits (not for a DETMAX selection, whose subset the second fit would not share, nor for a
+    // centre of mass already there).
+    let flange = if payload_identified(&id) && !detmax && id.set.tool.com.norm() > MM {
+        crate::identify::payload_at_flange(&cell, &opts).map_err(|e| e.to_string()).transpose()
     } else {
         None
     };
@@ -199,9 +200,12 @@ fn payload_identified(id: &crate::identify::Identification) -> bool {
 }
 
 /// What was done about a payload the sessions do not declare (0 kg), in one sentence; `flange`:
-/// the mass, σ and residual RMS identified with the centre of mass at the flange instead
-/// ([`crate::identify::payload_at_flange`]).
-fn payload_note(id: &crate::identify::Identification, flange: Option<(f64, Option<f64>, f64)>) -> String {
+/// the mass, σ and residual RMS identified with the centre of mass at the flange instead, or why
+/// that fit failed ([`crate::identify::payload_at_flange`]).
+fn payload_note(
+    id: &crate::identify::Identification,
+    flange: Option<Result<crate::identify::PayloadAtFlange, String>>,
+) -> String {
     let Some(i) = id.set.layout.index_of(crate::kinematics::Param::ToolMass) else { return String::new() };
     if id.set.tool.mass != 0.0 {
         return String::new();
@@ -210,10 +214,17 @@ fn payload_note(id: &crate::identify::Identification, flange: Option<(f64, Optio
         Some(s) => {
             let rms = |r: f64| format!("residual RMS {:.4} mm against {:.4} mm", r / MM, id.quality.rms_residual / MM);
             let at_flange = match flange {
-                Some((m, Some(sf), r)) => format!("; with it at the flange instead, {m:.3} ± {sf:.3} kg ({})", rms(r)),
-                Some((m, None, r)) => {
-                    format!("; with it at the flange instead, {m:.3} kg, not determined ({})", rms(r))
-                }
+                Some(Ok(f)) => match f.std {
+                    Some(sf) => {
+                        format!("; with it at the flange instead, {:.3} ± {sf:.3} kg ({})", f.mass, rms(f.rms_residual))
+                    }
+                    None => format!(
+                        "; with it at the flange instead, {:.3} kg, not determined ({})",
+                        f.mass,
+                        rms(f.rms_residual)
+                    ),
+                },
+                Some(Err(e)) => format!("; with it at the flange instead, no fit ({e})"),
                 None => String::new(),
             };
             format!(

@@ -317,7 +317,7 @@ fn an_unknown_payloads_mass_is_read_beside_where_it_sits() {
         let at_centroid = (id.set.values[i], id.std[i].expect("identified"), id.quality.rms_residual);
         let at_flange = robocal::identify::payload_at_flange(&cell, &options("", &[])).unwrap().expect("a payload");
         eprintln!("{tag}: centroid {at_centroid:?}, flange {at_flange:?}");
-        (at_centroid, (at_flange.0, at_flange.1.expect("identified"), at_flange.2))
+        (at_centroid, (at_flange.mass, at_flange.std.expect("identified"), at_flange.rms_residual))
     };
     let within = |(m, s, _): (f64, f64, f64)| (m - 2.0).abs() < 3.0 * s;
     let apart = |a: (f64, f64, f64), b: (f64, f64, f64)| (a.0 - b.0).abs() > 3.0 * a.1.max(b.1);

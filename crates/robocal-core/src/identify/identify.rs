@@ -69,9 +69,8 @@ fn payload_mass(problem: &Problem) -> Option<usize> {
 }
 
 /// An undeclared payload identified once more with its centre of mass at the flange's origin
-/// instead of where the sessions put it (an import puts it at the reflectors' centroid): the mass,
-/// its σ (`None` when that fit holds it as not determined) and that fit's residual RMS (m), or
-/// `None` when the chosen sessions declare a payload or the model identifies none.
+/// instead of where the sessions put it (an import puts it at the reflectors' centroid); `None`
+/// when the chosen sessions declare a payload or the model identifies none.
 ///
 /// The gravity torques of an unknown payload enter the fit only through the compliances, so the
 /// data tell its mass little apart from where it sits. On an independent simulator's twin
@@ -79,10 +78,7 @@ fn payload_mass(problem: &Problem) -> Option<usize> {
 /// against an independent twin") the centroid gave 1.24 ± 0.28 kg and the flange 2.64 ± 0.76 kg;
 /// each fit's σ holds only for the centre of mass it assumes. Said beside the mass, this is what a
 /// reader needs to judge it.
-pub fn payload_at_flange(
-    cell: &Cell,
-    opts: &IdentifyOptions,
-) -> Result<Option<(f64, Option<f64>, f64)>, IdentifyError> {
+pub fn payload_at_flange(cell: &Cell, opts: &IdentifyOptions) -> Result<Option<PayloadAtFlange>, IdentifyError> {
     let picks = opts.selection.picks(cell)?;
     let mut at_flange = cell.clone();
     for s in picks.iter().map(|p| p.0) {
@@ -93,7 +89,18 @@ pub fn payload_at_flange(
     }
     let id = identify(&at_flange, opts)?;
     let Some(i) = id.set.layout.index_of(Param::ToolMass) else { return Ok(None) };
-    Ok(Some((id.set.values[i], id.std[i], id.quality.rms_residual)))
+    Ok(Some(PayloadAtFlange { mass: id.set.values[i], std: id.std[i], rms_residual: id.quality.rms_residual }))
+}
+
+/// An undeclared payload identified with its centre of mass at the flange ([`payload_at_flange`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PayloadAtFlange {
+    /// The mass, kg.
+    pub mass: f64,
+    /// Its standard deviation, kg; `None` when that fit holds the mass as not determined.
+    pub std: Option<f64>,
+    /// That fit's residual RMS, m.
+    pub rms_residual: f64,
 }
 
 /// Identify a cell's robot. A model with backlash terms on sessions that do not log the approach
