@@ -140,16 +140,7 @@ pub(super) fn identify(a: IdentifyArgs) -> Result<String, CliError> {
         }
         Some(other) => return Err(CliError::arg("--select", format!("'{other}' is not a selection method (detmax)"))),
     };
-    let detmax = select.is_some();
-    let (id, doc) = run_identification(&cell, opts.clone(), select, &|| ())?;
-    // The payload again with its centre of mass at the flange: its mass is only read beside where
-    // it sits (not for a DETMAX selection, whose subset the second fit would not share, nor for a
-    // centre of mass already there).
-    let flange = if payload_identified(&id) && !detmax && id.set.tool.com.norm() > MM {
-        crate::identify::payload_at_flange(&cell, &opts).map_err(|e| e.to_string()).transpose()
-    } else {
-        None
-    };
+    let (id, doc) = run_identification(&cell, opts, select, &|| ())?;
     let q = &id.quality;
     write(&a.out, &doc.to_json_pretty())?;
     let mut reported = String::new();
@@ -176,7 +167,7 @@ pub(super) fn identify(a: IdentifyArgs) -> Result<String, CliError> {
         without_outliers(q),
         q.residual_ratio,
         q.expected_rms / MM
-    ) + &payload_note(&id, flange)
+    ) + &payload_note(&id, doc.quality.as_ref().and_then(|q| q.payload.as_ref()))
         + &id.notes.iter().map(|n| format!("; {n}")).collect::<String>()
         + &reported)
 }
@@ -193,48 +184,41 @@ fn without_outliers(q: &crate::identify::Quality) -> String {
     }
 }
 
-/// Whether the identification identified a payload the sessions do not declare.
-fn payload_identified(id: &crate::identify::Identification) -> bool {
-    id.set.tool.mass == 0.0
-        && id.set.layout.index_of(crate::kinematics::Param::ToolMass).is_some_and(|i| id.std[i].is_some())
-}
-
-/// What was done about a payload the sessions do not declare (0 kg), in one sentence; `flange`:
-/// the mass, σ and residual RMS identified with the centre of mass at the flange instead, or why
-/// that fit failed ([`crate::identify::payload_at_flange`]).
+/// What was done about a payload the sessions do not declare (0 kg), in one sentence, from the
+/// quality report's `payload` (the mass where the sessions put its centre of mass and, when it was
+/// determined, again with it at the flange: [`crate::identify::payload_at_flange`]).
 fn payload_note(
     id: &crate::identify::Identification,
-    flange: Option<Result<crate::identify::PayloadAtFlange, String>>,
+    payload: Option<&crate::domain::quality::PayloadQuality>,
 ) -> String {
-    let Some(i) = id.set.layout.index_of(crate::kinematics::Param::ToolMass) else { return String::new() };
-    if id.set.tool.mass != 0.0 {
-        return String::new();
-    }
-    match id.std[i] {
-        Some(s) => {
-            let rms = |r: f64| format!("residual RMS {:.4} mm against {:.4} mm", r / MM, id.quality.rms_residual / MM);
-            let at_flange = match flange {
-                Some(Ok(f)) => match f.std {
-                    Some(sf) => {
-                        format!("; with it at the flange instead, {:.3} ± {sf:.3} kg ({})", f.mass, rms(f.rms_residual))
-                    }
+    let Some(p) = payload else { return String::new() };
+    let kg = |mass: Option<f64>, std: Option<f64>| match (mass, std) {
+        (Some(m), Some(s)) => format!("{m:.3} ± {s:.3} kg"),
+        (Some(m), None) => format!("{m:.3} kg, not determined"),
+        _ => "no mass".to_string(),
+    };
+    match p.std_kg {
+        Some(_) => {
+            let at_flange = match &p.at_flange {
+                Some(f) => match &f.failed {
+                    Some(e) => format!("; with it at the flange instead, no fit ({e})"),
                     None => format!(
-                        "; with it at the flange instead, {:.3} kg, not determined ({})",
-                        f.mass,
-                        rms(f.rms_residual)
+                        "; with it at the flange instead, {} (residual RMS {:.4} mm against {:.4} mm)",
+                        kg(f.mass_kg, f.std_kg),
+                        f.rms_residual_mm.unwrap_or(f64::NAN),
+                        id.quality.rms_residual / MM
                     ),
                 },
-                Some(Err(e)) => format!("; with it at the flange instead, no fit ({e})"),
                 None => String::new(),
             };
+            let from_flange = p.com_mm.map_or(f64::NAN, |c| (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt());
             format!(
-                "; payload not declared (0 kg): identified {:.3} ± {:.3} kg at the tool's centre of mass, {:.1} mm from the flange{at_flange} (σ the larger of the fit's and the by-pose robust one, each for the centre of mass it assumes, with the robot file's link masses taken as exact; an effect the model lacks biases it beyond σ; declare the payload when it is known)",
-                id.set.values[i],
-                s,
-                id.set.tool.com.norm() / MM
+                "; payload not declared (0 kg): identified {} at the tool's centre of mass, {from_flange:.1} mm from the flange{at_flange} (σ the larger of the fit's and the by-pose robust one, each for the centre of mass it assumes, with the robot file's link masses taken as exact; an effect the model lacks biases it beyond σ; declare the payload when it is known)",
+                kg(p.mass_kg, p.std_kg)
             )
         }
         None => {
+            let status = id.set.layout.index_of(crate::kinematics::Param::ToolMass).map(|i| id.status[i].to_string());
             let compliance = id.set.layout.params().iter().zip(&id.status).any(|(p, s)| {
                 matches!(p, crate::kinematics::Param::Joint(_, crate::kinematics::JointTerm::Compliance))
                     && matches!(s, crate::identify::Status::Identified)
@@ -246,7 +230,7 @@ fn payload_note(
             };
             format!(
                 "; payload not declared (0 kg) and not identifiable from these data ({}): {consequence}",
-                id.status[i]
+                status.unwrap_or_default()
             )
         }
     }

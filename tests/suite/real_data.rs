@@ -294,7 +294,8 @@ fn an_unknown_payload_is_identified() {
 /// centre of mass is at the flange, imported as unknown: the import puts it at the reflectors'
 /// centroid, 40 mm up, and the mass read there is 7 σ off (its σ is for the centre of mass it
 /// assumes). `payload_at_flange` identifies it again at the flange, where the truth lies within
-/// 3 σ. The same plate with its centre of mass at the centroid: the roles swap. In both cases the
+/// 3 σ; the identification's file carries both readings (`quality.payload`). The same plate with
+/// its centre of mass at the centroid: the roles swap. In both cases the
 /// two readings lie further apart than three of either σ, which is why both are said. The
 /// residuals do not tell the two apart here (within 1 %), so no test asks them to.
 #[test]
@@ -312,12 +313,20 @@ fn an_unknown_payloads_mass_is_read_beside_where_it_sits() {
         let dir = common::fresh_dir(tag);
         let (joints, files) = tracker_run(&o).unwrap().write(&dir, "run", 6).unwrap();
         let cell = import(&joints, &files);
-        let id = identify(&cell, &options("", &[])).unwrap();
+        // As every front end runs it: the file's `quality.payload` carries both readings.
+        let (id, doc) =
+            robocal::domain::identification::run_identification(&cell, options("", &[]), None, &|| ()).unwrap();
         let i = id.set.layout.index_of(Param::ToolMass).expect("an unknown payload");
         let at_centroid = (id.set.values[i], id.std[i].expect("identified"), id.quality.rms_residual);
-        let at_flange = robocal::identify::payload_at_flange(&cell, &options("", &[])).unwrap().expect("a payload");
+        let payload = doc.quality.unwrap().payload.expect("an unknown payload");
+        let close = |a: Option<f64>, b: f64| (a.unwrap() - b).abs() <= 1e-10 * b.abs();
+        assert!(close(payload.mass_kg, at_centroid.0) && close(payload.std_kg, at_centroid.1), "{payload:?}");
+        let com = cell.sessions[0].tool.com / MM;
+        assert!(payload.com_mm.unwrap().iter().zip(com.iter()).all(|(a, b)| (a - b).abs() < 1e-4), "{payload:?}");
+        let f = payload.at_flange.expect("the second fit");
+        let at_flange = (f.mass_kg.unwrap(), f.std_kg.expect("identified"), f.rms_residual_mm.unwrap() * MM);
         eprintln!("{tag}: centroid {at_centroid:?}, flange {at_flange:?}");
-        (at_centroid, (at_flange.mass, at_flange.std.expect("identified"), at_flange.rms_residual))
+        (at_centroid, at_flange)
     };
     let within = |(m, s, _): (f64, f64, f64)| (m - 2.0).abs() < 3.0 * s;
     let apart = |a: (f64, f64, f64), b: (f64, f64, f64)| (a.0 - b.0).abs() > 3.0 * a.1.max(b.1);

@@ -33,7 +33,7 @@ use crate::robot::Robot;
 
 /// A document's part as plain Python (dicts, lists, numbers, strings), through its JSON form —
 /// the numbers are the ones the CLI prints.
-fn to_python<'py>(py: Python<'py>, v: &impl Serialize) -> PyResult<Bound<'py, PyAny>> {
+pub(crate) fn to_python<'py>(py: Python<'py>, v: &impl Serialize) -> PyResult<Bound<'py, PyAny>> {
     let text = serde_json::to_string(v).expect("the documents have only string keys and numbers");
     py.import("json")?.call_method1("loads", (text,))
 }

@@ -622,6 +622,21 @@ impl Identification {
         self.downweighted.clone()
     }
 
+    /// A payload the sessions do not declare (0 kg), as identified (`quality["payload"]` of the
+    /// parameter-set file): a dict with `mass_kg`, `std_kg` (absent when the data did not
+    /// determine the mass and it is held at 0), `com_mm` (the centre of mass the fit assumed, in
+    /// the flange frame) and `at_flange` (the mass fitted again with the centre of mass at the
+    /// flange: `mass_kg`, `std_kg`, `rms_residual_mm`, or `failed` with the reason). Each σ holds
+    /// only for the centre of mass its fit assumes. `None` when the sessions declare a payload or
+    /// the model has none.
+    #[getter]
+    fn payload<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
+        match self.doc.quality.as_ref().and_then(|q| q.payload.as_ref()) {
+            Some(p) => Ok(Some(crate::calibration::to_python(py, p)?)),
+            None => Ok(None),
+        }
+    }
+
     /// What was derived rather than given, in sentences.
     #[getter]
     fn notes(&self) -> Vec<String> {

@@ -282,3 +282,38 @@ def test_a_diagnosis_leaves_out_what_the_sets_identification_left_out(cell):
     told = diagnose(ParameterSet.from_json(json.dumps(bare)), cell, threads=1, exclude=left).as_dict()
     assert told["shrink"] == unasked["shrink"] and told["verdict"] == unasked["verdict"]
     assert told["sessions"]["excluded"] == unasked["sessions"]["excluded"]
+
+
+@pytest.mark.skipif(cli_binary() is None, reason="needs the command-line binary (ROBOCAL_BIN, or a debug build)")
+def test_an_undeclared_payload_is_read_beside_where_it_sits(tmp_path):
+    """A three-reflector twin imported without its payload: identify_cell identifies the mass at the
+    reflectors' centroid and again at the flange (`payload`, the file's quality["payload"]). The
+    second reading is checked by a second route: the same cell with the centre of mass moved to
+    the flange by hand, identified plainly. The command line writes the same file."""
+    run = lambda *a: subprocess.run([cli_binary(), *map(str, a)], check=True, capture_output=True, text=True)  # noqa: E731
+    run("simulate-tracker", "--seed", 3, "--poses", 300, "--payload-kg", 2.0, "--out-dir", tmp_path)
+    run("import", "three-reflector", "--robot", "irb120", "--joints", tmp_path / "run-joints.txt",
+        *[a for k in (1, 2, 3) for a in ("--positions", tmp_path / f"run-smr{k}.txt")], "--out", tmp_path / "cell.json")
+    cell = Cell.load(tmp_path / "cell.json")
+    fitted = identify_cell(cell)
+    payload = fitted.payload
+    assert payload == json.loads(fitted.parameter_set.to_json())["quality"]["payload"]
+    document = json.loads((tmp_path / "cell.json").read_text())
+    com = document["sessions"][0]["tool"]["com_mm"]
+    assert payload["com_mm"] == pytest.approx(com, abs=1e-4)
+    # The file keeps 12 significant digits.
+    assert payload["mass_kg"] == pytest.approx(fitted.parameters["tool_mass"], rel=1e-11)
+    assert payload["std_kg"] == pytest.approx(fitted.std["tool_mass"], rel=1e-11) and payload["std_kg"] > 0.0
+    # At the flange, by hand: the same mass, σ and residual.
+    for s in document["sessions"]:
+        s["tool"]["com_mm"] = [0.0, 0.0, 0.0]
+    by_hand = identify_cell(Cell.from_json(json.dumps(document)))
+    flange = payload["at_flange"]
+    assert flange["mass_kg"] == pytest.approx(by_hand.parameters["tool_mass"], rel=1e-9)
+    assert flange["std_kg"] == pytest.approx(by_hand.std["tool_mass"], rel=1e-9)
+    assert flange["rms_residual_mm"] == pytest.approx(by_hand.residual_rms_mm, abs=1e-4)
+    assert by_hand.payload["com_mm"] == [0.0, 0.0, 0.0] and "at_flange" not in by_hand.payload
+    # The two readings differ: where the mass sits is not told by these data.
+    assert flange["mass_kg"] != pytest.approx(payload["mass_kg"], rel=0.05)
+    run("identify", tmp_path / "cell.json", "--out", tmp_path / "set.json")
+    assert (tmp_path / "set.json").read_text().rstrip("\n") == fitted.parameter_set.to_json()

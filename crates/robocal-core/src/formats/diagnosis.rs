@@ -1006,7 +1006,12 @@ pub fn accepted_doc(d: &Diagnosis) -> Option<ParameterSetDoc> {
     }
     let mut sessions = d.identification.clone();
     sessions.extend(d.validation.iter().cloned());
-    let mut doc = super::identification::identification_doc(id, &sessions, None);
+    let mut doc = super::identification::identification_doc(
+        id,
+        &sessions,
+        None,
+        super::identification::payload_quality(id, None),
+    );
     if let Some(q) = doc.quality.as_mut() {
         q.diagnosis = Some(super::quality::AcceptedDiagnosis {
             accepted: Some(d.verdict.effects.iter().map(|e| e.candidate.label()).collect()),

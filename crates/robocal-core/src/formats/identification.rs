@@ -8,7 +8,10 @@ use serde_json::Value;
 
 use super::identify_options::DetmaxSelection;
 use super::param_set::ParameterSetDoc;
-use super::quality::{Downweighted, FitMeasurements, Observability, Quality, ToolQuality, WorstMeasurement};
+use super::quality::{
+    Downweighted, FitMeasurements, Observability, PayloadAtFlangeQuality, PayloadQuality, Quality, ToolQuality,
+    WorstMeasurement,
+};
 use crate::cell::Cell;
 use crate::identify::{Identification, IdentifyError, IdentifyOptions};
 use crate::units::{DEG, MM};
@@ -34,8 +37,52 @@ pub fn run_identification(
     selected();
     let id = crate::identify::identify(cell, &opts)?;
     let sessions: Vec<String> = id.problem.tools.iter().flat_map(|t| t.sessions.clone()).collect();
-    let doc = identification_doc(&id, &sessions, selection);
+    let payload = payload_quality(&id, payload_again_at_flange(cell, &opts, &id, selection.is_some()));
+    let doc = identification_doc(&id, &sessions, selection, payload);
     Ok((id, doc))
+}
+
+/// The undeclared payload fitted again with its centre of mass at the flange
+/// ([`crate::identify::payload_at_flange`]), when the first fit determined it — not for a centre of
+/// mass already within 1 mm of the flange, nor for a DETMAX selection (`detmax`), whose subset the
+/// second fit would not share.
+fn payload_again_at_flange(
+    cell: &Cell,
+    opts: &IdentifyOptions,
+    id: &Identification,
+    detmax: bool,
+) -> Option<PayloadAtFlangeQuality> {
+    let (_, std) = id.undeclared_payload()?;
+    if std.is_none() || detmax || id.set.tool.com.norm() <= MM {
+        return None;
+    }
+    match crate::identify::payload_at_flange(cell, opts) {
+        Ok(f) => f.map(|f| PayloadAtFlangeQuality {
+            mass_kg: Some(f.mass),
+            std_kg: f.std,
+            rms_residual_mm: Some(f.rms_residual / MM),
+            ..Default::default()
+        }),
+        Err(e) => Some(PayloadAtFlangeQuality { failed: Some(e.to_string()), ..Default::default() }),
+    }
+}
+
+/// What an identification made of a payload the sessions do not declare, with `at_flange` the
+/// second fit's ([`payload_again_at_flange`]); `None` when the sessions declare a payload or the
+/// model has none.
+pub(crate) fn payload_quality(
+    id: &Identification,
+    at_flange: Option<PayloadAtFlangeQuality>,
+) -> Option<PayloadQuality> {
+    let (mass, std) = id.undeclared_payload()?;
+    let com = id.set.tool.com;
+    Some(PayloadQuality {
+        mass_kg: Some(mass),
+        std_kg: std,
+        com_mm: Some([com.x / MM, com.y / MM, com.z / MM]),
+        at_flange,
+        other: Default::default(),
+    })
 }
 
 /// The measurements an identification fitted, per session in cell order (0-based indices,
@@ -104,8 +151,14 @@ pub fn excluded_measurements(id: &Identification) -> Option<Vec<FitMeasurements>
 }
 
 /// The parameter-set document of an identification; `selection` describes how the measurements
-/// were chosen (e.g. DETMAX settings), carried into the quality report.
-pub fn identification_doc(id: &Identification, sessions: &[String], selection: Option<Value>) -> ParameterSetDoc {
+/// were chosen (e.g. DETMAX settings) and `payload` what was made of an undeclared payload, both
+/// carried into the quality report.
+pub fn identification_doc(
+    id: &Identification,
+    sessions: &[String],
+    selection: Option<Value>,
+    payload: Option<PayloadQuality>,
+) -> ParameterSetDoc {
     let mut doc = ParameterSetDoc::new(id.set.clone());
     doc.std = id.std.clone();
     doc.status = id.status.iter().map(|s| Some(s.to_string())).collect();
@@ -179,6 +232,7 @@ pub fn identification_doc(id: &Identification, sessions: &[String], selection: O
                 })
                 .collect(),
         ),
+        payload,
         notes: Some(id.notes.clone()),
         diagnosis: None,
         other: Default::default(),

@@ -129,6 +129,11 @@ pub struct Quality {
     /// The measurements with the largest residuals, largest first.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub worst: Option<Vec<WorstMeasurement>>,
+    /// A payload the sessions do not declare (0 kg) and what the identification made of it: the
+    /// mass where the sessions put its centre of mass, and again with it at the flange. Absent
+    /// when the sessions declare a payload or the model identifies none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub payload: Option<PayloadQuality>,
     /// What the identification noted (parameters held, payload or compliances not determined, …).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub notes: Option<Vec<String>>,
@@ -250,6 +255,62 @@ pub struct WorstMeasurement {
     /// typical residual is zero.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ratio: Option<f64>,
+    /// Keys this version does not know, kept as they came.
+    #[serde(flatten)]
+    #[cfg_attr(feature = "openapi", schema(value_type = std::collections::HashMap<String, AnyJson>))]
+    pub other: Map<String, Value>,
+}
+
+/// An undeclared payload as identified (`quality.payload`). The gravity torques of a payload enter
+/// the fit only through the compliances, so the data tell its mass little apart from where it
+/// sits: each σ holds for the centre of mass its fit assumes, with the robot file's link masses
+/// taken as exact, and an effect the model lacks biases the mass beyond it.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(default)]
+pub struct PayloadQuality {
+    /// The mass identified with the centre of mass at `com_mm`, kg; 0 when the data do not
+    /// determine it (then held there, and `std_kg` is absent).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mass_kg: Option<f64>,
+    /// Its standard deviation, kg; absent when the mass was held as not determined.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub std_kg: Option<f64>,
+    /// The centre of mass that fit assumed, in the flange frame, mm (the sessions' tool's: an
+    /// import of reflector files puts it at the reflectors' centroid).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
+    pub com_mm: Option<[f64; 3]>,
+    /// The mass identified again with the centre of mass at the flange's origin; absent when that
+    /// fit was not run (the mass not determined, the centre of mass already within 1 mm of the
+    /// flange, a DETMAX selection, whose subset the second fit would not share, or the set a
+    /// diagnosis accepted).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub at_flange: Option<PayloadAtFlangeQuality>,
+    /// Keys this version does not know, kept as they came.
+    #[serde(flatten)]
+    #[cfg_attr(feature = "openapi", schema(value_type = std::collections::HashMap<String, AnyJson>))]
+    pub other: Map<String, Value>,
+}
+
+/// The undeclared payload identified with its centre of mass at the flange
+/// (`identify::payload_at_flange`), or why that fit failed.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(default)]
+pub struct PayloadAtFlangeQuality {
+    /// The mass, kg; 0 when that fit holds it as not determined.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mass_kg: Option<f64>,
+    /// Its standard deviation, kg; absent when that fit holds the mass as not determined.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub std_kg: Option<f64>,
+    /// That fit's residual RMS, mm, to set beside the identification's `rms_residual_mm`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rms_residual_mm: Option<f64>,
+    /// Why that fit failed (the fit's own error); the other fields are then absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub failed: Option<String>,
     /// Keys this version does not know, kept as they came.
     #[serde(flatten)]
     #[cfg_attr(feature = "openapi", schema(value_type = std::collections::HashMap<String, AnyJson>))]

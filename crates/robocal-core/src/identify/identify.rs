@@ -62,6 +62,16 @@ pub struct Identification {
     pub notes: Vec<String>,
 }
 
+impl Identification {
+    /// A payload the parameter set's tool does not declare (0 kg), as identified: its mass (kg) and
+    /// standard deviation (`None` when the data did not determine it and it is held at 0); `None`
+    /// when the tool declares a payload or the model has no payload mass.
+    pub fn undeclared_payload(&self) -> Option<(f64, Option<f64>)> {
+        let i = self.set.layout.index_of(Param::ToolMass)?;
+        (self.set.tool.mass == 0.0).then(|| (self.set.values[i], self.std[i]))
+    }
+}
+
 /// The global index of the payload's mass, when the problem has one.
 fn payload_mass(problem: &Problem) -> Option<usize> {
     let i = problem.layout.index_of(Param::ToolMass)?;

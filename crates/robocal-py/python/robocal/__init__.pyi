@@ -301,6 +301,15 @@ class Identification:
         """Measurements the Huber loss down-weighted: (session, index, weight)."""
 
     @property
+    def payload(self) -> dict[str, Any] | None:
+        """A payload the sessions do not declare (0 kg), as identified: ``mass_kg``, ``std_kg``
+        (absent when the data did not determine the mass, held at 0), ``com_mm`` (the centre of
+        mass the fit assumed, flange frame) and ``at_flange`` (the mass fitted again with the
+        centre of mass at the flange: ``mass_kg``, ``std_kg``, ``rms_residual_mm``, or ``failed``).
+        Each σ holds only for the centre of mass its fit assumes. ``None`` when a payload is
+        declared or the model has none."""
+
+    @property
     def notes(self) -> list[str]:
         """What was derived rather than given, in sentences."""
 
