@@ -373,7 +373,7 @@ fn where_section(s: &mut String, d: &DiagnosisOut) {
     match &w.order_drift {
         Some(d) => s.push_str(&format!(
             "<p{}>Along the measuring order, {}.</p>",
-            if d.found { " class=\"warn\"" } else { "" },
+            if d.found || d.joint_creep.as_ref().is_some_and(|c| c.found) { " class=\"warn\"" } else { "" },
             esc(&d.statement)
         )),
         None => s.push_str(

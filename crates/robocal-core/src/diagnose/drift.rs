@@ -28,8 +28,10 @@
 //! two, p = 0.001 — an error of the pose, not a drift, as far as these data can tell.)
 
 use nalgebra::{DMatrix, Vector3};
-use rand::SeedableRng;
+
+use crate::units::DEG;
 use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 /// Permutations of the test (its smallest p is 1/(N + 1) = 0.001).
@@ -45,6 +47,9 @@ pub const LOCALITY_LIMIT: f64 = 0.8;
 /// Significance level at which a drift is said.
 pub const LEVEL: f64 = 0.01;
 const DEGREE: usize = 3;
+/// Above this standard deviation a joint's creep is not determined by the stops and is not given
+/// (the bound `identify` holds an angle at).
+const UNDETERMINED: f64 = DEG;
 
 /// Where each stop's place in the run came from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -92,6 +97,32 @@ pub struct OrderDrift {
     /// Mean joint distance (RMS over the joints) between consecutive stops over that between any
     /// two: about 1 for poses measured in random order, small for a sweep or a grid.
     pub order_locality: f64,
+    /// The test of the joints' zeros creeping along the run ([`JointCreep`]); `None` when the
+    /// stops carry no zero columns.
+    pub joint_creep: Option<JointCreep>,
+}
+
+/// Whether the joints' zeros creep along the run: the held-out errors regressed on each joint's
+/// ∂(position)/∂θ_j times P1…P3 of the place in the run, beyond the configuration, a trend common
+/// to every pose and each joint's fixed zero (see the module).
+///
+/// A joint's zero that creeps as its motor and gear warm moves each pose by a different vector
+/// (∂p/∂θ_j), which averages out over a workspace measured in random order: the common trend
+/// barely sees it (an independent twin's 0.008° on joint 2 moved the held-out mean by about
+/// 0.002 mm). This test looks along those vectors.
+#[derive(Clone, Debug, PartialEq)]
+pub struct JointCreep {
+    /// p-value of H0 "no joint's zero moves along the run beyond the configuration, a common trend
+    /// and the fixed zeros": a wild bootstrap (Rademacher signs per stop, [`PERMUTATIONS`] draws)
+    /// of the null model's residuals.
+    pub p: f64,
+    /// Per joint, the fitted creep's mean over the last tenth of the stops minus over the first
+    /// tenth, rad; `None` for a joint whose zero moves no stop here (its column vanishes beyond
+    /// the others', or its creep's standard deviation would exceed 1°).
+    pub first_to_last: Vec<Option<f64>>,
+    /// Its standard deviation, rad: cluster-robust by stop (the sandwich), stops independent,
+    /// their reflectors averaged.
+    pub first_to_last_std: Vec<Option<f64>>,
 }
 
 impl OrderDrift {
@@ -99,6 +130,12 @@ impl OrderDrift {
     /// configuration.
     pub fn found(&self) -> bool {
         self.p < LEVEL && !self.confounded()
+    }
+
+    /// Whether a creep of the joints' zeros is said: significant at [`LEVEL`] and the order not
+    /// confounded with the configuration.
+    pub fn creep_found(&self) -> bool {
+        self.joint_creep.as_ref().is_some_and(|c| c.p < LEVEL) && !self.confounded()
     }
 
     /// Whether the order carries the configuration: it follows it (R²) or moves between
@@ -129,9 +166,18 @@ impl OrderDrift {
             self.permutations,
             self.stops,
         );
-        if self.found() {
+        let creep = match &self.joint_creep {
+            Some(c) if !self.confounded() => format!("; {}", c.statement(self.stops, self.permutations)),
+            _ => String::new(),
+        };
+        if self.found() || self.creep_found() {
+            let common = if self.found() {
+                format!("the starting model's held-out errors drift along the measuring order: {figures}")
+            } else {
+                format!("no drift common to every pose along the measuring order: {figures}")
+            };
             format!(
-                "the starting model's held-out errors drift along the measuring order: {figures}. No term of a robot's model takes a drift in time that no logged temperature follows (a warm-up, a tracker or a base that settled): log time_s and temperature_c with each measurement, or measure after warming up; the figures above include it"
+                "{common}{creep}. No term of a robot's model takes a drift in time that no logged temperature follows (a warm-up, a tracker or a base that settled, a joint's zero creeping as its motor warms): log time_s and temperature_c with each measurement, or measure after warming up; the figures above include it"
             )
         } else if self.confounded() {
             format!(
@@ -139,7 +185,32 @@ impl OrderDrift {
                 self.order_on_configuration_r2, self.order_locality, self.p, self.stops
             )
         } else {
-            format!("no drift along the measuring order: {figures}")
+            format!("no drift along the measuring order: {figures}{creep}")
+        }
+    }
+}
+
+impl JointCreep {
+    /// What the test says, in a clause (degrees), for `stops` stops and `permutations`.
+    fn statement(&self, stops: usize, permutations: usize) -> String {
+        let joints = self
+            .first_to_last
+            .iter()
+            .zip(&self.first_to_last_std)
+            .enumerate()
+            .filter_map(|(j, (d, s))| Some(format!("joint {} {:+.4} ± {:.4}°", j + 1, (*d)? / DEG, (*s)? / DEG)))
+            .collect::<Vec<_>>()
+            .join(", ");
+        let test = format!(
+            "p = {:.3}, {permutations} sign flips over {stops} stops, beyond the configuration, a trend common to every pose and each joint's fixed zero",
+            self.p
+        );
+        if self.p < LEVEL {
+            format!("the joints' zeros creep along it, from the first tenth of the run to the last: {joints} ({test})")
+        } else {
+            format!(
+                "the joints' zeros show no creep along it at p < 0.01 ({test}; from the first tenth to the last: {joints})"
+            )
         }
     }
 }
@@ -155,31 +226,40 @@ pub struct Stop {
     pub position: Vector3<f64>,
     /// The held-out error, {W}, m.
     pub error: Vector3<f64>,
+    /// Per joint, the model's ∂(position)/∂θ_j at this stop, {W}, m/rad (what a shift of that
+    /// joint's zero does here); empty when not given, and then no creep of the zeros is tested.
+    pub zero_columns: Vec<Vector3<f64>>,
 }
 
-/// One reading: its place in the run, joint readings (rad), measured position and held-out error
-/// ({W}, m).
-pub type Reading = (f64, Vec<f64>, Vector3<f64>, Vector3<f64>);
+/// One reading: its place in the run, joint readings (rad), measured position, held-out error
+/// ({W}, m) and the model's ∂(position)/∂θ_j per joint (m/rad; empty: not given).
+pub type Reading = (f64, Vec<f64>, Vector3<f64>, Vector3<f64>, Vec<Vector3<f64>>);
 
 /// Group readings into stops: sorted by place, consecutive readings at the same joint readings are
-/// one stop (the reflectors of a plate), their positions and errors averaged.
+/// one stop (the reflectors of a plate), their positions, errors and zero columns averaged.
 pub fn stops(mut readings: Vec<Reading>) -> Vec<Stop> {
     readings.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut out: Vec<(Stop, usize)> = Vec::new();
-    for (at, q, position, e) in readings {
+    for (at, q, position, e, zero_columns) in readings {
         match out.last_mut() {
             Some((s, n)) if s.q.iter().zip(&q).all(|(a, b)| (a - b).abs() < 1e-12) => {
                 s.error += e;
                 s.position += position;
+                if s.zero_columns.len() == zero_columns.len() {
+                    s.zero_columns.iter_mut().zip(&zero_columns).for_each(|(a, b)| *a += b);
+                } else {
+                    s.zero_columns.clear();
+                }
                 *n += 1;
             }
-            _ => out.push((Stop { at, q, position, error: e }, 1)),
+            _ => out.push((Stop { at, q, position, error: e, zero_columns }, 1)),
         }
     }
     out.into_iter()
         .map(|(mut s, n)| {
             s.error /= n as f64;
             s.position /= n as f64;
+            s.zero_columns.iter_mut().for_each(|c| *c /= n as f64);
             s
         })
         .collect()
@@ -309,7 +389,124 @@ pub fn order_drift(stops: &[Stop], source: RunPosition, seed: u64) -> Option<Ord
         first_to_last_std,
         order_on_configuration_r2: r2.max(0.0),
         order_locality: locality(stops),
+        joint_creep: joint_creep(stops, &u, &qz, &c, seed),
     })
+}
+
+/// The creep test ([`JointCreep`]) on `stops`, with `u` their place in the run on [−1, 1], `qz` the
+/// orthonormal configuration basis (stops × columns) and `c` the Legendre basis's last tenth minus
+/// its first. The regression is stacked over the three axes (row 3s + a: stop s, axis a of {W}).
+/// `None` when the stops carry no zero columns or nothing is left to test beyond the null model.
+fn joint_creep(
+    stops: &[Stop],
+    u: &impl Fn(f64) -> f64,
+    qz: &DMatrix<f64>,
+    c: &nalgebra::DVector<f64>,
+    seed: u64,
+) -> Option<JointCreep> {
+    let m = stops.len();
+    let n = stops.first()?.zero_columns.len();
+    if n == 0 || stops.iter().any(|s| s.zero_columns.len() != n) {
+        return None;
+    }
+    let rows = 3 * m;
+    let pz = qz.ncols();
+    // The null model: the configuration on each axis, a common trend on each axis, and each
+    // joint's fixed zero; the tested columns: each joint's zero times P1…P3.
+    let mut null = DMatrix::<f64>::zeros(rows, 3 * pz + 3 * DEGREE + n);
+    let mut x = DMatrix::<f64>::zeros(rows, n * DEGREE);
+    for (s, stop) in stops.iter().enumerate() {
+        let p = legendre(u(stop.at));
+        for a in 0..3 {
+            let row = 3 * s + a;
+            for k in 0..pz {
+                null[(row, a * pz + k)] = qz[(s, k)];
+            }
+            for k in 0..DEGREE {
+                null[(row, 3 * pz + a * DEGREE + k)] = p[k];
+            }
+            for (j, col) in stop.zero_columns.iter().enumerate() {
+                null[(row, 3 * pz + 3 * DEGREE + j)] = col[a];
+                for k in 0..DEGREE {
+                    x[(row, j * DEGREE + k)] = col[a] * p[k];
+                }
+            }
+        }
+    }
+    let y = DMatrix::from_fn(rows, 1, |r, _| stops[r / 3].error[r % 3]);
+    let qn = orthonormal(&null);
+    let xr = remove(&qn, &x);
+    let r = remove(&qn, &y);
+    let w = orthonormal(&xr);
+    if w.ncols() == 0 {
+        return None;
+    }
+    // Wild bootstrap (Rademacher signs per stop) of the null model's residuals: each residual
+    // stays at its stop. A permutation would move it to another pose, and an error of the pose —
+    // a random turn of the joints, which points along the very columns tested — is larger along
+    // its own stop's columns than along another's: the permutations' null was too narrow (3 of 26
+    // twins without creep below 0.05, 1 below 0.01).
+    let stat = |signs: &[f64]| -> f64 {
+        let mut acc = vec![0.0; w.ncols()];
+        for (s, &v) in signs.iter().enumerate() {
+            for a in 0..3 {
+                let e = v * r[(3 * s + a, 0)];
+                for (k, acc_k) in acc.iter_mut().enumerate() {
+                    *acc_k += w[(3 * s + a, k)] * e;
+                }
+            }
+        }
+        acc.iter().map(|v| v * v).sum()
+    };
+    let observed = stat(&vec![1.0; m]);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x6a6f_696e_7463_7270);
+    let mut signs = vec![1.0; m];
+    let mut above = 0usize;
+    for _ in 0..PERMUTATIONS {
+        signs.iter_mut().for_each(|v| *v = if rng.random_bool(0.5) { 1.0 } else { -1.0 });
+        if stat(&signs) >= observed * (1.0 - 1e-12) {
+            above += 1;
+        }
+    }
+    let p = (1 + above) as f64 / (1 + PERMUTATIONS) as f64;
+    // The creep per joint: the full regression's coefficients (Frisch–Waugh), through the
+    // pseudo-inverse — a joint whose zero moves no stop beyond the others' has a vanishing column —
+    // with the cluster-robust (by stop) covariance (X̃ᵀX̃)⁺·Σ_s X̃_sᵀ e_s e_sᵀ X̃_s·(X̃ᵀX̃)⁺, e the
+    // full regression's residuals: the errors' size and direction change with the pose.
+    let xtx = xr.transpose() * &xr;
+    let scale = xtx.diagonal().max();
+    let pinv = xtx.clone().pseudo_inverse(1e-12 * scale.max(f64::MIN_POSITIVE)).ok()?;
+    let b = &pinv * (xr.transpose() * &r);
+    let e = &r - &xr * &b;
+    let k = xr.ncols();
+    let mut meat = DMatrix::<f64>::zeros(k, k);
+    for s in 0..m {
+        let score =
+            nalgebra::DVector::from_fn(k, |c, _| (0..3).map(|a| xr[(3 * s + a, c)] * e[(3 * s + a, 0)]).sum::<f64>());
+        meat += &score * score.transpose();
+    }
+    let rest = rows.saturating_sub(qn.ncols() + w.ncols()).max(1) as f64;
+    let cov = (&pinv * meat * &pinv) * (rows as f64 / rest);
+    let (mut change, mut std) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    for j in 0..n {
+        let block = j * DEGREE..(j + 1) * DEGREE;
+        let column_norm = block.clone().map(|k| xtx[(k, k)]).sum::<f64>();
+        if column_norm <= 1e-10 * scale {
+            change.push(None);
+            std.push(None);
+            continue;
+        }
+        let var = block
+            .clone()
+            .flat_map(|k| block.clone().map(move |l| (k, l)))
+            .map(|(k, l)| c[k - j * DEGREE] * c[l - j * DEGREE] * cov[(k, l)]);
+        let sd = var.sum::<f64>().max(0.0).sqrt();
+        // A joint the stops barely move (a probe near the last axis) reads any creep: not said.
+        let determined = sd <= UNDETERMINED;
+        change.push(determined.then(|| block.clone().map(|k| c[k - j * DEGREE] * b[(k, 0)]).sum()));
+        std.push(determined.then_some(sd));
+    }
+    Some(JointCreep { p, first_to_last: change, first_to_last_std: std })
 }
 
 /// Mean joint distance between consecutive stops (in run order) over the mean between any two.
@@ -334,7 +531,6 @@ pub(crate) fn locality(stops: &[Stop]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::Rng;
     use rand_distr::{Distribution, Normal};
 
     /// Stops at random configurations in random order, each with an error of noise plus an error
@@ -349,7 +545,7 @@ mod tests {
                 let e = Vector3::from_fn(|_, _| noise.sample(&mut rng)) + pose + drift(k as f64 / m as f64);
                 let reach = 0.5 + 0.4 * q[1].cos();
                 let position = Vector3::new(q[0].cos() * reach, q[0].sin() * reach, 0.4 * q[1].sin());
-                Stop { at: k as f64, q, position, error: e }
+                Stop { at: k as f64, q, position, error: e, zero_columns: Vec::new() }
             })
             .collect()
     }
@@ -437,7 +633,7 @@ mod tests {
                 let position = Vector3::new(g(k / 100), g(k / 10 % 10), 0.5 + g(k % 10));
                 let q: Vec<f64> = (0..6).map(|_| rng.random_range(-2.5..2.5)).collect();
                 let error = Vector3::new(40e-6 * (position.x / 0.3).powi(3) + noise.sample(&mut rng), 0.0, 0.0);
-                Stop { at: k as f64, q, position, error }
+                Stop { at: k as f64, q, position, error, zero_columns: Vec::new() }
             })
             .collect();
         let r = order_drift(&d, RunPosition::FileOrder, 1).expect("tested");
@@ -475,7 +671,7 @@ mod tests {
                     noise.sample(&mut rng),
                     noise.sample(&mut rng),
                 );
-                Stop { at: k as f64, q, position, error }
+                Stop { at: k as f64, q, position, error, zero_columns: Vec::new() }
             })
             .collect();
         let r = order_drift(&d, RunPosition::Sequence, 1).expect("tested");
@@ -490,12 +686,110 @@ mod tests {
         let e = |x: f64| Vector3::new(x, 0.0, 0.0);
         let z = Vector3::zeros();
         let s = stops(vec![
-            (1.0, vec![0.1, 0.2], z, e(3.0)),
-            (0.0, vec![0.0, 0.0], z, e(1.0)),
-            (1.0, vec![0.1, 0.2], z, e(5.0)),
+            (1.0, vec![0.1, 0.2], z, e(3.0), vec![e(1.0)]),
+            (0.0, vec![0.0, 0.0], z, e(1.0), vec![e(1.0)]),
+            (1.0, vec![0.1, 0.2], z, e(5.0), vec![e(3.0)]),
         ]);
         assert_eq!(s.len(), 2);
         assert_eq!((s[0].at, s[0].error.x), (0.0, 1.0));
         assert_eq!((s[1].at, s[1].error.x), (1.0, 4.0));
+        assert_eq!(s[1].zero_columns, vec![e(2.0)], "the zero columns averaged as the errors are");
+    }
+
+    /// A toy arm (joint 1 vertical at the origin, joints 2 and 3 horizontal, links of 0.5 and
+    /// 0.45 m from a shoulder 0.3 m up) at readings `q`: the position, m.
+    fn arm(q: &[f64]) -> Vector3<f64> {
+        let radial = Vector3::new(q[0].cos(), q[0].sin(), 0.0);
+        let up = Vector3::z();
+        let elbow = Vector3::new(0.0, 0.0, 0.3) + 0.5 * (q[1].cos() * radial + q[1].sin() * up);
+        elbow + 0.45 * ((q[1] + q[2]).cos() * radial + (q[1] + q[2]).sin() * up)
+    }
+
+    /// Its ∂p/∂θ_j for joints 1–3 (axis × lever arm) and nothing for joints 4–6 (the point on
+    /// their axes), m/rad.
+    fn arm_zero_columns(q: &[f64]) -> Vec<Vector3<f64>> {
+        let p = arm(q);
+        let radial = Vector3::new(q[0].cos(), q[0].sin(), 0.0);
+        let axis = radial.cross(&Vector3::z());
+        let shoulder = Vector3::new(0.0, 0.0, 0.3);
+        let elbow = shoulder + 0.5 * (q[1].cos() * radial + q[1].sin() * Vector3::z());
+        let mut c = vec![Vector3::z().cross(&p), axis.cross(&(p - shoulder)), axis.cross(&(p - elbow))];
+        c.extend([Vector3::zeros(); 3]);
+        c
+    }
+
+    /// Stops of the toy arm in random order with noise (50 µm an axis), an error of the pose, and
+    /// joint `joint`'s zero moved by `creep(t)` at the place t ∈ [0, 1) in the run — the error
+    /// computed from the arm itself (the positions at q and at q + creep), not from its columns.
+    fn creeping_run(m: usize, seed: u64, joint: usize, creep: impl Fn(f64) -> f64) -> Vec<Stop> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let noise = Normal::new(0.0, 50e-6).unwrap();
+        (0..m)
+            .map(|k| {
+                let mut q: Vec<f64> = (0..6).map(|_| rng.random_range(-2.5..2.5)).collect();
+                q[1] = rng.random_range(0.2..1.4);
+                q[2] = rng.random_range(-2.0..-0.3);
+                let pose = Vector3::new(40e-6 * q[1].sin(), -30e-6 * q[2].cos(), 20e-6 * (q[1] + q[2]).sin());
+                let mut moved = q.clone();
+                moved[joint] += creep(k as f64 / m as f64);
+                let e = Vector3::from_fn(|_, _| noise.sample(&mut rng)) + pose + (arm(&moved) - arm(&q));
+                Stop { at: k as f64, position: arm(&q), error: e, zero_columns: arm_zero_columns(&q), q }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_joints_zero_creeping_is_found_and_measured() {
+        // Joint 2's zero creeps 0.01° as its motor warms (1 − e^(−3t)): about 80 µm at the point,
+        // in a direction that changes with the pose.
+        let creep = |t: f64| 0.01 * DEG * (1.0 - (-3.0 * t).exp());
+        let m = 500;
+        let d = creeping_run(m, 21, 1, creep);
+        let r = order_drift(&d, RunPosition::Sequence, 1).expect("tested");
+        let c = r.joint_creep.as_ref().expect("zero columns given");
+        assert!(r.creep_found() && c.p <= 0.002, "{r:?}");
+        let truth = truth_first_to_last(m, creep);
+        for j in 0..3 {
+            let (d, s) = (c.first_to_last[j].unwrap(), c.first_to_last_std[j].unwrap());
+            let want = if j == 1 { truth } else { 0.0 };
+            assert!((d - want).abs() < 3.0 * s, "joint {}: {d:e} ± {s:e}, truth {want:e}", j + 1);
+        }
+        let (d2, s2) = (c.first_to_last[1].unwrap(), c.first_to_last_std[1].unwrap());
+        assert!(d2 > 3.0 * s2, "joint 2's creep measured apart from zero: {c:?}");
+        assert!(c.first_to_last[3..].iter().all(Option::is_none), "joints 4–6 move no stop: {c:?}");
+        let said = r.statement();
+        assert!(said.contains("the joints' zeros creep along it") && said.contains("joint 2 +0.00"), "{said}");
+    }
+
+    #[test]
+    fn without_a_creep_the_joint_test_holds_its_level_and_its_sigma() {
+        // 60 runs without creep: p below 0.05 in about 3 (at most 9 with probability 0.996), and
+        // the z-scores of joints 1–3's estimates against 0 have an RMS near 1.
+        let mut low = 0;
+        let mut z = Vec::new();
+        for s in 0..60 {
+            let r = order_drift(&creeping_run(200, 300 + s, 0, |_| 0.0), RunPosition::Sequence, s).unwrap();
+            let c = r.joint_creep.unwrap();
+            low += usize::from(c.p < 0.05);
+            z.extend((0..3).map(|j| c.first_to_last[j].unwrap() / c.first_to_last_std[j].unwrap()));
+        }
+        assert!(low <= 9, "{low} of 60 below 0.05");
+        let rms = (z.iter().map(|v| v * v).sum::<f64>() / z.len() as f64).sqrt();
+        assert!((0.75..1.3).contains(&rms), "rms {rms}");
+    }
+
+    #[test]
+    fn a_common_drift_is_not_taken_for_a_creep() {
+        // The whole cell settles 60 µm along x (a tracker or a base): the common trend finds it,
+        // and the joints' test, which has it in its null model, does not name a creep.
+        let warm = |t: f64| 60e-6 * (1.0 - (-3.0 * t).exp());
+        let mut d = creeping_run(500, 23, 0, |_| 0.0);
+        let m = d.len() as f64;
+        for (k, s) in d.iter_mut().enumerate() {
+            s.error.x += warm(k as f64 / m);
+        }
+        let r = order_drift(&d, RunPosition::Sequence, 1).expect("tested");
+        assert!(r.found() && !r.creep_found(), "{r:?}");
+        assert!(r.statement().contains("the joints' zeros show no creep along it"), "{}", r.statement());
     }
 }

@@ -575,7 +575,7 @@ pub fn diagnose_with_progress(
         let named: Vec<ParamEstimate> = verdict.effects.iter().flat_map(|e| e.parameters.iter().cloned()).collect();
         verdict.summary.push_str(&held_payload_with_named(&work, &model, accepted.as_ref(), &named));
     }
-    if let Some(d) = location.order_drift.as_ref().filter(|d| d.found()) {
+    if let Some(d) = location.order_drift.as_ref().filter(|d| d.found() || d.creep_found()) {
         verdict.summary.push_str(&format!("; {}", d.statement()));
     }
     if let Some(g) = GrossHeldout::of(&s.stages[0].problem, figures[0]) {
@@ -878,27 +878,33 @@ impl Tested {
             voxel,
             opts.fdr,
         );
-        w.order_drift = order_drift(&s.stages[0].problem, cell, &s.baselines[0], opts.seed);
+        w.order_drift = order_drift(&s.stages[0], cell, &s.baselines[0], opts.seed);
         w
     }
 }
 
 /// The drift test ([`drift`]) on the starting model's held-out errors, where every tested
-/// observation has a place in one run ([`run_positions`]).
-fn order_drift(
-    pr: &crate::identify::problem::Problem,
-    cell: &Cell,
-    heldout: &cv::Heldout,
-    seed: u64,
-) -> Option<drift::OrderDrift> {
+/// observation has a place in one run ([`run_positions`]), with each joint's ∂(position)/∂θ_j at
+/// the starting model for the creep of the zeros.
+fn order_drift(stage: &stage::Stage, cell: &Cell, heldout: &cv::Heldout, seed: u64) -> Option<drift::OrderDrift> {
+    let pr = &stage.problem;
     let dof = pr.model.dof();
     let obs: Vec<usize> = heldout.errors.iter().map(|(o, _)| *o).collect();
     let (source, at) = run_positions(pr, cell, &obs)?;
+    // The weighted joint columns, unweighted row by row (a row of zero weight tells nothing).
+    let g = stage.joint_columns();
+    let zero_columns = |o: &crate::identify::problem::Obs| -> Vec<Vector3<f64>> {
+        let w = |a: usize| if o.weight[a] != 0.0 { 1.0 / o.weight[a] } else { 0.0 };
+        (0..dof).map(|j| Vector3::from_fn(|a, _| g[(o.row + a, j)] * w(a))).collect()
+    };
     let readings = heldout
         .errors
         .iter()
         .zip(at)
-        .map(|((o, e), t)| (t, pr.obs[*o].state.q[..dof].to_vec(), pr.target_position(&pr.obs[*o]), *e))
+        .map(|((o, e), t)| {
+            let ob = &pr.obs[*o];
+            (t, ob.state.q[..dof].to_vec(), pr.target_position(ob), *e, zero_columns(ob))
+        })
         .collect();
     drift::order_drift(&drift::stops(readings), source, seed)
 }

@@ -609,8 +609,9 @@ fn drift_columns(cell: &Cell, stage: &Stage, g: &Mat<f64>) -> Option<(Mat<f64>, 
     let u = super::drift::unit_scale(at.iter().copied())?;
     let dof = pr.model.dof();
     let zero = nalgebra::Vector3::zeros();
-    let stops =
-        super::drift::stops(pr.obs.iter().zip(&at).map(|(o, &t)| (t, o.state.q[..dof].to_vec(), zero, zero)).collect());
+    let stops = super::drift::stops(
+        pr.obs.iter().zip(&at).map(|(o, &t)| (t, o.state.q[..dof].to_vec(), zero, zero, Vec::new())).collect(),
+    );
     if stops.len() < 2 {
         return None;
     }

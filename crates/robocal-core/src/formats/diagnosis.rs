@@ -488,8 +488,32 @@ pub struct OrderDriftOut {
     /// order; below 0.8 (a sweep, a grid, an order planned for short moves) neighbouring poses'
     /// alike errors make a trend along the order and no drift is claimed.
     pub order_locality: f64,
+    /// Whether the joints' zeros creep along the run beyond a trend common to every pose: each
+    /// joint's ∂(position)/∂θ_j times P1…P3 of the place in the run, beyond the configuration, the
+    /// common trend and the fixed zeros, by the same permutations. Absent where no joint column
+    /// was available (and in documents of earlier versions).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint_creep: Option<JointCreepOut>,
     /// What it says, in a sentence.
     pub statement: String,
+}
+
+/// The test of the joints' zeros creeping along the measuring order.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct JointCreepOut {
+    /// Whether a creep is said: p below 0.01 and the order not carrying the configuration (the
+    /// same guards as the common trend's).
+    pub found: bool,
+    /// Permutation p-value of "no joint's zero moves along the run beyond the configuration, a
+    /// common trend and the fixed zeros".
+    pub p: f64,
+    /// Per joint, the fitted creep's mean over the last tenth of the stops minus over the first
+    /// tenth, deg; `null` for a joint whose zero moves no stop here beyond the others' (its
+    /// standard deviation would exceed 1°).
+    pub first_to_last_deg: Vec<Option<f64>>,
+    /// Its standard deviation per joint, deg (the regression's, stops independent).
+    pub first_to_last_std_deg: Vec<Option<f64>>,
 }
 
 /// A candidate's held-out figures: the model plus the candidate against the model alone, on the
@@ -749,6 +773,12 @@ fn where_out(w: &Where) -> WhereOut {
             first_to_last_std_mm: [0, 1, 2].map(|k| d.first_to_last_std[k] / MM),
             order_on_configuration_r2: d.order_on_configuration_r2,
             order_locality: d.order_locality,
+            joint_creep: d.joint_creep.as_ref().map(|c| JointCreepOut {
+                found: d.creep_found(),
+                p: c.p,
+                first_to_last_deg: c.first_to_last.iter().map(|v| v.map(|v| v / DEG)).collect(),
+                first_to_last_std_deg: c.first_to_last_std.iter().map(|v| v.map(|v| v / DEG)).collect(),
+            }),
             statement: d.statement(),
         }),
     }
