@@ -193,23 +193,35 @@ impl OrderDrift {
 impl JointCreep {
     /// What the test says, in a clause (degrees), for `stops` stops and `permutations`.
     fn statement(&self, stops: usize, permutations: usize) -> String {
-        let joints = self
+        // Each determined joint: (beyond 2 σ of zero, its figure).
+        let joints: Vec<(bool, String)> = self
             .first_to_last
             .iter()
             .zip(&self.first_to_last_std)
             .enumerate()
-            .filter_map(|(j, (d, s))| Some(format!("joint {} {:+.4} ± {:.4}°", j + 1, (*d)? / DEG, (*s)? / DEG)))
-            .collect::<Vec<_>>()
-            .join(", ");
+            .filter_map(|(j, (d, s))| {
+                let (d, s) = ((*d)?, (*s)?);
+                Some((d.abs() > 2.0 * s, format!("joint {} {:+.4} ± {:.4}°", j + 1, d / DEG, s / DEG)))
+            })
+            .collect();
+        let list = |beyond: bool| joints.iter().filter(|j| j.0 == beyond).map(|j| j.1.as_str()).collect::<Vec<_>>();
         let test = format!(
             "p = {:.3}, {permutations} sign flips over {stops} stops, beyond the configuration, a trend common to every pose and each joint's fixed zero",
             self.p
         );
         if self.p < LEVEL {
-            format!("the joints' zeros creep along it, from the first tenth of the run to the last: {joints} ({test})")
-        } else {
+            let (beyond, within) = (list(true), list(false));
+            let within =
+                if within.is_empty() { String::new() } else { format!("; within 2 σ of zero: {}", within.join(", ")) };
+            let beyond =
+                if beyond.is_empty() { "no joint beyond 2 σ of zero alone".to_string() } else { beyond.join(", ") };
             format!(
-                "the joints' zeros show no creep along it at p < 0.01 ({test}; from the first tenth to the last: {joints})"
+                "the joints' zeros creep along it ({test}), from the first tenth of the run to the last: {beyond}{within}"
+            )
+        } else {
+            let all = joints.iter().map(|j| j.1.as_str()).collect::<Vec<_>>().join(", ");
+            format!(
+                "the joints' zeros show no creep along it at p < 0.01 ({test}; from the first tenth to the last: {all})"
             )
         }
     }
@@ -758,7 +770,10 @@ mod tests {
         assert!(d2 > 3.0 * s2, "joint 2's creep measured apart from zero: {c:?}");
         assert!(c.first_to_last[3..].iter().all(Option::is_none), "joints 4–6 move no stop: {c:?}");
         let said = r.statement();
-        assert!(said.contains("the joints' zeros creep along it") && said.contains("joint 2 +0.00"), "{said}");
+        assert!(
+            said.contains("the joints' zeros creep along it") && said.contains("to the last: joint 2 +0.00"),
+            "{said}"
+        );
     }
 
     #[test]
