@@ -102,6 +102,35 @@ pub fn quality_rows(quality: &Quality) -> Vec<Vec<String>> {
     if let Some(v) = quality.sigma_ratio {
         push("σ̂ / instrument σ (weighted)", fixed(v, 3), "");
     }
+    if let Some(p) = &quality.payload {
+        let kg = |m: Option<f64>, s: Option<f64>| match (m, s) {
+            (Some(m), Some(s)) => format!("{} ± {} kg", fixed(m, 3), fixed(s, 3)),
+            (Some(m), None) => format!("{} kg, not determined (held)", fixed(m, 3)),
+            _ => "–".to_string(),
+        };
+        let at = p
+            .com_mm
+            .map_or(String::new(), |c| format!(" at ({}, {}, {}) mm", fixed(c[0], 1), fixed(c[1], 1), fixed(c[2], 1)));
+        push(
+            &format!("payload not declared: mass with its centre of mass{at} in the flange frame"),
+            kg(p.mass_kg, p.std_kg),
+            "σ for this centre of mass, the robot file's link masses taken as exact",
+        );
+        if let Some(f) = &p.at_flange {
+            match &f.failed {
+                Some(e) => push("the same with its centre of mass at the flange", "no fit".to_string(), e),
+                None => push(
+                    "the same with its centre of mass at the flange",
+                    kg(f.mass_kg, f.std_kg),
+                    &f.rms_residual_mm.map_or(String::new(), |r| {
+                        let against =
+                            quality.rms_residual_mm.map_or(String::new(), |a| format!(" against {} mm", fixed(a, 4)));
+                        format!("residual RMS {} mm{against}", fixed(r, 4))
+                    }),
+                ),
+            }
+        }
+    }
     rows
 }
 

@@ -398,3 +398,30 @@ fn a_suspect_is_not_listed_as_a_named_effect() {
     let named = diagnosis_report(&serde_json::from_value(v).unwrap());
     assert!(named.contains("Named effects") && !named.contains("Suspected, not named"));
 }
+
+#[test]
+fn the_quality_table_says_both_readings_of_an_undeclared_payload() {
+    use crate::domain::quality::{PayloadAtFlangeQuality, PayloadQuality};
+    let quality = crate::domain::Quality {
+        rms_residual_mm: Some(0.185),
+        payload: Some(PayloadQuality {
+            mass_kg: Some(0.568920059528),
+            std_kg: Some(0.150075943501),
+            com_mm: Some([20.021, 0.0861, 40.3995]),
+            at_flange: Some(PayloadAtFlangeQuality {
+                mass_kg: Some(0.843283783961),
+                std_kg: Some(0.233975438803),
+                rms_residual_mm: Some(0.1851),
+                ..Default::default()
+            }),
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    let rows = parameters::quality_rows(&quality);
+    assert_eq!(rows.len(), 3, "{rows:?}");
+    let rows = &rows[1..];
+    assert!(rows[0][0].contains("at (20.0, 0.1, 40.4) mm") && rows[0][1] == "0.569 ± 0.150 kg", "{rows:?}");
+    assert_eq!(rows[1][1], "0.843 ± 0.234 kg");
+    assert!(rows[1][2].contains("residual RMS 0.1851 mm against 0.1850 mm"), "{rows:?}");
+}
