@@ -16,6 +16,13 @@
 //! Written here rather than taken from a crate: no maintained Rust crate does a Freedman–Lane
 //! permutation test; the linear algebra is nalgebra's and, for the bases, faer's.
 //!
+//! A joint's zero that creeps as its motor warms moves every pose another way (along ∂p/∂θ_j), which
+//! that common trend barely sees. [`JointCreep`] regresses the errors, stacked over the three axes,
+//! on each joint's ∂p/∂θ_j times P1…P3, beyond the configuration, the common trend and each joint's
+//! fixed zero. Its null distribution is a wild bootstrap (Rademacher signs per stop), not a
+//! permutation: an error of the pose (a random turn of the joints) points along the very columns
+//! tested, larger along its own stop's than along another's, and permutations held no level there.
+//!
 //! Where the measuring order follows the configuration (a planner's sweep over the joints, a grid
 //! in Cartesian space), an error of the pose the configuration basis does not span would look like
 //! a drift: the adjusted R² of the run position on Z is reported, and above [`CONFOUNDED_R2`] no
