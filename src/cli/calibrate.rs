@@ -212,8 +212,29 @@ fn payload_note(
                 None => String::new(),
             };
             let from_flange = p.com_mm.map_or(f64::NAN, |c| (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt());
+            let with_com = match &p.with_centre_of_mass {
+                Some(c) => match (&c.failed, c.com_mm, c.com_std_mm) {
+                    (Some(e), _, _) => format!("; with its centre of mass identified too, no fit ({e})"),
+                    (None, Some(m), Some(s)) => format!(
+                        "; with its centre of mass identified too, {} at ({:.1} ± {:.1}, {:.1} ± {:.1}, {:.1} ± {:.1}) mm in the flange frame, {}",
+                        kg(c.mass_kg, c.std_kg),
+                        m[0],
+                        s[0],
+                        m[1],
+                        s[1],
+                        m[2],
+                        s[2],
+                        match c.undetermined_because() {
+                            None => "which these data determine".to_string(),
+                            Some(why) => format!("which these data do not determine ({why})"),
+                        }
+                    ),
+                    _ => String::new(),
+                },
+                None => String::new(),
+            };
             format!(
-                "; payload not declared (0 kg): identified {} at the tool's centre of mass, {from_flange:.1} mm from the flange{at_flange} (σ the larger of the fit's and the by-pose robust one, each for the centre of mass it assumes, with the robot file's link masses taken as exact; an effect the model lacks biases it beyond σ; declare the payload when it is known)",
+                "; payload not declared (0 kg): identified {} at the tool's centre of mass, {from_flange:.1} mm from the flange{at_flange}{with_com} (σ the larger of the fit's and the by-pose robust one, each for the centre of mass it assumes or identifies, with the robot file's link masses taken as exact; an effect the model lacks biases it beyond σ; declare the payload when it is known)",
                 kg(p.mass_kg, p.std_kg)
             )
         }

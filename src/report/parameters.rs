@@ -130,6 +130,29 @@ pub fn quality_rows(quality: &Quality) -> Vec<Vec<String>> {
                 ),
             }
         }
+        if let Some(c) = &p.with_centre_of_mass {
+            let label = "the same with its centre of mass identified too";
+            match (&c.failed, c.com_mm, c.com_std_mm) {
+                (Some(e), _, _) => push(label, "no fit".to_string(), e),
+                (None, Some(m), Some(s)) => {
+                    let at = format!(
+                        "centre of mass ({} ± {}, {} ± {}, {} ± {}) mm",
+                        fixed(m[0], 1),
+                        fixed(s[0], 1),
+                        fixed(m[1], 1),
+                        fixed(s[1], 1),
+                        fixed(m[2], 1),
+                        fixed(s[2], 1)
+                    );
+                    let verdict = match c.undetermined_because() {
+                        None => "determined by these data".to_string(),
+                        Some(why) => format!("not determined by these data ({why})"),
+                    };
+                    push(label, kg(c.mass_kg, c.std_kg), &format!("{at}: {verdict}"));
+                }
+                _ => {}
+            }
+        }
     }
     rows
 }

@@ -400,8 +400,8 @@ fn a_suspect_is_not_listed_as_a_named_effect() {
 }
 
 #[test]
-fn the_quality_table_says_both_readings_of_an_undeclared_payload() {
-    use crate::domain::quality::{PayloadAtFlangeQuality, PayloadQuality};
+fn the_quality_table_says_every_reading_of_an_undeclared_payload() {
+    use crate::domain::quality::{PayloadAtFlangeQuality, PayloadComQuality, PayloadQuality};
     let quality = crate::domain::Quality {
         rms_residual_mm: Some(0.185),
         payload: Some(PayloadQuality {
@@ -414,14 +414,29 @@ fn the_quality_table_says_both_readings_of_an_undeclared_payload() {
                 rms_residual_mm: Some(0.1851),
                 ..Default::default()
             }),
+            with_centre_of_mass: Some(PayloadComQuality {
+                mass_kg: Some(0.95667),
+                std_kg: Some(0.55134),
+                com_mm: Some([32.21, 20.46, 69.96]),
+                com_std_mm: Some([20.81, 19.24, 70.66]),
+                determined: Some(false),
+                rms_residual_mm: Some(0.1849),
+                ..Default::default()
+            }),
             ..Default::default()
         }),
         ..Default::default()
     };
     let rows = parameters::quality_rows(&quality);
-    assert_eq!(rows.len(), 3, "{rows:?}");
+    assert_eq!(rows.len(), 4, "{rows:?}");
     let rows = &rows[1..];
     assert!(rows[0][0].contains("at (20.0, 0.1, 40.4) mm") && rows[0][1] == "0.569 ± 0.150 kg", "{rows:?}");
     assert_eq!(rows[1][1], "0.843 ± 0.234 kg");
     assert!(rows[1][2].contains("residual RMS 0.1851 mm against 0.1850 mm"), "{rows:?}");
+    assert_eq!(rows[2][1], "0.957 ± 0.551 kg");
+    assert!(
+        rows[2][2]
+            == "centre of mass (32.2 ± 20.8, 20.5 ± 19.2, 70.0 ± 70.7) mm: not determined by these data (the σ of x, y, z above 10 mm and the mass within 3 σ of 0)",
+        "{rows:?}"
+    );
 }

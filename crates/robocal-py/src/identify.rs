@@ -625,10 +625,12 @@ impl Identification {
     /// A payload the sessions do not declare (0 kg), as identified (`quality["payload"]` of the
     /// parameter-set file): a dict with `mass_kg`, `std_kg` (absent when the data did not
     /// determine the mass and it is held at 0), `com_mm` (the centre of mass the fit assumed, in
-    /// the flange frame) and `at_flange` (the mass fitted again with the centre of mass at the
-    /// flange: `mass_kg`, `std_kg`, `rms_residual_mm`, or `failed` with the reason). Each σ holds
-    /// only for the centre of mass its fit assumes. `None` when the sessions declare a payload or
-    /// the model has none.
+    /// the flange frame), `at_flange` (the mass fitted again with the centre of mass at the
+    /// flange: `mass_kg`, `std_kg`, `rms_residual_mm`, or `failed` with the reason) and
+    /// `with_centre_of_mass` (the mass fitted again with the centre of mass identified beside it:
+    /// `mass_kg`, `std_kg`, `com_mm`, `com_std_mm`, `determined`, `rms_residual_mm`, or `failed`).
+    /// Each σ holds only for the centre of mass its fit assumes or identifies. `None` when the
+    /// sessions declare a payload or the model has none.
     #[getter]
     fn payload<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
         match self.doc.quality.as_ref().and_then(|q| q.payload.as_ref()) {

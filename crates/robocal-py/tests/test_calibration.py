@@ -287,9 +287,10 @@ def test_a_diagnosis_leaves_out_what_the_sets_identification_left_out(cell):
 @pytest.mark.skipif(cli_binary() is None, reason="needs the command-line binary (ROBOCAL_BIN, or a debug build)")
 def test_an_undeclared_payload_is_read_beside_where_it_sits(tmp_path):
     """A three-reflector twin imported without its payload: identify_cell identifies the mass at the
-    reflectors' centroid and again at the flange (`payload`, the file's quality["payload"]). The
-    second reading is checked by a second route: the same cell with the centre of mass moved to
-    the flange by hand, identified plainly. The command line writes the same file."""
+    reflectors' centroid, again at the flange, and with its centre of mass free (`payload`, the
+    file's quality["payload"]). The second reading is checked by a second route: the same cell with
+    the centre of mass moved to the flange by hand, identified plainly; the third must not depend
+    on where the centre of mass was assumed. The command line writes the same file."""
     run = lambda *a: subprocess.run([cli_binary(), *map(str, a)], check=True, capture_output=True, text=True)  # noqa: E731
     run("simulate-tracker", "--seed", 3, "--poses", 300, "--payload-kg", 2.0, "--out-dir", tmp_path)
     run("import", "three-reflector", "--robot", "irb120", "--joints", tmp_path / "run-joints.txt",
@@ -315,5 +316,17 @@ def test_an_undeclared_payload_is_read_beside_where_it_sits(tmp_path):
     assert by_hand.payload["com_mm"] == [0.0, 0.0, 0.0] and "at_flange" not in by_hand.payload
     # The two readings differ: where the mass sits is not told by these data.
     assert flange["mass_kg"] != pytest.approx(payload["mass_kg"], rel=0.05)
+    # With the centre of mass identified too, where the fit started does not matter: the centroid
+    # and the flange give one mass, σ and centre of mass (its σ within a few per cent: each
+    # parameter's is the larger of the classic and the by-pose robust one, which is not invariant
+    # under the change of parameters).
+    free, free_by_hand = payload["with_centre_of_mass"], by_hand.payload["with_centre_of_mass"]
+    assert free["mass_kg"] == pytest.approx(free_by_hand["mass_kg"], rel=1e-5)
+    assert free["std_kg"] == pytest.approx(free_by_hand["std_kg"], rel=1e-5)
+    assert free["com_mm"] == pytest.approx(free_by_hand["com_mm"], abs=0.01)
+    assert free["com_std_mm"] == pytest.approx(free_by_hand["com_std_mm"], rel=0.1)
+    assert free["determined"] is free_by_hand["determined"] is False
+    # Here it is not determined, and its mass σ says more than the assumed centroid's does.
+    assert free["std_kg"] > payload["std_kg"]
     run("identify", tmp_path / "cell.json", "--out", tmp_path / "set.json")
     assert (tmp_path / "set.json").read_text().rstrip("\n") == fitted.parameter_set.to_json()

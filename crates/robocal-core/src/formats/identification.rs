@@ -9,8 +9,8 @@ use serde_json::Value;
 use super::identify_options::DetmaxSelection;
 use super::param_set::ParameterSetDoc;
 use super::quality::{
-    Downweighted, FitMeasurements, Observability, PayloadAtFlangeQuality, PayloadQuality, Quality, ToolQuality,
-    WorstMeasurement,
+    Downweighted, FitMeasurements, Observability, PayloadAtFlangeQuality, PayloadComQuality, PayloadQuality, Quality,
+    ToolQuality, WorstMeasurement,
 };
 use crate::cell::Cell;
 use crate::identify::{Identification, IdentifyError, IdentifyOptions};
@@ -37,7 +37,9 @@ pub fn run_identification(
     selected();
     let id = crate::identify::identify(cell, &opts)?;
     let sessions: Vec<String> = id.problem.tools.iter().flat_map(|t| t.sessions.clone()).collect();
-    let payload = payload_quality(&id, payload_again_at_flange(cell, &opts, &id, selection.is_some()));
+    let detmax = selection.is_some();
+    let payload = payload_quality(&id, payload_again_at_flange(cell, &opts, &id, detmax))
+        .map(|p| PayloadQuality { with_centre_of_mass: payload_with_centre_of_mass(&opts, &id, detmax), ..p });
     let doc = identification_doc(&id, &sessions, selection, payload);
     Ok((id, doc))
 }
@@ -67,6 +69,27 @@ fn payload_again_at_flange(
     }
 }
 
+/// The undeclared payload fitted again with its centre of mass free
+/// ([`crate::identify::payload_centre_of_mass`]), when the first fit determined its mass — not for
+/// a DETMAX selection (`detmax`), like [`payload_again_at_flange`].
+fn payload_with_centre_of_mass(opts: &IdentifyOptions, id: &Identification, detmax: bool) -> Option<PayloadComQuality> {
+    if detmax {
+        return None;
+    }
+    match crate::identify::payload_centre_of_mass(id, opts) {
+        Ok(f) => f.map(|f| PayloadComQuality {
+            mass_kg: Some(f.mass),
+            std_kg: Some(f.std),
+            com_mm: Some([f.com.x / MM, f.com.y / MM, f.com.z / MM]),
+            com_std_mm: Some(f.com_std.map(|s| s / MM)),
+            determined: Some(f.determined),
+            rms_residual_mm: Some(f.rms_residual / MM),
+            ..Default::default()
+        }),
+        Err(e) => Some(PayloadComQuality { failed: Some(e.to_string()), ..Default::default() }),
+    }
+}
+
 /// What an identification made of a payload the sessions do not declare, with `at_flange` the
 /// second fit's ([`payload_again_at_flange`]); `None` when the sessions declare a payload or the
 /// model has none.
@@ -81,7 +104,7 @@ pub(crate) fn payload_quality(
         std_kg: std,
         com_mm: Some([com.x / MM, com.y / MM, com.z / MM]),
         at_flange,
-        other: Default::default(),
+        ..Default::default()
     })
 }
 

@@ -287,6 +287,10 @@ pub struct PayloadQuality {
     /// diagnosis accepted).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub at_flange: Option<PayloadAtFlangeQuality>,
+    /// The mass identified again with the centre of mass free beside it; absent when that fit was
+    /// not run (the mass not determined, a DETMAX selection, or the set a diagnosis accepted).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub with_centre_of_mass: Option<PayloadComQuality>,
     /// Keys this version does not know, kept as they came.
     #[serde(flatten)]
     #[cfg_attr(feature = "openapi", schema(value_type = std::collections::HashMap<String, AnyJson>))]
@@ -315,6 +319,70 @@ pub struct PayloadAtFlangeQuality {
     #[serde(flatten)]
     #[cfg_attr(feature = "openapi", schema(value_type = std::collections::HashMap<String, AnyJson>))]
     pub other: Map<String, Value>,
+}
+
+/// The undeclared payload's mass identified with its centre of mass
+/// (`identify::payload_centre_of_mass`: the first moment beyond `com_mm` fitted too, from the
+/// identification's solution), or why that fit failed. Its mass σ includes the uncertainty of
+/// where the payload sits, which the identification's own σ does not.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(default)]
+pub struct PayloadComQuality {
+    /// The mass, kg.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mass_kg: Option<f64>,
+    /// Its standard deviation, kg, with the centre of mass free.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub std_kg: Option<f64>,
+    /// The centre of mass in the flange frame, mm.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
+    pub com_mm: Option<[f64; 3]>,
+    /// Its standard deviations, mm.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "openapi", schema(min_items = 3, max_items = 3))]
+    pub com_std_mm: Option<[f64; 3]>,
+    /// Whether these data determine the centre of mass: every σ within 10 mm, κ within its limit
+    /// and the mass above 3 of its σ. When not, the reading says how little they tell, and the
+    /// identification's mass (at the assumed centre of mass) is the one used.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub determined: Option<bool>,
+    /// That fit's residual RMS, mm.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rms_residual_mm: Option<f64>,
+    /// Why that fit failed (the fit's own error); the other fields are then absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub failed: Option<String>,
+    /// Keys this version does not know, kept as they came.
+    #[serde(flatten)]
+    #[cfg_attr(feature = "openapi", schema(value_type = std::collections::HashMap<String, AnyJson>))]
+    pub other: Map<String, Value>,
+}
+
+impl PayloadComQuality {
+    /// Why these data do not determine the centre of mass, in words (`None` when they do, or
+    /// when the reading is absent): the components whose σ is above 10 mm, the mass within 3 of
+    /// its σ of 0, or else κ above its limit.
+    pub fn undetermined_because(&self) -> Option<String> {
+        if self.determined != Some(false) {
+            return None;
+        }
+        let mut why = Vec::new();
+        if let Some(s) = self.com_std_mm {
+            let wide: Vec<&str> =
+                ["x", "y", "z"].into_iter().zip(s).filter(|(_, s)| *s > 10.0).map(|(n, _)| n).collect();
+            if !wide.is_empty() {
+                why.push(format!("the σ of {} above 10 mm", wide.join(", ")));
+            }
+        }
+        if let (Some(m), Some(s)) = (self.mass_kg, self.std_kg)
+            && m <= 3.0 * s
+        {
+            why.push("the mass within 3 σ of 0".to_string());
+        }
+        Some(if why.is_empty() { "κ above its limit".to_string() } else { why.join(" and ") })
+    }
 }
 
 /// The diagnosis a set was accepted from.

@@ -51,6 +51,7 @@ fn priority(problem: &Problem, g: usize) -> (u8, i64) {
             Param::Joint(j, _) => (4, j as i64),
             Param::Thermal => (4, 100),
             Param::ToolMass => (4, 101),
+            Param::ToolMoment(k) => (4, 102 + k as i64),
             Param::Alpha(_) | Param::A(_) | Param::D(_) | Param::Theta(_) => (5, 0),
             Param::Tool(k) => (6, k as i64),
         },
@@ -94,7 +95,7 @@ pub(super) fn undetermined_bound(problem: &Problem, g: usize) -> Option<(f64, bo
                     angle
                 }
             }
-            Param::Joint(..) | Param::Thermal | Param::ToolMass => None,
+            Param::Joint(..) | Param::Thermal | Param::ToolMass | Param::ToolMoment(_) => None,
         },
         GlobalParam::Tool { k, .. } => {
             if k < 3 {

@@ -4,6 +4,7 @@
 
 use faer::Mat;
 
+use super::hold::PAYLOAD_SIGNIFICANCE;
 use super::noise::NoiseModel;
 use super::prepare::{Prepared, prepare, row_sigmas};
 use super::problem::{GlobalParam, Problem};
@@ -111,6 +112,100 @@ pub struct PayloadAtFlange {
     pub std: Option<f64>,
     /// That fit's residual RMS, m.
     pub rms_residual: f64,
+}
+
+/// An undeclared payload's centre of mass, identified with its mass where the data determine it
+/// (the identification's undeclared payload must have been kept, [`Identification::undeclared_payload`]):
+/// the solution is fitted once more with the payload's first moment beyond its assumed centre of
+/// mass free (`tool_moment_x`, `_y`, `_z` in the flange frame, [`Param::ToolMoment`]), from the
+/// solution and with every other free parameter still free. `None` when there is no determined
+/// undeclared payload.
+///
+/// The mass this gives carries the uncertainty of where the payload sits, which the first fit's σ
+/// takes as exact (BENCHMARKS "The payload's σ against an independent twin"). The centre of mass
+/// c = c₀ + h/m and its standard deviations come by the delta method from the fit's covariance
+/// (the larger of the classic and the cluster-robust, as every σ of an identification).
+///
+/// The centre of mass is `determined` when every component's σ is within
+/// `UNDETERMINED_LENGTH_M` (10 mm, the bound of every length the
+/// identification keeps), the fit's κ within the limit and the mass still above
+/// [`PAYLOAD_SIGNIFICANCE`] of its σ; otherwise the reading stands with its σ as what these data
+/// say about it, and only the first fit's mass is used.
+pub fn payload_centre_of_mass(
+    id: &Identification,
+    opts: &IdentifyOptions,
+) -> Result<Option<PayloadCentreOfMass>, IdentifyError> {
+    let Some((_, Some(_))) = id.undeclared_payload() else { return Ok(None) };
+    let Some(gm) = payload_mass(&id.problem).filter(|g| id.free.contains(g)) else { return Ok(None) };
+    let moments = [Param::ToolMoment(0), Param::ToolMoment(1), Param::ToolMoment(2)];
+    let (problem, remap) = id.problem.extended(&moments);
+    let mut x = problem.nominal.clone();
+    for (old, &new) in remap.iter().enumerate() {
+        x[new] = id.x[old];
+    }
+    let hs: Vec<usize> =
+        moments.iter().map(|&p| problem.robot_index(p).expect("the moments were just added")).collect();
+    for &g in &hs {
+        x[g] = 0.0;
+    }
+    let mut free: Vec<usize> = id.free.iter().map(|&g| remap[g]).collect();
+    free.extend(&hs);
+    let fit = solver::solve(&problem, &free, &x, &opts.solver)?;
+    let rows: Vec<(usize, usize)> = problem.obs.iter().map(|o| (o.row, o.rows)).collect();
+    let dof = problem.model.dof();
+    let (pose_of_obs, n_poses) = crate::cell::poses::group_poses(problem.obs.iter().map(|o| &o.state.q[..dof]));
+    let mut q = Quality::of(&fit, problem.obs.len(), &rows);
+    q.make_robust(&fit, &rows, &pose_of_obs, n_poses);
+    let col = |g: usize| free.iter().position(|&f| f == g).expect("free");
+    let cm = col(remap[gm]);
+    let ch: Vec<usize> = hs.iter().map(|&g| col(g)).collect();
+    let m = fit.x[remap[gm]];
+    let h = nalgebra::Vector3::from_fn(|k, _| fit.x[hs[k]]);
+    let c0 = problem.tools[0].tool.com;
+    // c = c₀ + h/m: ∂c_k/∂h_k = 1/m, ∂c_k/∂m = −h_k/m².
+    let com_std: [f64; 3] = std::array::from_fn(|k| {
+        let (a, b) = (1.0 / m, -h[k] / (m * m));
+        let (hh, mm) = (ch[k], cm);
+        let v = a * a * q.covariance[(hh, hh)] + b * b * q.covariance[(mm, mm)] + 2.0 * a * b * q.covariance[(hh, mm)];
+        v.max(0.0).sqrt()
+    });
+    let std_mass = q.std[cm];
+    let rms_residual = if opts.noise.is_some() || fit.weights.iter().any(|&w| w != 1.0) {
+        weighted_rms(&problem, &fit)
+    } else {
+        q.rms_residual
+    };
+    let determined = q.kappa_scaled <= opts.kappa_limit
+        && m > PAYLOAD_SIGNIFICANCE * std_mass
+        && com_std.iter().all(|s| *s <= super::identifiability::UNDETERMINED_LENGTH_M);
+    Ok(Some(PayloadCentreOfMass {
+        mass: m,
+        std: std_mass,
+        com: c0 + h / m,
+        com_std,
+        rms_residual,
+        kappa: q.kappa_scaled,
+        determined,
+    }))
+}
+
+/// An undeclared payload's mass and centre of mass identified together ([`payload_centre_of_mass`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PayloadCentreOfMass {
+    /// The mass, kg.
+    pub mass: f64,
+    /// Its standard deviation, kg, with the centre of mass free.
+    pub std: f64,
+    /// The centre of mass in the flange frame, m.
+    pub com: nalgebra::Vector3<f64>,
+    /// Its standard deviations, m.
+    pub com_std: [f64; 3],
+    /// That fit's residual RMS, m.
+    pub rms_residual: f64,
+    /// That fit's κ (unit-norm columns).
+    pub kappa: f64,
+    /// Whether the data determine the centre of mass (see [`payload_centre_of_mass`]).
+    pub determined: bool,
 }
 
 /// Identify a cell's robot. A model with backlash terms on sessions that do not log the approach

@@ -29,7 +29,10 @@ pub use error::{IdentifyError, Worst, outliers_message};
 pub use fixed::{FixedReason, ModelTerm, Structure};
 pub use hold::{COMPLIANCE_SIGNIFICANCE, PAYLOAD_SIGNIFICANCE};
 pub use identifiability::Status;
-pub use identify::{Identification, PayloadAtFlange, ToolResult, WORST_REPORTED, identify, payload_at_flange};
+pub use identify::{
+    Identification, PayloadAtFlange, PayloadCentreOfMass, ToolResult, WORST_REPORTED, identify, payload_at_flange,
+    payload_centre_of_mass,
+};
 pub use noise::NoiseModel;
 pub use options::{
     Anchor, DEFAULT_MAP_SMOOTHING, IdentifyOptions, ModelOptions, OUTLIER_FACTOR, RESIDUAL_RATIO_LIMIT, map_knots,

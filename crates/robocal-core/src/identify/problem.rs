@@ -285,6 +285,36 @@ pub struct Problem {
     pub session_names: Vec<String>,
 }
 
+/// Fill every observation's ∂τ/∂h (`JointState::tau_per_kgm`), for a payload's first-moment
+/// error (`tool_moment_*`): the torques are linear in the last link's first moment, so the
+/// difference of the torques with one kilogram-metre more along each flange axis is exact.
+fn fill_moment_torques(model: &RobotModel, tools: &[ToolBlock], obs: &mut [Obs]) {
+    let models: Vec<[GravityModel; 4]> = tools
+        .iter()
+        .map(|b| {
+            let g = GravityModel::new(model, &b.tool);
+            let moved = |k: usize| {
+                let mut m = g.clone();
+                m.add_payload_moment(&Vector3::ith(k, 1.0));
+                m
+            };
+            [moved(0), moved(1), moved(2), g.clone()]
+        })
+        .collect();
+    let dof = model.dof();
+    obs.par_iter_mut().with_min_len(PAR_MIN_OBS).for_each(|o| {
+        let [gx, gy, gz, g] = &models[o.tool];
+        let q = &o.state.q[..dof];
+        let tau = g.torques(q);
+        for (k, m) in [gx, gy, gz].into_iter().enumerate() {
+            let t = m.torques(q);
+            for j in 0..dof {
+                o.state.tau_per_kgm[k][j] = t[j] - tau[j];
+            }
+        }
+    });
+}
+
 impl Problem {
     /// Build the problem of `cell` with the robot parameter layout `layout` (the full layout plus any
     /// effect terms). Base nominal = `base`.
@@ -375,6 +405,9 @@ impl Problem {
             obs.push(Obs { session: s, index: i, tool: t, state, target, row, rows, weight: [1.0; 6], q_sc });
             row += rows;
         }
+        if layout.params().iter().any(|p| matches!(p, Param::ToolMoment(_))) {
+            fill_moment_torques(&model, &tools, &mut obs);
+        }
         Ok(Problem {
             model,
             layout,
@@ -441,6 +474,10 @@ impl Problem {
             .collect();
         let mut pr = Problem { layout, params, nominal, priors, ..self.clone() };
         pr.n_rows = pr.n_obs_rows + pr.priors.len();
+        let had_moments = self.layout.params().iter().any(|p| matches!(p, Param::ToolMoment(_)));
+        if !had_moments && extra.iter().any(|p| matches!(p, Param::ToolMoment(_))) {
+            fill_moment_torques(&pr.model, &pr.tools, &mut pr.obs);
+        }
         (pr, remap)
     }
 

@@ -30,6 +30,10 @@ pub struct JointState {
     /// everywhere else a parameter set's `tool_mass` is already in `tau` (see
     /// `ParameterSet::gravity_for`), and this stays zero so it is not counted twice.
     pub tau_per_kg: [f64; MAX_JOINTS],
+    /// ∂τ/∂h_k: the holding torques of one kilogram-metre more of the payload's first moment
+    /// along the flange's axis k (x, y, z), N·m/(kg·m), indexed `[k][joint]`. Filled, like
+    /// `tau_per_kg`, only where the payload's centre of mass is identified (`tool_moment_*`).
+    pub tau_per_kgm: [[f64; MAX_JOINTS]; 3],
 }
 
 impl JointState {
@@ -41,6 +45,7 @@ impl JointState {
             approach: [0.0; MAX_JOINTS],
             temperature_c: REFERENCE_TEMPERATURE_C,
             tau_per_kg: [0.0; MAX_JOINTS],
+            tau_per_kgm: [[0.0; MAX_JOINTS]; 3],
         };
         s.q[..q.len()].copy_from_slice(q);
         s
@@ -182,6 +187,9 @@ pub struct Chain {
     thermal: f64,
     /// Payload mass error, kg (acts through `JointState::tau_per_kg`).
     tool_mass: f64,
+    /// Payload first-moment error in the flange frame, kg·m (acts through
+    /// `JointState::tau_per_kgm`).
+    tool_moment: [f64; 3],
 }
 
 impl Chain {
@@ -210,6 +218,7 @@ impl Chain {
             terms: Vec::new(),
             thermal: 0.0,
             tool_mass: 0.0,
+            tool_moment: [0.0; 3],
         };
         for (p, &v) in layout.params().iter().zip(values) {
             match *p {
@@ -224,6 +233,7 @@ impl Chain {
                 Param::Tool(k) => chain.tool_chi[k] = v,
                 Param::Thermal => chain.thermal = v,
                 Param::ToolMass => chain.tool_mass = v,
+                Param::ToolMoment(k) => chain.tool_moment[k] = v,
             }
         }
         // The first and last knot of each (joint, step) table extend their value beyond it.
@@ -295,17 +305,32 @@ impl Chain {
     }
 
     /// The state as the joint terms see it: with a payload error, the torques of the true payload
-    /// τ + m·∂τ/∂m (a copy then; the state itself otherwise — FK is a hot path).
+    /// τ + m·∂τ/∂m + Σ_k h_k·∂τ/∂h_k (a copy then; the state itself otherwise — FK is a hot path).
     #[inline]
     fn effective<'a>(&self, s: &'a JointState, buf: &'a mut Option<JointState>) -> &'a JointState {
-        if self.tool_mass == 0.0 {
+        if self.tool_mass == 0.0 && self.tool_moment == [0.0; 3] {
             return s;
         }
         let mut e = *s;
         for j in 0..self.n {
             e.tau[j] += self.tool_mass * s.tau_per_kg[j];
+            for (h, per) in self.tool_moment.iter().zip(&s.tau_per_kgm) {
+                e.tau[j] += h * per[j];
+            }
         }
         buf.insert(e)
+    }
+
+    /// ∂θ_j/∂τ_j at the state: c_j + 3·d_j·τ_j² (linear and cubic compliance).
+    #[inline]
+    fn stiffness_slope(&self, s: &JointState, j: usize) -> f64 {
+        let mut k = self.compliance[j];
+        for &(tj, term, v, _) in &self.terms {
+            if tj == j && term == JointTerm::ComplianceCubic {
+                k += 3.0 * v * s.tau[j] * s.tau[j];
+            }
+        }
+        k
     }
 
     /// The DH joint angles θ_j = q_j + offset_j + c_j·τ_j + Σ (joint terms of j).
@@ -645,17 +670,16 @@ impl Chain {
                     };
                     times(rot_col(&t.z[j], &t.o[j], &p), basis_at(term, j, s, edge))
                 }
-                Param::ToolMass => {
-                    // ∂θ_j/∂m = (c_j + 3·d_j·τ_j²)·∂τ_j/∂m, summed over the joints' columns.
+                Param::ToolMass | Param::ToolMoment(_) => {
+                    // ∂θ_j/∂m = (c_j + 3·d_j·τ_j²)·∂τ_j/∂m, summed over the joints' columns (and
+                    // the same with ∂τ_j/∂h_k for a component of the first moment).
+                    let per = match params[i] {
+                        Param::ToolMoment(k) => &s.tau_per_kgm[k],
+                        _ => &s.tau_per_kg,
+                    };
                     let mut col = [0.0; 6];
                     for j in 0..self.n {
-                        let mut k = self.compliance[j];
-                        for &(tj, term, v, _) in &self.terms {
-                            if tj == j && term == JointTerm::ComplianceCubic {
-                                k += 3.0 * v * s.tau[j] * s.tau[j];
-                            }
-                        }
-                        let w = k * s.tau_per_kg[j];
+                        let w = self.stiffness_slope(s, j) * per[j];
                         if w != 0.0 {
                             for (c, v) in col.iter_mut().zip(rot_col(&t.z[j], &t.o[j], &p)) {
                                 *c += w * v;
@@ -802,7 +826,10 @@ mod tests {
         // The true payload's torques, and the table of each map: linear interpolation between
         // the knots present, constant beyond the first and last.
         let mass = get(Param::ToolMass).unwrap_or(0.0);
-        let tau: Vec<f64> = (0..model.dof()).map(|j| s.tau[j] + mass * s.tau_per_kg[j]).collect();
+        let moment: Vec<f64> = (0..3).map(|k| get(Param::ToolMoment(k)).unwrap_or(0.0)).collect();
+        let tau: Vec<f64> = (0..model.dof())
+            .map(|j| s.tau[j] + mass * s.tau_per_kg[j] + (0..3).map(|k| moment[k] * s.tau_per_kgm[k][j]).sum::<f64>())
+            .collect();
         let table = |j: usize, step: u8| -> f64 {
             let mut knots: Vec<(f64, f64)> = layout
                 .params()
@@ -891,6 +918,9 @@ mod tests {
             Param::Joint(3, JointTerm::Map { step_deg: 90, knot: 1 }),
             Param::Thermal,
             Param::ToolMass,
+            Param::ToolMoment(0),
+            Param::ToolMoment(1),
+            Param::ToolMoment(2),
         ]);
         l
     }
@@ -909,6 +939,7 @@ mod tests {
                 crate::kinematics::params::Unit::Ratio => rng.random_range(-1e-2..1e-2),
                 crate::kinematics::params::Unit::PpmPerK => rng.random_range(-5e-5..5e-5),
                 crate::kinematics::params::Unit::Kg => rng.random_range(-1.0..1.0),
+                crate::kinematics::params::Unit::KgMm => rng.random_range(-0.1..0.1),
             })
             .collect()
     }
@@ -923,6 +954,9 @@ mod tests {
         s.temperature_c = rng.random_range(15.0..35.0);
         for g in s.tau_per_kg.iter_mut().take(model.dof()) {
             *g = rng.random_range(-5.0..5.0);
+        }
+        for g in s.tau_per_kgm.iter_mut().flat_map(|per| per.iter_mut().take(model.dof())) {
+            *g = rng.random_range(-10.0..10.0);
         }
         s
     }

@@ -30,8 +30,11 @@ pub struct GravityModel {
     rab: [Matrix3<f64>; MAX_JOINTS],
     p: [Vector3<f64>; MAX_JOINTS],
     mass: [f64; MAX_JOINTS],
-    /// Centres of mass in the link frames, the payload lumped into the last link.
-    com: [Vector3<f64>; MAX_JOINTS],
+    /// First moments m·c (kg·m) of the links in their own frames, the payload lumped into the
+    /// last link. First moments rather than centres of mass: the torques are linear in them, and
+    /// a payload's first-moment error ([`GravityModel::add_payload_moment`]) adds to them even
+    /// where no mass is declared.
+    first: [Vector3<f64>; MAX_JOINTS],
     gravity: Vector3<f64>,
     chain: Chain,
 }
@@ -50,7 +53,7 @@ impl GravityModel {
             rab: [Matrix3::identity(); MAX_JOINTS],
             p: [Vector3::zeros(); MAX_JOINTS],
             mass: [0.0; MAX_JOINTS],
-            com: [Vector3::zeros(); MAX_JOINTS],
+            first: [Vector3::zeros(); MAX_JOINTS],
             gravity: model.gravity,
             chain: {
                 let layout = ParamLayout::full(model);
@@ -64,17 +67,20 @@ impl GravityModel {
             g.offset[j] = l.theta;
             g.d[j] = l.d;
             g.mass[j] = l.mass;
-            g.com[j] = l.com;
+            g.first[j] = l.com * l.mass;
             g.rab[j] = rot_x(g.alpha[j]) * rot_y(g.beta[j]);
             g.p[j] = Vector3::new(g.a[j], 0.0, 0.0) + g.rab[j] * Vector3::new(0.0, 0.0, g.d[j]);
         }
         let last = n - 1;
-        let m = g.mass[last] + tool.mass;
-        if m > 0.0 {
-            g.com[last] = (g.com[last] * g.mass[last] + tool.com * tool.mass) / m;
-        }
-        g.mass[last] = m;
+        g.mass[last] += tool.mass;
+        g.first[last] += tool.com * tool.mass;
         g
+    }
+
+    /// Add a first moment h (kg·m, in the flange frame) to the payload: the torques of the payload
+    /// whose mass times centre of mass grew by h (an identified `tool_moment`).
+    pub fn add_payload_moment(&mut self, h: &Vector3<f64>) {
+        self.first[self.n - 1] += h;
     }
 
     /// Number of joints.
@@ -97,9 +103,11 @@ impl GravityModel {
         let p = &self.p;
         // Outward: v̇_{i} = R_{i−1}^{i} v̇_{i−1}, v̇_0 = −g; F_i = m_i v̇_i.
         let mut acc = -self.gravity;
+        let mut accel = [Vector3::zeros(); MAX_JOINTS];
         let mut force = [Vector3::zeros(); MAX_JOINTS];
         for j in 0..n {
             acc = r[j].transpose() * acc;
+            accel[j] = acc;
             force[j] = acc * self.mass[j];
         }
         // Inward: f_i = R f_{i+1} + F_i; n_i = R n_{i+1} + Pc_i × F_i + P_{i+1} × (R f_{i+1}).
@@ -113,7 +121,8 @@ impl GravityModel {
                 (Vector3::zeros(), Vector3::zeros(), Vector3::zeros())
             };
             let f = rf + force[j];
-            let nn = rn + self.com[j].cross(&force[j]) + pn.cross(&rf);
+            // Pc_i × (m_i·v̇_i) = (m_i·Pc_i) × v̇_i.
+            let nn = rn + self.first[j].cross(&accel[j]) + pn.cross(&rf);
             tau[j] = nn.z;
             f_next = f;
             n_next = nn;
@@ -132,9 +141,11 @@ impl GravityModel {
             theta[j] = q[j] + self.offset[j];
         }
         let tr = self.chain.trace(&theta);
+        // Each link's first moment in the world frame: R·(m·c) + m·o.
         let mut c_world = [Vector3::zeros(); MAX_JOINTS];
         for j in 0..n {
-            c_world[j] = tr.link_frame(j).transform_point(&self.com[j]);
+            let f = tr.link_frame(j);
+            c_world[j] = f.r * self.first[j] + f.t * self.mass[j];
         }
         let g = -self.gravity;
         // Suffix sums: M_i, C_i (first moment).
@@ -142,7 +153,7 @@ impl GravityModel {
         let mut c_suf = [Vector3::zeros(); MAX_JOINTS + 1];
         for j in (0..n).rev() {
             m_suf[j] = m_suf[j + 1] + self.mass[j];
-            c_suf[j] = c_suf[j + 1] + c_world[j] * self.mass[j];
+            c_suf[j] = c_suf[j + 1] + c_world[j];
         }
         let mut tau = [0.0; MAX_JOINTS];
         let mut jac = [[0.0; MAX_JOINTS]; MAX_JOINTS];
@@ -174,7 +185,7 @@ impl GravityModel {
             let rab = rot * rot_x(self.alpha[j]) * rot_y(self.beta[j]);
             o += rot * Vector3::new(self.a[j], 0.0, 0.0) + rab * Vector3::new(0.0, 0.0, self.d[j]);
             rot = rab * rot_z(q[j] + self.offset[j]);
-            v += self.mass[j] * (-self.gravity).dot(&(o + rot * self.com[j]));
+            v += (-self.gravity).dot(&(o * self.mass[j] + rot * self.first[j]));
         }
         v
     }
@@ -265,5 +276,37 @@ mod tests {
         // so the holding torque is −31.646 N·m.
         let tau = g.torques(&[0.0, std::f64::consts::FRAC_PI_2, 0.0, 0.0, 0.0, 0.0]);
         assert!((tau[1] + 3.227 * crate::kinematics::model::STANDARD_GRAVITY).abs() < 1e-9, "{tau:?}");
+    }
+
+    /// A payload's first moment added (an identified `tool_moment`) gives the torques of the
+    /// payload whose centre of mass moved by h/m; with no mass declared, of a payload that is a
+    /// pure moment, which the world-frame form computes by another route.
+    #[test]
+    fn a_payload_moment_is_its_centre_of_mass_moved() {
+        let mut rng = ChaCha8Rng::seed_from_u64(6);
+        for (model, tool) in models() {
+            let h = Vector3::new(0.03, -0.02, 0.05);
+            let heavy = Tool { mass: 2.0, com: tool.com, ..tool.clone() };
+            let mut moved_heavy = GravityModel::new(&model, &heavy);
+            moved_heavy.add_payload_moment(&h);
+            let by_com = GravityModel::new(&model, &Tool { com: tool.com + h / 2.0, ..heavy.clone() });
+            let bare = GravityModel::new(&model, &Tool { mass: 0.0, ..tool.clone() });
+            let mut pure = bare.clone();
+            pure.add_payload_moment(&h);
+            for _ in 0..20 {
+                let q: Vec<f64> = model.links.iter().map(|l| rng.random_range(l.limits[0]..l.limits[1])).collect();
+                let (a, b) = (moved_heavy.torques(&q), by_com.torques(&q));
+                for j in 0..model.dof() {
+                    assert!((a[j] - b[j]).abs() < 1e-10 * (1.0 + b[j].abs()), "joint {j}: {} vs {}", a[j], b[j]);
+                }
+                let (p, w) = (pure.torques(&q), pure.torques_and_jacobian(&q).0);
+                for j in 0..model.dof() {
+                    assert!((p[j] - w[j]).abs() < 1e-10 * (1.0 + w[j].abs()), "joint {j}: {} vs {}", p[j], w[j]);
+                }
+                // The moment does move the torques (else the comparison above says nothing).
+                let t0 = bare.torques(&q);
+                assert!((1..model.dof()).any(|j| (p[j] - t0[j]).abs() > 1e-3), "{p:?} vs {t0:?}");
+            }
+        }
     }
 }

@@ -103,16 +103,17 @@ impl ParameterSet {
     /// Gravity torques of this robot carrying another tool's payload. A `tool_mass` parameter (an
     /// identified payload error, accepted from a diagnosis) is added to the tool's declared mass
     /// here, once: the torques a parameter set's FK, validation and compensation use are those of
-    /// the true payload.
+    /// the true payload. So is a first-moment error (`tool_moment_*`, the payload's centre of
+    /// mass identified with it).
     pub fn gravity_for(&self, tool: &Tool) -> GravityModel {
-        match self.value(Param::ToolMass) {
-            Some(dm) if dm != 0.0 => {
-                let mut t = tool.clone();
-                t.mass += dm;
-                GravityModel::new(&self.model, &t)
-            }
-            _ => GravityModel::new(&self.model, tool),
+        let mut t = tool.clone();
+        t.mass += self.value(Param::ToolMass).unwrap_or(0.0);
+        let mut g = GravityModel::new(&self.model, &t);
+        let h: [f64; 3] = std::array::from_fn(|k| self.value(Param::ToolMoment(k)).unwrap_or(0.0));
+        if h != [0.0; 3] {
+            g.add_payload_moment(&nalgebra::Vector3::from(h));
         }
+        g
     }
 
     /// Pose vector χ of a block (`Param::Base` or `Param::Tool`) at the current values.

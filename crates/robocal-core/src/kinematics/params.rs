@@ -120,6 +120,12 @@ pub enum Param {
     /// mass plus this, at the tool's declared centre of mass. It acts through the compliances
     /// (the holding torques change): `tool_mass`.
     ToolMass,
+    /// Component k (x, y, z in the flange frame) of the payload's first moment beyond the one
+    /// its declared mass and centre of mass give, kg·m: the true payload's mass times its centre
+    /// of mass is the declared one's plus this. Like [`Param::ToolMass`] it acts through the
+    /// compliances; with it, the payload's centre of mass is identified beside its mass:
+    /// `tool_moment_x` …
+    ToolMoment(usize),
 }
 
 /// Reference temperature of the nominal link lengths (ISO 1), °C.
@@ -142,6 +148,8 @@ pub enum Unit {
     PpmPerK,
     /// Kilograms, for the payload mass error.
     Kg,
+    /// Kilogram-millimetres, for the payload's first moment.
+    KgMm,
 }
 
 impl Unit {
@@ -155,6 +163,7 @@ impl Unit {
             Unit::Ratio => "rad/rad",
             Unit::PpmPerK => "ppm/K",
             Unit::Kg => "kg",
+            Unit::KgMm => "kg·mm",
         }
     }
 
@@ -168,6 +177,7 @@ impl Unit {
             "rad/rad" | "deg/deg" | "1" => Some(Unit::Ratio),
             "ppm/K" | "um/(m*K)" | "µm/(m·K)" => Some(Unit::PpmPerK),
             "kg" => Some(Unit::Kg),
+            "kg·mm" | "kg*mm" | "kg mm" => Some(Unit::KgMm),
             _ => None,
         }
     }
@@ -175,7 +185,7 @@ impl Unit {
     /// Multiply a file value by this to get SI.
     pub fn to_si(self) -> f64 {
         match self {
-            Unit::Mm => 1e-3,
+            Unit::Mm | Unit::KgMm => 1e-3,
             Unit::Deg | Unit::DegPerNm | Unit::DegPerNm3 => std::f64::consts::PI / 180.0,
             Unit::Ratio | Unit::Kg => 1.0,
             Unit::PpmPerK => 1e-6,
@@ -198,6 +208,7 @@ impl Param {
             Param::Joint(_, JointTerm::Coupling { .. }) => Unit::Ratio,
             Param::Thermal => Unit::PpmPerK,
             Param::ToolMass => Unit::Kg,
+            Param::ToolMoment(_) => Unit::KgMm,
             Param::Base(k) | Param::Tool(k) => {
                 if k < 3 {
                     Unit::Mm
@@ -216,6 +227,9 @@ impl Param {
         }
         if name == "tool_mass" {
             return Some(Param::ToolMass);
+        }
+        if let Some(k) = name.strip_prefix("tool_moment_") {
+            return POSE_COMPONENTS[..3].iter().position(|c| *c == k).map(Param::ToolMoment);
         }
         if let Some(k) = name.strip_prefix("tool_") {
             return POSE_COMPONENTS.iter().position(|c| *c == k).map(Param::Tool);
@@ -358,6 +372,7 @@ impl fmt::Display for Param {
             Param::Joint(j, JointTerm::Map { step_deg, knot }) => write!(f, "map{}_s{step_deg}_k{knot}", j + 1),
             Param::Thermal => f.write_str("thermal_alpha"),
             Param::ToolMass => f.write_str("tool_mass"),
+            Param::ToolMoment(k) => write!(f, "tool_moment_{}", POSE_COMPONENTS[k]),
             Param::Base(k) => write!(f, "base_{}", POSE_COMPONENTS[k]),
             Param::Tool(k) => write!(f, "tool_{}", POSE_COMPONENTS[k]),
         }
@@ -434,6 +449,7 @@ impl ParamLayout {
             Param::Joint(j, JointTerm::Coupling { from }) => j < self.dof && from < self.dof,
             Param::Joint(j, _) => j < self.dof,
             Param::Thermal | Param::ToolMass => true,
+            Param::ToolMoment(k) => k < 3,
             // Hayati's β can be given to any row whose joint axis is nominally parallel to the
             // previous one (where plain DH is not proportional, §3.4).
             Param::Beta(j) => self.index_of(p).is_some() || (j < self.dof && self.parallel & (1 << j) != 0),
@@ -457,7 +473,7 @@ impl ParamLayout {
                 Param::D(j) => model.links[j].d,
                 Param::Theta(j) => model.links[j].theta,
                 Param::Beta(j) => model.links[j].beta.unwrap_or(0.0),
-                Param::Joint(..) | Param::Thermal | Param::ToolMass => 0.0,
+                Param::Joint(..) | Param::Thermal | Param::ToolMass | Param::ToolMoment(_) => 0.0,
                 Param::Base(k) => base[k],
                 Param::Tool(k) => tool.tcp[k],
             })

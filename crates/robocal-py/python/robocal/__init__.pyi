@@ -304,10 +304,12 @@ class Identification:
     def payload(self) -> dict[str, Any] | None:
         """A payload the sessions do not declare (0 kg), as identified: ``mass_kg``, ``std_kg``
         (absent when the data did not determine the mass, held at 0), ``com_mm`` (the centre of
-        mass the fit assumed, flange frame) and ``at_flange`` (the mass fitted again with the
-        centre of mass at the flange: ``mass_kg``, ``std_kg``, ``rms_residual_mm``, or ``failed``).
-        Each σ holds only for the centre of mass its fit assumes. ``None`` when a payload is
-        declared or the model has none."""
+        mass the fit assumed, flange frame), ``at_flange`` (the mass fitted again with the
+        centre of mass at the flange: ``mass_kg``, ``std_kg``, ``rms_residual_mm``, or ``failed``)
+        and ``with_centre_of_mass`` (the mass fitted again with the centre of mass identified
+        beside it: ``mass_kg``, ``std_kg``, ``com_mm``, ``com_std_mm``, ``determined``,
+        ``rms_residual_mm``, or ``failed``). Each σ holds only for the centre of mass its fit
+        assumes or identifies. ``None`` when a payload is declared or the model has none."""
 
     @property
     def notes(self) -> list[str]:
