@@ -799,6 +799,18 @@ fn the_payload_that_the_named_terms_determine_is_said() {
     let (after, sd_after) = kg_after(&v.summary, "with the named terms the payload reads");
     let (before, _) = kg_after(&v.summary, "(the model without them:");
     assert!((after - 1.0).abs() < 2.0 * sd_after && (before - 1.0).abs() > (after - 1.0).abs(), "{}", v.summary);
+    // The set the diagnosis accepts carries the payload's centre of mass identified with it, as
+    // `identify` with the accepted model gives it (a second path, from nominal).
+    let doc = robocal::domain::diagnosis::accepted_doc(&d).expect("an accepted set");
+    let c = doc.quality.unwrap().payload.unwrap().with_centre_of_mass.expect("the payload's centre of mass");
+    let (mass, sd) = (c.mass_kg.unwrap(), c.std_kg.unwrap());
+    assert!((mass - 1.0).abs() < 3.0 * sd && sd > sd_after, "{c:?}");
+    let run = tracker_run(&TrackerRunOptions { seed: 1, poses: 982, removed: 10, ..Default::default() }).unwrap();
+    let (joints, files) = run.write(&common::fresh_dir("real-data-payload-com"), "run", 6).unwrap();
+    let cell = import(&joints, &files);
+    let id = identify(&cell, &IdentifyOptions { anchor: None, ..d.model.clone() }).unwrap();
+    let again = robocal::identify::payload_centre_of_mass(&id, &d.model).unwrap().expect("a determined payload");
+    assert!((again.mass - mass).abs() < 1e-3 * mass && (again.std - sd).abs() < 1e-3 * sd, "{again:?} vs {c:?}");
 }
 
 /// The k-fold options of the twin tests below: `sessions` split, the default model only.

@@ -1036,12 +1036,13 @@ pub fn accepted_doc(d: &Diagnosis) -> Option<ParameterSetDoc> {
     }
     let mut sessions = d.identification.clone();
     sessions.extend(d.validation.iter().cloned());
-    let mut doc = super::identification::identification_doc(
-        id,
-        &sessions,
-        None,
-        super::identification::payload_quality(id, None),
-    );
+    // The payload's centre of mass identified with it, as `identify` gives it (one fit from the
+    // accepted solution); the fit with the centre of mass at the flange is not run here.
+    let payload = super::identification::payload_quality(id, None).map(|p| super::quality::PayloadQuality {
+        with_centre_of_mass: super::identification::payload_with_centre_of_mass(&d.model, id, false),
+        ..p
+    });
+    let mut doc = super::identification::identification_doc(id, &sessions, None, payload);
     if let Some(q) = doc.quality.as_mut() {
         q.diagnosis = Some(super::quality::AcceptedDiagnosis {
             accepted: Some(d.verdict.effects.iter().map(|e| e.candidate.label()).collect()),

@@ -72,7 +72,11 @@ fn payload_again_at_flange(
 /// The undeclared payload fitted again with its centre of mass free
 /// ([`crate::identify::payload_centre_of_mass`]), when the first fit determined its mass — not for
 /// a DETMAX selection (`detmax`), like [`payload_again_at_flange`].
-fn payload_with_centre_of_mass(opts: &IdentifyOptions, id: &Identification, detmax: bool) -> Option<PayloadComQuality> {
+pub(crate) fn payload_with_centre_of_mass(
+    opts: &IdentifyOptions,
+    id: &Identification,
+    detmax: bool,
+) -> Option<PayloadComQuality> {
     if detmax {
         return None;
     }

@@ -288,7 +288,7 @@ pub struct PayloadQuality {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub at_flange: Option<PayloadAtFlangeQuality>,
     /// The mass identified again with the centre of mass free beside it; absent when that fit was
-    /// not run (the mass not determined, a DETMAX selection, or the set a diagnosis accepted).
+    /// not run (the mass not determined, or a DETMAX selection).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub with_centre_of_mass: Option<PayloadComQuality>,
     /// Keys this version does not know, kept as they came.
