@@ -758,7 +758,9 @@ fn kg_after(text: &str, after: &str) -> (f64, f64) {
 /// determined: near 0 kg), and the coupling named with the payload held reads 5 σ low; with the
 /// payload, both come within 2 σ of the truth — as an identification with the named term finds
 /// (a second path). On the default twin (hysteresis), whose identification found the payload but
-/// biased low, the verdict says the named terms move it towards the truth.
+/// biased low, the verdict says the named terms move it towards the truth. In both, the verdict
+/// reads it again with its centre of mass free, with a wider σ that covers the truth; the set the
+/// diagnosis accepts carries that reading, as `identify` with the accepted model gives it.
 #[test]
 fn the_payload_that_the_named_terms_determine_is_said() {
     use robocal::diagnose::Status;
@@ -782,6 +784,9 @@ fn the_payload_that_the_named_terms_determine_is_said() {
     assert!((ratio - 0.002).abs() < 2.0 * ratio_sd, "{ratio} ± {ratio_sd}: {}", v.summary);
     let named = v.effects[0].estimate.unwrap();
     assert!((named - 0.002).abs() > 3.0 * v.effects[0].std.unwrap(), "the payload held biases it: {named}");
+    // Read again with its centre of mass free: a wider σ, which still covers the truth.
+    let (free, free_sd) = kg_after(&v.summary, "with its centre of mass identified too, it reads");
+    assert!((free - 2.3).abs() < 3.0 * free_sd && free_sd > sd, "{free} ± {free_sd}: {}", v.summary);
     // A second path: identify the imported twin with the named term.
     let dir = common::fresh_dir("real-data-payload");
     let (joints, files) = tracker_run(&o).unwrap().write(&dir, "run", 6).unwrap();
@@ -805,6 +810,9 @@ fn the_payload_that_the_named_terms_determine_is_said() {
     let c = doc.quality.unwrap().payload.unwrap().with_centre_of_mass.expect("the payload's centre of mass");
     let (mass, sd) = (c.mass_kg.unwrap(), c.std_kg.unwrap());
     assert!((mass - 1.0).abs() < 3.0 * sd && sd > sd_after, "{c:?}");
+    // The summary says the same reading.
+    let said = kg_after(&v.summary, "with its centre of mass identified too, it reads");
+    assert!((said.0 - mass).abs() < 1e-3 && (said.1 - sd).abs() < 1e-3, "{said:?} vs {c:?}: {}", v.summary);
     let run = tracker_run(&TrackerRunOptions { seed: 1, poses: 982, removed: 10, ..Default::default() }).unwrap();
     let (joints, files) = run.write(&common::fresh_dir("real-data-payload-com"), "run", 6).unwrap();
     let cell = import(&joints, &files);

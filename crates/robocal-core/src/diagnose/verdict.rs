@@ -200,7 +200,7 @@ pub(super) fn verdict(s: &search::Search, d: &Decomposition) -> Verdict {
 /// hysteresis) leaks into the payload through the compliances; on a twin with an unmodelled
 /// coupling 2→3 the default model read 0.41 ± 0.11 kg for a 2.84 kg plate, and the model with the
 /// named terms 2.73 ± 0.20 kg.
-fn payload_change(s: &search::Search) -> String {
+pub(super) fn payload_change(s: &search::Search) -> String {
     let (Some(first), Some(last)) = (s.stages.first(), s.stages.last().filter(|_| s.stages.len() > 1)) else {
         return String::new();
     };
