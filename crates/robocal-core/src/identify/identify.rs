@@ -123,8 +123,10 @@ pub struct PayloadAtFlange {
 ///
 /// The mass this gives carries the uncertainty of where the payload sits, which the first fit's σ
 /// takes as exact (BENCHMARKS "The payload's σ against an independent twin"). The centre of mass
-/// c = c₀ + h/m and its standard deviations come by the delta method from the fit's covariance
-/// (the larger of the classic and the cluster-robust, as every σ of an identification).
+/// c = c₀ + h/m and its standard deviations come by the delta method: for each component the
+/// larger of the classic and the cluster-robust variance of that combination (as every σ of an
+/// identification is the larger of the two), so they do not depend on the centre of mass assumed
+/// at the start.
 ///
 /// The centre of mass is `determined` when every component's σ is within
 /// `UNDETERMINED_LENGTH_M` (10 mm, the bound of every length the
@@ -155,20 +157,27 @@ pub fn payload_centre_of_mass(
     let dof = problem.model.dof();
     let (pose_of_obs, n_poses) = crate::cell::poses::group_poses(problem.obs.iter().map(|o| &o.state.q[..dof]));
     let mut q = Quality::of(&fit, problem.obs.len(), &rows);
-    q.make_robust(&fit, &rows, &pose_of_obs, n_poses);
     let col = |g: usize| free.iter().position(|&f| f == g).expect("free");
     let cm = col(remap[gm]);
     let ch: Vec<usize> = hs.iter().map(|&g| col(g)).collect();
     let m = fit.x[remap[gm]];
     let h = nalgebra::Vector3::from_fn(|k, _| fit.x[hs[k]]);
     let c0 = problem.tools[0].tool.com;
-    // c = c₀ + h/m: ∂c_k/∂h_k = 1/m, ∂c_k/∂m = −h_k/m².
+    // c = c₀ + h/m: ∂c_k/∂h_k = 1/m, ∂c_k/∂m = −h_k/m². Each σ the larger of the classic and the
+    // cluster-robust one of that combination, so it does not depend on the parameters it is
+    // derived from (the centre of mass assumed at the start).
     let com_std: [f64; 3] = std::array::from_fn(|k| {
-        let (a, b) = (1.0 / m, -h[k] / (m * m));
-        let (hh, mm) = (ch[k], cm);
-        let v = a * a * q.covariance[(hh, hh)] + b * b * q.covariance[(mm, mm)] + 2.0 * a * b * q.covariance[(hh, mm)];
-        v.max(0.0).sqrt()
+        let mut w = vec![0.0; free.len()];
+        w[ch[k]] = 1.0 / m;
+        w[cm] = -h[k] / (m * m);
+        let classic: f64 = (0..w.len())
+            .flat_map(|a| (0..w.len()).map(move |b| (a, b)))
+            .map(|(a, b)| w[a] * q.covariance[(a, b)] * w[b])
+            .sum();
+        let robust = q.cluster_robust_variance(&fit, &rows, &pose_of_obs, n_poses, &w).unwrap_or(0.0);
+        classic.max(robust).max(0.0).sqrt()
     });
+    q.make_robust(&fit, &rows, &pose_of_obs, n_poses);
     let std_mass = q.std[cm];
     let rms_residual = if opts.noise.is_some() || fit.weights.iter().any(|&w| w != 1.0) {
         weighted_rms(&problem, &fit)

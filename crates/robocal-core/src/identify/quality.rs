@@ -146,6 +146,56 @@ impl Quality {
         cluster_of_obs: &[usize],
         n_clusters: usize,
     ) -> Option<Vec<f64>> {
+        let (u, c) = self.cluster_scores(fit, obs_rows, cluster_of_obs, n_clusters)?;
+        let m = fit.jacobian.ncols();
+        // The diagonal of Σ_g (B·u_g)(B·u_g)ᵀ, B = Cov/σ̂².
+        let s2 = self.sigma * self.sigma;
+        let mut var = vec![0.0; m];
+        for ug in &u {
+            for (a, v) in var.iter_mut().enumerate() {
+                let bu: f64 = (0..m).map(|k| self.covariance[(a, k)] * ug[k]).sum::<f64>() / s2;
+                *v += bu * bu;
+            }
+        }
+        let out: Vec<f64> = var.iter().map(|v| (c * v).sqrt()).collect();
+        out.iter().all(|v| v.is_finite()).then_some(out)
+    }
+
+    /// The cluster-robust variance of the combination wᵀθ of the free parameters (in the fit's
+    /// column order): c·Σ_g (wᵀ·B·u_g)², as [`Quality::cluster_robust_std`] (which is its square
+    /// root for each unit w). The larger of this and the classic wᵀ·Cov·w is the σ² of a derived
+    /// quantity (a payload's centre of mass) whatever parameters it is derived from, where scaling
+    /// each parameter's σ first would not be. Call it before [`Quality::make_robust`] scales the
+    /// covariance.
+    pub fn cluster_robust_variance(
+        &self,
+        fit: &Fit,
+        obs_rows: &[(usize, usize)],
+        cluster_of_obs: &[usize],
+        n_clusters: usize,
+        w: &[f64],
+    ) -> Option<f64> {
+        let m = fit.jacobian.ncols();
+        if w.len() != m {
+            return None;
+        }
+        let (u, c) = self.cluster_scores(fit, obs_rows, cluster_of_obs, n_clusters)?;
+        // B·w, B = Cov/σ̂² (symmetric): wᵀ·B·u_g = (B·w)ᵀ·u_g.
+        let s2 = self.sigma * self.sigma;
+        let b: Vec<f64> = (0..m).map(|a| (0..m).map(|k| self.covariance[(a, k)] * w[k]).sum::<f64>() / s2).collect();
+        let v = c * u.iter().map(|ug| ug.iter().zip(&b).map(|(x, y)| x * y).sum::<f64>().powi(2)).sum::<f64>();
+        v.is_finite().then_some(v)
+    }
+
+    /// The sandwich's scores u_g = J_gᵀ·r_g per pose and its small-sample factor c (see
+    /// [`Quality::cluster_robust_std`]); `None` where the sandwich is not used.
+    fn cluster_scores(
+        &self,
+        fit: &Fit,
+        obs_rows: &[(usize, usize)],
+        cluster_of_obs: &[usize],
+        n_clusters: usize,
+    ) -> Option<(Vec<Vec<f64>>, f64)> {
         let j = &fit.jacobian;
         let (n, m) = (j.nrows(), j.ncols());
         if m == 0
@@ -164,19 +214,9 @@ impl Quality {
                 }
             }
         }
-        // The diagonal of Σ_g (B·u_g)(B·u_g)ᵀ, B = Cov/σ̂².
-        let s2 = self.sigma * self.sigma;
-        let mut var = vec![0.0; m];
-        for ug in &u {
-            for (a, v) in var.iter_mut().enumerate() {
-                let bu: f64 = (0..m).map(|k| self.covariance[(a, k)] * ug[k]).sum::<f64>() / s2;
-                *v += bu * bu;
-            }
-        }
         let g = n_clusters as f64;
         let c = g / (g - 1.0) * (n as f64 - 1.0) / (n.saturating_sub(m).max(1) as f64);
-        let out: Vec<f64> = var.iter().map(|v| (c * v).sqrt()).collect();
-        out.iter().all(|v| v.is_finite()).then_some(out)
+        Some((u, c))
     }
 
     /// Report each parameter's standard deviation as the larger of the classic σ̂²(JᵀJ)⁻¹ one and
@@ -322,6 +362,12 @@ mod tests {
         for a in 0..m {
             assert!(rel(got[a], cov[(a, a)].sqrt()) < 1e-9, "std {a}: {} vs {}", got[a], cov[(a, a)].sqrt());
         }
+        // A combination's variance: wᵀ·Cov·w of the same sandwich.
+        let w = [0.3, -1.2, 0.0, 2.5, 0.7];
+        let wv = DMatrix::from_column_slice(m, 1, &w);
+        let want = (wv.transpose() * &cov * &wv)[(0, 0)];
+        let v = q.cluster_robust_variance(&f, &rows, &cluster, 40, &w).expect("40 poses");
+        assert!(rel(v, want) < 1e-9, "{v} vs {want}");
         assert!(q.cluster_robust_std(&f, &rows, &cluster, 29).is_none(), "too few poses");
     }
 
