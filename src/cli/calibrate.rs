@@ -215,6 +215,10 @@ fn payload_note(
             let with_com = match &p.with_centre_of_mass {
                 Some(c) => match (&c.failed, c.com_mm, c.com_std_mm) {
                     (Some(e), _, _) => format!("; with its centre of mass identified too, no fit ({e})"),
+                    (None, None, _) | (None, _, None) => format!(
+                        "; with its centre of mass identified too, {}, which places no centre of mass",
+                        kg(c.mass_kg, c.std_kg)
+                    ),
                     (None, Some(m), Some(s)) => format!(
                         "; with its centre of mass identified too, {} at ({:.1} ± {:.1}, {:.1} ± {:.1}, {:.1} ± {:.1}) mm in the flange frame, {}",
                         kg(c.mass_kg, c.std_kg),
@@ -229,7 +233,6 @@ fn payload_note(
                             Some(why) => format!("which these data do not determine ({why})"),
                         }
                     ),
-                    _ => String::new(),
                 },
                 None => String::new(),
             };

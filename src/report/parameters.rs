@@ -150,7 +150,7 @@ pub fn quality_rows(quality: &Quality) -> Vec<Vec<String>> {
                     };
                     push(label, kg(c.mass_kg, c.std_kg), &format!("{at}: {verdict}"));
                 }
-                _ => {}
+                _ => push(label, kg(c.mass_kg, c.std_kg), "which places no centre of mass"),
             }
         }
     }

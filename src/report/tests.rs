@@ -440,3 +440,29 @@ fn the_quality_table_says_every_reading_of_an_undeclared_payload() {
         "{rows:?}"
     );
 }
+
+/// A payload the free centre-of-mass fit takes to 0 kg or below places no centre of mass: the row
+/// says so, and shows no position.
+#[test]
+fn the_quality_table_says_when_a_payload_places_no_centre_of_mass() {
+    use crate::domain::quality::{PayloadComQuality, PayloadQuality};
+    let quality = crate::domain::Quality {
+        payload: Some(PayloadQuality {
+            mass_kg: Some(0.41),
+            std_kg: Some(0.12),
+            com_mm: Some([20.0, 0.0, 40.0]),
+            with_centre_of_mass: Some(PayloadComQuality {
+                mass_kg: Some(-0.2),
+                std_kg: Some(0.5),
+                determined: Some(false),
+                ..Default::default()
+            }),
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    let rows = parameters::quality_rows(&quality);
+    let last = rows.last().expect("rows");
+    assert_eq!(last[1], "-0.200 ± 0.500 kg", "{rows:?}");
+    assert_eq!(last[2], "which places no centre of mass", "{rows:?}");
+}

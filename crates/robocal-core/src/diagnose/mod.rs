@@ -1044,6 +1044,12 @@ fn held_payload_with_named(
 /// mass, identified with its mass").
 fn payload_com_clause(id: &Identification, model: &IdentifyOptions) -> String {
     let Ok(Some(c)) = crate::identify::payload_centre_of_mass(id, model) else { return String::new() };
+    if !c.com.iter().chain(&c.com_std).all(|v| v.is_finite()) {
+        return format!(
+            "; with its centre of mass identified too, it reads {:.3} ± {:.3} kg, which places no centre of mass",
+            c.mass, c.std
+        );
+    }
     let mm = |v: f64| v / crate::units::MM;
     format!(
         "; with its centre of mass identified too, it reads {:.3} ± {:.3} kg at ({:.1} ± {:.1}, {:.1} ± {:.1}, {:.1} ± {:.1}) mm in the flange frame{}",

@@ -82,10 +82,10 @@ pub(crate) fn payload_with_centre_of_mass(
     }
     match crate::identify::payload_centre_of_mass(id, opts) {
         Ok(f) => f.map(|f| PayloadComQuality {
-            mass_kg: Some(f.mass),
-            std_kg: Some(f.std),
-            com_mm: Some([f.com.x / MM, f.com.y / MM, f.com.z / MM]),
-            com_std_mm: Some(f.com_std.map(|s| s / MM)),
+            mass_kg: Some(f.mass).filter(|v| v.is_finite()),
+            std_kg: Some(f.std).filter(|v| v.is_finite()),
+            com_mm: f.com.iter().all(|v| v.is_finite()).then(|| [f.com.x / MM, f.com.y / MM, f.com.z / MM]),
+            com_std_mm: f.com_std.iter().all(|v| v.is_finite()).then(|| f.com_std.map(|s| s / MM)),
             determined: Some(f.determined),
             rms_residual_mm: Some(f.rms_residual / MM),
             ..Default::default()
