@@ -464,6 +464,12 @@ async fn a_full_disk_is_refused_clearly_and_corrupts_nothing() {
     let (rid, aid) = robot_and_artefact(&s).await;
     let c = cell(30);
     let sid = session(&s, &rid, &aid, &c, "fill").await;
+    // Room kept aside for the job queued below once the batches have filled the disk: what a
+    // refused batch happens to leave free depends on the last bytes of what was stored before.
+    let ballast = dir.join("ballast");
+    if mounted {
+        std::fs::write(&ballast, vec![0u8; 256 << 10]).unwrap();
+    }
     let body = batch(&c, 1000);
     let mut stored = 0;
     let mut refused = None;
@@ -494,11 +500,12 @@ async fn a_full_disk_is_refused_clearly_and_corrupts_nothing() {
     };
     refusal(&a);
     // A job that starts before the disk is full and ends after (mounted only: with a file-size
-    // limit the job could not even be queued). The refused batch left room for small writes
-    // (SQLite's log had grown by the part it wrote): the job is queued in it, then the disk is
-    // filled to the last byte — a filler file, then small writes until one is refused too.
+    // limit the job could not even be queued). The ballast set aside makes room for it: the job
+    // is queued there, then the disk is filled to the last byte — a filler file, then small
+    // writes until one is refused too.
     let mut queued = None;
     let job = if mounted {
+        std::fs::remove_file(&ballast).unwrap();
         let j =
             s.json(Method::POST, &format!("/v1/robots/{rid}/pose-plans"), Some(&plan_request(&aid, 600, 0)), &[]).await;
         assert_eq!(j.status.as_u16(), 202, "{}", String::from_utf8_lossy(&j.body));
