@@ -14,6 +14,7 @@ import json
 import math
 import os
 import pathlib
+import re
 import subprocess
 
 import numpy as np
@@ -273,6 +274,19 @@ def test_hopeless_problems_raise_identification_error(irb120):
 
 
 
+def same_words_close_numbers(a, b):
+    """Two statuses say the same: the same words, and the same numbers to 1e-3 relative. A status
+    can quote a number at the noise of the fit (a held payload's refit that stopped with a relative
+    cost change of 8.05e-8), whose fourth digit the 1-ulp differences above may flip."""
+    if a is None or b is None:
+        return a == b
+    number = re.compile(r"-?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
+    if number.sub("#", a) != number.sub("#", b):
+        return False
+    pairs = zip(map(float, number.findall(a)), map(float, number.findall(b)))
+    return all(x == pytest.approx(y, rel=1e-3, abs=1e-12) for x, y in pairs)
+
+
 @pytest.mark.skipif(cli_binary() is None, reason="robocal CLI binary not built (target/debug/robocal or ROBOCAL_BIN)")
 @pytest.mark.parametrize("model,only", [("", []), ("-compliance", []), ("", ["base", "tool"])])
 def test_identify_equals_the_cli(irb120, tmp_path, model, only):
@@ -313,7 +327,7 @@ def test_identify_equals_the_cli(irb120, tmp_path, model, only):
     # millionth of its own standard deviation, and every standard deviation to 1e-8 relative.
     for e in cli["parameters"]:
         name = e["name"]
-        assert e.get("status") == ident.status[name]
+        assert same_words_close_numbers(e.get("status"), ident.status[name]), name
         if e.get("std") is not None:
             assert e["std"] == pytest.approx(ident.std[name], rel=1e-8), name
             assert abs(e["value"] - ident.parameters[name]) <= 1e-6 * e["std"] + 1e-12, name
