@@ -10,6 +10,7 @@
 //! sum never increases.
 
 use nalgebra::{Matrix3, Vector3};
+use rayon::prelude::*;
 
 use super::problem::ToolBlock;
 use crate::cell::{Cell, Observation};
@@ -201,15 +202,15 @@ fn point_pairs(cell: &Cell, picks: &[(usize, usize)]) -> (Vec<Vector3<f64>>, Vec
         .iter()
         .map(|s| ParameterSet::nominal(cell.model.clone(), s.tool.clone(), [0.0; 6]).nominal_chain())
         .collect();
-    let (mut a, mut b) = (Vec::new(), Vec::new());
-    for &(s, i) in picks {
-        let m = &cell.sessions[s].measurements[i];
-        if let Some(p) = cell.observed_position(m) {
-            a.push(chains[s].fk(&JointState::new(&m.q)).t);
-            b.push(p);
-        }
-    }
-    (a, b)
+    // In parallel (one FK a reading), in pick order.
+    picks
+        .par_iter()
+        .with_min_len(super::problem::PAR_MIN_OBS)
+        .filter_map(|&(s, i)| {
+            let m = &cell.sessions[s].measurements[i];
+            cell.observed_position(m).map(|p| (chains[s].fk(&JointState::new(&m.q)).t, p))
+        })
+        .unzip()
 }
 
 #[cfg(test)]

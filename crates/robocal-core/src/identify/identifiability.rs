@@ -144,10 +144,15 @@ pub fn select_given_noise(
 
     // A column this much smaller than the typical one is rounding noise (e.g. τ₁ ≈ 1e-16 N·m on an
     // axis parallel to gravity), not an effect: unit-scaling it would invent a direction.
-    let mut norms: Vec<f64> = (0..n).map(|g| (0..rows).map(|r| jac[(r, g)].powi(2)).sum::<f64>().sqrt()).collect();
+    // The typical column among those the sweep judges (a fixed parameter's column may be left
+    // zero by the caller).
+    let mut norms: Vec<f64> = (0..n)
+        .filter(|g| !fixed.contains_key(g))
+        .map(|g| (0..rows).map(|r| jac[(r, g)].powi(2)).sum::<f64>().sqrt())
+        .collect();
     let typical = {
         norms.sort_by(f64::total_cmp);
-        norms[n / 2]
+        norms.get(norms.len() / 2).copied().unwrap_or(0.0)
     };
     let mut basis: Vec<Vec<f64>> = Vec::new(); // orthonormal
     let mut kept: Vec<usize> = Vec::new();

@@ -3,6 +3,7 @@
 //! parameter set with its uncertainties.
 
 use faer::Mat;
+use rayon::prelude::*;
 
 use super::hold::PAYLOAD_SIGNIFICANCE;
 use super::noise::NoiseModel;
@@ -145,11 +146,9 @@ pub fn payload_centre_of_mass(
     for (old, &new) in remap.iter().enumerate() {
         x[new] = id.x[old];
     }
+    // The moments start at their nominal, 0: the centre of mass the sessions assume.
     let hs: Vec<usize> =
         moments.iter().map(|&p| problem.robot_index(p).expect("the moments were just added")).collect();
-    for &g in &hs {
-        x[g] = 0.0;
-    }
     let mut free: Vec<usize> = id.free.iter().map(|&g| remap[g]).collect();
     free.extend(&hs);
     let fit = solver::solve(&problem, &free, &x, &opts.solver)?;
@@ -170,10 +169,10 @@ pub fn payload_centre_of_mass(
         let mut w = vec![0.0; free.len()];
         w[ch[k]] = 1.0 / m;
         w[cm] = -h[k] / (m * m);
-        let classic: f64 = (0..w.len())
-            .flat_map(|a| (0..w.len()).map(move |b| (a, b)))
-            .map(|(a, b)| w[a] * q.covariance[(a, b)] * w[b])
-            .sum();
+        let cov = |a: usize, b: usize| q.covariance[(a, b)];
+        let classic = w[ch[k]] * w[ch[k]] * cov(ch[k], ch[k])
+            + 2.0 * w[ch[k]] * w[cm] * cov(ch[k], cm)
+            + w[cm] * w[cm] * cov(cm, cm);
         let robust = q.cluster_robust_variance(&fit, &rows, &pose_of_obs, n_poses, &w).unwrap_or(0.0);
         classic.max(robust).max(0.0).sqrt()
     });
@@ -715,10 +714,11 @@ impl Fitness {
         // their σ (m).
         let rows: Vec<(Vec<f64>, Vec<f64>)> = problem
             .obs
-            .iter()
+            .par_iter()
+            .with_min_len(super::problem::PAR_MIN_OBS)
             .zip(&sigmas)
             .map(|(o, s)| {
-                let (d, rot) = problem.error(o, &chains[o.tool].fk(&o.state));
+                let (d, rot) = problem.error(o, &o.fk(&chains[o.tool]));
                 let (mut e, mut sd) = (d.as_slice().to_vec(), s[..3].to_vec());
                 if let Some(w) = rot {
                     e.extend(w.iter().map(|v| rw * v));

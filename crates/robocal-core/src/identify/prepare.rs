@@ -325,17 +325,41 @@ fn identifiable(
     fixed: &HashMap<usize, FixedReason>,
     map_smoothing: f64,
 ) -> Result<(Vec<usize>, Vec<Status>), IdentifyError> {
-    let (mut j0, _) = problem.linearise_all(x0);
-    let priors = map_priors(problem, &j0, map_smoothing)?;
-    if !priors.is_empty() {
-        problem.add_priors(priors);
-        j0 = problem.linearise_all(x0).0;
-    }
-    let (free, status) = identifiability::select(problem, &j0, fixed);
+    let has_tables = problem.layout.params().iter().any(|p| matches!(p, Param::Joint(_, JointTerm::Map { .. })));
+    let (free, status) = if has_tables {
+        let (mut j0, _) = problem.linearise_all(x0);
+        let priors = map_priors(problem, &j0, map_smoothing)?;
+        if !priors.is_empty() {
+            problem.add_priors(priors);
+            j0 = problem.linearise_all(x0).0;
+        }
+        identifiability::select(problem, &j0, fixed)
+    } else {
+        identifiability::select(problem, &columns_not_fixed(problem, x0, fixed), fixed)
+    };
     if free.is_empty() {
         return Err(IdentifyError::option("no parameter is free to identify"));
     }
     Ok((free, status))
+}
+
+/// The Jacobian at `x0` as the identifiability sweep reads it (its columns' inner products, global
+/// column g for parameter g), computed for the parameters not fixed in advance only: their
+/// columns, by R of J = Q·R when J is tall, and a zero column for each fixed one, which the sweep
+/// never reads. On the peers' 5,000-pose problem (43 parameters, 20 fixed by the model and the
+/// user) this halves the columns computed and quarters the factorisation.
+fn columns_not_fixed(problem: &Problem, x0: &[f64], fixed: &HashMap<usize, FixedReason>) -> Mat<f64> {
+    let n = problem.n_params();
+    let wanted: Vec<usize> = (0..n).filter(|g| !fixed.contains_key(g)).collect();
+    let mut j = Mat::<f64>::zeros(problem.n_rows, wanted.len());
+    let mut r = vec![0.0; problem.n_rows];
+    problem.linearise(x0, &wanted, &mut j, &mut r);
+    let j = if j.nrows() > 4 * wanted.len() { super::solver::r_factor(j.as_ref()) } else { j };
+    let mut col = vec![None; n];
+    for (c, &g) in wanted.iter().enumerate() {
+        col[g] = Some(c);
+    }
+    Mat::from_fn(j.nrows(), n, |i, g| col[g].map_or(0.0, |c| j[(i, c)]))
 }
 
 /// Whether the payload is unknown and identified ([`IdentifyOptions::identify_payload`]): every

@@ -90,6 +90,12 @@ pub struct Obs {
 }
 
 impl Obs {
+    /// The TCP pose of `chain` at this measurement's state, from the readings' (sin, cos) cached
+    /// here: what the fit's residual is computed from.
+    pub(crate) fn fk(&self, chain: &Chain) -> Frame {
+        chain.fk_cached(&self.state, &self.q_sc)
+    }
+
     /// Whether it measured a ball of the artefact (its position is the ball's, not the TCP's
     /// path).
     pub(crate) fn is_ball(&self) -> bool {
@@ -696,7 +702,7 @@ impl Problem {
 /// Observations per part below which the work is not split further across threads (handing a
 /// part to another thread costs a few microseconds; one observation's FK and Jacobian about half
 /// of one).
-const PAR_MIN_OBS: usize = 256;
+pub(crate) const PAR_MIN_OBS: usize = 256;
 
 /// The rows of the stacked system that a part of the observations writes: a row range of J and r.
 struct JacRows<'a> {

@@ -2,6 +2,8 @@
 //! millimetres make a robot of a tenth, a 25th or a thousandth of its size, which a fit of the
 //! lengths then "identifies" (a2 27 mm for 270 mm) with a small residual.
 
+use rayon::prelude::*;
+
 use super::IdentifyError;
 use super::problem::Problem;
 use crate::cell::Cell;
@@ -54,7 +56,10 @@ pub(crate) fn check_position_scale(problem: &Problem, x0: &[f64], cell: &Cell) -
         if !measured.is_finite() {
             continue;
         }
-        let nominal = spread(obs.iter().map(|o| declared[o.tool].fk(&o.state).t));
+        // One FK a reading, in parallel, in order.
+        let at_declared: Vec<_> =
+            obs.par_iter().with_min_len(super::problem::PAR_MIN_OBS).map(|o| o.fk(&declared[o.tool]).t).collect();
+        let nominal = spread(at_declared.into_iter());
         let agrees = |nominal: f64| {
             nominal >= MIN_NOMINAL_SPREAD && (1.0 / MAX_SPREAD_RATIO..=MAX_SPREAD_RATIO).contains(&(measured / nominal))
         };
