@@ -375,6 +375,51 @@ mod tests {
         cell
     }
 
+    /// The sweep judges the same columns whether the caller computes every parameter's (the path
+    /// of the correction tables, and of the judgement at a solution) or only those not fixed in
+    /// advance, R-factored ([`crate::identify::prepare`]'s path for every other identification):
+    /// the same parameters kept, each other one fixed for the same reason, in the same words.
+    #[test]
+    fn the_sweep_on_the_columns_not_fixed_equals_the_sweep_on_every_column() {
+        let ms = random_configurations(600, 7)
+            .into_iter()
+            .enumerate()
+            .map(|(i, q)| measurement(q, Observation::Ball(i % 3 + 1)))
+            .collect();
+        let mut cell = irb120_cell(vec![session("trical", Purpose::Identification, trical_tool(), ms)]);
+        cell.base_guess = Some(BASE);
+        for opts in [
+            IdentifyOptions::default(),
+            IdentifyOptions {
+                fixed: vec!["base_z".into(), "a2".into(), "c3".into()],
+                model: crate::identify::ModelOptions { beta: false, ..Default::default() },
+                ..Default::default()
+            },
+        ] {
+            let p = prepare(&cell, &opts).unwrap();
+            let full = p.problem.linearise_all(&p.x0).0;
+            let reduced = crate::identify::prepare::columns_not_fixed(&p.problem, &p.x0, &p.fixed);
+            assert!(reduced.nrows() < p.problem.n_params(), "factored: {} rows", reduced.nrows());
+            assert_eq!(full.nrows(), 1800);
+            let (a, a_status) = select(&p.problem, &full, &p.fixed);
+            let (b, b_status) = select(&p.problem, &reduced, &p.fixed);
+            assert_eq!(a, b);
+            assert_eq!(a, p.free);
+            let words = |st: &[Status]| st.iter().map(|s| format!("{s:?}")).collect::<Vec<_>>();
+            assert_eq!(words(&a_status), words(&b_status));
+            assert!(a.len() >= 25 && a.len() < p.problem.n_params() - p.fixed.len(), "{} kept", a.len());
+        }
+    }
+
+    /// Every parameter fixed by the user: said, not a factorisation of no column.
+    #[test]
+    fn a_problem_with_every_parameter_fixed_is_refused_by_name() {
+        let mut opts = IdentifyOptions { only: vec!["base_x".into()], ..Default::default() };
+        opts.fixed = vec!["base_x".into()];
+        let e = prepare(&three_balls(), &opts).err().expect("nothing to identify");
+        assert!(e.to_string().contains("no parameter is free to identify"), "{e}");
+    }
+
     /// The thesis's 31 of 43 (§3.6, Table 5.1), and why each of the other 12 is fixed: the four
     /// joint-1 geometry parameters redundant with the base, d2 dependent on d3 (parallel axes),
     /// c1 without gravity torque (axis 1 is vertical), the tool position fixed as the session

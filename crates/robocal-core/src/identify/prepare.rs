@@ -348,7 +348,7 @@ fn identifiable(
 /// columns, by R of J = Q·R when J is tall, and a zero column for each fixed one, which the sweep
 /// never reads. On the peers' 5,000-pose problem (43 parameters, 20 fixed by the model and the
 /// user) this halves the columns computed and quarters the factorisation.
-fn columns_not_fixed(problem: &Problem, x0: &[f64], fixed: &HashMap<usize, FixedReason>) -> Mat<f64> {
+pub(super) fn columns_not_fixed(problem: &Problem, x0: &[f64], fixed: &HashMap<usize, FixedReason>) -> Mat<f64> {
     let n = problem.n_params();
     let wanted: Vec<usize> = (0..n).filter(|g| !fixed.contains_key(g)).collect();
     let mut j = Mat::<f64>::zeros(problem.n_rows, wanted.len());
