@@ -1044,23 +1044,23 @@ fn held_payload_with_named(
 /// mass, identified with its mass").
 fn payload_com_clause(id: &Identification, model: &IdentifyOptions) -> String {
     let Ok(Some(c)) = crate::identify::payload_centre_of_mass(id, model) else { return String::new() };
-    if !c.com.iter().chain(&c.com_std).all(|v| v.is_finite()) {
+    let (Some(com), Some(sd)) = (c.com, c.com_std) else {
         return format!(
             "; with its centre of mass identified too, it reads {:.3} ± {:.3} kg, which places no centre of mass",
             c.mass, c.std
         );
-    }
+    };
     let mm = |v: f64| v / crate::units::MM;
     format!(
         "; with its centre of mass identified too, it reads {:.3} ± {:.3} kg at ({:.1} ± {:.1}, {:.1} ± {:.1}, {:.1} ± {:.1}) mm in the flange frame{}",
         c.mass,
         c.std,
-        mm(c.com.x),
-        mm(c.com_std[0]),
-        mm(c.com.y),
-        mm(c.com_std[1]),
-        mm(c.com.z),
-        mm(c.com_std[2]),
+        mm(com.x),
+        mm(sd[0]),
+        mm(com.y),
+        mm(sd[1]),
+        mm(com.z),
+        mm(sd[2]),
         if c.determined { "" } else { ", which these data do not determine" }
     )
 }

@@ -84,8 +84,8 @@ pub(crate) fn payload_with_centre_of_mass(
         Ok(f) => f.map(|f| PayloadComQuality {
             mass_kg: Some(f.mass).filter(|v| v.is_finite()),
             std_kg: Some(f.std).filter(|v| v.is_finite()),
-            com_mm: f.com.iter().all(|v| v.is_finite()).then(|| [f.com.x / MM, f.com.y / MM, f.com.z / MM]),
-            com_std_mm: f.com_std.iter().all(|v| v.is_finite()).then(|| f.com_std.map(|s| s / MM)),
+            com_mm: f.com.map(|c| [c.x / MM, c.y / MM, c.z / MM]),
+            com_std_mm: f.com_std.map(|s| s.map(|s| s / MM)),
             determined: Some(f.determined),
             rms_residual_mm: Some(f.rms_residual / MM),
             ..Default::default()

@@ -365,7 +365,12 @@ mod tests {
     /// The thesis's setup: the IRB 120 with the TriCal (TCP declared) on three balls, 10
     /// configurations each (only the Jacobian matters here, so they need not sit on the balls).
     fn three_balls() -> Cell {
-        let ms = random_configurations(30, 3)
+        balls(30, 3)
+    }
+
+    /// The same set-up with `n` random configurations drawn from `seed`.
+    fn balls(n: usize, seed: u64) -> Cell {
+        let ms = random_configurations(n, seed)
             .into_iter()
             .enumerate()
             .map(|(i, q)| measurement(q, Observation::Ball(i % 3 + 1)))
@@ -381,13 +386,7 @@ mod tests {
     /// the same parameters kept, each other one fixed for the same reason, in the same words.
     #[test]
     fn the_sweep_on_the_columns_not_fixed_equals_the_sweep_on_every_column() {
-        let ms = random_configurations(600, 7)
-            .into_iter()
-            .enumerate()
-            .map(|(i, q)| measurement(q, Observation::Ball(i % 3 + 1)))
-            .collect();
-        let mut cell = irb120_cell(vec![session("trical", Purpose::Identification, trical_tool(), ms)]);
-        cell.base_guess = Some(BASE);
+        let cell = balls(600, 7);
         for opts in [
             IdentifyOptions::default(),
             IdentifyOptions {

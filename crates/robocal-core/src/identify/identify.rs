@@ -186,14 +186,14 @@ pub fn payload_centre_of_mass(
     let determined = q.kappa_scaled <= opts.kappa_limit
         && m > PAYLOAD_SIGNIFICANCE * std_mass
         && com_std.iter().all(|s| *s <= super::identifiability::UNDETERMINED_LENGTH_M);
-    // A mass the free fit takes to 0 or below places no centre of mass: NaN, which the front ends
-    // leave out (and `determined` is false: the mass is not above 3 σ).
-    let placed = m > 0.0 && (h / m).iter().all(|v| v.is_finite());
+    // A mass the free fit takes to 0 or below places no centre of mass (and `determined` is
+    // false: the mass is not above 3 σ).
+    let placed = m > 0.0 && (h / m).iter().chain(&com_std).all(|v| v.is_finite());
     Ok(Some(PayloadCentreOfMass {
         mass: m,
         std: std_mass,
-        com: if placed { c0 + h / m } else { nalgebra::Vector3::repeat(f64::NAN) },
-        com_std: if placed { com_std } else { [f64::NAN; 3] },
+        com: placed.then(|| c0 + h / m),
+        com_std: placed.then_some(com_std),
         rms_residual,
         kappa: q.kappa_scaled,
         determined,
@@ -207,10 +207,10 @@ pub struct PayloadCentreOfMass {
     pub mass: f64,
     /// Its standard deviation, kg, with the centre of mass free.
     pub std: f64,
-    /// The centre of mass in the flange frame, m; NaN when the mass is not above 0.
-    pub com: nalgebra::Vector3<f64>,
-    /// Its standard deviations, m; NaN when the mass is not above 0.
-    pub com_std: [f64; 3],
+    /// The centre of mass in the flange frame, m; `None` when the mass is not above 0.
+    pub com: Option<nalgebra::Vector3<f64>>,
+    /// Its standard deviations, m; `None` when the mass is not above 0.
+    pub com_std: Option<[f64; 3]>,
     /// That fit's residual RMS, m.
     pub rms_residual: f64,
     /// That fit's κ (unit-norm columns).
