@@ -5,7 +5,7 @@ use super::prepare::{Prepared, prepare};
 use super::problem::{GlobalParam, Problem};
 use super::{IdentifyError, IdentifyOptions, detmax, observability};
 use crate::cell::Cell;
-use crate::kinematics::{Param, Tool};
+use crate::kinematics::Param;
 
 /// The candidate pool for DETMAX: every measurement of the chosen sessions, as its Jacobian
 /// block on the identifiable parameters at the starting point (SI units, as the thesis computes
@@ -42,13 +42,13 @@ impl DetmaxPool {
     /// the joint limits (ChaCha8, `seed`), carrying the pool's first tool, as position blocks on
     /// the pool's parameters at its starting point (unweighted, metres: the prediction's units).
     pub fn uniform_workspace(&self, count: usize, seed: u64) -> Result<detmax::Workspace, IdentifyError> {
-        use crate::kinematics::{GravityModel, JointState, MAX_JOINTS, Rows};
+        use crate::kinematics::{GravityModel, JointState, Rows};
         use rand::{Rng, SeedableRng};
         let p = &self.problem;
         let chain = &p.chains(&self.x0)[0];
         let tool = &p.tools[0].tool;
         let gravity = GravityModel::new(&p.model, tool);
-        let heavier = GravityModel::new(&p.model, &Tool { mass: tool.mass + 1.0, ..tool.clone() });
+        let moments = p.layout.params().iter().any(|p| matches!(p, Param::ToolMoment(_)));
         // Layout column of each free parameter on tool 0's chain (another tool's: none).
         let cols: Vec<Option<usize>> = self
             .free
@@ -68,12 +68,11 @@ impl DetmaxPool {
                 for (j, l) in p.model.links.iter().enumerate() {
                     q[j] = rng.random_range(l.limits[0]..=l.limits[1]);
                 }
-                let (tau, t1) = (gravity.torques(&q), heavier.torques(&q));
+                let (tau, per_kg, per_kgm) = gravity.torques_and_payload_slopes(&q, &tool.com, moments);
                 let mut s = JointState::with_torques(&q, &tau[..dof]);
                 s.temperature_c = crate::kinematics::params::REFERENCE_TEMPERATURE_C;
-                for j in 0..dof.min(MAX_JOINTS) {
-                    s.tau_per_kg[j] = t1[j] - tau[j];
-                }
+                s.tau_per_kg = per_kg;
+                s.tau_per_kgm = per_kgm;
                 chain.jacobian_into(&s, &p.layout, Rows::Position, &mut buf, 3);
                 let mut data = vec![0.0; 3 * cols.len()];
                 for (c, col) in cols.iter().enumerate() {

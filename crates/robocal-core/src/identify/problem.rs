@@ -295,29 +295,12 @@ pub struct Problem {
 /// error (`tool_moment_*`): the torques are linear in the last link's first moment, so the
 /// difference of the torques with one kilogram-metre more along each flange axis is exact.
 fn fill_moment_torques(model: &RobotModel, tools: &[ToolBlock], obs: &mut [Obs]) {
-    let models: Vec<[GravityModel; 4]> = tools
-        .iter()
-        .map(|b| {
-            let g = GravityModel::new(model, &b.tool);
-            let moved = |k: usize| {
-                let mut m = g.clone();
-                m.add_payload_moment(&Vector3::ith(k, 1.0));
-                m
-            };
-            [moved(0), moved(1), moved(2), g.clone()]
-        })
-        .collect();
+    let models: Vec<GravityModel> = tools.iter().map(|b| GravityModel::new(model, &b.tool)).collect();
     let dof = model.dof();
     obs.par_iter_mut().with_min_len(PAR_MIN_OBS).for_each(|o| {
-        let [gx, gy, gz, g] = &models[o.tool];
-        let q = &o.state.q[..dof];
-        let tau = g.torques(q);
-        for (k, m) in [gx, gy, gz].into_iter().enumerate() {
-            let t = m.torques(q);
-            for j in 0..dof {
-                o.state.tau_per_kgm[k][j] = t[j] - tau[j];
-            }
-        }
+        let tool = &tools[o.tool].tool;
+        let (_, _, per_kgm) = models[o.tool].torques_and_payload_slopes(&o.state.q[..dof], &tool.com, true);
+        o.state.tau_per_kgm = per_kgm;
     });
 }
 
@@ -353,32 +336,24 @@ impl Problem {
         // Observations.
         let gravity: Vec<GravityModel> = tools.iter().map(|b| GravityModel::new(&model, &b.tool)).collect();
         // ∂τ/∂m of each tool, for a payload-error parameter (in the model or a candidate of the
-        // diagnosis): the torques are linear in the payload mass (its first moment enters the
-        // recursion linearly), so the difference of the torques with one kilogram more is exact,
-        // not a finite-difference approximation.
-        let heavier: Vec<GravityModel> = tools
-            .iter()
-            .map(|b| {
-                let mut t = b.tool.clone();
-                t.mass += 1.0;
-                GravityModel::new(&model, &t)
-            })
-            .collect();
+        // diagnosis), and ∂τ/∂h for its first moment where the layout has it: the torques are
+        // linear in the payload's mass and first moment, so the slopes are exact, not
+        // finite-difference approximations. In parallel: the longest part of building a large
+        // problem.
+        let moments = layout.params().iter().any(|p| matches!(p, Param::ToolMoment(_)));
         let trical = TriCal::default();
-        // The holding torques with the tool and with a kilogram more, in parallel (two recursions
-        // a measurement: the longest part of building a large problem).
         let torques: Vec<_> = picks
             .par_iter()
             .with_min_len(PAR_MIN_OBS)
             .map(|&(s, i)| {
                 let q = &cell.sessions[s].measurements[i].q;
                 let t = session_tool[s];
-                (gravity[t].torques(q), heavier[t].torques(q))
+                gravity[t].torques_and_payload_slopes(q, &tools[t].tool.com, moments)
             })
             .collect();
         let mut obs = Vec::with_capacity(picks.len());
         let mut row = 0;
-        for ((s, i), (tau, t1)) in picks.into_iter().zip(torques) {
+        for ((s, i), (tau, per_kg, per_kgm)) in picks.into_iter().zip(torques) {
             let m: &Measurement = &cell.sessions[s].measurements[i];
             let t = session_tool[s];
             let mut state = JointState::with_torques(&m.q, &tau[..model.dof()]);
@@ -388,9 +363,8 @@ impl Problem {
                 }
             }
             state.temperature_c = m.temperature_c.unwrap_or(REFERENCE_TEMPERATURE_C);
-            for j in 0..model.dof() {
-                state.tau_per_kg[j] = t1[j] - tau[j];
-            }
+            state.tau_per_kg = per_kg;
+            state.tau_per_kgm = per_kgm;
             let target = match (&m.observation, &m.indicators) {
                 (Observation::Ball(k), ind) => {
                     let centre =
@@ -410,9 +384,6 @@ impl Problem {
             }
             obs.push(Obs { session: s, index: i, tool: t, state, target, row, rows, weight: [1.0; 6], q_sc });
             row += rows;
-        }
-        if layout.params().iter().any(|p| matches!(p, Param::ToolMoment(_))) {
-            fill_moment_torques(&model, &tools, &mut obs);
         }
         Ok(Problem {
             model,
