@@ -251,6 +251,19 @@ fn read_files(
             order: MeasuringOrder::Measured,
         });
     }
+    // Nothing measured is nothing to calibrate: refused here, where the files are named, rather
+    // than written as a cell that every later command refuses.
+    if poses.is_empty() {
+        return Err(ImportError::Input(format!("{}: no pose lines (only comments or blank lines)", joints.display())));
+    }
+    if sessions.iter().all(|s| s.measurements.is_empty()) {
+        let files: Vec<String> = positions.iter().map(|p| p.display().to_string()).collect();
+        return Err(ImportError::Input(format!(
+            "no reflector was visible at any of the {} poses: every line of {} reads `nan nan nan` or `-`, so there is nothing to calibrate (check that these are the run's positions files)",
+            poses.len(),
+            files.join(", ")
+        )));
+    }
     notes.extend(approach_through_unread_stops(&mut sessions, &poses, &joint_lines));
     Ok(Imported { cell: Cell { model, base_guess: None, artefact: None, sessions }, notes })
 }
@@ -489,6 +502,37 @@ mod tests {
         assert_eq!(e.to_string(), "r1.txt line 5, column z: 'x' is not a number");
         let e = position(p, 6, "1 2").unwrap_err();
         assert!(e.to_string().starts_with("r1.txt line 6: expected x y z"), "{e}");
+    }
+
+    /// A run in which no reflector was ever seen, or a joints file without poses, is refused by
+    /// name rather than written as an empty cell; one hidden reflector among visible ones is a
+    /// session skipped, as before.
+    #[test]
+    fn a_run_with_nothing_measured_is_refused() {
+        let dir = std::env::temp_dir().join(format!("robocal-3r-empty-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let write = |name: &str, text: &str| {
+            let p = dir.join(name);
+            std::fs::write(&p, text).unwrap();
+            p
+        };
+        let joints = write("j.txt", "0 10 20 0 30 0\n5 -10 15 20 -30 40\n");
+        let hidden = write("r1.txt", "nan nan nan\n-\n");
+        let hidden2 = write("r2.txt", "# x y z\nNaN NaN NaN\nnan nan nan\n");
+        let seen = write("r3.txt", "700 0 500\n650 -40 520\n");
+        let e = import(&joints, &[hidden.clone(), hidden2.clone()], irb120(), Purpose::Identification)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("no reflector was visible at any of the 2 poses"), "{e}");
+        assert!(e.contains("r1.txt") && e.contains("r2.txt"), "{e}");
+        let empty = write("j0.txt", "# joints (deg)\n\n");
+        let e = import(&empty, &[write("r0.txt", "# nothing\n")], irb120(), Purpose::Identification)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("j0.txt: no pose lines"), "{e}");
+        let ok = import(&joints, &[hidden, seen], irb120(), Purpose::Identification).unwrap();
+        assert_eq!(ok.cell.sessions.iter().map(|s| s.measurements.len()).collect::<Vec<_>>(), vec![0, 2]);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     /// Whitespace, commas, or semicolons with decimal commas: the same position.
