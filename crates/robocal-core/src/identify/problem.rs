@@ -292,8 +292,9 @@ pub struct Problem {
 }
 
 /// Fill every observation's ∂τ/∂h (`JointState::tau_per_kgm`), for a payload's first-moment
-/// error (`tool_moment_*`): the torques are linear in the last link's first moment, so the
-/// difference of the torques with one kilogram-metre more along each flange axis is exact.
+/// error (`tool_moment_*`) that `extended` adds: the torques are linear in the last link's first
+/// moment, so the slope per kilogram-metre along each flange axis is exact
+/// ([`GravityModel::torques_and_payload_slopes`]).
 fn fill_moment_torques(model: &RobotModel, tools: &[ToolBlock], obs: &mut [Obs]) {
     let models: Vec<GravityModel> = tools.iter().map(|b| GravityModel::new(model, &b.tool)).collect();
     let dof = model.dof();
