@@ -446,6 +446,30 @@ mod tests {
     use crate::kinematics::model::irb120;
     use proptest::prelude::*;
 
+    /// A scratch directory of this test process for the files a test imports, removed when dropped.
+    struct Scratch(PathBuf);
+
+    impl Scratch {
+        fn new(tag: &str) -> Self {
+            let dir = std::env::temp_dir().join(format!("robocal-3r-{tag}-{}", std::process::id()));
+            std::fs::create_dir_all(&dir).unwrap();
+            Scratch(dir)
+        }
+
+        /// Write `text` to the file `name` in it; its path.
+        fn write(&self, name: &str, text: &str) -> PathBuf {
+            let path = self.0.join(name);
+            std::fs::write(&path, text).unwrap();
+            path
+        }
+    }
+
+    impl Drop for Scratch {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
     proptest! {
         /// Positions printed in mm with full precision come back exactly, in metres.
         #[test]
@@ -509,13 +533,8 @@ mod tests {
     /// session skipped, as before.
     #[test]
     fn a_run_with_nothing_measured_is_refused() {
-        let dir = std::env::temp_dir().join(format!("robocal-3r-empty-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let write = |name: &str, text: &str| {
-            let p = dir.join(name);
-            std::fs::write(&p, text).unwrap();
-            p
-        };
+        let dir = Scratch::new("empty");
+        let write = |name: &str, text: &str| dir.write(name, text);
         let joints = write("j.txt", "0 10 20 0 30 0\n5 -10 15 20 -30 40\n");
         let hidden = write("r1.txt", "nan nan nan\n-\n");
         let hidden2 = write("r2.txt", "# x y z\nNaN NaN NaN\nnan nan nan\n");
@@ -532,7 +551,6 @@ mod tests {
         assert!(e.contains("j0.txt: no pose lines"), "{e}");
         let ok = import(&joints, &[hidden, seen], irb120(), Purpose::Identification).unwrap();
         assert_eq!(ok.cell.sessions.iter().map(|s| s.measurements.len()).collect::<Vec<_>>(), vec![0, 2]);
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     /// Whitespace, commas, or semicolons with decimal commas: the same position.
@@ -578,13 +596,8 @@ mod tests {
     /// which lines it read as headers.
     #[test]
     fn headers_are_skipped_and_said() {
-        let dir = std::env::temp_dir().join(format!("robocal-3r-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let write = |name: &str, text: &str| {
-            let path = dir.join(name);
-            std::fs::write(&path, text).unwrap();
-            path
-        };
+        let dir = Scratch::new("labels");
+        let write = |name: &str, text: &str| dir.write(name, text);
         let joints = [[0.0, 10.0, 20.0, 30.0, 40.0, 50.0], [5.0, -10.0, 25.0, -30.0, 45.0, 60.0]];
         let plain_j = joints.iter().map(|q| q.map(|v| v.to_string()).join(" ") + "\n").collect::<String>();
         let comma_j = "J1,J2,J3,J4,J5,J6\n".to_owned()
@@ -623,6 +636,5 @@ mod tests {
         assert_eq!(zeros.cell.sessions[0].measurements.len(), 2);
         let notes = zeros.notes.join("\n");
         assert!(notes.contains("1 line(s) read exactly 0 0 0, the instrument's own origin (line(s) 2)"), "{notes}");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
