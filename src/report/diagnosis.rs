@@ -84,8 +84,9 @@ fn verdict_section(s: &mut String, d: &DiagnosisOut) {
     s.push_str(&format!("<p><strong>{}</strong>: {}</p>", v.status, esc(&v.summary)));
     if !v.effects.is_empty() {
         // The shrink table holds the start, then one model per accepted effect in the order
-        // they were named: effect k is shrink[k] → shrink[k + 1] (only for a named verdict).
-        let steps = v.status == crate::diagnose::Status::Named && d.shrink.len() == v.effects.len() + 1;
+        // they were named: effect k is shrink[k] → shrink[k + 1] (only for a named verdict); a
+        // last row beyond them is the model with an adopted payload.
+        let steps = v.status == crate::diagnose::Status::Named && d.shrink.len() > v.effects.len();
         let rows: Vec<Vec<String>> = v
             .effects
             .iter()

@@ -391,7 +391,8 @@ impl Diagnosis {
         to_python(py, &self.out.candidates)
     }
 
-    /// From the starting model to the last accepted one: held-out figures of each, mm.
+    /// From the starting model to the last accepted one, and last the model with an adopted
+    /// payload when there is one (`tool_mass` among its effects): held-out figures of each, mm.
     #[getter]
     fn shrink<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         to_python(py, &self.out.shrink)

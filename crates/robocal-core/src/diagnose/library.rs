@@ -98,7 +98,7 @@ pub struct Candidate {
 }
 
 impl Candidate {
-    fn new(kind: Kind, joint: Option<usize>, params: Vec<Param>) -> Self {
+    pub(crate) fn new(kind: Kind, joint: Option<usize>, params: Vec<Param>) -> Self {
         Self { kind, joint, from: None, quarters: None, scanned: false, step_deg: None, params, frees: Vec::new() }
     }
 

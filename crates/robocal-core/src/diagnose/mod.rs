@@ -11,7 +11,9 @@
 //! 3. where the misses lie (`locate`);
 //! 4. which effect: screening, confirmation on held-out poses, greedy acceptance and honest
 //!    verdicts (`search`, [`library`], `screen`, [`cv`]);
-//! 5. how far it shrinks: the held-out figures of every accepted model.
+//! 5. how far it shrinks: the held-out figures of every accepted model, and last of the model
+//!    with an unknown payload that the named terms determine, when it predicts held-out poses
+//!    better (`search::adopt_payload`).
 //!
 //! Held-out means: grouped K-fold cross-validation over the validation poses, every fold's model
 //! trained on all identification measurements and the other folds (the "refit with part of the
@@ -134,6 +136,22 @@ pub struct Input<'a> {
     /// content where a fingerprint is recorded, by the index otherwise — are left out of every fit
     /// and every test, as the options' `exclude`.
     pub excluded: Vec<(String, usize, Option<String>)>,
+}
+
+impl Input<'_> {
+    /// Whether the set's identification fitted its `i`-th layout entry ([`Input::identified`]).
+    fn fitted(&self, i: usize) -> bool {
+        match &self.identified {
+            Some(f) => f.get(i).copied().unwrap_or(false),
+            None => self.set.values[i] != self.set.nominal[i],
+        }
+    }
+
+    /// Whether the set's identification held an undeclared payload (its data did not determine
+    /// the mass): the set carries `tool_mass` and did not fit it.
+    fn payload_held(&self) -> bool {
+        self.set.layout.index_of(Param::ToolMass).is_some_and(|i| !self.fitted(i))
+    }
 }
 
 /// Why a diagnosis was refused.
@@ -423,10 +441,7 @@ fn range_split(cell: &Cell, ranges: &[[f64; 2]], residuals: &[crate::validate::r
 fn start_options(input: &Input<'_>, opts: &DiagnoseOptions, sessions: Vec<String>) -> IdentifyOptions {
     let set = input.set;
     let full = ParamLayout::full(&set.model);
-    let fitted = |i: usize| match &input.identified {
-        Some(f) => f.get(i).copied().unwrap_or(false),
-        None => set.values[i] != set.nominal[i],
-    };
+    let fitted = |i: usize| input.fitted(i);
     let mut model = ModelOptions { beta: false, compliance: false, ..ModelOptions::default() };
     for (i, p) in set.layout.params().iter().enumerate() {
         match p {
@@ -460,8 +475,10 @@ fn start_options(input: &Input<'_>, opts: &DiagnoseOptions, sessions: Vec<String
 /// models that miss (a withheld effect, a nominal start) and poses they miss by much; that is its
 /// evidence, not an error (issue 13's refusals are for calibrations). The set's own decision
 /// about an undeclared payload (identified: a term of its model; held: left out) and about each
-/// compliance (held when its data did not determine it) is every model's here; the diagnosis
-/// does not decide them again.
+/// compliance (held when its data did not determine it) is every model's here; the search does
+/// not decide them again. One decision is revisited after it: a payload held at 0 kg that the
+/// model with the named terms determines, adopted when held-out poses confirm it
+/// (`search::adopt_payload`).
 fn unrefused() -> IdentifyOptions {
     IdentifyOptions {
         residual_ratio_limit: f64::INFINITY,
@@ -550,6 +567,9 @@ pub fn diagnose_with_progress(
             u.reason = reason.clone();
         }
     }
+    // An unknown payload the set held, which the named terms may determine: adopted when the
+    // model refitted with it predicts held-out poses better (`search::adopt_payload`).
+    s.payload = search::adopt_payload(&work, &mut s, &tested.folds, input.payload_held(), &search_opts);
     search::timing("search", t0);
     // 4. Where the start model misses, and the decomposition of its error.
     progress(0.85, "locating the residual error");
@@ -573,7 +593,31 @@ pub fn diagnose_with_progress(
     let accepted = accepted_identification(&s, &work, &model);
     if verdict.status == Status::Named {
         let named: Vec<ParamEstimate> = verdict.effects.iter().flat_map(|e| e.parameters.iter().cloned()).collect();
-        verdict.summary.push_str(&held_payload_with_named(&work, &model, accepted.as_ref(), &named));
+        match s.payload.as_ref() {
+            Some(t @ search::PayloadTrial { adopted: Ok(()), .. }) => {
+                let last = s.stages.last().expect("a stage");
+                verdict.summary.push_str(&adopted_payload_clause(t, &shrink, last, &named));
+                // What remained was the payload error, not separable from the compliances with a
+                // single payload: the adoption answers it, on the premise it states.
+                let lr = s.rounds.last().expect("a round");
+                if let (Some((_, text)), Decision::NotSeparable { best, .. }) =
+                    (verdict.remaining.as_mut(), &lr.decision)
+                    && lr.screened[*best].candidate.kind == Kind::ToolMass
+                {
+                    text.push_str(": the final model adopts the payload these data determine with the robot file's link masses taken as exact, which a second payload would check");
+                }
+                if let Some(a) = accepted.as_ref() {
+                    verdict.summary.push_str(&payload_com_clause(a, &model));
+                }
+            }
+            trial => {
+                let said = held_payload_with_named(&work, &model, accepted.as_ref(), &named);
+                verdict.summary.push_str(&said);
+                if let Some(Err(why)) = trial.map(|t| &t.adopted).filter(|_| !said.is_empty()) {
+                    verdict.summary.push_str(&format!("; not adopted in the model: {why}"));
+                }
+            }
+        }
         // The payload the named terms moved, read again with its centre of mass free.
         if let Some(a) = accepted.as_ref().filter(|_| !verdict::payload_change(&s).is_empty()) {
             verdict.summary.push_str(&payload_com_clause(a, &model));
@@ -987,7 +1031,12 @@ fn shrink_table(
             let gap = decomposition.heldout.mean - decomposition.floor.mean;
             if gap > 0.0 { (decomposition.heldout.mean - stats.mean) / gap } else { 0.0 }
         });
-        shrink.push(ShrinkEntry { model: s.accepted[..k].iter().map(|c| c.label()).collect(), stats, closure });
+        // A row beyond the accepted effects is the model with the adopted payload.
+        let mut model: Vec<String> = s.accepted[..k.min(s.accepted.len())].iter().map(|c| c.label()).collect();
+        if k > s.accepted.len() {
+            model.push(Kind::ToolMass.name().to_string());
+        }
+        shrink.push(ShrinkEntry { model, stats, closure });
     }
     Ok(shrink)
 }
@@ -1032,6 +1081,43 @@ fn held_payload_with_named(
         "; with the named terms the data determine the payload the identification held at 0 kg: {:.3} ± {sd:.3} kg{with} (σ with the tool's centre of mass and the robot file's link masses taken as exact; identify with them to use it){}",
         id.set.values[i],
         payload_com_clause(&id, &o)
+    )
+}
+
+/// "; with the named terms the data determine the payload the identification held at 0 kg, and the
+/// model adopts it: … ± … kg (held-out mean … → … mm, p = …; …)": an adopted payload
+/// ([`search::adopt_payload`]) with the figures of the shrink table's last two rows.
+/// The named parameters it moves by more than their σ are said with their values in that model
+/// (the effects keep those of the model that accepted them).
+fn adopted_payload_clause(
+    t: &search::PayloadTrial,
+    shrink: &[ShrinkEntry],
+    last: &stage::Stage,
+    named: &[ParamEstimate],
+) -> String {
+    let sd = t.std.map_or(String::new(), |sd| format!(" ± {sd:.3}"));
+    let moved: Vec<String> = named
+        .iter()
+        .filter_map(|e| {
+            let g = last.problem.robot_index(e.param)?;
+            let (v, s) = (last.x[g], last.stds_of(&[g])[0]?);
+            ((v - e.value).abs() > s.max(e.std.unwrap_or(0.0)))
+                .then(|| format!("{} {}", e.param, verdict::with_sd(v, Some(s), e.param.unit())))
+        })
+        .collect();
+    let with = if moved.is_empty() { String::new() } else { format!(", and with it {}", moved.join(", ")) };
+    let held = match (shrink.len().checked_sub(2).map(|k| &shrink[k..]), t.refit.as_ref()) {
+        (Some([a, b]), Some(r)) => format!(
+            "held-out mean {:.4} mm → {:.4} mm, p = {:.1e}; ",
+            a.stats.mean * 1e3,
+            b.stats.mean * 1e3,
+            r.p.unwrap_or(f64::NAN)
+        ),
+        _ => String::new(),
+    };
+    format!(
+        "; with the named terms the data determine the payload the identification held at 0 kg, and the final model adopts it: {:.3}{sd} kg ({held}σ with the tool's centre of mass and the robot file's link masses taken as exact){with}",
+        t.mass
     )
 }
 

@@ -61,7 +61,9 @@ use crate::identify::{GlobalParam, IdentifyError, IdentifyOptions, map_knots};
 use crate::kinematics::{JointTerm, Param};
 
 mod decide;
+mod payload;
 use decide::{Smoother, decide};
+pub use payload::{PayloadTrial, adopt_payload};
 
 /// Share of the best candidate's held-out RMS gain from which a confirmed candidate of another
 /// effect is examined as its look-alike, whatever their correlation.
@@ -311,6 +313,9 @@ pub struct Search {
     pub unavailable: Vec<Unavailable>,
     /// The smallest relative held-out gain a name needs ([`SearchOptions::min_rel_gain`]).
     pub min_rel_gain: f64,
+    /// A payload the set held, tried after the named terms ([`adopt_payload`]); when adopted, the
+    /// last stage (and baseline and refit) is the model with it, one more than `accepted` has.
+    pub payload: Option<PayloadTrial>,
 }
 
 /// Run the search from `start` (the current model on the pooled data).
@@ -380,7 +385,16 @@ pub fn search(
             }
         }
     }
-    Ok(Search { stages, baselines, refits, rounds, accepted, unavailable, min_rel_gain: opts.min_rel_gain })
+    Ok(Search {
+        stages,
+        baselines,
+        refits,
+        rounds,
+        accepted,
+        unavailable,
+        min_rel_gain: opts.min_rel_gain,
+        payload: None,
+    })
 }
 
 /// `f` over `items` on up to `threads` scoped threads; results in item order.

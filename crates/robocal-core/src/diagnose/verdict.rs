@@ -263,7 +263,7 @@ fn too_small_clause(lr: &search::Round, e: &search::Evaluated, base: f64) -> Str
 /// The held-out mean the last round judged its candidates against (its model's, linearised
 /// folds); `otherwise` without a baseline figure.
 fn round_mean(s: &search::Search, otherwise: f64) -> f64 {
-    ErrorStats::of(&s.baselines.last().expect("a baseline").norms()).map_or(otherwise, |e| e.mean)
+    ErrorStats::of(&s.baselines[s.accepted.len()].norms()).map_or(otherwise, |e| e.mean)
 }
 
 /// What the last round found (or did not).
@@ -372,9 +372,10 @@ fn last_finding(s: &search::Search, d: &Decomposition) -> Finding {
 fn nothing_new(s: &search::Search, d: &Decomposition) -> Finding {
     let last = s.rounds.len() - 1;
     let lr = &s.rounds[last];
-    let last_fig = match s.refits.last() {
-        Some(Ok(h)) => h,
-        _ => s.baselines.last().expect("a baseline"),
+    // The model the last round judged (an adopted payload comes after it).
+    let last_fig = match &s.refits[s.accepted.len()] {
+        Ok(h) => h,
+        _ => &s.baselines[s.accepted.len()],
     };
     let now = ErrorStats::of(&last_fig.norms()).unwrap_or(d.heldout);
     let strong = lr

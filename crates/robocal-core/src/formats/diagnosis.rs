@@ -33,7 +33,8 @@ pub struct DiagnosisOut {
     /// Every candidate of every round, with its screening statistics and, for the ones
     /// confirmed on held-out poses, their held-out figures.
     pub candidates: Vec<CandidateOut>,
-    /// From the starting model to the last accepted one: held-out figures of each.
+    /// From the starting model to the last accepted one, and last the model with an adopted
+    /// payload when there is one: held-out figures of each.
     pub shrink: Vec<ShrinkOut>,
     /// The rounds of the search, in order, each with its decision.
     pub rounds: Vec<RoundOut>,
@@ -594,9 +595,11 @@ pub struct CandidateOut {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct ShrinkOut {
-    /// `start`, then `start + …` with each accepted effect.
+    /// `start`, then `start + …` with each accepted effect, and last `… + tool_mass` when the
+    /// diagnosis adopted a payload that the set's identification had held at 0 kg.
     pub model: String,
-    /// The effects added to the starting model, by label (empty for `start`).
+    /// The effects added to the starting model, by label (empty for `start`; `tool_mass` for an
+    /// adopted payload).
     pub effects: Vec<String>,
     /// Number of tested observations.
     pub n: usize,

@@ -595,7 +595,8 @@ class Diagnosis:
 
     @property
     def shrink(self) -> list[dict[str, Any]]:
-        """From the starting model to the last accepted one: each model's held-out figures."""
+        """From the starting model to the last accepted one, and last the model with an adopted
+        payload when there is one (``tool_mass`` among its effects): each model's held-out figures."""
 
     @property
     def shrink_mean_mm(self) -> npt.NDArray[np.float64]:
