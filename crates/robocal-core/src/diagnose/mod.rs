@@ -1096,11 +1096,14 @@ fn adopted_payload_clause(
     named: &[ParamEstimate],
 ) -> String {
     let sd = t.std.map_or(String::new(), |sd| format!(" ± {sd:.3}"));
-    let moved: Vec<String> = named
+    let found: Vec<(&ParamEstimate, usize)> =
+        named.iter().filter_map(|e| last.problem.robot_index(e.param).map(|g| (e, g))).collect();
+    let stds = last.stds_of(&found.iter().map(|f| f.1).collect::<Vec<_>>());
+    let moved: Vec<String> = found
         .iter()
-        .filter_map(|e| {
-            let g = last.problem.robot_index(e.param)?;
-            let (v, s) = (last.x[g], last.stds_of(&[g])[0]?);
+        .zip(stds)
+        .filter_map(|(&(e, g), s)| {
+            let (v, s) = (last.x[g], s?);
             ((v - e.value).abs() > s.max(e.std.unwrap_or(0.0)))
                 .then(|| format!("{} {}", e.param, verdict::with_sd(v, Some(s), e.param.unit())))
         })
