@@ -289,6 +289,20 @@ pub fn suite() -> Vec<Case> {
             expect,
         });
     }
+    // A term the model lacks leaks into the undeclared payload, which the identification then
+    // holds at 0 kg; once the coupling is named the data determine it, and the diagnosis adopts it
+    // when held-out poses confirm it (its final figure can then pass the oracle's, which keeps the
+    // payload held).
+    cases.push(Case {
+        name: "twin: coupling 2→3, undeclared 2.3 kg plate".into(),
+        effects: "coupling:from=2:to=3:ratio=0.002".into(),
+        aux: true,
+        shuffle: false,
+        noise: NoiseVariant::Default,
+        heavy_validation: false,
+        rig: Rig::TrackerTwin { jitter_deg: 0.0075, removed: 10, payload_kg: 2.3, stop_s: 0.0 },
+        expect: named(Kind::Coupling, Some(2), Some(1), None),
+    });
     cases
 }
 
