@@ -1067,16 +1067,10 @@ fn held_payload_with_named(
     let Ok(id) = identify(work, &o) else { return String::new() };
     let Some(i) = id.set.layout.index_of(Param::ToolMass) else { return String::new() };
     let (crate::identify::Status::Identified, Some(sd)) = (&id.status[i], id.std[i]) else { return String::new() };
-    let moved: Vec<String> = named
-        .iter()
-        .filter_map(|e| {
-            let k = id.set.layout.index_of(e.param)?;
-            let (v, s) = (id.set.values[k], id.std[k]?);
-            ((v - e.value).abs() > s.max(e.std.unwrap_or(0.0)))
-                .then(|| format!("{} {}", e.param, verdict::with_sd(v, Some(s), e.param.unit())))
-        })
-        .collect();
-    let with = if moved.is_empty() { String::new() } else { format!(", and with it {}", moved.join(", ")) };
+    let with = moved_clause(named.iter().filter_map(|e| {
+        let k = id.set.layout.index_of(e.param)?;
+        Some((e, id.set.values[k], id.std[k]?))
+    }));
     format!(
         "; with the named terms the data determine the payload the identification held at 0 kg: {:.3} ± {sd:.3} kg{with} (σ with the tool's centre of mass and the robot file's link masses taken as exact; identify with them to use it){}",
         id.set.values[i],
@@ -1099,16 +1093,7 @@ fn adopted_payload_clause(
     let found: Vec<(&ParamEstimate, usize)> =
         named.iter().filter_map(|e| last.problem.robot_index(e.param).map(|g| (e, g))).collect();
     let stds = last.stds_of(&found.iter().map(|f| f.1).collect::<Vec<_>>());
-    let moved: Vec<String> = found
-        .iter()
-        .zip(stds)
-        .filter_map(|(&(e, g), s)| {
-            let (v, s) = (last.x[g], s?);
-            ((v - e.value).abs() > s.max(e.std.unwrap_or(0.0)))
-                .then(|| format!("{} {}", e.param, verdict::with_sd(v, Some(s), e.param.unit())))
-        })
-        .collect();
-    let with = if moved.is_empty() { String::new() } else { format!(", and with it {}", moved.join(", ")) };
+    let with = moved_clause(found.iter().zip(stds).filter_map(|(&(e, g), s)| Some((e, last.x[g], s?))));
     let held = match (shrink.len().checked_sub(2).map(|k| &shrink[k..]), t.refit.as_ref()) {
         (Some([a, b]), Some(r)) => format!(
             "held-out mean {:.4} mm → {:.4} mm, p = {:.1e}; ",
@@ -1122,6 +1107,17 @@ fn adopted_payload_clause(
         "; with the named terms the data determine the payload the identification held at 0 kg, and the final model adopts it: {:.3}{sd} kg ({held}σ with the tool's centre of mass and the robot file's link masses taken as exact){with}",
         t.mass
     )
+}
+
+/// ", and with it <param> v ± σ, …": the named parameters, given as (estimate, value with the
+/// payload, σ with the payload), that the payload moves by more than their σ (the larger of the
+/// two fits'); "" when it moves none.
+fn moved_clause<'a>(with_payload: impl Iterator<Item = (&'a ParamEstimate, f64, f64)>) -> String {
+    let moved: Vec<String> = with_payload
+        .filter(|&(e, v, s)| (v - e.value).abs() > s.max(e.std.unwrap_or(0.0)))
+        .map(|(e, v, s)| format!("{} {}", e.param, verdict::with_sd(v, Some(s), e.param.unit())))
+        .collect();
+    if moved.is_empty() { String::new() } else { format!(", and with it {}", moved.join(", ")) }
 }
 
 /// "; with its centre of mass identified too, it reads … ± … kg at (… ± …, …) mm in the flange
