@@ -229,3 +229,52 @@ fn an_undetermined_compliance_is_held_and_said() {
     );
     assert!(h.max < 2.0 * MM && h.mean < f.mean, "held {h:?}, free {f:?}");
 }
+
+/// Issue 24: the σ of a fit that held a compliance are those of the model with it held. Where the
+/// hold moves another parameter by more than its σ, a note says so, with both values: two fits
+/// that held different compliances (the two halves of series C with tables, one holding c3, the
+/// other c2) read θ2 4 σ apart though each σ holds for its own model. On series C the default
+/// model holds c5, c4 and then c3 (1.5 σ), which moves a3 by about twice its σ. Checked against
+/// two fits by hand: c4 and c5 fixed with c3 free (the "with it free" value), and all three fixed
+/// (the value and σ the set reports).
+#[test]
+fn a_hold_that_moves_a_parameter_beyond_its_sigma_says_so() {
+    use robocal::identify::Status;
+    let cell = import_cell(&[(series("C"), Purpose::Identification)], &Ur10Options::default()).unwrap().cell;
+    let held = identify(&cell, &IdentifyOptions::default()).unwrap();
+    for c in ["c3", "c4", "c5"] {
+        assert!(matches!(held.status[held.set.layout.find(c).unwrap()], Status::Fixed(_)), "{c} held");
+    }
+    let note = held.notes.iter().find(|n| n.starts_with("holding c3 (see its status) moved ")).unwrap_or_else(|| {
+        panic!("{:?}", held.notes);
+    });
+    eprintln!("{note}");
+    // "a3 from -571.659 mm with it free to -571.756 ± 0.049 mm"
+    let moved = note.split(" moved ").nth(1).unwrap();
+    let name = moved.split(' ').next().unwrap();
+    let number = |s: &str| s.trim().split(' ').next().unwrap().parse::<f64>().unwrap();
+    let from = number(moved.split(" from ").nth(1).unwrap());
+    let to = number(moved.split(" with it free to ").nth(1).unwrap());
+    let sd = number(moved.split(" ± ").nth(1).unwrap());
+    let decimals = moved.split(" ± ").nth(1).unwrap().split(' ').next().unwrap().split('.').nth(1).map_or(0, str::len);
+    let tolerance = 0.5 * 10f64.powi(-(decimals as i32)) * 1.001;
+    assert!((from - to).abs() > sd, "{note}");
+
+    let i = held.set.layout.find(name).unwrap();
+    let unit = held.set.layout.params()[i].unit().to_si();
+    let by_hand = |fixed: &[&str]| {
+        let o = IdentifyOptions {
+            fixed: fixed.iter().map(|s| s.to_string()).collect(),
+            hold_undetermined_compliance: false,
+            ..Default::default()
+        };
+        identify(&cell, &o).unwrap()
+    };
+    let free = by_hand(&["c4", "c5"]);
+    let all = by_hand(&["c3", "c4", "c5"]);
+    assert!((free.set.values[i] / unit - from).abs() <= tolerance, "{name}: {} vs {from}", free.set.values[i] / unit);
+    assert!((all.set.values[i] / unit - to).abs() <= tolerance, "{name}: {} vs {to}", all.set.values[i] / unit);
+    assert!((held.set.values[i] / unit - to).abs() <= tolerance, "{name}: {} vs {to}", held.set.values[i] / unit);
+    let s = all.std[i].unwrap() / unit;
+    assert!((s - sd).abs() <= tolerance, "{name}: σ {s} vs {sd}");
+}

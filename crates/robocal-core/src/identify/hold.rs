@@ -97,6 +97,7 @@ pub(super) fn hold_undetermined(
     fit: &mut Fit,
     free: &mut Vec<usize>,
     status: &mut [Status],
+    shifts: &mut Vec<HoldShift>,
 ) -> Result<Quality, SolveError> {
     loop {
         let mut q = Quality::of(fit, f.problem.obs.len(), f.rows);
@@ -145,9 +146,77 @@ pub(super) fn hold_undetermined(
                 held_at: f.x0[g],
             },
         });
+        if matches!(next, Undetermined::Compliance(..)) {
+            shifts.push(HoldShift { held: g, before: fit.x.clone(), after: refit.x.clone() });
+        }
         *fit = refit;
         *free = held;
     }
+}
+
+/// What holding one compliance did to the other parameters: the solution with it free, and the
+/// refit with it held ([`hold_undetermined`]).
+pub(super) struct HoldShift {
+    /// The held compliance's global index.
+    pub held: usize,
+    /// Every global parameter's value before the hold, and after its refit.
+    pub before: Vec<f64>,
+    pub after: Vec<f64>,
+}
+
+/// The robot parameters (not a table's knots) that a compliance's hold moved by more than their
+/// final σ, as one note per hold: the σ are those of the model with the compliance held, so they
+/// do not count that choice, and a reader comparing two fits that held different compliances
+/// would read them as many σ apart. On the UR10's series C cut into two interleaved halves, with
+/// tables on joints 1, 2, 3 and 5 (which make c2 and c3 nearly one direction), one half kept c2
+/// and held c3 (2.1 σ), the other the reverse: θ2 read 4.0 σ apart, a1 3.7 σ, θ4 3.5 σ, and the
+/// geometry's RMS z was 1.77. With the same compliance in both halves it was 0.80–0.95.
+pub(super) fn hold_notes(problem: &Problem, free: &[usize], q: &Quality, shifts: &[HoldShift]) -> Vec<String> {
+    const SHOWN: usize = 6;
+    shifts
+        .iter()
+        .filter_map(|h| {
+            let mut moved: Vec<(f64, String)> = free
+                .iter()
+                .enumerate()
+                .filter_map(|(c, &g)| {
+                    let GlobalParam::Robot(i) = problem.params[g] else { return None };
+                    let p = problem.layout.params()[i];
+                    if matches!(p, Param::Joint(_, JointTerm::Map { .. })) {
+                        return None;
+                    }
+                    let (sd, shift) = (q.std[c], h.after[g] - h.before[g]);
+                    let z = shift.abs() / sd;
+                    let u = p.unit();
+                    (z > 1.0).then(|| {
+                        // Two significant digits of the σ, and the values to the same decimal: a
+                        // 0.1 mm move of a 572 mm length must show.
+                        let sd_u = sd / u.to_si();
+                        let d = (1 - sd_u.log10().floor() as i32).clamp(0, 9) as usize;
+                        let (unit, v) = (u.as_str(), |x: f64| x / u.to_si());
+                        let text = format!(
+                            "{p} from {:.d$} {unit} with it free to {:.d$} ± {sd_u:.d$} {unit}",
+                            v(h.before[g]),
+                            v(h.after[g]),
+                        );
+                        (z, text)
+                    })
+                })
+                .collect();
+            if moved.is_empty() {
+                return None;
+            }
+            moved.sort_by(|a, b| b.0.total_cmp(&a.0));
+            let more = moved.len().saturating_sub(SHOWN);
+            let list: Vec<String> = moved.into_iter().take(SHOWN).map(|m| m.1).collect();
+            let more = if more > 0 { format!(" and {more} more") } else { String::new() };
+            Some(format!(
+                "holding {} (see its status) moved {}{more}, each by more than its σ: those σ are the model's with {0} held and do not count that choice, so a fit that keeps it, or holds another compliance instead, reads these parameters elsewhere",
+                problem.name(h.held),
+                list.join(", ")
+            ))
+        })
+        .collect()
 }
 
 /// The unknown payload, when it is free and its mass is not above [`PAYLOAD_SIGNIFICANCE`] of

@@ -322,7 +322,9 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
         compliances: opts.hold_undetermined_compliance,
         kappa_limit: opts.kappa_limit,
     };
-    let mut quality = super::hold::hold_undetermined(&f, &mut fit, &mut free, &mut status)?;
+    let mut shifts = Vec::new();
+    let mut quality = super::hold::hold_undetermined(&f, &mut fit, &mut free, &mut status, &mut shifts)?;
+    notes.extend(super::hold::hold_notes(&problem, &free, &quality, &shifts));
     if opts.noise.is_some() {
         quality.weighted = true;
     }
