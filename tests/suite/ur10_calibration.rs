@@ -278,3 +278,59 @@ fn a_hold_that_moves_a_parameter_beyond_its_sigma_says_so() {
     let s = all.std[i].unwrap() / unit;
     assert!((s - sd).abs() <= tolerance, "{name}: σ {s} vs {sd}");
 }
+
+/// Issue 24: a correction table carried to another series (base and probe refitted there) is
+/// applied as the set applies it wherever it is used: its own knots, whose first and last hold
+/// their value beyond the identified range. The refit used to lay new knots over the other
+/// series' range, started at 0, so the table fell to zero one knot step past series C's range and
+/// `crossval --transfer` scored a model that compensation does not apply (table j2 on series B:
+/// 0.686 mm so, 0.597 mm as applied). Checked against the set refitted by hand with the table's
+/// knots named one by one (`extra`, the diagnosis's way) and validated on series B, whose q2
+/// lies beyond series C's table for most of its poses.
+#[test]
+fn a_transfer_carries_a_table_as_the_set_applies_it() {
+    use robocal::identify::ModelOptions;
+    use robocal::kinematics::{JointTerm, Param};
+    use robocal::validate::report::{Reference, validate};
+    let cell = cell();
+    let model = ModelOptions::parse("+map2_s2", 6).unwrap();
+    let variant =
+        Variant { name: "table".into(), options: IdentifyOptions { model: model.clone(), ..Default::default() } };
+    let cv = crossval(&cell, &CrossvalOptions { transfer: vec!["series-B".into()], ..options(vec![variant]) }).unwrap();
+    let t = cv.transfer.iter().find(|t| t.variant == "table" && t.session == "series-B").unwrap();
+    let carried = t.errors.as_ref().unwrap().position.mean;
+
+    let mut o = IdentifyOptions { model: model.clone(), ..Default::default() };
+    o.selection.sessions = vec!["series-C".into()];
+    let set = identify(&cell, &o).unwrap().set;
+    let knots: Vec<Param> =
+        set.layout.params().iter().copied().filter(|p| matches!(p, Param::Joint(1, JointTerm::Map { .. }))).collect();
+    let index = |p: &Param| match p {
+        Param::Joint(_, JointTerm::Map { knot, .. }) => *knot as f64 * 2.0_f64.to_radians(),
+        _ => unreachable!(),
+    };
+    let (lo, hi) = knots.iter().map(index).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), q| (a.min(q), b.max(q)));
+    let b = cell.session("series-B").unwrap();
+    let beyond = b.measurements.iter().filter(|m| m.q[1] < lo || m.q[1] > hi).count();
+    eprintln!(
+        "table j2 over [{:.1}°, {:.1}°]; {beyond} of {} series-B poses beyond it",
+        lo.to_degrees(),
+        hi.to_degrees(),
+        b.measurements.len()
+    );
+    assert!(beyond * 2 > b.measurements.len(), "{beyond}");
+
+    let named = ModelOptions { maps: Vec::new(), extra: [model.extra.clone(), knots.clone()].concat(), ..model };
+    let mut r = IdentifyOptions {
+        model: named,
+        start: Some(set.clone()),
+        only: vec!["base".into(), "tool".into()],
+        ..Default::default()
+    };
+    r.selection.sessions = vec!["series-B".into()];
+    let refit = identify(&cell, &r).unwrap();
+    let by_hand =
+        validate(&refit.set, &cell, &["series-B".into()], Reference::Measured).unwrap().calibrated.position.mean;
+    eprintln!("series B: crossval {:.4} mm, by hand {:.4} mm", carried / MM, by_hand / MM);
+    assert!((carried - by_hand).abs() <= 1e-6 * by_hand, "crossval {carried} vs by hand {by_hand}");
+}

@@ -100,11 +100,41 @@ fn layout_of(cell: &Cell, opts: &IdentifyOptions) -> Result<(ParamLayout, bool),
     if !opts.model.maps.is_empty() {
         let picks = opts.selection.picks(cell)?;
         for &(j, step) in &opts.model.maps {
-            let qs = picks.iter().map(|&(s, i)| cell.sessions[s].measurements[i].q[j]);
-            layout.extend(&map_knots(j, step, qs));
+            match carried_table(opts, j, step) {
+                Some(knots) => {
+                    layout.extend(&knots);
+                }
+                None => {
+                    let qs = picks.iter().map(|&(s, i)| cell.sessions[s].measurements[i].q[j]);
+                    layout.extend(&map_knots(j, step, qs));
+                }
+            }
         }
     }
     Ok((layout, payload_unknown))
+}
+
+/// The knots of table (j, step) of the start set, when the fit carries that table as it is: the
+/// set has it and `only` does not free it (a re-registration, `only: ["base", "tool"]`). A
+/// carried table keeps its own knots and so its edges, which hold their value beyond it as
+/// the set does wherever it is used (compensation, validation). Built over the new session's
+/// joint range instead, its knots beyond the set's started at 0: the table fell to zero one knot
+/// step past the identified range, and a transfer's figure described a model that compensation
+/// does not apply.
+fn carried_table(opts: &IdentifyOptions, j: usize, step: u8) -> Option<Vec<Param>> {
+    let start = opts.start.as_ref()?;
+    let prefix = format!("map{}_s{step}", j + 1);
+    if opts.only.is_empty() || opts.only.iter().any(|n| n.starts_with(&prefix)) {
+        return None;
+    }
+    let knots: Vec<Param> = start
+        .layout
+        .params()
+        .iter()
+        .copied()
+        .filter(|p| matches!(p, Param::Joint(k, JointTerm::Map { step_deg, .. }) if *k == j && *step_deg == step))
+        .collect();
+    (!knots.is_empty()).then_some(knots)
 }
 
 /// Where the fit starts: the base, the registration of the TCPs to identify (their start
