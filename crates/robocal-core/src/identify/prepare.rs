@@ -124,7 +124,8 @@ fn layout_of(cell: &Cell, opts: &IdentifyOptions) -> Result<(ParamLayout, bool),
 fn carried_table(opts: &IdentifyOptions, j: usize, step: u8) -> Option<Vec<Param>> {
     let start = opts.start.as_ref()?;
     let prefix = format!("map{}_s{step}", j + 1);
-    if opts.only.is_empty() || opts.only.iter().any(|n| n.starts_with(&prefix)) {
+    let frees = |n: &String| *n == prefix || n.strip_prefix(&prefix).is_some_and(|k| k.starts_with("_k"));
+    if opts.only.is_empty() || opts.only.iter().any(frees) {
         return None;
     }
     let knots: Vec<Param> = start
