@@ -242,7 +242,17 @@ fn payload_note(
             )
         }
         None => {
-            let status = id.set.layout.index_of(crate::kinematics::Param::ToolMass).map(|i| id.status[i].to_string());
+            use crate::identify::{FixedReason, Status};
+            let mass = id.set.layout.index_of(crate::kinematics::Param::ToolMass);
+            if let Some(i) = mass.filter(|&i| matches!(id.status[i], Status::Fixed(FixedReason::NotInOnly { .. }))) {
+                // A re-registration (`--only`): the payload is the start set's, as every robot
+                // parameter outside `only` is; nothing here was judged identifiable or not.
+                return format!(
+                    "; payload held at the start set's {:.3} kg with the rest of the set (not in --only)",
+                    id.set.values[i]
+                );
+            }
+            let status = mass.map(|i| id.status[i].to_string());
             let compliance = id.set.layout.params().iter().zip(&id.status).any(|(p, s)| {
                 matches!(p, crate::kinematics::Param::Joint(_, crate::kinematics::JointTerm::Compliance))
                     && matches!(s, crate::identify::Status::Identified)

@@ -334,3 +334,65 @@ fn a_transfer_carries_a_table_as_the_set_applies_it() {
     eprintln!("series B: crossval {:.4} mm, by hand {:.4} mm", carried / MM, by_hand / MM);
     assert!((carried - by_hand).abs() <= 1e-6 * by_hand, "crossval {carried} vs by hand {by_hand}");
 }
+
+/// A re-registration (`only: base, tool`) holds every robot parameter at the start set's value,
+/// so it holds the set's own terms too, whatever model it is given. It used to build the layout
+/// from the model alone: `identify --start set.json --only base,tool` with the default model, and
+/// the ISO 9283 evaluation's registration, dropped the set's correction tables and cyclic terms
+/// without a word, and wrote and scored a set without them. Checked against the same refit with
+/// the terms named in the model, and against the set with its terms stripped (the old figure).
+/// A full refit from the set with a model that leaves them out says so in its notes.
+#[test]
+fn a_re_registration_carries_the_sets_own_terms() {
+    use robocal::kinematics::{JointTerm, Param};
+    use robocal::validate::report::{Reference, validate};
+    let cell = cell();
+    let model = ModelOptions::parse("+map2_s2,+cyc1_h1", 6).unwrap();
+    let mut o = IdentifyOptions { model: model.clone(), ..Default::default() };
+    o.selection.sessions = vec!["series-C".into()];
+    let set = identify(&cell, &o).unwrap().set;
+    let is_term = |p: &Param| matches!(p, Param::Joint(_, JointTerm::Map { .. } | JointTerm::Cyclic { .. }));
+    let terms = set.layout.params().iter().filter(|p| is_term(p)).count();
+    assert!(terms > 10, "{terms} table and cyclic parameters");
+
+    let register = |model: ModelOptions, only: bool| {
+        let mut r = IdentifyOptions {
+            model,
+            start: Some(set.clone()),
+            only: if only { vec!["base".into(), "tool".into()] } else { Vec::new() },
+            ..Default::default()
+        };
+        r.selection.sessions = vec!["series-B".into()];
+        identify(&cell, &r).unwrap()
+    };
+    let mean = |s: &robocal::kinematics::ParameterSet| {
+        validate(s, &cell, &["series-B".into()], Reference::Measured).unwrap().calibrated.position.mean
+    };
+    let default = register(ModelOptions::default(), true);
+    let named = register(model.clone(), true);
+    let carried = default.set.layout.params().iter().filter(|p| is_term(p)).count();
+    assert_eq!(carried, terms, "the re-registered set keeps every term of the set");
+    let note = default.notes.iter().find(|n| n.contains("are carried at its values")).expect("a note");
+    assert!(note.contains("+cyc1_h1") && note.contains("+map2_s2"), "{note}");
+    let (a, b) = (mean(&default.set), mean(&named.set));
+    assert!((a - b).abs() <= 1e-9 * b, "default model {a} vs terms named {b}");
+
+    // What the registration used to score: the same refit of the set without its terms.
+    let mut stripped = set.clone();
+    for (i, p) in set.layout.params().iter().enumerate() {
+        if is_term(p) {
+            stripped.values[i] = 0.0;
+        }
+    }
+    let mut r =
+        IdentifyOptions { start: Some(stripped), only: vec!["base".into(), "tool".into()], ..Default::default() };
+    r.selection.sessions = vec!["series-B".into()];
+    let without = mean(&identify(&cell, &r).unwrap().set);
+    eprintln!("series B: carried {:.4} mm, named {:.4} mm, without the terms {:.4} mm", a / MM, b / MM, without / MM);
+    assert!((a - without).abs() > 0.01 * MM, "the terms change series B's figure: {a} vs {without}");
+
+    let refit = register(ModelOptions::default(), false);
+    assert!(!refit.set.layout.params().iter().any(is_term));
+    let note = refit.notes.iter().find(|n| n.contains("are not in this model")).expect("a note");
+    assert!(note.contains("+map2_s2"), "{note}");
+}

@@ -800,29 +800,17 @@ fn model_spec(d: &Diagnosis) -> String {
         if all_b { "+beta" } else { "-beta" }.to_string(),
         if all_c { "+compliance" } else { "-compliance" }.to_string(),
     ];
-    let mut maps: Vec<(usize, u8)> = Vec::new();
-    for p in &m.extra {
-        match p {
-            Param::Beta(_) if all_b => {}
-            Param::Joint(_, JointTerm::Compliance) if all_c => {}
-            Param::Joint(j, crate::kinematics::JointTerm::Map { step_deg, .. }) => {
-                if !maps.contains(&(*j, *step_deg)) {
-                    maps.push((*j, *step_deg));
-                }
-            }
-            Param::Joint(
-                j,
-                t @ (JointTerm::Cyclic { cosine: false, .. } | JointTerm::Periodic { cosine: false, .. }),
-            ) => {
-                // A sine and its cosine are one option: +cyc2_h1, +cyc2_f7.25.
-                let name = Param::Joint(*j, *t).to_string();
-                items.push(format!("+{}", name.trim_end_matches("_sin")));
-            }
-            Param::Joint(_, JointTerm::Cyclic { cosine: true, .. } | JointTerm::Periodic { cosine: true, .. }) => {}
-            p => items.push(format!("+{p}")),
-        }
-    }
-    items.extend(maps.iter().map(|(j, s)| format!("+map{}_s{s}", j + 1)));
+    let rest: Vec<Param> = m
+        .extra
+        .iter()
+        .copied()
+        .filter(|p| match p {
+            Param::Beta(_) => !all_b,
+            Param::Joint(_, JointTerm::Compliance) => !all_c,
+            _ => true,
+        })
+        .collect();
+    items.extend(crate::identify::term_spec(&rest));
     items.join(",")
 }
 

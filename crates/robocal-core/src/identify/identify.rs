@@ -250,14 +250,21 @@ pub struct PayloadCentreOfMass {
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 pub fn identify(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, IdentifyError> {
-    match super::prepare::with_approach(cell, &[&opts.model]) {
+    let (carried, carry_note) = match super::prepare::carry_start_terms(cell, opts) {
+        Some((o, note)) => (o, Some(note)),
+        None => (None, None),
+    };
+    let opts = carried.as_ref().unwrap_or(opts);
+    let mut id = match super::prepare::with_approach(cell, &[&opts.model]) {
         Some((filled, notes)) => {
             let mut id = identify_cell(&filled, opts)?;
             id.notes.extend(notes);
-            Ok(id)
+            id
         }
-        None => identify_cell(cell, opts),
-    }
+        None => identify_cell(cell, opts)?,
+    };
+    id.notes.extend(carry_note);
+    Ok(id)
 }
 
 fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, IdentifyError> {

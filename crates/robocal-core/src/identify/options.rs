@@ -98,6 +98,33 @@ impl ModelOptions {
     }
 }
 
+/// Effect terms as `--model` spells them: a sine and its cosine as one `+cyc2_h1`, a table's
+/// knots as one `+map2_s3`, the rest `+{name}` (`+backlash2`, `+c3`).
+pub fn term_spec(terms: &[Param]) -> Vec<String> {
+    let mut items: Vec<String> = Vec::new();
+    let mut maps: Vec<(usize, u8)> = Vec::new();
+    for p in terms {
+        match p {
+            Param::Joint(j, JointTerm::Map { step_deg, .. }) => {
+                if !maps.contains(&(*j, *step_deg)) {
+                    maps.push((*j, *step_deg));
+                }
+            }
+            Param::Joint(
+                j,
+                t @ (JointTerm::Cyclic { cosine: false, .. } | JointTerm::Periodic { cosine: false, .. }),
+            ) => {
+                let name = Param::Joint(*j, *t).to_string();
+                items.push(format!("+{}", name.trim_end_matches("_sin")));
+            }
+            Param::Joint(_, JointTerm::Cyclic { cosine: true, .. } | JointTerm::Periodic { cosine: true, .. }) => {}
+            p => items.push(format!("+{p}")),
+        }
+    }
+    items.extend(maps.iter().map(|(j, s)| format!("+map{}_s{s}", j + 1)));
+    items
+}
+
 /// `map{j}_s{step}` → (0-based joint, step in degrees).
 fn parse_map(name: &str) -> Option<(usize, u8)> {
     let rest = name.strip_prefix("map")?;

@@ -56,6 +56,63 @@ pub fn with_approach(cell: &Cell, models: &[&ModelOptions]) -> Option<(Cell, Vec
     Some((filled, notes))
 }
 
+/// The start set's own effect terms and correction tables that `opts.model` does not name
+/// (its payload excepted: an unknown payload has its own rule), in its layout's order.
+fn start_terms_missing(cell: &Cell, opts: &IdentifyOptions) -> Vec<Param> {
+    let Some(start) = &opts.start else { return Vec::new() };
+    let full = ParamLayout::full(&cell.model);
+    let named = |p: &Param| {
+        opts.model.extra.contains(p)
+            || matches!(p, Param::Joint(j, JointTerm::Map { step_deg, .. }) if opts.model.maps.contains(&(*j, *step_deg)))
+    };
+    start
+        .layout
+        .params()
+        .iter()
+        .copied()
+        .filter(|p| full.index_of(*p).is_none() && full.admits(*p))
+        .filter(|p| !matches!(p, Param::ToolMass | Param::ToolMoment(_)))
+        .filter(|p| !named(p))
+        .collect()
+}
+
+/// A fit from a start set whose model lacks some of the set's own terms (a cyclic term, a
+/// backlash, a correction table): the options to fit with and a sentence for the notes.
+///
+/// With `only` (a re-registration, `only: ["base", "tool"]`) every robot parameter outside
+/// `only` is held at the set's value, so the set's terms are held with them: the fit is of the
+/// set as it is, whatever `model` says. Before, a model that did not name them (the default
+/// one, `identify --start set.json --only base,tool`, and the ISO 9283 evaluation's
+/// registration) dropped them without a word, and the parameter set written and the figures
+/// described a model without its tables (the UR10's set with tables j2, j1, j3, j5 and a cyclic
+/// j1 term, re-registered on series D: 0.348 mm, the same geometry without its terms, where the
+/// set itself reads 0.453 mm). Without `only` the model is the caller's choice: the options
+/// stand and the note says what the start set had that this fit leaves out.
+pub(crate) fn carry_start_terms(cell: &Cell, opts: &IdentifyOptions) -> Option<(Option<IdentifyOptions>, String)> {
+    let missing = start_terms_missing(cell, opts);
+    if missing.is_empty() {
+        return None;
+    }
+    let spelled = super::term_spec(&missing).join(",");
+    if opts.only.is_empty() {
+        return Some((
+            None,
+            format!(
+                "the start set's terms {spelled} are not in this model and are left out (name them in the model to fit them)"
+            ),
+        ));
+    }
+    let mut carried = opts.clone();
+    carried.model.extra.extend(missing);
+    Some((
+        Some(carried),
+        format!(
+            "the start set's terms {spelled} are carried at its values (the fit frees only {}, and holds the rest of the set as it is)",
+            opts.only.join(", ")
+        ),
+    ))
+}
+
 /// Build the problem, the starting point and the identifiable set: the layout, the base, the
 /// weighted problem, the start values, the fixed parameters, the unknown TCPs' start, the
 /// identifiable set, the anchors — each step below, in that order.
@@ -100,15 +157,10 @@ fn layout_of(cell: &Cell, opts: &IdentifyOptions) -> Result<(ParamLayout, bool),
     if !opts.model.maps.is_empty() {
         let picks = opts.selection.picks(cell)?;
         for &(j, step) in &opts.model.maps {
-            match carried_table(opts, j, step) {
-                Some(knots) => {
-                    layout.extend(&knots);
-                }
-                None => {
-                    let qs = picks.iter().map(|&(s, i)| cell.sessions[s].measurements[i].q[j]);
-                    layout.extend(&map_knots(j, step, qs));
-                }
-            }
+            let knots = carried_table(opts, j, step).unwrap_or_else(|| {
+                map_knots(j, step, picks.iter().map(|&(s, i)| cell.sessions[s].measurements[i].q[j]))
+            });
+            layout.extend(&knots);
         }
     }
     Ok((layout, payload_unknown))
