@@ -45,7 +45,7 @@ pub struct IdentifyArgs {
     /// The base comes from the cell (base guess or registration).
     #[arg(long)]
     pub start: Option<PathBuf>,
-    /// Free only these parameters (comma-separated names, or the groups `base` and `tool`);
+    /// Free only these parameters (comma-separated names, or the groups `base`, `tool` and `zeros`, the joints' zero offsets);
     /// `--start calibrated.json --only base,tool` re-registers a calibrated robot in a new cell.
     #[arg(long)]
     pub only: Option<String>,

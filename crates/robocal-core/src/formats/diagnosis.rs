@@ -132,6 +132,47 @@ pub struct TransferOut {
     /// carried with the same registration. Absent when the refits agreed.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub held_in_every_refit: Vec<String>,
+    /// `start` and `final`: the model registered with the joints' zero offsets refitted as well
+    /// as base and tools, against base and tools alone, both held out on alternate poses. Absent
+    /// for the intermediate models (or from a diagnosis stored before this field).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zeros_refitted: Option<ZerosRefitOut>,
+}
+
+/// A model registered on a transfer session with its joints' zero offsets refitted too. The
+/// session's readings are split into alternate poses in measuring order; each half registers
+/// the model (base and tools; base, tools and zeros) and the other half is scored. A robot
+/// re-mastered between the set-ups, or whose zeros drifted, differs there by a constant angle
+/// per joint that a base-and-tool registration cannot take.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct ZerosRefitOut {
+    /// Held-out |e| with base and tools registered, mm; `null` when a registration failed.
+    pub held_out_base_tool: Option<StatsOut>,
+    /// Held-out |e| with base, tools and the joints' zeros registered, mm; `null` when a
+    /// registration failed.
+    pub held_out_with_zeros: Option<StatsOut>,
+    /// The change from the first to the second, paired reading by reading (negative: the zeros'
+    /// registration predicts better); `null` with too few readings.
+    pub change: Option<PairedChangeOut>,
+    /// Each zero offset the registration on the whole session identifies: its change from the
+    /// model's value, with its standard deviation.
+    pub zero_shifts: Vec<ZeroShiftOut>,
+    /// Why a registration failed; `null` when none did.
+    pub error: Option<String>,
+}
+
+/// A joint's zero offset as a transfer session registers it, against the model's.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct ZeroShiftOut {
+    /// The parameter (`theta2`).
+    pub parameter: String,
+    /// Registered value − the model's, degrees.
+    pub change_deg: f64,
+    /// Its standard deviation (the registration's and the model's own, from disjoint data,
+    /// combined), degrees.
+    pub std_deg: f64,
 }
 
 /// A transfer's change of the mean |e| from the starting model's, paired reading by reading.
@@ -973,16 +1014,44 @@ pub fn diagnosis_out(d: &Diagnosis) -> DiagnosisOut {
                     outside: r.outside.as_ref().map(stats),
                 }),
                 held_in_every_refit: t.held.clone(),
-                change_from_start: t.change.as_ref().map(|c| PairedChangeOut {
-                    mean_mm: round_to(c.mean / MM, OUT_MM),
-                    standard_error_mm: round_to(c.se / MM, OUT_MM),
-                    n: c.n,
-                    batches: c.batches,
+                change_from_start: t.change.as_ref().map(paired_change_out),
+                zeros_refitted: t.zeros.as_ref().map(|z| match z {
+                    Ok(z) => ZerosRefitOut {
+                        held_out_base_tool: Some(stats(&z.base_tool)),
+                        held_out_with_zeros: Some(stats(&z.with_zeros)),
+                        change: z.change.as_ref().map(paired_change_out),
+                        zero_shifts: z
+                            .shifts
+                            .iter()
+                            .map(|(n, d, sd)| ZeroShiftOut {
+                                parameter: n.clone(),
+                                change_deg: round_to(d / DEG, OUT_DEG),
+                                std_deg: round_to(sd / DEG, OUT_DEG),
+                            })
+                            .collect(),
+                        error: None,
+                    },
+                    Err(e) => ZerosRefitOut {
+                        held_out_base_tool: None,
+                        held_out_with_zeros: None,
+                        change: None,
+                        zero_shifts: Vec::new(),
+                        error: Some(e.clone()),
+                    },
                 }),
             })
             .collect(),
         evidence: d.evidence.iter().map(evidence_out).collect(),
         notes,
+    }
+}
+
+fn paired_change_out(c: &crate::diagnose::PairedChange) -> PairedChangeOut {
+    PairedChangeOut {
+        mean_mm: round_to(c.mean / MM, OUT_MM),
+        standard_error_mm: round_to(c.se / MM, OUT_MM),
+        n: c.n,
+        batches: c.batches,
     }
 }
 

@@ -80,7 +80,7 @@ pub struct IdentifySpec {
     pub huber: Option<f64>,
     /// Length weighting orientation residuals of full-pose measurements, mm per rad.
     pub rotation_weight_mm: f64,
-    /// Free only these parameters (names, or the groups `base` and `tool`); empty: all.
+    /// Free only these parameters (names, or the groups `base`, `tool` and `zeros`, the joints' zero offsets); empty: all.
     pub only: Vec<String>,
     /// Measurements left out of the fit (outliers).
     pub exclude: Vec<MeasurementRef>,

@@ -173,9 +173,11 @@ pub struct IdentifyOptions {
     /// registration): a new setup is what re-identifying from a calibrated set is for.
     pub start: Option<ParameterSet>,
     /// When non-empty, only these parameters are free; every other one is fixed (at its start
-    /// value). Items are parameter names (`a2`, `tool2_x`) or the groups `base` (base_x … base_c)
-    /// and `tool` (every tool's six). `["base", "tool"]` re-registers a calibrated robot in a new
-    /// cell, or gives the "before calibration" reference of a cell without a base guess.
+    /// value). Items are parameter names (`a2`, `tool2_x`) or the groups `base` (base_x … base_c),
+    /// `tool` (every tool's six) and `zeros` (the joints' zero offsets θ1 … θn). `["base", "tool"]`
+    /// re-registers a calibrated robot in a new cell, or gives the "before calibration" reference
+    /// of a cell without a base guess; `["base", "tool", "zeros"]` re-registers it after its
+    /// joints were re-mastered (or their zeros drifted) as well.
     pub only: Vec<String>,
     /// Weight every measurement by its instrument's σ (weighted least squares); `None` = every
     /// residual row weighs the same (the thesis's plain least squares).

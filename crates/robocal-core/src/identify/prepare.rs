@@ -346,8 +346,9 @@ fn fixed_by_model(problem: &Problem, opts: &IdentifyOptions) -> HashMap<usize, F
     fixed
 }
 
-/// Every parameter not named by [`IdentifyOptions::only`] (a name, or the groups `base` and
-/// `tool`) is fixed at its start value; a reason already given stays.
+/// Every parameter not named by [`IdentifyOptions::only`] (a name, or the groups `base`, `tool`
+/// and `zeros`, the joints' zero offsets θ1…θn) is fixed at its start value; a reason already
+/// given stays.
 fn fix_all_but_only(
     problem: &Problem,
     opts: &IdentifyOptions,
@@ -359,6 +360,7 @@ fn fix_all_but_only(
             .filter(|&g| match (item.as_str(), problem.params[g]) {
                 ("base", GlobalParam::Robot(i)) => matches!(problem.layout.params()[i], Param::Base(_)),
                 ("tool", GlobalParam::Tool { .. }) => true,
+                ("zeros", GlobalParam::Robot(i)) => matches!(problem.layout.params()[i], Param::Theta(_)),
                 (name, _) => problem.name(g) == name,
             })
             .collect();
@@ -366,7 +368,7 @@ fn fix_all_but_only(
             return Err(IdentifyError::item(
                 "only",
                 i,
-                format!("'{item}' is neither a parameter of this problem nor a group (base, tool)"),
+                format!("'{item}' is neither a parameter of this problem nor a group (base, tool, zeros)"),
             ));
         }
         hits.into_iter().for_each(|g| keep[g] = true);

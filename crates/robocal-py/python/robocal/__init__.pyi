@@ -420,7 +420,7 @@ def identify(
 
     ``model``: the CLI's ``--model`` (empty: geometry + β + compliance; e.g. ``"-compliance"``,
     ``"+cyc2_h1,+backlash2"``). ``fix``: parameters held at nominal (``["a2", "tool_x"]``);
-    ``only``: the only free parameters (names, or the groups ``"base"`` and ``"tool"``).
+    ``only``: the only free parameters (names, or the groups ``"base"``, ``"tool"`` and ``"zeros"``, the joints' zero offsets).
     ``kappa_limit`` (default 1000), ``huber`` (Huber threshold in robust σ; default plain least
     squares), ``residual_ratio_limit`` (default 50; ``float("inf")`` never refuses).
     ``exclude``: measurements left out, ``(session, index)`` with the 0-based index into
