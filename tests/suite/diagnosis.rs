@@ -226,6 +226,20 @@ fn ur10_fine_joint_structure_on_joints_1_to_3() {
     assert!(out.notes.iter().any(|n| n.starts_with("series-D: tool_z held at each model's value")), "{:?}", out.notes);
     let d_final = out.transfer.iter().find(|t| t.session == "series-D" && t.model == "final").unwrap();
     assert_eq!(d_final.held_in_every_refit, ["tool_z"]);
+    // The report's table of the zeros' registration carries the verdict's figures.
+    let html = robocal::report::diagnosis_report(&out);
+    let b_start = out.transfer.iter().find(|t| t.session == "series-B" && t.model == "start").unwrap();
+    let z = b_start.zeros_refitted.as_ref().unwrap();
+    let theta2 = z.zero_shifts.iter().find(|x| x.parameter == "theta2").unwrap();
+    assert!(
+        html.contains("Registered with the joints&#39; zeros too")
+            || html.contains("Registered with the joints' zeros too")
+    );
+    let with_zeros = z.held_out_with_zeros.as_ref().unwrap().figures.mean_mm;
+    let shift = format!("theta2 {:+.4} ± {:.4}°", theta2.change_deg, theta2.std_deg);
+    assert!(html.contains(&format!("<td class=\"n\">{with_zeros:.3}</td>")), "{with_zeros:.3} mm not in the report");
+    assert!(v.summary.contains(&format!("→ {with_zeros:.4} mm")), "{with_zeros:.4} mm not in the verdict");
+    assert!(html.contains(&shift) && v.summary.contains(&shift), "{shift} not in the report and the verdict");
 }
 
 /// Accepting a named effect gives a parameter set whose model carries it; compensating targets

@@ -86,7 +86,7 @@ fn start_terms_missing(cell: &Cell, opts: &IdentifyOptions) -> Vec<Param> {
 /// registration) dropped them without a word, and the parameter set written and the figures
 /// described a model without its tables (the UR10's set with tables j2, j1, j3, j5 and a cyclic
 /// j1 term, re-registered on series D: 0.348 mm, the same geometry without its terms, where the
-/// set itself reads 0.453 mm). Without `only` the model is the caller's choice: the options
+/// set itself reads 0.449 mm). Without `only` the model is the caller's choice: the options
 /// stand and the note says what the start set had that this fit leaves out.
 pub(crate) fn carry_start_terms(cell: &Cell, opts: &IdentifyOptions) -> Option<(Option<IdentifyOptions>, String)> {
     let missing = start_terms_missing(cell, opts);
