@@ -1350,13 +1350,22 @@ fn zeros_clause(transfer: &[Transfer]) -> Option<String> {
     } else {
         format!(
             " — on {} registering the zeros too predicts held-out poses better beyond twice its uncertainty, with zeros beyond 3 σ from the model's: a robot re-mastered between the set-ups, or whose zeros drifted, does that, and so does a model error outside the identification's joint ranges that looks like a zero; this session alone does not tell them apart (where the robot was re-mastered, re-register it with `only: base, tool, zeros`)",
-            gained.join(", ")
+            and_list(&gained)
         )
     };
     Some(format!(
         "each half of alternate poses registering the model and the other half scored, base and tools → with the joints' zeros too: {}{moved}{meaning}",
         parts.join(", ")
     ))
+}
+
+/// Names joined as English writes them: "B", "B and D", "B, C and D".
+fn and_list(names: &[String]) -> String {
+    match names {
+        [] => String::new(),
+        [one] => one.clone(),
+        [init @ .., last] => format!("{} and {last}", init.join(", ")),
+    }
 }
 
 /// The start model, each intermediate model of the search and the final one carried to each
@@ -1393,22 +1402,7 @@ fn transfers(
             models.push(("final".to_string(), model.model.clone(), fin));
         }
         let carry = |m: &ModelOptions, set: &ParameterSet, held: &[String]| -> Result<Carried, String> {
-            let mut fixed = opts.transfer_fixed.clone();
-            for h in held {
-                if !fixed.contains(h) {
-                    fixed.push(h.clone());
-                }
-            }
-            let mut o = IdentifyOptions {
-                model: m.clone(),
-                start: Some(set.clone()),
-                only: vec!["base".into(), "tool".into()],
-                fixed,
-                kappa_limit: opts.transfer_kappa_limit,
-                rotation_weight: opts.rotation_weight,
-                ..unrefused()
-            };
-            o.selection.sessions = vec![t.clone()];
+            let o = registration_options(m, set, t, &transfer_fixed(opts, held), opts, false, Vec::new());
             let id = identify(work, &o).map_err(|e| e.to_string())?;
             let r = validate(&id.set, work, std::slice::from_ref(t), Reference::Measured).map_err(|e| e.to_string())?;
             Ok(Carried {
@@ -1443,12 +1437,7 @@ fn transfers(
         let start_readings = carried[0].as_ref().ok().map(|c| c.per_reading.clone());
         for ((name, m, set), c) in models.into_iter().zip(carried) {
             let zeros = (name == "start" || name == "final").then(|| {
-                let mut fixed = opts.transfer_fixed.clone();
-                for h in &held {
-                    if !fixed.contains(h) {
-                        fixed.push(h.clone());
-                    }
-                }
+                let fixed = transfer_fixed(opts, &held);
                 // The model's own σ of each zero: the accepted identification's, or its stage's.
                 let stage = if name == "start" { s.stages.first() } else { s.stages.last() };
                 let model_std = |p: Param| match (name == "final", accepted) {
@@ -1476,6 +1465,49 @@ fn transfers(
     Ok(transfer)
 }
 
+/// The transfer's held parameters: the caller's `transfer_fixed` and those held for every model
+/// (`held`), each once.
+fn transfer_fixed(opts: &DiagnoseOptions, held: &[String]) -> Vec<String> {
+    let mut fixed = opts.transfer_fixed.clone();
+    for h in held {
+        if !fixed.contains(h) {
+            fixed.push(h.clone());
+        }
+    }
+    fixed
+}
+
+/// The options that re-register `set` (of `model`) on transfer session `t`: base and tools free
+/// (and the joints' zeros with `zeros`), `fixed` held, the transfer's κ limit and rotation
+/// weight, the readings `exclude` left out. Every registration of a transfer is built here, so
+/// the figures compared are of the same registration.
+fn registration_options(
+    model: &ModelOptions,
+    set: &ParameterSet,
+    t: &str,
+    fixed: &[String],
+    opts: &DiagnoseOptions,
+    zeros: bool,
+    exclude: Vec<(String, usize)>,
+) -> IdentifyOptions {
+    let mut only: Vec<String> = vec!["base".into(), "tool".into()];
+    if zeros {
+        only.push("zeros".into());
+    }
+    let mut o = IdentifyOptions {
+        model: model.clone(),
+        start: Some(set.clone()),
+        only,
+        fixed: fixed.to_vec(),
+        kappa_limit: opts.transfer_kappa_limit,
+        rotation_weight: opts.rotation_weight,
+        ..unrefused()
+    };
+    o.selection.sessions = vec![t.to_string()];
+    o.selection.exclude = exclude;
+    o
+}
+
 /// The joint-zero registration of a model on transfer session `t` ([`ZerosRefit`]): two
 /// registrations (base and tools; base, tools and zeros) on each half of alternate poses, each
 /// scored on the other half, and the zeros' changes from one registration on the whole session.
@@ -1489,22 +1521,7 @@ fn zeros_refit(
     model_std: &dyn Fn(Param) -> Option<f64>,
 ) -> Result<ZerosRefit, String> {
     let register = |zeros: bool, exclude: Vec<(String, usize)>| {
-        let mut only: Vec<String> = vec!["base".into(), "tool".into()];
-        if zeros {
-            only.push("zeros".into());
-        }
-        let mut o = IdentifyOptions {
-            model: model.clone(),
-            start: Some(set.clone()),
-            only,
-            fixed: fixed.to_vec(),
-            kappa_limit: opts.transfer_kappa_limit,
-            rotation_weight: opts.rotation_weight,
-            ..unrefused()
-        };
-        o.selection.sessions = vec![t.to_string()];
-        o.selection.exclude = exclude;
-        identify(work, &o).map_err(|e| e.to_string())
+        identify(work, &registration_options(model, set, t, fixed, opts, zeros, exclude)).map_err(|e| e.to_string())
     };
     let n = work.session(t).map_or(0, |s| s.measurements.len());
     // Per registration, |e| per held-out reading (index in the session).
@@ -1620,4 +1637,18 @@ fn auto_voxel(p: &[Vector3<f64>]) -> f64 {
     let volume = d.x.max(0.01) * d.y.max(0.01) * d.z.max(0.01);
     let edge = (volume * 10.0 / p.len() as f64).cbrt();
     ((edge / 0.01).round() * 0.01).max(0.02)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::and_list;
+
+    #[test]
+    fn names_are_joined_as_english_writes_them() {
+        let s = |v: &[&str]| and_list(&v.iter().map(|x| x.to_string()).collect::<Vec<_>>());
+        assert_eq!(s(&[]), "");
+        assert_eq!(s(&["series-B"]), "series-B");
+        assert_eq!(s(&["series-B", "series-D"]), "series-B and series-D");
+        assert_eq!(s(&["a", "b", "c"]), "a, b and c");
+    }
 }
