@@ -275,8 +275,13 @@ fn table(e: &Evaluation) -> String {
             opt(m.rp_l_max_mm, 3)
         ));
         if let Some(g) = &r.registration {
+            let held = if g.held.is_empty() {
+                String::new()
+            } else {
+                format!(", {} held at its start value in both models' registrations", g.held.join(", "))
+            };
             s.push_str(&format!(
-                "  registration: κ (scaled) {:.0}, position RMS {:.3} mm\n",
+                "  registration: κ (scaled) {:.0}, position RMS {:.3} mm{held}\n",
                 g.kappa_scaled, g.rms_position_mm
             ));
         }

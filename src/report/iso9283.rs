@@ -50,6 +50,7 @@ pub fn render(session: &str, nominal: &IsoReport, calibrated: Option<&IsoReport>
             opt(s.rp_l_max_mm, 3),
             r.registration.as_ref().map_or("—".into(), |g| sig(g.kappa_scaled)),
             r.registration.as_ref().map_or("—".into(), |g| fixed(g.rms_position_mm, 3)),
+            r.registration.as_ref().filter(|g| !g.held.is_empty()).map_or("—".into(), |g| esc(&g.held.join(", "))),
         ]);
     }
     b.push_str(&table(
@@ -63,9 +64,10 @@ pub fn render(session: &str, nominal: &IsoReport, calibrated: Option<&IsoReport>
             "RP_l max (mm)",
             "registration κ (scaled)",
             "registration RMS (mm)",
+            "held in both registrations",
         ],
         &rows,
-        &[false, true, true, true, true, true, true, true],
+        &[false, true, true, true, true, true, true, true, false],
     ));
 
     b.push_str("<h2>Poses with at least two cycles</h2>");

@@ -222,7 +222,7 @@ fn ur10_series_d_table() {
     let calibrated = identify(&cell, &opts).unwrap().set;
     let pairs: Vec<(String, String)> = (2..=9).map(|k| ("D001".to_string(), format!("D{k:03}"))).collect();
     let run = |set, name: &str| -> IsoReport {
-        let e = evaluate_session(&cell, "series-D", set, &assignments, 1e4).unwrap();
+        let e = evaluate_session(&cell, "series-D", set, &assignments, 1e4, &[]).unwrap();
         report(name, &e.visits, &pairs, Some(&e.registration)).unwrap()
     };
     let nominal = run(None, "nominal");
@@ -246,6 +246,84 @@ fn ur10_series_d_table() {
     close(nominal.summary.ap_p_mean_mm, 0.721, 0.03, "nominal AP mean");
     close(cal.summary.ap_p_mean_mm, 0.497, 0.03, "calibrated AP mean");
     eprintln!("series D ISO table in {:.1} s", started.elapsed().as_secs_f64());
+}
+
+/// Both models are registered with the same freedoms. With a set carrying the UR10's correction
+/// tables (tables j2, j1, j3, j5 and the periodic j1 term, identified on series C), series D's
+/// registration left the probe's z at σ 9.3 mm and freed it (κ 2,100, z moved 48 mm along base x),
+/// where the nominal model's registration found it undetermined (σ 11 mm) and held it (κ 7):
+/// AP compared the two with different freedoms. Now what one registration held is held in both,
+/// and the figures are those of the registration done by hand with it held (`identify` with
+/// `only: base, tool` and `fixed: tool_z`, then `validate`: another code path).
+#[test]
+fn both_models_are_registered_with_the_same_freedoms() {
+    use robocal::domain::iso9283::evaluate;
+    use robocal::identify::ModelOptions;
+    use robocal::units::MM;
+    use robocal::validate::report::{Reference, validate};
+    let cell = import_cell(
+        &[(series("C"), Purpose::Identification), (series("D"), Purpose::Validation)],
+        &Ur10Options::default(),
+    )
+    .unwrap()
+    .cell;
+    let mut assignments = assign_poses(&read_series_goals(&series("D")).unwrap());
+    assignments.sort_by_key(|a| a.index);
+    let mut opts = IdentifyOptions {
+        model: ModelOptions::parse("+map2_s2,+map1_s3,+map3_s3,+cyc1_f22.75,+map5_s3", 6).unwrap(),
+        ..Default::default()
+    };
+    opts.selection.sessions = vec!["series-C".into()];
+    let set = identify(&cell, &opts).unwrap().set;
+
+    // Each registration on its own: the calibrated one frees the probe's z, the nominal holds it.
+    let alone = evaluate_session(&cell, "series-D", Some(&set), &assignments, 1e4, &[]).unwrap().registration;
+    let nominal_alone = evaluate_session(&cell, "series-D", None, &assignments, 1e4, &[]).unwrap().registration;
+    eprintln!(
+        "alone: calibrated κ {:.0} free {:?}; nominal κ {:.0}",
+        alone.kappa_scaled, alone.free, nominal_alone.kappa_scaled
+    );
+    assert!(alone.free.iter().any(|n| n == "tool_z") && alone.kappa_scaled > 1000.0, "{alone:?}");
+    assert!(!nominal_alone.free.iter().any(|n| n == "tool_z") && nominal_alone.kappa_scaled < 100.0);
+
+    let e = evaluate(&cell, "series-D", Some(&set), &assignments, &[], 1e4).unwrap();
+    let cal = e.calibrated.as_ref().unwrap();
+    for r in [&e.nominal, cal] {
+        let g = r.registration.as_ref().unwrap();
+        assert_eq!(g.held, vec!["tool_z".to_string()], "{}", r.model);
+        assert!(g.kappa_scaled < 100.0, "{}: κ {}", r.model, g.kappa_scaled);
+        assert!(r.notes.iter().any(|n| n.contains("tool_z held at its start value in both")), "{:?}", r.notes);
+    }
+    // The nominal registration held the probe's z already: unchanged.
+    close(
+        e.nominal.registration.as_ref().unwrap().rms_position_mm,
+        nominal_alone.rms_position / MM,
+        1e-9,
+        "nominal RMS",
+    );
+
+    let mut by_hand = IdentifyOptions {
+        start: Some(set.clone()),
+        only: vec!["base".into(), "tool".into()],
+        fixed: vec!["tool_z".into()],
+        residual_ratio_limit: f64::INFINITY,
+        kappa_limit: 1e4,
+        ..Default::default()
+    };
+    by_hand.selection.sessions = vec!["series-D".into()];
+    let refit = identify(&cell, &by_hand).unwrap();
+    let v = validate(&refit.set, &cell, &["series-D".into()], Reference::Measured).unwrap();
+    let g = cal.registration.as_ref().unwrap();
+    eprintln!(
+        "calibrated: registration RMS {:.4} mm (by hand {:.4}), AP mean {:.4} mm; tool z free: RMS {:.4} mm",
+        g.rms_position_mm,
+        v.calibrated.position.rms / MM,
+        cal.summary.ap_p_mean_mm,
+        alone.rms_position / MM
+    );
+    close(g.rms_position_mm, v.calibrated.position.rms / MM, 1e-6, "calibrated registration RMS, by hand");
+    let z = refit.tools.iter().find(|t| t.sessions.iter().any(|n| n == "series-D")).unwrap().tool.tcp[2];
+    close(g.tool_xyz_mm[2], z / MM, 1e-6, "probe z held");
 }
 
 fn robocal(args: &[&str], dir: &std::path::Path) -> std::process::Output {

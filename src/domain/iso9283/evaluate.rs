@@ -47,6 +47,11 @@ pub struct Registration {
     pub kappa_scaled: f64,
     /// RMS of the position residual after the registration, m.
     pub rms_position: f64,
+    /// The registration's free parameters, by name (a base or tool parameter the data leave
+    /// undetermined is held at its start value and is not among them).
+    pub free: Vec<String>,
+    /// The parameters the caller asked to hold ([`evaluate_session`]'s `held`).
+    pub held: Vec<String>,
 }
 
 /// The evaluated visits and how they were registered.
@@ -69,14 +74,16 @@ pub enum EvaluateError {
     Registration(String),
 }
 
-/// Register base and tool of `session` with `set` (nominal model when `None`) and pair each
-/// assigned measurement with the model's prediction, both in the base frame.
+/// Register base and tool of `session` with `set` (nominal model when `None`), the base or tool
+/// parameters `held` kept at their start values, and pair each assigned measurement with the
+/// model's prediction, both in the base frame.
 pub fn evaluate_session(
     cell: &Cell,
     session: &str,
     set: Option<&ParameterSet>,
     assignments: &[Assignment],
     kappa_limit: f64,
+    held: &[String],
 ) -> Result<Evaluated, EvaluateError> {
     let s: &Session = cell.session(session).ok_or_else(|| EvaluateError::UnknownSession(session.to_string()))?;
     for (row, a) in assignments.iter().enumerate() {
@@ -97,6 +104,7 @@ pub fn evaluate_session(
         only: vec!["base".into(), "tool".into()],
         residual_ratio_limit: f64::INFINITY,
         kappa_limit,
+        fixed: held.to_vec(),
         ..Default::default()
     };
     opts.selection.sessions = vec![session.to_string()];
@@ -132,6 +140,13 @@ pub fn evaluate_session(
     let rms_position = if visits.is_empty() { 0.0 } else { (sq / visits.len() as f64).sqrt() };
     Ok(Evaluated {
         visits,
-        registration: Registration { base, tool, kappa_scaled: id.quality.kappa_scaled, rms_position },
+        registration: Registration {
+            base,
+            tool,
+            kappa_scaled: id.quality.kappa_scaled,
+            rms_position,
+            free: id.free_names.clone(),
+            held: held.to_vec(),
+        },
     })
 }
