@@ -179,6 +179,10 @@ pub struct TransferFigures {
     pub session: String,
     pub errors: Outcome,
     pub kappa_scaled: Option<f64>,
+    /// Base or tool parameters held in every model's refit on this session because some refit
+    /// left them undetermined (the notes say so too).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub held: Vec<String>,
 }
 
 fn orientation_figures(o: &Option<crate::validate::stats::ErrorStats>) -> Option<OrientationFigures> {
@@ -334,6 +338,7 @@ impl CrossvalReport {
                     session: t.session.clone(),
                     errors: Outcome::of(&t.errors, false),
                     kappa_scaled: t.kappa_scaled,
+                    held: t.held.clone(),
                 })
                 .collect(),
             quartiles: "min, q1, median, q3, max over the draws",

@@ -396,3 +396,59 @@ fn a_re_registration_carries_the_sets_own_terms() {
     let note = refit.notes.iter().find(|n| n.contains("are not in this model")).expect("a note");
     assert!(note.contains("+map2_s2"), "{note}");
 }
+
+/// `crossval --transfer` registers every model on a transfer session with the same freedoms.
+/// On series D the probe's z is at the edge of determined (σ ≈ 10 mm along base x): the refits of
+/// "before" and the default model held it (κ 7), that of a model with the tables j2, j1, j3, j5
+/// and the periodic j1 term freed it (κ 2,055), so the table compared models registered
+/// differently. Now what some refit held is held in all, a note says so, and the table model's
+/// figure is that of its registration done by hand with the probe's z held (`identify` with
+/// `only: base, tool` and `fixed: tool_z`, then `validate`).
+#[test]
+fn a_transfer_registers_every_model_with_the_same_freedoms() {
+    use robocal::validate::report::{Reference, validate};
+    let cell = import_cell(
+        &[(series("C"), Purpose::Identification), (series("D"), Purpose::Validation)],
+        &Ur10Options::default(),
+    )
+    .unwrap()
+    .cell;
+    let model = ModelOptions::parse("+map2_s2,+map1_s3,+map3_s3,+cyc1_f22.75,+map5_s3", 6).unwrap();
+    let tables =
+        Variant { name: "tables".into(), options: IdentifyOptions { model: model.clone(), ..Default::default() } };
+    let default = Variant { name: "default".into(), options: IdentifyOptions::default() };
+    let cv = crossval(
+        &cell,
+        &CrossvalOptions {
+            transfer: vec!["series-D".into()],
+            transfer_kappa_limit: Some(1e4),
+            ..options(vec![default, tables])
+        },
+    )
+    .unwrap();
+    for t in &cv.transfer {
+        eprintln!("{} on {}: κ {:?}, held {:?}", t.variant, t.session, t.kappa_scaled, t.held);
+        assert_eq!(t.held, vec!["tool_z".to_string()], "{}", t.variant);
+        assert!(t.kappa_scaled.is_some_and(|k| k < 100.0), "{}: κ {:?}", t.variant, t.kappa_scaled);
+    }
+    assert!(cv.notes.iter().any(|n| n.contains("'series-D': tool_z held")), "{:?}", cv.notes);
+    let carried = cv.transfer.iter().find(|t| t.variant == "tables").unwrap().errors.as_ref().unwrap().position.mean;
+
+    let mut o = IdentifyOptions { model, ..Default::default() };
+    o.selection.sessions = vec!["series-C".into()];
+    let set = identify(&cell, &o).unwrap().set;
+    let mut r = IdentifyOptions {
+        start: Some(set),
+        only: vec!["base".into(), "tool".into()],
+        fixed: vec!["tool_z".into()],
+        kappa_limit: 1e4,
+        ..Default::default()
+    };
+    r.selection.sessions = vec!["series-D".into()];
+    let refit = identify(&cell, &r).unwrap();
+    assert!(!refit.free_names.iter().any(|n| n == "tool_z"));
+    let by_hand =
+        validate(&refit.set, &cell, &["series-D".into()], Reference::Measured).unwrap().calibrated.position.mean;
+    eprintln!("series D, tables: crossval {:.4} mm, by hand {:.4} mm", carried / MM, by_hand / MM);
+    assert!((carried - by_hand).abs() <= 1e-6 * by_hand, "crossval {carried} vs by hand {by_hand}");
+}

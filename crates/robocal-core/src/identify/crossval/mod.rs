@@ -155,6 +155,10 @@ pub struct TransferResult {
     pub errors: Result<HeldOut, String>,
     /// κ of the column-scaled Jacobian of the base-and-tools refit.
     pub kappa_scaled: Option<f64>,
+    /// Base or tool parameters held in every variant's refit on this session because some refit
+    /// left them undetermined (beyond the options' `transfer_fixed`): one registration's freedoms
+    /// for every model compared.
+    pub held: Vec<String>,
 }
 
 /// Everything a cross-validation run measured.
@@ -401,6 +405,7 @@ impl Split<'_> {
             scored,
             unscored,
             identified: id.free_names.len(),
+            free: id.free_names.clone(),
             kappa_scaled: id.quality.kappa_scaled,
             above_limit,
         })
@@ -500,7 +505,13 @@ fn without_excluded<'s>(
 }
 
 /// Identify on all the measurements of `session` with `options` and score the model there.
-fn fit_and_score_whole(cell: &Cell, session: &Session, options: &IdentifyOptions) -> Result<(HeldOut, f64), Refusal> {
+/// Fit `options` on the whole of `session` and score it there: the errors, κ and the fit's free
+/// parameters by name.
+fn fit_and_score_whole(
+    cell: &Cell,
+    session: &Session,
+    options: &IdentifyOptions,
+) -> Result<(HeldOut, f64, Vec<String>), Refusal> {
     let all: Vec<usize> = (0..session.measurements.len()).collect();
     let split = Split {
         sessions: vec![session],
@@ -508,7 +519,9 @@ fn fit_and_score_whole(cell: &Cell, session: &Session, options: &IdentifyOptions
         items: all.iter().map(|&i| (0, i)).collect(),
         members: all.iter().map(|&i| vec![i]).collect(),
     };
-    split.fit_and_score(cell, &all, &all, options)
+    let e = split.fold_errors(cell, &all, &all, options, false)?;
+    let h = HeldOut::of(&e.scored, &split.names, &e.unscored).ok_or_else(|| Refusal::plain(NOTHING_SCORED))?;
+    Ok((h, e.kappa_scaled, e.free))
 }
 
 /// Per-measurement errors of one fit on its test set.
@@ -517,6 +530,8 @@ struct FoldErrors {
     /// Test measurements not scored, their TCP unknown ([`Split::unknown_tcp`]): (session, count).
     unscored: Vec<(usize, usize)>,
     identified: usize,
+    /// The fit's free parameters, by name.
+    free: Vec<String>,
     kappa_scaled: f64,
     /// (κ, the limit) when the fit was refused for its κ alone and fitted again without the limit
     /// (a k-fold fold: [`Split::fold_errors`]).
@@ -862,8 +877,7 @@ fn transfer(
     let on = split.names.join(", ");
     let jobs: Vec<(usize, usize)> =
         (0..variants.len()).flat_map(|v| (0..opts.transfer.len()).map(move |t| (v, t))).collect();
-    let results = par_map(&jobs, opts.threads, |&(v, t)| {
-        let _done = Tick(tick);
+    let refit = |v: usize, t: usize, held: &[String]| {
         let id = fitted[v].as_ref().map_err(|e| Refusal::plain(format!("identification on '{on}': {e}")))?;
         let target = cell.session(&opts.transfer[t]).expect("checked above");
         let mut o = IdentifyOptions {
@@ -872,17 +886,58 @@ fn transfer(
             selection: Default::default(),
             ..variants[v].options.clone()
         };
-        o.fixed.extend(opts.transfer_fixed.iter().cloned());
+        for n in opts.transfer_fixed.iter().chain(held) {
+            if !o.fixed.contains(n) {
+                o.fixed.push(n.clone());
+            }
+        }
         if let Some(k) = opts.transfer_kappa_limit {
             o.kappa_limit = k;
         }
         fit_and_score_whole(cell, target, &o)
+    };
+    let mut results = par_map(&jobs, opts.threads, |&(v, t)| {
+        let _done = Tick(tick);
+        refit(v, t, &[])
     });
+    // One registration's freedoms for every model on a session. A base or tool parameter the
+    // session's data leave at the edge of determined (the UR10 probe's z on series D, σ ≈ 10 mm
+    // along base x) is held by some refits and freed by others (κ 7 against 2,055), and the
+    // models would be compared with different freedoms. What some refit held is held in all.
+    let mut held: Vec<Vec<String>> = vec![Vec::new(); opts.transfer.len()];
+    for (t, h) in held.iter_mut().enumerate() {
+        let free: Vec<&Vec<String>> = jobs
+            .iter()
+            .zip(&results)
+            .filter(|((_, jt), _)| *jt == t)
+            .filter_map(|(_, r)| r.as_ref().ok().map(|x| &x.2))
+            .collect();
+        for n in free.iter().flat_map(|f| f.iter()) {
+            if !h.contains(n) && !free.iter().all(|f| f.contains(n)) {
+                h.push(n.clone());
+            }
+        }
+    }
+    let again: Vec<usize> = (0..jobs.len())
+        .filter(|&k| results[k].as_ref().is_ok_and(|x| x.2.iter().any(|n| held[jobs[k].1].contains(n))))
+        .collect();
+    let redone = par_map(&again, opts.threads, |&k| refit(jobs[k].0, jobs[k].1, &held[jobs[k].1]));
+    for (k, r) in again.into_iter().zip(redone) {
+        results[k] = r;
+    }
+    for (t, h) in held.iter().enumerate().filter(|(_, h)| !h.is_empty()) {
+        found.notes.push(format!(
+            "transfer to '{}': {} held at its start value in every model's refit there (some refit left it \
+             undetermined by that session's data), so the models are compared with the same freedoms",
+            opts.transfer[t],
+            h.join(", ")
+        ));
+    }
     jobs.iter()
         .zip(results.into_iter().map(|r| found.keep(r)))
         .map(|(&(v, t), r)| {
             let (errors, kappa_scaled) = match r {
-                Ok((h, k)) => (Ok(h), Some(k)),
+                Ok((h, k, _)) => (Ok(h), Some(k)),
                 Err(e) => (Err(e), None),
             };
             TransferResult {
@@ -890,6 +945,7 @@ fn transfer(
                 session: opts.transfer[t].clone(),
                 errors,
                 kappa_scaled,
+                held: held[t].clone(),
             }
         })
         .collect()
