@@ -639,6 +639,17 @@ impl Identification {
         }
     }
 
+    /// Per parameter held because the data leave it undetermined (`quality["conditional"]` of the
+    /// parameter-set file): dicts with `held`, `unit`, `value` (where it is held), `std` (what the
+    /// data would leave it) and `moves`, the free parameters whose values and σ assume that value
+    /// (one σ of it would move them beyond their own): `name`, `unit`, `per_unit` (their shift per
+    /// unit of the held one), `std`. Empty when nothing is held for want of information.
+    #[getter]
+    fn conditional<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let c = self.doc.quality.as_ref().and_then(|q| q.conditional.clone()).unwrap_or_default();
+        crate::calibration::to_python(py, &c)
+    }
+
     /// What was derived rather than given, in sentences.
     #[getter]
     fn notes(&self) -> Vec<String> {

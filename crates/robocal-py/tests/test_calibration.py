@@ -13,6 +13,7 @@ References:
 """
 
 import json
+import pathlib
 import math
 import subprocess
 
@@ -329,3 +330,35 @@ def test_an_undeclared_payload_is_read_beside_where_it_sits(tmp_path):
     assert free["std_kg"] > payload["std_kg"]
     run("identify", tmp_path / "cell.json", "--out", tmp_path / "set.json")
     assert (tmp_path / "set.json").read_text().rstrip("\n") == fitted.parameter_set.to_json()
+
+
+UR10 = pathlib.Path(__file__).resolve().parents[3] / ".." / "shared" / "datasets" / "ur10-ipa"
+
+
+@pytest.mark.skipif(cli_binary() is None or not UR10.is_dir(),
+                    reason="needs the command-line binary and the UR10 data set (../shared)")
+def test_a_held_parameter_says_what_the_free_ones_assume_of_it(tmp_path):
+    """The UR10's series D registered with a set identified on series C holds the probe's z (the
+    data leave it ± 11 mm, one direction with base_x): `conditional` says base_x moves about a
+    millimetre per millimetre of it, as the file's quality["conditional"] and the notes do; and a
+    second registration with the start set's probe z 1 mm further moves base_x by that."""
+    subprocess.run([cli_binary(), "import", "ur10-ipa", "--series", f"{UR10 / 'Series_C'}:identification",
+                    "--series", f"{UR10 / 'Series_D'}:validation", "--out", tmp_path / "ur10.json"],
+                   check=True, capture_output=True)
+    cell = Cell.load(tmp_path / "ur10.json")
+    on_c = identify_cell(cell, sessions=["series-C"]).parameter_set
+    registered = identify_cell(cell, sessions=["series-D"], start=on_c, only=["base", "tool"], kappa_limit=1e4)
+    held = {c["held"]: c for c in registered.conditional}
+    assert registered.conditional == json.loads(registered.parameter_set.to_json())["quality"]["conditional"]
+    z = held["tool_z"]
+    assert z["unit"] == "mm" and z["std"] > 10.0
+    moves = {m["name"]: m for m in z["moves"]}
+    assert moves["base_x"]["unit"] == "mm" and 0.9 < moves["base_x"]["per_unit"] < 1.05
+    assert any(n.startswith("tool_z is held at") for n in registered.notes)
+    document = json.loads(on_c.to_json())
+    tool_z = next(p for p in document["parameters"] if p["name"] == "tool_z")
+    tool_z["value"] += 1.0
+    moved = identify_cell(cell, sessions=["series-D"], start=ParameterSet.from_json(json.dumps(document)),
+                          only=["base", "tool"], kappa_limit=1e4)
+    shift = moved.parameters["base_x"] - registered.parameters["base_x"]
+    assert shift == pytest.approx(moves["base_x"]["per_unit"], rel=2e-3)

@@ -9,8 +9,8 @@ use serde_json::Value;
 use super::identify_options::DetmaxSelection;
 use super::param_set::ParameterSetDoc;
 use super::quality::{
-    Downweighted, FitMeasurements, Observability, PayloadAtFlangeQuality, PayloadComQuality, PayloadQuality, Quality,
-    ToolQuality, WorstMeasurement,
+    ConditionalMove, ConditionalQuality, Downweighted, FitMeasurements, Observability, PayloadAtFlangeQuality,
+    PayloadComQuality, PayloadQuality, Quality, ToolQuality, WorstMeasurement,
 };
 use crate::cell::Cell;
 use crate::identify::{Identification, IdentifyError, IdentifyOptions};
@@ -260,6 +260,29 @@ pub fn identification_doc(
                 .collect(),
         ),
         payload,
+        conditional: (!id.conditional.is_empty()).then(|| {
+            id.conditional
+                .iter()
+                .map(|c| ConditionalQuality {
+                    held: c.held.clone(),
+                    unit: c.unit.to_string(),
+                    value: c.value,
+                    std: c.std,
+                    moves: c
+                        .moves
+                        .iter()
+                        .map(|(name, unit, per_unit, std)| ConditionalMove {
+                            name: name.clone(),
+                            unit: unit.to_string(),
+                            per_unit: *per_unit,
+                            std: *std,
+                            other: Default::default(),
+                        })
+                        .collect(),
+                    other: Default::default(),
+                })
+                .collect()
+        }),
         notes: Some(id.notes.clone()),
         diagnosis: None,
         other: Default::default(),

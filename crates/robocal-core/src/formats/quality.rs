@@ -134,6 +134,10 @@ pub struct Quality {
     /// when the sessions declare a payload or the model identifies none.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub payload: Option<PayloadQuality>,
+    /// Per parameter held because the data leave it undetermined, the free parameters whose
+    /// values and σ assume its held value: one σ of it would move them beyond their own.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub conditional: Option<Vec<ConditionalQuality>>,
     /// What the identification noted (parameters held, payload or compliances not determined, …).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub notes: Option<Vec<String>>,
@@ -234,6 +238,47 @@ pub struct Downweighted {
     pub index: usize,
     /// Its weight in the fit, 0–1; dimensionless.
     pub weight: f64,
+    /// Keys this version does not know, kept as they came.
+    #[serde(flatten)]
+    #[cfg_attr(feature = "openapi", schema(value_type = std::collections::HashMap<String, AnyJson>))]
+    pub other: Map<String, Value>,
+}
+
+/// A parameter held because the data leave it undetermined, and the free parameters whose values
+/// and σ assume its held value (`quality.conditional`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(default)]
+pub struct ConditionalQuality {
+    /// The held parameter's name.
+    pub held: String,
+    /// Its file unit (`mm`, `deg`, `kg`).
+    pub unit: String,
+    /// The value it is held at, in `unit`.
+    pub value: f64,
+    /// Its standard deviation as judged when it was held, in `unit`: what the data would leave it.
+    pub std: f64,
+    /// The free parameters it moves beyond their σ, largest first.
+    pub moves: Vec<ConditionalMove>,
+    /// Keys this version does not know, kept as they came.
+    #[serde(flatten)]
+    #[cfg_attr(feature = "openapi", schema(value_type = std::collections::HashMap<String, AnyJson>))]
+    pub other: Map<String, Value>,
+}
+
+/// A free parameter's least-squares shift per unit of a held one.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(default)]
+pub struct ConditionalMove {
+    /// The free parameter's name.
+    pub name: String,
+    /// Its file unit.
+    pub unit: String,
+    /// Its shift per unit of the held parameter (its unit per the held one's).
+    pub per_unit: f64,
+    /// Its own standard deviation as reported, in `unit`.
+    pub std: f64,
     /// Keys this version does not know, kept as they came.
     #[serde(flatten)]
     #[cfg_attr(feature = "openapi", schema(value_type = std::collections::HashMap<String, AnyJson>))]

@@ -62,6 +62,9 @@ pub struct Identification {
     /// What was derived rather than given, in sentences (e.g. approach directions taken from the
     /// measuring order).
     pub notes: Vec<String>,
+    /// Per parameter held because the data leave it undetermined, the free parameters whose
+    /// values and σ assume its held value (it would move them beyond their σ): [`super::Conditional`].
+    pub conditional: Vec<super::conditional::Conditional>,
 }
 
 impl Identification {
@@ -342,6 +345,8 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
         quality.rms_residual = weighted_rms(&problem, &fit);
     }
     let worst = judge_fit(&problem, cell, opts, &fit, &free, &mut quality)?;
+    let conditional = super::conditional::conditionals(&problem, &fit, &free, &status, &quality);
+    notes.extend(super::conditional::conditional_notes(&conditional));
 
     // The parameter set of the first tool, and every tool's result.
     let mut std_g = vec![None; problem.n_params()];
@@ -380,6 +385,7 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
         quality,
         x: fit.x,
         notes,
+        conditional,
         problem,
         free,
     })

@@ -14,6 +14,7 @@ pub(crate) mod quality;
 pub(crate) mod solver;
 pub mod study;
 
+mod conditional;
 mod error;
 mod fixed;
 mod hold;
@@ -24,6 +25,7 @@ mod pool;
 mod prepare;
 mod scale;
 
+pub use conditional::Conditional;
 pub(crate) use error::outliers_found;
 pub use error::{IdentifyError, Worst, outliers_message};
 pub use fixed::{FixedReason, ModelTerm, Structure};

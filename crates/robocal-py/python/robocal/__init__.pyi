@@ -312,6 +312,14 @@ class Identification:
         assumes or identifies. ``None`` when a payload is declared or the model has none."""
 
     @property
+    def conditional(self) -> list[dict[str, Any]]:
+        """Per parameter held because the data leave it undetermined: ``held``, ``unit``,
+        ``value`` (where it is held), ``std`` (what the data would leave it) and ``moves``, the
+        free parameters whose values and σ assume that value (one σ of it would move them beyond
+        their own): ``name``, ``unit``, ``per_unit`` (their shift per unit of the held one),
+        ``std``. Empty when nothing is held for want of information."""
+
+    @property
     def notes(self) -> list[str]:
         """What was derived rather than given, in sentences."""
 
