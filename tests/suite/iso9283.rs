@@ -182,6 +182,13 @@ fn characteristics_are_invariant_under_a_rigid_motion() {
     assert!(distance_characteristics(&one, "P1", "P9").unwrap_err().to_string().contains("no pose named 'P9'"));
 }
 
+/// Series C (identification) and D (validation, the ISO cubes) of the UR10 data set.
+fn series_c_and_d() -> robocal::cell::Cell {
+    import_cell(&[(series("C"), Purpose::Identification), (series("D"), Purpose::Validation)], &Ur10Options::default())
+        .unwrap()
+        .cell
+}
+
 fn series(letter: &str) -> PathBuf {
     [env!("CARGO_MANIFEST_DIR"), "..", "shared", "datasets", "ur10-ipa", &format!("Series_{letter}")].iter().collect()
 }
@@ -197,12 +204,7 @@ fn series(letter: &str) -> PathBuf {
 #[test]
 fn ur10_series_d_table() {
     let started = std::time::Instant::now();
-    let cell = import_cell(
-        &[(series("C"), Purpose::Identification), (series("D"), Purpose::Validation)],
-        &Ur10Options::default(),
-    )
-    .unwrap()
-    .cell;
+    let cell = series_c_and_d();
     let mut assignments = assign_poses(&read_series_goals(&series("D")).unwrap());
     assert_eq!(assignments.len(), 632);
     let mut counts = std::collections::BTreeMap::<String, u32>::new();
@@ -261,12 +263,7 @@ fn both_models_are_registered_with_the_same_freedoms() {
     use robocal::identify::ModelOptions;
     use robocal::units::MM;
     use robocal::validate::report::{Reference, validate};
-    let cell = import_cell(
-        &[(series("C"), Purpose::Identification), (series("D"), Purpose::Validation)],
-        &Ur10Options::default(),
-    )
-    .unwrap()
-    .cell;
+    let cell = series_c_and_d();
     let mut assignments = assign_poses(&read_series_goals(&series("D")).unwrap());
     assignments.sort_by_key(|a| a.index);
     let mut opts = IdentifyOptions {

@@ -27,6 +27,13 @@ fn cell() -> Cell {
         .cell
 }
 
+/// Series C (identification) and D (validation, the ISO cubes).
+fn cell_c_and_d() -> Cell {
+    import_cell(&[(series("C"), Purpose::Identification), (series("D"), Purpose::Validation)], &Ur10Options::default())
+        .unwrap()
+        .cell
+}
+
 fn geometry() -> Variant {
     Variant {
         name: "geometry".into(),
@@ -407,12 +414,7 @@ fn a_re_registration_carries_the_sets_own_terms() {
 #[test]
 fn a_transfer_registers_every_model_with_the_same_freedoms() {
     use robocal::validate::report::{Reference, validate};
-    let cell = import_cell(
-        &[(series("C"), Purpose::Identification), (series("D"), Purpose::Validation)],
-        &Ur10Options::default(),
-    )
-    .unwrap()
-    .cell;
+    let cell = cell_c_and_d();
     let model = ModelOptions::parse("+map2_s2,+map1_s3,+map3_s3,+cyc1_f22.75,+map5_s3", 6).unwrap();
     let tables =
         Variant { name: "tables".into(), options: IdentifyOptions { model: model.clone(), ..Default::default() } };
@@ -462,12 +464,7 @@ fn a_transfer_registers_every_model_with_the_same_freedoms() {
 #[test]
 fn a_held_parameter_says_what_the_free_ones_assume_of_it() {
     use robocal::kinematics::Param;
-    let cell = import_cell(
-        &[(series("C"), Purpose::Identification), (series("D"), Purpose::Validation)],
-        &Ur10Options::default(),
-    )
-    .unwrap()
-    .cell;
+    let cell = cell_c_and_d();
     let mut o = IdentifyOptions::default();
     o.selection.sessions = vec!["series-C".into()];
     let set = identify(&cell, &o).unwrap().set;
