@@ -494,7 +494,7 @@ fn zeros_section(s: &mut String, d: &DiagnosisOut) {
             let beyond: Vec<String> = z
                 .zero_shifts
                 .iter()
-                .filter(|x| x.change_deg.abs() > 3.0 * x.std_deg)
+                .filter(|x| x.change_deg.abs() > crate::diagnose::ZERO_SHIFT_SIGMAS * x.std_deg)
                 .map(|x| format!("{} {:+.4} ± {:.4}°", x.parameter, x.change_deg, x.std_deg))
                 .collect();
             vec![

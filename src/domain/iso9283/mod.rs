@@ -278,8 +278,7 @@ pub fn evaluate(
     // freedoms: series D's calibrated registration freed it at κ 2,100 where the nominal's held it
     // (κ 7). What one held is held in both.
     let held = calibrated.as_ref().map_or_else(Vec::new, |c| {
-        let (a, b) = (&nominal.registration.free, &c.registration.free);
-        a.iter().filter(|n| !b.contains(n)).chain(b.iter().filter(|n| !a.contains(n))).cloned().collect::<Vec<_>>()
+        crate::identify::free_in_some_only(&[&nominal.registration.free, &c.registration.free])
     });
     if !held.is_empty() {
         if nominal.registration.free.iter().any(|n| held.contains(n)) {

@@ -1283,6 +1283,10 @@ fn transfer_clause(transfer: &[Transfer]) -> Option<String> {
     ))
 }
 
+/// A registered zero offset is said to have moved from the model's when its change exceeds this
+/// many of its standard deviations (the verdict's clause and the report's table).
+pub const ZERO_SHIFT_SIGMAS: f64 = 3.0;
+
 /// The joint-zero registrations of the transfer ([`ZerosRefit`]) as a clause of the verdict: per
 /// session the start's and the final model's held-out mean with base and tools registered → with
 /// the zeros too, and the zeros that read beyond 3 σ from the model's; where both the gain (beyond
@@ -1318,7 +1322,7 @@ fn zeros_clause(transfer: &[Transfer]) -> Option<String> {
                 let beyond: Vec<String> = z
                     .shifts
                     .iter()
-                    .filter(|(_, d, sd)| d.abs() > 3.0 * sd)
+                    .filter(|(_, d, sd)| d.abs() > ZERO_SHIFT_SIGMAS * sd)
                     .map(|(n, d, sd)| format!("{n} {:+.4} ± {:.4}°", d.to_degrees(), sd.to_degrees()))
                     .collect();
                 // A gain with every zero within 3 σ of the model's is the model's own zeros
@@ -1418,13 +1422,9 @@ fn transfers(
         // the edge of determined (the UR10's probe z on series D, σ ≈ 10 mm) is held in some
         // refits and free in others, and the models would be compared with different freedoms.
         // What some refit held is held in all of them.
-        let free_sets: Vec<&Vec<String>> = carried.iter().filter_map(|c| c.as_ref().ok()).map(|c| &c.free).collect();
-        let mut held: Vec<String> = Vec::new();
-        for n in free_sets.iter().flat_map(|f| f.iter()) {
-            if !held.contains(n) && !free_sets.iter().all(|f| f.contains(n)) {
-                held.push(n.clone());
-            }
-        }
+        let free_sets: Vec<&[String]> =
+            carried.iter().filter_map(|c| c.as_ref().ok()).map(|c| c.free.as_slice()).collect();
+        let held = crate::identify::free_in_some_only(&free_sets);
         if !held.is_empty() {
             for (c, (_, m, set)) in carried.iter_mut().zip(&models) {
                 if c.as_ref().is_ok_and(|c| c.free.iter().any(|n| held.contains(n))) {

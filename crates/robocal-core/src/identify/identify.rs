@@ -67,6 +67,21 @@ pub struct Identification {
     pub conditional: Vec<super::conditional::Conditional>,
 }
 
+/// The parameters free in some of several registrations and held in others (`free`: each
+/// registration's free names), in first-seen order. Models compared after registering on one
+/// session must share one registration's freedoms: a base or tool parameter the session leaves at
+/// the edge of determined is held by one fit and freed by another (the UR10 probe's z on series D:
+/// κ 7 against 2,055), so every caller holds these in all of them and refits.
+pub fn free_in_some_only(free: &[&[String]]) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    for n in free.iter().flat_map(|f| f.iter()) {
+        if !out.contains(n) && !free.iter().all(|f| f.contains(n)) {
+            out.push(n.clone());
+        }
+    }
+    out
+}
+
 impl Identification {
     /// A payload the parameter set's tool does not declare (0 kg), as identified: its mass (kg) and
     /// standard deviation (`None` when the data did not determine it and it is held at 0); `None`

@@ -32,8 +32,8 @@ pub use fixed::{FixedReason, ModelTerm, Structure};
 pub use hold::{COMPLIANCE_SIGNIFICANCE, PAYLOAD_SIGNIFICANCE};
 pub use identifiability::Status;
 pub use identify::{
-    Identification, PayloadAtFlange, PayloadCentreOfMass, ToolResult, WORST_REPORTED, identify, payload_at_flange,
-    payload_centre_of_mass,
+    Identification, PayloadAtFlange, PayloadCentreOfMass, ToolResult, WORST_REPORTED, free_in_some_only, identify,
+    payload_at_flange, payload_centre_of_mass,
 };
 pub use noise::NoiseModel;
 pub use options::{

@@ -900,24 +900,19 @@ fn transfer(
         let _done = Tick(tick);
         refit(v, t, &[])
     });
-    // One registration's freedoms for every model on a session. A base or tool parameter the
-    // session's data leave at the edge of determined (the UR10 probe's z on series D, σ ≈ 10 mm
-    // along base x) is held by some refits and freed by others (κ 7 against 2,055), and the
-    // models would be compared with different freedoms. What some refit held is held in all.
-    let mut held: Vec<Vec<String>> = vec![Vec::new(); opts.transfer.len()];
-    for (t, h) in held.iter_mut().enumerate() {
-        let free: Vec<&Vec<String>> = jobs
-            .iter()
-            .zip(&results)
-            .filter(|((_, jt), _)| *jt == t)
-            .filter_map(|(_, r)| r.as_ref().ok().map(|x| &x.2))
-            .collect();
-        for n in free.iter().flat_map(|f| f.iter()) {
-            if !h.contains(n) && !free.iter().all(|f| f.contains(n)) {
-                h.push(n.clone());
-            }
-        }
-    }
+    // One registration's freedoms for every model on a session ([`super::free_in_some_only`]):
+    // what some refit held is held in all.
+    let held: Vec<Vec<String>> = (0..opts.transfer.len())
+        .map(|t| {
+            let free: Vec<&[String]> = jobs
+                .iter()
+                .zip(&results)
+                .filter(|((_, jt), _)| *jt == t)
+                .filter_map(|(_, r)| r.as_ref().ok().map(|x| x.2.as_slice()))
+                .collect();
+            super::free_in_some_only(&free)
+        })
+        .collect();
     let again: Vec<usize> = (0..jobs.len())
         .filter(|&k| results[k].as_ref().is_ok_and(|x| x.2.iter().any(|n| held[jobs[k].1].contains(n))))
         .collect();
