@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use clap::{Args, Subcommand};
 
-use super::{CliError, read, robot_model, three, write};
+use super::{CliError, load_cell, read, robot_model, three, write};
 use crate::cell::Purpose;
 use crate::units::{MM, UM};
 
@@ -155,6 +155,13 @@ pub struct ThreeReflectorArgs {
     /// registration on the nominal robot).
     #[arg(long, allow_hyphen_values = true)]
     pub payload_com_mm: Option<String>,
+    /// The sessions' name: NAME-1, NAME-2, … one per positions file.
+    #[arg(long, default_value = crate::import::three_reflector::DEFAULT_NAME)]
+    pub name: String,
+    /// A cell file to add this run to (another run of the same robot: a validation day), written
+    /// to --out with both; the import says whether the run was measured in the cell's tracker frame.
+    #[arg(long)]
+    pub into: Option<PathBuf>,
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -304,8 +311,13 @@ fn purpose(arg: &str, s: &str) -> Result<Purpose, CliError> {
 }
 
 fn write_imported(out: &Path, imported: crate::import::Imported) -> Result<String, CliError> {
-    let n: usize = imported.cell.sessions.iter().map(|s| s.measurements.len()).sum();
     let text = crate::domain::cell::cell_to_json(&imported.cell);
+    write_cell_text(out, text, imported)
+}
+
+/// Write `text`, the cell file of `imported`, and report what it holds with the import's notes.
+fn write_cell_text(out: &Path, text: String, imported: crate::import::Imported) -> Result<String, CliError> {
+    let n: usize = imported.cell.sessions.iter().map(|s| s.measurements.len()).sum();
     write(out, &text)?;
     let mut report = format!("wrote {} ({} sessions, {n} measurements)", out.display(), imported.cell.sessions.len());
     for note in imported.notes {
@@ -335,7 +347,7 @@ pub(super) fn import_ur10(a: Ur10IpaArgs) -> Result<String, CliError> {
 pub(super) fn import_three(a: ThreeReflectorArgs) -> Result<String, CliError> {
     let model = robot_model("--robot", &a.robot)?;
     let p = purpose("--purpose", &a.purpose)?;
-    use crate::import::three_reflector::{Payload, import_with_payload};
+    use crate::import::three_reflector::{Payload, import_run};
     let payload = match (a.payload_kg, &a.payload_com_mm) {
         (None, None) => Payload::Unknown,
         (None, Some(_)) => return Err(CliError::arg("--payload-com-mm", "needs --payload-kg")),
@@ -347,7 +359,35 @@ pub(super) fn import_three(a: ThreeReflectorArgs) -> Result<String, CliError> {
             Payload::Declared { mass_kg: m, com: com.map(|c| nalgebra::Vector3::new(c[0], c[1], c[2]) * MM) }
         }
     };
+    // The cell a run is added to is read first: a robot other than its own is refused before the
+    // files are read against the wrong model.
+    let into = a.into.as_deref().map(|path| load_cell(path).map(|cell| (path, cell))).transpose()?;
+    if let Some((path, cell)) = &into
+        && cell.model != model
+    {
+        return Err(CliError::arg(
+            "--into",
+            format!(
+                "{}: its robot model differs from --robot {}: a cell holds one robot's runs",
+                path.display(),
+                a.robot
+            ),
+        ));
+    }
     let imported =
-        import_with_payload(&a.joints, &a.positions, model, p, payload).map_err(|e| CliError::msg(e.to_string()))?;
-    write_imported(&a.out, imported)
+        import_run(&a.joints, &a.positions, model, p, payload, &a.name).map_err(|e| CliError::msg(e.to_string()))?;
+    let Some((path, cell)) = into else { return write_imported(&a.out, imported) };
+    let before = cell.sessions.len();
+    let merged = crate::import::merge(cell, path, imported).map_err(|e| CliError::msg(e.to_string()))?;
+    // The cell's own text is kept as written, the run's sessions appended to its list: a cell read
+    // and written again would change its values in the last digit (mm to m and back).
+    let mut file: serde_json::Value =
+        serde_json::from_str(&read(path)?).map_err(|e| CliError::msg(format!("{}: {e}", path.display())))?;
+    let run = crate::cell::Cell { sessions: merged.cell.sessions[before..].to_vec(), ..merged.cell.clone() };
+    let run: serde_json::Value = serde_json::from_str(&crate::domain::cell::cell_to_json(&run)).expect("a cell's JSON");
+    match (file.get_mut("sessions").and_then(|s| s.as_array_mut()), run["sessions"].as_array()) {
+        (Some(list), Some(new)) => list.extend(new.iter().cloned()),
+        _ => return Err(CliError::msg(format!("{}: no list of sessions", path.display()))),
+    }
+    write_cell_text(&a.out, serde_json::to_string_pretty(&file).expect("JSON serialises"), merged)
 }

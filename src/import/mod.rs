@@ -71,6 +71,97 @@ impl ImportError {
     }
 }
 
+/// A run imported apart (`run`) added to a cell already written (`into`, read from `into_path`):
+/// one cell holding both, so that the second run can be scored against the first's calibration
+/// with its base refitted (`crossval --transfer`, `diagnose --transfer`). The robot model must be
+/// the cell's, and no session name may be taken (a three-reflector run is then imported under
+/// another name, `import_run`'s `name`).
+///
+/// A tracker moved between the runs puts the run in another frame, which a cell's single base
+/// cannot serve: each run is registered on the nominal robot (base and reflectors alternating,
+/// as the identification starts), and the note says whether the run's base lies in another frame
+/// than the cell's first session (beyond 50 mm or 2°, against the few millimetres a nominal model
+/// misses by) and so must be scored with its base refitted, not identified with it.
+pub fn merge(into: Cell, into_path: &Path, run: Imported) -> Result<Imported, ImportError> {
+    let file = || into_path.to_path_buf();
+    if into.model != run.cell.model {
+        return Err(ImportError::File {
+            file: file(),
+            reason: "its robot model differs from the one the run was imported with (--robot): a cell holds one robot's runs".into(),
+        });
+    }
+    let taken: Vec<&str> = run
+        .cell
+        .sessions
+        .iter()
+        .map(|s| s.name.as_str())
+        .filter(|n| into.sessions.iter().any(|s| s.name == *n))
+        .collect();
+    if !taken.is_empty() {
+        return Err(ImportError::File {
+            file: file(),
+            reason: format!(
+                "it already holds session(s) {}: import the run under another name (--name day2 gives day2-1, day2-2, …)",
+                taken.join(", ")
+            ),
+        });
+    }
+    let names: Vec<String> = run.cell.sessions.iter().map(|s| s.name.clone()).collect();
+    let names = names.join(", ");
+    let mut notes = run.notes;
+    let first = into.sessions.first().map(|s| s.name.clone());
+    let frame = |sessions: &[crate::cell::Session]| {
+        let cell = Cell { model: into.model.clone(), base_guess: None, artefact: None, sessions: sessions.to_vec() };
+        registered_base(&cell)
+    };
+    let note = match (
+        &first,
+        into.sessions.first().and_then(|s| frame(std::slice::from_ref(s))),
+        frame(&run.cell.sessions),
+    ) {
+        (None, _, _) => format!("{names}: merged into {}, which held no session", into_path.display()),
+        (Some(first), Some(a), Some(b)) => {
+            let (d, angle) = a.distance(&b);
+            let (mm, deg) = (d / crate::units::MM, angle / crate::units::DEG);
+            if d > 0.05 || angle > 2.0 * crate::units::DEG {
+                format!(
+                    "{names}: merged into {}; measured in another tracker frame than {first} (the robot base registers {mm:.0} mm and {deg:.1}° apart on the nominal robot): score the run with its base refitted (`crossval --transfer {}`, `diagnose --transfer {}`, or `identify --start … --only base,tool`), and do not identify it together with {first}",
+                    into_path.display(),
+                    names.replace(", ", ","),
+                    names.replace(", ", ",")
+                )
+            } else {
+                format!(
+                    "{names}: merged into {}; the robot base registers {mm:.1} mm and {deg:.2}° from {first}'s on the nominal robot, within what a nominal model misses by (50 mm, 2°): no move of the tracker that these registrations can see (a smaller one shows in a joint fit's residual; `crossval --transfer` scores the run with its own base either way)",
+                    into_path.display()
+                )
+            }
+        }
+        (Some(first), _, _) => format!(
+            "{names}: merged into {}; whether it shares {first}'s tracker frame is not known (a registration on the nominal robot failed): score it with its base refitted (`crossval --transfer`)",
+            into_path.display()
+        ),
+    };
+    notes.push(note);
+    let mut sessions = into.sessions;
+    sessions.extend(run.cell.sessions);
+    Ok(Imported {
+        cell: Cell { model: into.model, base_guess: into.base_guess, artefact: into.artefact, sessions },
+        notes,
+    })
+}
+
+/// The robot's base in the measurement frame, registered with every session's reflector or
+/// probe on the nominal robot (base and unknown TCPs alternating); `None` when it fails.
+fn registered_base(cell: &Cell) -> Option<crate::kinematics::frame::Frame> {
+    use crate::identify::{base::register_base_and_tcps, tool_blocks};
+    let picks: Vec<(usize, usize)> =
+        cell.sessions.iter().enumerate().flat_map(|(s, x)| (0..x.measurements.len()).map(move |i| (s, i))).collect();
+    let (blocks, session_tool) = tool_blocks(cell, &picks);
+    let r = register_base_and_tcps(cell, &picks, &blocks, &session_tool, None).ok()?;
+    Some(crate::kinematics::frame::Frame::from_xyzabc(&r.base))
+}
+
 /// The whole text of a file.
 fn read_text(path: &Path) -> Result<String, ImportError> {
     std::fs::read_to_string(path).map_err(|e| ImportError::io(path, e))

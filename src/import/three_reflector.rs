@@ -61,6 +61,9 @@ pub fn import(
     import_with_payload(joints, positions, model, purpose, Payload::Unknown)
 }
 
+/// The sessions' name unless another is given: `reflector-1`, `reflector-2`, …
+pub const DEFAULT_NAME: &str = "reflector";
+
 /// As [`import`], with what is known of the payload. Its centre of mass, when not given, is put
 /// at the reflectors' centroid on the flange (a plate carrying them), found by registering the
 /// base and the reflectors' positions on the nominal robot (to a millimetre or so: the torques
@@ -72,6 +75,26 @@ pub fn import_with_payload(
     purpose: Purpose,
     payload: Payload,
 ) -> Result<Imported, ImportError> {
+    import_run(joints, positions, model, purpose, payload, DEFAULT_NAME)
+}
+
+/// As [`import_with_payload`], the sessions named `{name}-1`, `{name}-2`, … (one per positions
+/// file): a second run to be merged into a cell that already holds `reflector-…`
+/// ([`super::merge`]). The name is refused when empty or when it holds a comma, whitespace or a
+/// control character (commands take session names as comma-separated lists).
+pub fn import_run(
+    joints: &Path,
+    positions: &[PathBuf],
+    model: RobotModel,
+    purpose: Purpose,
+    payload: Payload,
+    name: &str,
+) -> Result<Imported, ImportError> {
+    if name.is_empty() || name.len() > 100 || name.chars().any(|c| c == ',' || c.is_whitespace() || c.is_control()) {
+        return Err(ImportError::Input(format!(
+            "session name {name:?}: give 1–100 characters without commas, spaces or control characters (sessions are named {name}-1, {name}-2, …)"
+        )));
+    }
     if let Payload::Declared { mass_kg, com } = payload {
         if !(mass_kg.is_finite() && (0.0..=1000.0).contains(&mass_kg)) {
             return Err(ImportError::Input(format!("payload mass must be 0–1000 kg, got {mass_kg}")));
@@ -82,7 +105,7 @@ pub fn import_with_payload(
             ));
         }
     }
-    let mut imported = match read_files(joints, positions, model.clone(), purpose) {
+    let mut imported = match read_files(joints, positions, model.clone(), purpose, name) {
         Ok(imported) => imported,
         Err(e) => return Err(convention_beyond_limits(joints, positions, &model, purpose, e)),
     };
@@ -137,7 +160,7 @@ fn convention_beyond_limits(
     for l in &mut opened.links {
         l.limits = [-720.0 * DEG, 720.0 * DEG];
     }
-    let Ok(read) = read_files(joints, positions, opened, purpose) else { return e };
+    let Ok(read) = read_files(joints, positions, opened, purpose, DEFAULT_NAME) else { return e };
     match crate::identify::check_readings(&read.cell) {
         Err(c @ crate::identify::IdentifyError::JointConvention { .. }) => {
             let c = c.to_string();
@@ -167,6 +190,7 @@ fn read_files(
     positions: &[PathBuf],
     model: RobotModel,
     purpose: Purpose,
+    name: &str,
 ) -> Result<Imported, ImportError> {
     model.validate()?;
     if positions.is_empty() {
@@ -187,7 +211,7 @@ fn read_files(
     notes.extend(joint_header.map(|h| header_note(joints, h)));
     let mut sessions = Vec::with_capacity(positions.len());
     for (k, path) in positions.iter().enumerate() {
-        let name = format!("reflector-{}", k + 1);
+        let name = format!("{name}-{}", k + 1);
         let text = read_text(path)?;
         let (lines, header) = without_header(pose_lines(&text));
         notes.extend(header.map(|h| header_note(path, h)));
@@ -607,6 +631,7 @@ mod tests {
             &[write("r.txt", "500 20 300\n-\n")],
             irb120(),
             Purpose::Identification,
+            DEFAULT_NAME,
         )
         .unwrap();
         let headed = read_files(
@@ -614,6 +639,7 @@ mod tests {
             &[write("rh.csv", "X;Y;Z\n500;20;300\nnan;nan;nan\n")],
             irb120(),
             Purpose::Identification,
+            DEFAULT_NAME,
         )
         .unwrap();
         let (a, b) = (&plain.cell.sessions[0].measurements, &headed.cell.sessions[0].measurements);
@@ -631,10 +657,32 @@ mod tests {
             &[write("rz.txt", "500 20 300\n0.000 0.000 0.000\n")],
             irb120(),
             Purpose::Identification,
+            DEFAULT_NAME,
         )
         .unwrap();
         assert_eq!(zeros.cell.sessions[0].measurements.len(), 2);
         let notes = zeros.notes.join("\n");
         assert!(notes.contains("1 line(s) read exactly 0 0 0, the instrument's own origin (line(s) 2)"), "{notes}");
+    }
+
+    /// A run's session name is refused where the commands could not take it back (they read
+    /// session lists split at commas), before any file is read; a good one names every session.
+    #[test]
+    fn a_runs_name_is_one_the_commands_can_take() {
+        let dir = Scratch::new("names");
+        let j = dir.write("j.txt", "0 10 20 30 40 50\n5 -10 25 -30 45 60\n");
+        let r = [dir.write("r1.txt", "500 20 300\n510 25 310\n"), dir.write("r2.txt", "600 20 300\n610 25 310\n")];
+        for bad in ["", "day 2", "day,2", "day\t2"] {
+            let e = import_run(&j, &r, irb120(), Purpose::Validation, Payload::Unknown, bad).unwrap_err().to_string();
+            assert!(e.contains("without commas, spaces or control characters"), "{bad:?}: {e}");
+        }
+        let names: Vec<String> = read_files(&j, &r, irb120(), Purpose::Validation, "day2")
+            .unwrap()
+            .cell
+            .sessions
+            .iter()
+            .map(|s| s.name.clone())
+            .collect();
+        assert_eq!(names, ["day2-1", "day2-2"]);
     }
 }

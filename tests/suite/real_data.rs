@@ -1968,3 +1968,117 @@ fn the_payloads_centre_of_mass_is_identified_where_the_data_determine_it() {
     assert_eq!(c.determined, Some(false), "{c:?}");
     assert!(c.com_std_mm.unwrap().iter().any(|s| *s > 10.0), "{c:?}");
 }
+
+/// A second run (a validation day, the tracker moved) imported into the first run's cell under
+/// its own name: the merged cell holds both runs' sessions exactly as imported apart, the import
+/// says the run lies in another tracker frame with the move the registrations read (against the
+/// simulated one), and the run is scored against the first run's calibration with its base
+/// refitted (`crossval --transfer`). A run in the same frame is said to be so; a taken name and
+/// another robot are refused before anything is written.
+#[test]
+fn a_second_run_merged_into_a_cell_says_whether_the_tracker_moved() {
+    use robocal::kinematics::frame::Frame;
+    let dir = common::fresh_dir("merge-runs");
+    let run = |args: &[&str]| std::process::Command::new(env!("CARGO_BIN_EXE_robocal")).args(args).output().unwrap();
+    let first = TrackerRunOptions { seed: 31, poses: 200, removed: 0, ..Default::default() };
+    let mut moved = TrackerRunOptions { seed: 32, poses: 200, removed: 0, ..Default::default() };
+    let b = &mut moved.base_in_tracker;
+    (b[0], b[1], b[2], b[5]) = (b[0] + 0.300, b[1] - 0.200, b[2] + 0.050, b[5] + 20.0 * DEG);
+    let (true_mm, true_deg) = {
+        let (d, a) = Frame::from_xyzabc(&first.base_in_tracker).distance(&Frame::from_xyzabc(&moved.base_in_tracker));
+        (d / MM, a / DEG)
+    };
+    let same = TrackerRunOptions { seed: 33, poses: 200, removed: 0, ..Default::default() };
+    let files = |o: &TrackerRunOptions, tag: &str| {
+        let (joints, files) = tracker_run(o).unwrap().write(&dir, tag, 6).unwrap();
+        let mut args = vec!["--joints".to_string(), joints.to_str().unwrap().to_string()];
+        for f in files {
+            args.extend(["--positions".to_string(), f.to_str().unwrap().to_string()]);
+        }
+        args
+    };
+    let (f1, f2, f3) = (files(&first, "first"), files(&moved, "moved"), files(&same, "same"));
+    let path = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    let import = |f: &[String], extra: &[&str]| {
+        let mut args: Vec<&str> = vec!["import", "three-reflector", "--robot", "irb120"];
+        args.extend(f.iter().map(String::as_str));
+        args.extend_from_slice(extra);
+        run(&args)
+    };
+    let ok = |out: std::process::Output| {
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8(out.stdout).unwrap()
+    };
+    ok(import(&f1, &["--out", &path("a.json")]));
+    let said = ok(import(
+        &f2,
+        &["--name", "day2", "--purpose", "validation", "--into", &path("a.json"), "--out", &path("b.json")],
+    ));
+    let head = "day2-1, day2-2, day2-3: merged into";
+    let note = said.lines().find(|l| l.contains(head)).unwrap_or_else(|| panic!("{said}"));
+    assert!(note.contains("measured in another tracker frame than reflector-1"), "{note}");
+    assert!(note.contains("--transfer day2-1,day2-2,day2-3"), "{note}");
+    let read = |after: &str, unit: &str| -> f64 {
+        let rest = &note[note.find(after).unwrap() + after.len()..];
+        rest[..rest.find(unit).unwrap()].trim().parse().unwrap()
+    };
+    let (mm, deg) = (read("registers", " mm"), read("mm and", "°"));
+    eprintln!("registered {mm} mm, {deg}°; simulated {true_mm:.1} mm, {true_deg:.2}°");
+    assert!((mm - true_mm).abs() < 5.0 && (deg - true_deg).abs() < 0.3, "{note}");
+
+    // The merged cell: the first run's sessions, then the second's exactly as imported apart.
+    let cell = |p: &str| serde_json::from_str::<serde_json::Value>(&std::fs::read_to_string(p).unwrap()).unwrap();
+    ok(import(&f2, &["--name", "day2", "--purpose", "validation", "--out", &path("apart.json")]));
+    let (a, merged, apart) = (cell(&path("a.json")), cell(&path("b.json")), cell(&path("apart.json")));
+    let sessions = |v: &serde_json::Value| v["sessions"].as_array().unwrap().clone();
+    assert_eq!(merged["robot"], a["robot"]);
+    // (Compared as values: a failure would print some 10⁵ numbers.)
+    let names =
+        |v: &serde_json::Value| sessions(v).iter().map(|s| s["name"].to_string()).collect::<Vec<_>>().join(", ");
+    assert!(sessions(&merged) == [sessions(&a), sessions(&apart)].concat(), "merged: {}", names(&merged));
+
+    // Scored against the first run's calibration with its base refitted.
+    let x = path("x.json");
+    ok(run(&[
+        "crossval",
+        &path("b.json"),
+        "--session",
+        "reflector-1,reflector-2,reflector-3",
+        "--folds",
+        "0",
+        "--transfer",
+        "day2-1,day2-2,day2-3",
+        "--out",
+        &x,
+    ]));
+    let transfer = cell(&x)["transfer"].as_array().unwrap().clone();
+    let default: Vec<f64> =
+        transfer.iter().filter(|t| t["model"] == "default").map(|t| t["errors"]["mean_mm"].as_f64().unwrap()).collect();
+    assert_eq!(default.len(), 3, "{transfer:?}");
+    assert!(default.iter().all(|m| *m < 0.5), "day 2 with its base refitted: {default:?} mm");
+
+    // A run in the first one's frame is said to be so.
+    let said = ok(import(&f3, &["--name", "day3", "--into", &path("b.json"), "--out", &path("c.json")]));
+    assert!(said.contains("day3-1, day3-2, day3-3: merged into") && said.contains("no move of the tracker"), "{said}");
+    assert_eq!(sessions(&cell(&path("c.json"))).len(), 9);
+
+    // Refused, nothing written: a name the cell holds, another robot.
+    let (into, out) = (path("a.json"), path("d.json"));
+    let refused = |robot: &str, extra: &[&str], why: &str| {
+        let mut args: Vec<&str> = vec!["import", "three-reflector", "--robot", robot];
+        args.extend(f2.iter().map(String::as_str));
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--into", &into, "--out", &out]);
+        let o = run(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains(why), "{err}");
+        assert!(!dir.join("d.json").exists());
+    };
+    refused(
+        "irb120",
+        &[],
+        "already holds session(s) reflector-1, reflector-2, reflector-3: import the run under another name",
+    );
+    refused("ur10", &["--name", "x"], "--into");
+    refused("ur10", &["--name", "x"], "robot model differs");
+}
