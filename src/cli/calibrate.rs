@@ -345,7 +345,7 @@ fn validate_error(a: &ValidateArgs, e: crate::validate::report::ValidateError) -
         E::NoMeasurement if a.session.is_empty() => {
             CliError::msg(format!("{}: the cell's validation sessions hold no measurement", a.cell.display()))
         }
-        E::NoMeasurement => CliError::arg("--session", e),
+        E::NoMeasurement | E::TcpUnknown { .. } => CliError::arg("--session", e),
         E::RobotMismatch { .. } => {
             CliError::msg(format!("{} and {} do not match: {e}", a.params.display(), a.cell.display()))
         }

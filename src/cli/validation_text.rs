@@ -67,6 +67,9 @@ pub fn text(v: &ValidationOut) -> String {
     if let Some(why) = &v.held_out_statement {
         let _ = writeln!(s, "{why}");
     }
+    for note in &v.notes {
+        let _ = writeln!(s, "note: {note}");
+    }
     let per_session: Vec<(String, String, &crate::domain::validation::SessionErrorsOut)> = if v.per_session.len() > 1 {
         v.per_session
             .iter()

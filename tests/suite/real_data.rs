@@ -2082,3 +2082,88 @@ fn a_second_run_merged_into_a_cell_says_whether_the_tracker_moved() {
     refused("ur10", &["--name", "x"], "--into");
     refused("ur10", &["--name", "x"], "robot model differs");
 }
+
+/// A second run that the diagnosis carries its models to (`transfer`) is scored with the
+/// hysteresis the diagnosis named: the run's approach directions are derived from its measuring
+/// order, as the diagnosed sessions' are. They were not, and the named hysteresis acted nowhere
+/// there: a twin's second run read it as costing 0.002 mm where `crossval --transfer` read a gain
+/// of 0.013 mm. The transfer's figures now equal those on the same cell with every direction
+/// written in beforehand, the named hysteresis gains on the second run beyond twice its standard
+/// error, and the accepted set validated there is scored with its hysteresis too (a set fitted on
+/// other sessions, whose TCP for the second run is unknown, is refused rather than scored at the
+/// flange).
+#[test]
+fn a_second_run_is_scored_with_the_named_hysteresis() {
+    use robocal::diagnose::{DiagnoseOptions, Input, diagnose};
+    use robocal::validate::report::{Reference, ValidateError, validate, validate_fitted};
+    let dir = common::fresh_dir("transfer-hysteresis");
+    let write = |seed: u64, poses: usize, tag: &str| {
+        let o = TrackerRunOptions { seed, poses, removed: 0, ..Default::default() };
+        tracker_run(&o).unwrap().write(&dir, tag, 6).unwrap()
+    };
+    let (j1, f1) = write(41, 600, "first");
+    let (j2, f2) = write(42, 300, "second");
+    let first = three_reflector::import(&j1, &f1, irb120(), Purpose::Identification).unwrap();
+    let second =
+        three_reflector::import_run(&j2, &f2, irb120(), Purpose::Validation, three_reflector::Payload::Unknown, "day2")
+            .unwrap();
+    let cell = robocal::import::merge(first.cell, &dir.join("first.json"), second).unwrap().cell;
+    let reflectors = ["reflector-1", "reflector-2", "reflector-3"].map(String::from).to_vec();
+    let days = ["day2-1", "day2-2", "day2-3"].map(String::from).to_vec();
+    let run = |cell: &Cell| {
+        let id = identify(cell, &options("", &["reflector-1", "reflector-2", "reflector-3"])).unwrap();
+        let identified = id.status.iter().map(|s| matches!(s, robocal::identify::Status::Identified)).collect();
+        let input = Input { cell, set: &id.set, identified: Some(identified), fixed: Vec::new(), excluded: Vec::new() };
+        let opts = DiagnoseOptions {
+            identification: reflectors.clone(),
+            validation: Some(Vec::new()),
+            transfer: days.clone(),
+            threads: 2,
+            ..DiagnoseOptions::default()
+        };
+        diagnose(&input, &opts).unwrap()
+    };
+    let derived = run(&cell);
+    let mut logged = cell.clone();
+    robocal::cell::order::fill_approach(&mut logged, &[]);
+    let written = run(&logged);
+    assert!(
+        derived.verdict.effects.iter().any(|e| e.candidate.kind == robocal::diagnose::library::Kind::Backlash),
+        "{}",
+        derived.verdict.summary
+    );
+    assert_eq!(derived.transfer.len(), written.transfer.len());
+    for (a, b) in derived.transfer.iter().zip(&written.transfer) {
+        let (ma, mb) = (a.errors.as_ref().unwrap().mean, b.errors.as_ref().unwrap().mean);
+        assert!((ma - mb).abs() < 1e-9, "{} {}: {ma} against {mb} with the directions written in", a.session, a.model);
+    }
+    for day in &days {
+        let last = derived.transfer.iter().rfind(|t| t.session == *day).unwrap();
+        let c = last.change.as_ref().unwrap();
+        eprintln!("{day}: {} {:+.4} ± {:.4} mm", last.model, c.mean / MM, c.se / MM);
+        assert!(c.mean < -2.0 * c.se, "{day}: {} changes the mean by {} ± {} m", last.model, c.mean, c.se);
+    }
+
+    // Validated on the second run: a set registered there (base and tools) applies its
+    // hysteresis with the directions derived, and says so; the first run's set, which has no TCP
+    // for the second run's reflectors, is refused.
+    let accepted = derived.accepted.as_ref().expect("an accepted set");
+    let mut o = options("", &["day2-1"]);
+    o.start = Some(accepted.set.clone());
+    o.only = vec!["base".into(), "tool".into()];
+    let registered = identify(&cell, &o).unwrap();
+    let plain = validate(&registered.set, &cell, &days[..1], Reference::Measured).unwrap();
+    let with_written = validate(&registered.set, &logged, &days[..1], Reference::Measured).unwrap();
+    assert_eq!(plain.calibrated.position.mean, with_written.calibrated.position.mean);
+    assert!(plain.notes.iter().any(|n| n.contains("derived from the measuring order of day2-1")), "{:?}", plain.notes);
+    assert!(with_written.notes.is_empty(), "{:?}", with_written.notes);
+    let opts = options("", &["reflector-1", "reflector-2", "reflector-3"]);
+    let (_, written) = robocal::domain::identification::run_identification(&cell, opts, None, &|| {}).unwrap();
+    let doc = robocal::domain::ParameterSetDoc::from_json(&written.to_json_pretty()).unwrap();
+    let fit = robocal::domain::validation::fit_data(&doc, &[]);
+    let e = validate_fitted(&doc.set, &cell, &days[..1], Reference::Measured, Some(&fit)).unwrap_err();
+    assert!(matches!(e, ValidateError::TcpUnknown { .. }), "{e}");
+    assert!(e.to_string().contains("it fitted reflector-1, reflector-2, reflector-3"), "{e}");
+    let own = validate_fitted(&doc.set, &cell, &reflectors, Reference::Measured, Some(&fit)).unwrap();
+    assert!(own.calibrated.position.mean < 0.5 * MM, "{}", own.calibrated.position.mean);
+}

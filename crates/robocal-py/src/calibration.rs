@@ -183,6 +183,13 @@ impl Validation {
         self.out.sessions.clone()
     }
 
+    /// What the validation derived rather than read (the approach directions of sessions that do
+    /// not log them, for a set with hysteresis), in sentences.
+    #[getter]
+    fn notes(&self) -> Vec<String> {
+        self.out.notes.clone()
+    }
+
     #[getter]
     fn n(&self) -> usize {
         self.out.calibrated.n
@@ -293,7 +300,8 @@ fn validate_error(e: ValidateError, named: bool) -> Error {
         ValidateError::NoSession
         | ValidateError::UnknownSession(_)
         | ValidateError::DuplicateSession(_)
-        | ValidateError::NoMeasurement => Error::input("sessions", e.to_string()),
+        | ValidateError::NoMeasurement
+        | ValidateError::TcpUnknown { .. } => Error::input("sessions", e.to_string()),
         ValidateError::RobotMismatch { .. } => Error::input("parameter_set", e.to_string()),
         ValidateError::TruthMissing(_) | ValidateError::TruthCount { .. } => Error::input("truth", e.to_string()),
         ValidateError::JointCount { .. } | ValidateError::NoBall { .. } | ValidateError::NotFinite { .. } => {

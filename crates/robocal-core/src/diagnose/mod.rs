@@ -659,8 +659,18 @@ pub fn diagnose_with_progress(
     }
     let backlash_screened = s.rounds[0].screened.iter().any(|c| c.candidate.kind == Kind::Backlash);
     let approach = derived.source.filter(|_| backlash_screened);
-    let approach_notes =
+    let mut approach_notes =
         if backlash_screened || derived.refused().next().is_some() { derived.notes() } else { Vec::new() };
+    // The transfer sessions' approach directions, derived as the diagnosed sessions' are: a model
+    // with hysteresis carried there and scored without them is scored without its hysteresis (a
+    // twin's second run read 0.1766 → 0.1790 mm with the named hysteresis, where the same terms
+    // carried by `crossval --transfer`, which derives them, gain 0.013 mm).
+    let carried = order::fill_approach(&mut work, &opts.transfer);
+    let carries_backlash = s.accepted.iter().any(|c| c.kind == Kind::Backlash)
+        || input.set.layout.params().iter().any(|p| matches!(p, Param::Joint(_, JointTerm::Backlash)));
+    if carries_backlash {
+        approach_notes.extend(carried.notes());
+    }
     let transfer = transfers(input, opts, &work, &identification, &s, &model, accepted.as_ref())?;
     if let Some(clause) = transfer_clause(&transfer) {
         verdict.summary.push_str(&format!("; {clause}"));

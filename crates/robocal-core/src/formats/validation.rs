@@ -15,7 +15,8 @@
 //! - `balls_mm` and each residual's `position_mm`: 2026-11-24, with the HTML report (ad0899c);
 //! - `validated_envelope`: 2026-11-24 (de0f43f), only for held-out validations since 8de8956;
 //! - `held_out`, `fit`, `in_sample_sessions`, `held_out_statement`, `uncertainty`, and each
-//!   session's `fitted` and `fitted_measurements`: 2026-11-27 (8de8956).
+//!   session's `fitted` and `fitted_measurements`: 2026-11-27 (8de8956);
+//! - `notes`: 2026-12-07.
 
 use serde::{Deserialize, Serialize};
 
@@ -81,6 +82,11 @@ pub struct ValidationOut {
     /// document was written after 2026-11-24: an earlier one never records them).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub balls_mm: Option<[[f64; 3]; 3]>,
+    /// What the validation derived rather than read, in sentences (the approach directions of
+    /// sessions that do not log them, for a set with hysteresis). Empty: nothing derived (or a
+    /// document stored before 2026-12-07).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
 }
 
 /// What a validation's errors are taken against, as the document spells it.
@@ -328,6 +334,7 @@ impl ValidationOut {
             uncertainty: None,
             residuals: include_residuals.then(|| r.residuals.iter().map(ResidualOut::from_residual).collect()),
             balls_mm: r.balls.map(|b| b.map(|c| [c.x / MM, c.y / MM, c.z / MM])),
+            notes: r.notes.clone(),
         }
     }
 }

@@ -34,7 +34,7 @@ use super::regression::{LinearFit, linear_fit};
 use super::stats::ErrorStats;
 use crate::cell::{Cell, Observation, Purpose, Session};
 use crate::kinematics::frame::rotation_angle;
-use crate::kinematics::{Chain, GravityModel, JointState, MAX_JOINTS, ParameterSet};
+use crate::kinematics::{Chain, GravityModel, JointState, JointTerm, MAX_JOINTS, Param, ParameterSet};
 use crate::sim::measure::RunTruth;
 
 /// What the model positions are scored against.
@@ -253,6 +253,9 @@ pub struct ValidationReport {
     pub fit: Option<FitData>,
     /// The artefact's ball centres in {W}, m (the calibration zone), when the cell has one.
     pub balls: Option<[Vector3<f64>; 3]>,
+    /// What the validation derived rather than read, in sentences: the approach directions of
+    /// sessions that do not log them, for a set with hysteresis terms.
+    pub notes: Vec<String>,
 }
 
 /// One session's share of a validation: both models' errors over its measurements.
@@ -283,6 +286,17 @@ pub enum ValidateError {
     /// The selected sessions hold no measurement.
     #[error("the selected sessions hold no measurement")]
     NoMeasurement,
+    /// A session whose TCP is to be identified (declared without one) for which the set, which
+    /// records the TCPs it fitted, has none: its readings would be predicted at the flange.
+    #[error(
+        "session '{session}' declares no TCP (it is to be identified) and the parameter set fitted none for it (it fitted {known}): its readings would be predicted at the flange, not where they were measured. Score it with its TCP registered (`crossval --transfer {session}` refits base and tools for each model; or `identify --start SET --sessions {session} --only base,tool`, then validate that), or give it the `target` of the fitted session that measured the same point"
+    )]
+    TcpUnknown {
+        /// The session, by name.
+        session: String,
+        /// The sessions the set fitted a TCP for, comma-separated.
+        known: String,
+    },
     /// The set is for another robot: a different number of joints, or a different preset.
     #[error(
         "the parameter set is for robot '{set}' ({set_dof} joints), the cell's robot is '{cell}' ({cell_dof} joints)"
@@ -381,6 +395,8 @@ pub fn validate_fitted(
             cell_dof: cell.model.dof(),
         });
     }
+    let (filled, notes) = approach_for(set, cell, sessions);
+    let cell = filled.as_ref().unwrap_or(cell);
     let mut selected: Vec<&Session> = Vec::with_capacity(sessions.len());
     for name in sessions {
         let s = cell.session(name).ok_or_else(|| ValidateError::UnknownSession(name.clone()))?;
@@ -414,7 +430,21 @@ pub fn validate_fitted(
             }
         };
         let (cal_chain, nom_chain) = session_chains(set, session);
-        let cal_chain = match fit.and_then(|f| f.tcp_of(session, cell)) {
+        let fitted_tcp = fit.and_then(|f| f.tcp_of(session, cell));
+        // A reflector imported without a TCP, in a run the set was not fitted on under that name
+        // (a second run merged as `day2-1`, …): the declared TCP is the flange's origin, and
+        // figures taken there are 80–110 mm of plate, not the calibration's error.
+        if let Some(f) = fit.filter(|f| f.recorded && !f.tcps.is_empty())
+            && fitted_tcp.is_none()
+            && session.identify_tcp
+            && session.tool.tcp[..3] == [0.0; 3]
+        {
+            return Err(ValidateError::TcpUnknown {
+                session: session.name.clone(),
+                known: f.tcps.keys().cloned().collect::<Vec<_>>().join(", "),
+            });
+        }
+        let cal_chain = match fitted_tcp {
             // Not for the chain's own TCP (the first tool's): the document's mm and degrees convert back
             // to within an ulp, and its figures stay bit for bit.
             Some(tcp) if tcp.iter().zip(&cal_chain.tool_pose()).any(|(a, b)| (a - b).abs() > 1e-9) => {
@@ -496,7 +526,43 @@ pub fn validate_fitted(
         region: Region::of(held_out),
         balls: cell.artefact.as_ref().map(|a| *a.triangle.centres()),
         fit: fit.cloned(),
+        notes,
     })
+}
+
+/// The cell with the approach directions of the validated sessions derived from their measuring
+/// order (as the identification derives them, [`crate::cell::order::fill_approach`]), and what was
+/// done, when the set has hysteresis (a non-zero backlash term) and some validated reading does
+/// not log its direction; `(None, [])` otherwise. A set with hysteresis predicts each reading from
+/// the direction of the move into its stop: without it the backlash terms act nowhere, and the
+/// figures would be of another model than the set (a twin's second run read the named hysteresis
+/// as costing 0.002 mm where, applied, it gains 0.013 mm).
+fn approach_for(set: &ParameterSet, cell: &Cell, sessions: &[String]) -> (Option<Cell>, Vec<String>) {
+    let backlash = set
+        .layout
+        .params()
+        .iter()
+        .zip(&set.values)
+        .any(|(p, v)| matches!(p, Param::Joint(_, JointTerm::Backlash)) && *v != 0.0);
+    let missing = cell
+        .sessions
+        .iter()
+        .filter(|s| sessions.contains(&s.name))
+        .any(|s| s.measurements.iter().any(|m| m.approach.is_none()));
+    if !(backlash && missing) {
+        return (None, Vec::new());
+    }
+    let mut filled = cell.clone();
+    let approach = crate::cell::order::fill_approach(&mut filled, sessions);
+    let mut notes = approach.notes();
+    let refused: Vec<&str> = approach.refused().map(|(n, _)| n).collect();
+    if !refused.is_empty() {
+        notes.push(format!(
+            "the set's backlash terms act nowhere on {}: its figures there are of the set without its hysteresis",
+            refused.join(", ")
+        ));
+    }
+    (Some(filled), notes)
 }
 
 impl ValidationReport {

@@ -507,6 +507,12 @@ class Validation:
         """The same in words, naming the in-sample sessions when there are any."""
 
     @property
+    def notes(self) -> list[str]:
+        """What the validation derived rather than read, in sentences: for a set with hysteresis
+        (backlash terms), the approach directions of sessions that do not log them, derived from
+        their measuring order as the identification derives them."""
+
+    @property
     def sessions(self) -> list[str]: ...
     @property
     def n(self) -> int:
