@@ -152,14 +152,19 @@ pub fn merge(into: Cell, into_path: &Path, run: Imported) -> Result<Imported, Im
 }
 
 /// The robot's base in the measurement frame, registered with every session's reflector or
-/// probe on the nominal robot (base and unknown TCPs alternating); `None` when it fails.
+/// probe on the nominal robot; `None` when it fails.
 fn registered_base(cell: &Cell) -> Option<crate::kinematics::frame::Frame> {
+    register_nominal(cell).map(|r| crate::kinematics::frame::Frame::from_xyzabc(&r.base))
+}
+
+/// Every measurement of `cell` registered on the nominal robot, base and unknown TCPs
+/// alternating as the identification starts; `None` when it fails.
+fn register_nominal(cell: &Cell) -> Option<crate::identify::base::Registration> {
     use crate::identify::{base::register_base_and_tcps, tool_blocks};
     let picks: Vec<(usize, usize)> =
         cell.sessions.iter().enumerate().flat_map(|(s, x)| (0..x.measurements.len()).map(move |i| (s, i))).collect();
     let (blocks, session_tool) = tool_blocks(cell, &picks);
-    let r = register_base_and_tcps(cell, &picks, &blocks, &session_tool, None).ok()?;
-    Some(crate::kinematics::frame::Frame::from_xyzabc(&r.base))
+    register_base_and_tcps(cell, &picks, &blocks, &session_tool, None).ok()
 }
 
 /// The whole text of a file.

@@ -175,11 +175,7 @@ fn convention_beyond_limits(
 /// The centroid of the reflectors' positions on the flange, from the alternating registration
 /// of the base and the TCPs on the nominal robot; `None` when it fails.
 fn reflector_centroid(cell: &Cell) -> Option<Vector3<f64>> {
-    use crate::identify::{base::register_base_and_tcps, tool_blocks};
-    let picks: Vec<(usize, usize)> =
-        cell.sessions.iter().enumerate().flat_map(|(s, x)| (0..x.measurements.len()).map(move |i| (s, i))).collect();
-    let (blocks, session_tool) = tool_blocks(cell, &picks);
-    let r = register_base_and_tcps(cell, &picks, &blocks, &session_tool, None).ok()?;
+    let r = super::register_nominal(cell)?;
     let n = r.tcps.len();
     (n > 0).then(|| r.tcps.iter().map(|t| Vector3::new(t[0], t[1], t[2])).sum::<Vector3<f64>>() / n as f64)
 }
