@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use clap::{Args, Subcommand};
 
-use super::{CliError, load_cell, read, robot_model, three, write};
+use super::{CliError, read, robot_model, three, write};
 use crate::cell::Purpose;
 use crate::units::{MM, UM};
 
@@ -361,8 +361,17 @@ pub(super) fn import_three(a: ThreeReflectorArgs) -> Result<String, CliError> {
     };
     // The cell a run is added to is read first: a robot other than its own is refused before the
     // files are read against the wrong model.
-    let into = a.into.as_deref().map(|path| load_cell(path).map(|cell| (path, cell))).transpose()?;
-    if let Some((path, cell)) = &into
+    // Read once: parsed for the checks and the merge, its text kept for the output.
+    let into = a
+        .into
+        .as_deref()
+        .map(|path| -> Result<_, CliError> {
+            let text = read(path)?;
+            let cell = crate::domain::cell::parse_cell(&text).map_err(|e| CliError::file(path, e))?;
+            Ok((path, cell, text))
+        })
+        .transpose()?;
+    if let Some((path, cell, _)) = &into
         && cell.model != model
     {
         return Err(CliError::arg(
@@ -376,13 +385,13 @@ pub(super) fn import_three(a: ThreeReflectorArgs) -> Result<String, CliError> {
     }
     let imported =
         import_run(&a.joints, &a.positions, model, p, payload, &a.name).map_err(|e| CliError::msg(e.to_string()))?;
-    let Some((path, cell)) = into else { return write_imported(&a.out, imported) };
+    let Some((path, cell, text)) = into else { return write_imported(&a.out, imported) };
     let before = cell.sessions.len();
     let merged = crate::import::merge(cell, path, imported).map_err(|e| CliError::msg(e.to_string()))?;
     // The cell's own text is kept as written, the run's sessions appended to its list: a cell read
     // and written again would change its values in the last digit (mm to m and back).
     let mut file: serde_json::Value =
-        serde_json::from_str(&read(path)?).map_err(|e| CliError::msg(format!("{}: {e}", path.display())))?;
+        serde_json::from_str(&text).map_err(|e| CliError::msg(format!("{}: {e}", path.display())))?;
     let run = crate::cell::Cell { sessions: merged.cell.sessions[before..].to_vec(), ..merged.cell.clone() };
     let run: serde_json::Value = serde_json::from_str(&crate::domain::cell::cell_to_json(&run)).expect("a cell's JSON");
     match (file.get_mut("sessions").and_then(|s| s.as_array_mut()), run["sessions"].as_array()) {

@@ -184,6 +184,13 @@ pub struct TargetSpec {
     /// A nominal joint target instead of a pose: reach where the nominal model puts these joints.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub joints_deg: Option<Vec<f64>>,
+    /// The direction each joint moves in to reach the target, one per joint: −1, +1, or 0 when
+    /// unknown (or the joint does not move). A parameter set with hysteresis (backlash terms) is
+    /// compensated for it. Where it is unknown for a joint with hysteresis, the target is
+    /// compensated for the middle of that joint's band, a note says so, and the band's spread
+    /// joins the uncertainty (`uncertainty.hysteresis_mm`). Without hysteresis it changes nothing.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub approach: Option<Vec<i8>>,
 }
 
 /// Check a batch of targets at the door, before any is solved (the service answers 422, the
@@ -237,6 +244,11 @@ pub fn check_targets(targets: &[TargetSpec], model: &crate::kinematics::RobotMod
                 limits::within(*v, -2.0, 2.0, "", &at(&format!("quaternion[{k}]")))?;
             }
         }
+        if let Some(a) = &t.approach
+            && let Some(k) = a.iter().position(|v| !(-1..=1).contains(v))
+        {
+            return Err(DomainError::new(at(&format!("approach[{k}]")), "must be -1, 0 or 1"));
+        }
     }
     Ok(())
 }
@@ -273,6 +285,25 @@ impl Choice {
 }
 
 impl TargetSpec {
+    /// The approach directions to compensate for: one per joint (refused otherwise), each −1, 0
+    /// or +1; none given: every one unknown (0).
+    pub fn approach(&self, dof: usize) -> Result<Vec<f64>, DomainError> {
+        match &self.approach {
+            None => Ok(Vec::new()),
+            Some(a) if a.len() != dof => {
+                Err(DomainError::new("approach", format!("expected {dof} values (one per joint), got {}", a.len())))
+            }
+            Some(a) => a
+                .iter()
+                .enumerate()
+                .map(|(k, v)| match v {
+                    -1..=1 => Ok(f64::from(*v)),
+                    _ => Err(DomainError::new(format!("approach[{k}]"), "must be -1, 0 or 1")),
+                })
+                .collect(),
+        }
+    }
+
     pub fn to_target(&self, dof: usize) -> Result<Target, DomainError> {
         if let Some(q) = &self.joints_deg {
             if self.position_mm.is_some() || self.rotation_deg.is_some() || self.quaternion.is_some() {
@@ -546,16 +577,20 @@ pub fn compensate_target(
         Ok(t) => t,
         Err(e) => return CompensationResult::failed(id, e.within(&format!("targets[{i}]")).to_string()),
     };
+    let approach = match t.approach(dof) {
+        Ok(a) => a,
+        Err(e) => return CompensationResult::failed(id, e.within(&format!("targets[{i}]")).to_string()),
+    };
     let (res, note) = match &target {
-        Target::NominalJoints(q) => (comp.joints(q), None),
+        Target::NominalJoints(q) => (comp.joints_approaching(q, &approach), None),
         Target::Pose { pose, choice, note } => {
-            (comp.pose(&frames.into_world.compose(pose), choice.seed()), note.clone())
+            (comp.pose_approaching(&frames.into_world.compose(pose), choice.seed(), &approach), note.clone())
         }
     };
     let mut r = match res {
         Ok(c) => {
             let fake = PoseOut::like(&frames.out_of_world.compose(&c.fake_pose), t.rotation_deg, t.quaternion);
-            match guard_target(comp, guard, &c) {
+            match guard_target(comp, guard, &c, "; give approach to compensate for it") {
                 Ok((uncertainty, notes)) => {
                     let mut r = CompensationResult::ok(id, &c, fake);
                     if let Some((u, combined)) = uncertainty {
@@ -611,19 +646,22 @@ pub type TargetUncertainty = Option<(UncertaintyOut, Option<f64>)>;
 
 /// The envelope check and the predicted uncertainty of a solved target: `Err(why)` when its
 /// joints lie outside the envelope and that was not allowed; otherwise its uncertainty by part
-/// and the notes (outside as asked; the distance to the measured region).
+/// and the notes (outside as asked; the distance to the measured region; the set's hysteresis
+/// where the target's approach is unknown, followed by `hint`, what the caller can do about it).
 pub fn guard_target(
     comp: &Compensator,
     guard: &Guard,
     c: &Compensated,
+    hint: &str,
 ) -> Result<(TargetUncertainty, Vec<String>), String> {
+    let hysteresis = comp.hysteresis_spread(c);
+    let mut notes: Vec<String> = hysteresis.map(|h| hysteresis_note(comp, c, h, hint)).into_iter().collect();
     if guard.envelope.is_none() && guard.covariance.is_none() && guard.held_out.is_none() {
-        return Ok((None, Vec::new()));
+        return Ok((None, notes));
     }
     let q = c.joints();
     let tau = comp.gravity().torques(q);
-    let s = JointState::with_torques(q, &tau[..q.len()]);
-    let mut notes = Vec::new();
+    let s = JointState { approach: c.approach, ..JointState::with_torques(q, &tau[..q.len()]) };
     let tcp = comp.calibrated_chain().fk(&s).t;
     if let Some(e) = guard.envelope {
         if let Some(why) = e.outside(q) {
@@ -636,7 +674,26 @@ pub fn guard_target(
     }
     let sigma = guard.covariance.map(|pc| pc.sigma(comp.calibrated_chain(), &s));
     let outside = guard.envelope.map(|e| e.outside_measured(&tcp));
-    Ok((Some(UncertaintyOut::of(sigma, &tcp, outside, guard.held_out)), notes))
+    Ok((Some(UncertaintyOut::of(sigma, hysteresis, &tcp, outside, guard.held_out)), notes))
+}
+
+/// What a target compensated without the approach of some joints with hysteresis says: which
+/// joints, and how far their bands move the TCP (`spread`, m: RMS over the directions), then
+/// `hint`.
+fn hysteresis_note(comp: &Compensator, c: &Compensated, spread: f64, hint: &str) -> String {
+    let joints: Vec<String> = comp
+        .hysteresis()
+        .iter()
+        .filter(|(j, _)| c.approach[*j] == 0.0)
+        .map(|(j, b)| format!("joint {} ±{:.4}°", j + 1, b.abs() / DEG))
+        .collect();
+    format!(
+        "the set has hysteresis ({}) and which way those joints arrive at this target is not known: it is \
+         compensated for the middle of each band, where arriving from one side or the other moves the TCP by \
+         {:.3} mm RMS{hint}",
+        joints.join(", "),
+        spread / MM
+    )
 }
 
 /// Targets per thread below which splitting a batch across cores is not worth a thread.

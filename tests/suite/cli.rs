@@ -189,6 +189,69 @@ fn compensate_writes_joints_and_fake_poses() {
     assert!(!ok && err.contains("parameters[0].name"), "{err}");
 }
 
+/// A set with hysteresis (backlash terms): a target that says which way each joint arrives is
+/// compensated for it, and its joints differ from the band-middle answer by exactly −b_j·approach_j
+/// (the backlash adds b_j·approach_j to joint j's angle and nothing else). A target without its
+/// approach is compensated for the middle of the bands, and its note says so with the spread; a
+/// wrong length fails that target alone, naming the field; a value other than −1, 0, 1 is refused
+/// at the door.
+#[test]
+fn compensate_applies_a_sets_hysteresis_for_the_approach_given_and_says_when_it_cannot() {
+    let b = [0.02, -0.03, 0.025];
+    let params = json!({"robot": {"preset": "irb120"},
+        "tool": {"tcp_mm": [40, 0, 130], "mass_kg": 1.7, "com_mm": [30, 0, 64]},
+        "parameters": [{"name": "a2", "value": 270.146, "nominal": 270.0, "unit": "mm"},
+                       {"name": "c2", "value": -0.00206, "unit": "deg/(N·m)"},
+                       {"name": "backlash1", "value": b[0], "unit": "deg"},
+                       {"name": "backlash2", "value": b[1], "unit": "deg"},
+                       {"name": "backlash3", "value": b[2], "unit": "deg"}]});
+    let pose = json!({"position_mm": [400, 50, 450], "rotation_deg": [0, 90, 0], "cfx": 1});
+    let approach = [1, -1, -1, 1, 0, 0];
+    let with = |id: &str, a: Option<Value>| {
+        let mut t = pose.clone();
+        t["id"] = json!(id);
+        if let Some(a) = a {
+            t["approach"] = a;
+        }
+        t
+    };
+    let targets = json!({"targets": [
+        with("unknown", None),
+        with("known", Some(json!(approach))),
+        with("short", Some(json!([1, -1]))),
+        {"id": "joints", "joints_deg": [10, 20, -10, 5, 40, 0], "approach": [-1, 1, 1, 0, 0, 0]}]});
+    let pp = tmp("hysteresis_params.json", &params.to_string());
+    let tp = tmp("hysteresis_targets.json", &targets.to_string());
+    let (ok, out, err) = robocal(&["compensate", "--params", pp.to_str().unwrap(), "--targets", tp.to_str().unwrap()]);
+    assert!(!ok && err.contains("1 of 4 targets not compensated (short)"), "{err}");
+    let r = out["results"].as_array().unwrap();
+    let note = r[0]["notes"].as_array().unwrap().iter().map(|n| n.as_str().unwrap()).collect::<Vec<_>>().join(" ");
+    assert!(
+        note.contains("hysteresis (joint 1 ±0.0200°, joint 2 ±0.0300°, joint 3 ±0.0250°)")
+            && note.contains("middle of each band")
+            && note.contains("give approach"),
+        "{note}"
+    );
+    let spread: f64 = note.split(" mm RMS").next().unwrap().rsplit(' ').next().unwrap().parse().unwrap();
+    // Each band moves this TCP by about its angle times the TCP's lever (0.3–0.7 m).
+    assert!(spread > 0.1 && spread < 0.6, "{spread} mm");
+    assert!(r[1]["notes"].as_array().is_none_or(|n| n.iter().all(|n| !n.as_str().unwrap().contains("hysteresis"))));
+    let (mid, known) = (nums(&r[0]["joints_deg"]), nums(&r[1]["joints_deg"]));
+    for j in 0..6 {
+        let want = if j < 3 { mid[j] - b[j] * f64::from(approach[j]) } else { mid[j] };
+        assert!((known[j] - want).abs() < 2e-4, "joint {}: {} vs {want}", j + 1, known[j]);
+    }
+    assert!(r[2]["error"].as_str().unwrap().contains("targets[2].approach"), "{}", r[2]["error"]);
+    assert!(r[3]["error"].is_null() && r[3]["notes"].as_array().is_none_or(|n| n.is_empty()), "{}", r[3]);
+    // A value that is not a direction: refused before anything is solved.
+    let bad = json!({"targets": [with("two", Some(json!([2, 0, 0, 0, 0, 0])))]});
+    let bp = tmp("hysteresis_bad.json", &bad.to_string());
+    let args = ["compensate", "--params", pp.to_str().unwrap(), "--targets", bp.to_str().unwrap()];
+    let (ok, _, err) = robocal(&args);
+    assert!(!ok && err.contains("targets[0].approach[0]") && err.contains("must be -1, 0 or 1"), "{err}");
+    assert_eq!(status(&args), 2);
+}
+
 #[test]
 fn import_writes_a_valid_cell() {
     let series = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/datasets/ur10-ipa/Series_D");

@@ -219,6 +219,34 @@ fn rapid_modules_filter_with_a_round_trip_and_only_target_lines_changed() {
     }
 }
 
+/// A set with hysteresis: a program does not say which way the robot arrives at its targets,
+/// so each is compensated for the middle of the bands (the calibrated TCP with every joint at
+/// its band's middle lands on it, the round trip above), and each says so with its spread.
+#[test]
+fn a_program_filtered_with_a_sets_hysteresis_says_it_is_left_at_the_bands_middle() {
+    use robocal::kinematics::{JointTerm, Param};
+    let mut set = irb120_set();
+    set.extend(&[Param::Joint(0, JointTerm::Backlash), Param::Joint(1, JointTerm::Backlash)]);
+    set.set(Param::Joint(0, JointTerm::Backlash), 0.015_f64.to_radians());
+    set.set(Param::Joint(1, JointTerm::Backlash), -0.02_f64.to_radians());
+    let sample = rapid(7, 400);
+    let (out, before, after) = filtered(&sample, &set, JointTargets::Recompute);
+    round_trip(&set, &out, &before, &after, 1e-7);
+    let mut spreads = Vec::new();
+    for r in out.report.iter().filter(|r| r.status == TargetStatus::Compensated) {
+        let note =
+            r.notes.iter().find(|n| n.contains("hysteresis")).unwrap_or_else(|| panic!("{}: {:?}", r.name, r.notes));
+        assert!(
+            note.contains("(joint 1 ±0.0150°, joint 2 ±0.0200°)") && note.contains("a program does not say"),
+            "{note}"
+        );
+        spreads.push(note.split(" mm RMS").next().unwrap().rsplit(' ').next().unwrap().parse::<f64>().unwrap());
+    }
+    // Each band moves the TCP by its angle times the lever: 0.1–0.3 mm over this workspace.
+    let (lo, hi) = spreads.iter().fold((f64::INFINITY, 0.0f64), |(l, h), s| (l.min(*s), h.max(*s)));
+    assert!(lo > 0.02 && hi < 0.4 && hi > lo, "{lo}–{hi} mm");
+}
+
 #[test]
 fn krl_pairs_filter_with_a_round_trip_and_only_target_lines_changed() {
     let set = irb120_set();

@@ -128,7 +128,7 @@ fn run(seed: u64, reported_sigma: bool) -> Run {
         let e = (truth.physical_position - p_model).norm() / MM;
         let sigma = pc.sigma(&chain, &state);
         let d = envelope.outside_measured(&p_model);
-        let (u, standard) = UncertaintyOut::of(Some(sigma), &p_model, Some(d), Some(&model));
+        let (u, standard) = UncertaintyOut::of(Some(sigma), None, &p_model, Some(d), Some(&model));
         let bound = u.bound_95_mm.expect("every part known");
         let g = if far_set.contains(&(si, mi)) { &mut outside } else { &mut inside };
         g.n += 1;

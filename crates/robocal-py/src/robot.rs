@@ -126,6 +126,29 @@ impl Robot {
 
     /// Joint readings (deg) of shape (dof,) or (N, dof): each finite and within its joint's limits,
     /// as the CLI's `fk --joints-deg` requires.
+    /// `approach` of shape (dof,) (every target) or (N, dof) with `n` = Some(N) targets: each
+    /// value −1, 0 or +1.
+    fn approach(&self, d: &Dense, n: Option<usize>) -> Result<Vec<f64>, Error> {
+        let dof = self.dof();
+        match (d.shape.as_slice(), n) {
+            ([k], _) if *k == dof => {}
+            ([m, k], Some(n)) if *k == dof && *m == n => {}
+            (s, _) => {
+                let want = n.map_or_else(|| format!("({dof},)"), |n| format!("({dof},) or ({n}, {dof})"));
+                return Err(Error::input("approach", format!("expected shape {want}, got {}", shape_text(s))));
+            }
+        }
+        for (i, v) in d.data.iter().enumerate() {
+            if ![-1.0, 0.0, 1.0].contains(v) {
+                return Err(Error::input(
+                    element_path("approach", &d.shape, i),
+                    format!("must be -1, 0 or 1, got {v}"),
+                ));
+            }
+        }
+        Ok(d.data.clone())
+    }
+
     pub(crate) fn joints(&self, d: &Dense, field: &str) -> Result<Joints, Error> {
         let dof = self.dof();
         let n = match d.shape.as_slice() {
@@ -243,16 +266,30 @@ impl Robot {
 
     /// The solution of `target` by the choice of [`Robot::choice`]; without one, every branch in
     /// increasing cfx until one reaches it (the reasons of all when none does).
-    fn reach(&self, target: &Frame, seed: Option<&[f64]>, branch: Option<Branch>) -> Result<Compensated, Error> {
+    /// `approach`: the direction each joint arrives in (see `Compensator::pose_approaching`;
+    /// empty: unknown).
+    fn reach(
+        &self,
+        target: &Frame,
+        seed: Option<&[f64]>,
+        branch: Option<Branch>,
+        approach: &[f64],
+    ) -> Result<Compensated, Error> {
         if let Some(s) = seed {
-            return self.comp.pose(target, Seed::Joints(s)).map_err(|e| Robot::ik_error("from the seed".into(), e));
+            return self
+                .comp
+                .pose_approaching(target, Seed::Joints(s), approach)
+                .map_err(|e| Robot::ik_error("from the seed".into(), e));
         }
         if let Some(b) = branch {
-            return self.comp.pose(target, Seed::Branch(b)).map_err(|e| Robot::ik_error(format!("cfx {}", b.cfx()), e));
+            return self
+                .comp
+                .pose_approaching(target, Seed::Branch(b), approach)
+                .map_err(|e| Robot::ik_error(format!("cfx {}", b.cfx()), e));
         }
         let mut reasons = Vec::new();
         for b in Branch::ALL {
-            match self.comp.pose(target, Seed::Branch(b)) {
+            match self.comp.pose_approaching(target, Seed::Branch(b), approach) {
                 Ok(c) => return Ok(c),
                 Err(e) => match Robot::ik_error(format!("cfx {}", b.cfx()), e) {
                     Error::Unreachable { reasons: r } => reasons.extend(r),
@@ -506,7 +543,7 @@ impl Robot {
                     Some(all) => Some(&all[i * dof..(i + 1) * dof]),
                     None => shared_seed.as_deref(),
                 };
-                let c = self.reach(target, seed, branch).map_err(|e| Robot::in_batch(n, i, e))?;
+                let c = self.reach(target, seed, branch, &[]).map_err(|e| Robot::in_batch(n, i, e))?;
                 out.extend(to_deg(c.joints()));
             }
             Ok(out)
@@ -522,8 +559,11 @@ impl Robot {
     /// configuration, as in `robocal compensate`: `branch` (cfx 0–7, one for every target or one
     /// per target) or `seed_joints_deg`. A target whose joints leave the calibrated envelope of
     /// the parameter set (its joint ranges, widened by 5°) is refused unless
-    /// `allow_outside_envelope`: the model is not validated there.
-    #[pyo3(signature = (pose_mm, branch=None, seed_joints_deg=None, allow_outside_envelope=false))]
+    /// `allow_outside_envelope`: the model is not validated there. `approach` ((dof,) for every
+    /// target or (N, dof), each −1, 0 or +1): the direction each joint moves in to reach the
+    /// target, for a set with hysteresis (backlash terms); without it such a set is compensated
+    /// for the middle of each band, with a UserWarning.
+    #[pyo3(signature = (pose_mm, branch=None, seed_joints_deg=None, allow_outside_envelope=false, approach=None))]
     fn compensate<'py>(
         &self,
         py: Python<'py>,
@@ -531,6 +571,7 @@ impl Robot {
         branch: Option<Branches>,
         seed_joints_deg: Option<&Bound<'py, PyAny>>,
         allow_outside_envelope: bool,
+        approach: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<(Array<'py>, Array<'py>)> {
         if !self.is_calibrated_set() {
             return Err(Error::Unsupported(format!(
@@ -564,6 +605,21 @@ impl Robot {
             }
         };
         let (seed, first) = self.choice(per_target.first().copied(), seed_joints_deg)?;
+        let approach = match approach {
+            None => None,
+            Some(a) => Some(self.approach(&dense(a, "approach")?, n)?),
+        };
+        let hysteresis = self.comp.hysteresis();
+        if approach.is_none() && !hysteresis.is_empty() {
+            let joints: Vec<String> =
+                hysteresis.iter().map(|(j, b)| format!("joint {} ±{:.4}°", j + 1, b.abs() / DEG)).collect();
+            let message = format!(
+                "the set has hysteresis ({}) and no approach was given: each target is compensated for the middle \
+                 of each band; give approach (the direction each joint moves in to reach it) to compensate for it",
+                joints.join(", ")
+            );
+            PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &std::ffi::CString::new(message)?, 1)?;
+        }
         let mut branches = vec![first; count];
         for (i, &b) in per_target.iter().enumerate() {
             let field =
@@ -580,7 +636,10 @@ impl Robot {
             let mut joints = Vec::with_capacity(dof * targets.len());
             let mut fake = Vec::with_capacity(16 * targets.len());
             for (i, target) in targets.iter().enumerate() {
-                let c = self.reach(target, seed.as_deref(), branches[i]).map_err(|e| Robot::in_batch(n, i, e))?;
+                let a = approach
+                    .as_ref()
+                    .map_or(&[][..], |a| if a.len() == dof { &a[..] } else { &a[i * dof..(i + 1) * dof] });
+                let c = self.reach(target, seed.as_deref(), branches[i], a).map_err(|e| Robot::in_batch(n, i, e))?;
                 if let Some(why) = self.envelope.as_ref().and_then(|e| e.outside(c.joints()))
                     && !allow_outside_envelope
                 {

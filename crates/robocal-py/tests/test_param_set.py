@@ -194,6 +194,35 @@ def test_compensation_refuses_outside_the_envelope_unless_asked(fitted):
     assert e.value.field == "pose_mm"
 
 
+def test_compensation_applies_a_sets_hysteresis_for_the_approach_given(fitted):
+    # The fitted set with backlash on joints 1-3 (deg): the backlash adds b_j * approach_j to joint
+    # j's angle and nothing else, so a target compensated for an approach differs from the one
+    # compensated for the middle of the bands by exactly -b_j * approach_j (to the compliance's
+    # second-order change).
+    b = [0.02, -0.03, 0.025]
+    f = json.loads(fitted.parameter_set.to_json())
+    f["parameters"] += [{"name": f"backlash{j + 1}", "value": v, "unit": "deg"} for j, v in enumerate(b)]
+    robot = ParameterSet.from_json(json.dumps(f)).robot()
+    q = poses(3, seed=29)
+    q[:, 1] = np.clip(q[:, 1], -60, 60)
+    targets = robot.fk(q)
+    cfx = [int(c[3]) for c in robot.confdata(q)]
+    with pytest.warns(UserWarning, match=r"hysteresis \(joint 1 ±0.0200°, joint 2 ±0.0300°, joint 3 ±0.0250°\)"):
+        middle, _ = robot.compensate(targets, branch=cfx)
+    approach = np.array([[1, -1, 1, 0, 0, 0], [-1, -1, 1, 1, 0, 0], [1, 1, -1, 0, 0, -1]])
+    known, _ = robot.compensate(targets, branch=cfx, approach=approach)
+    shift = np.zeros((3, 6))
+    shift[:, :3] = -np.array(b) * approach[:, :3]
+    np.testing.assert_allclose(known, middle + shift, rtol=0, atol=2e-4)
+    # One approach for every target; a wrong shape or value names the argument.
+    one, _ = robot.compensate(targets, branch=cfx, approach=approach[1])
+    np.testing.assert_allclose(one[1], known[1], rtol=0, atol=1e-9)
+    for bad, field in (([1, 0], "approach"), (np.zeros((2, 6)), "approach"), ([2, 0, 0, 0, 0, 0], "approach[0]")):
+        with pytest.raises(InputError) as e:
+            robot.compensate(targets, branch=cfx, approach=bad)
+        assert e.value.field == field, bad
+
+
 @pytest.mark.skipif(cli_binary() is None, reason="robocal CLI binary not built (target/debug/robocal or ROBOCAL_BIN)")
 def test_compensation_equals_the_cli(fitted, tmp_path):
     path = tmp_path / "set.json"

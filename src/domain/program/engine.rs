@@ -387,7 +387,11 @@ fn solve_target(
             (c, correction)
         }
     };
-    let (sigma, mut notes) = match guard_target(comp, &rig.guard(), &c) {
+    // A program does not say which way the robot arrives at a target (that depends on the path
+    // the controller runs): a set's hysteresis is left at the middle of its bands, and said.
+    let hint = "; a program does not say which way its joints arrive (compensate the targets through \
+                `robocal compensate` with approach to include it)";
+    let (sigma, mut notes) = match guard_target(comp, &rig.guard(), &c, hint) {
         Ok(x) => x,
         Err(why) => {
             return Outcome::Failed(format!(

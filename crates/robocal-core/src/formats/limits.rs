@@ -173,6 +173,7 @@ pub const SCHEMA_BOUNDS: &[(&str, &str, f64, f64, Applies, bool)] = {
         ("TargetSpec", "position_mm", -P, P, Items, false),
         ("TargetSpec", "rotation_deg", -A, A, Items, false),
         ("TargetSpec", "quaternion", -2.0, 2.0, Items, false),
+        ("TargetSpec", "approach", -1.0, 1.0, Items, false),
         ("ToolSpec", "tcp_mm", -L, L, Items, false),
         ("ToolSpec", "tcp_rotation_deg", -A, A, Items, false),
         ("ToolSpec", "mass_kg", 0.0, MAX_MASS_KG, Value, false),

@@ -491,6 +491,12 @@ pub struct UncertaintyOut {
     /// it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub covariance_mm: Option<f64>,
+    /// The set's hysteresis where the target does not say which way a joint that has it arrives
+    /// (its `approach` 0 or absent): the target is compensated for the middle of each band, and
+    /// this is the RMS, over the directions the robot may arrive from, of how far that moves the
+    /// TCP. Absent when the set has no hysteresis or every such joint's approach is given.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hysteresis_mm: Option<f64>,
     /// The set's latest held-out validation's RMS error beyond the covariance and the
     /// instrument's noise: what the model misses that its covariance does not say. Absent when
     /// unknown (no held-out validation).
@@ -510,8 +516,8 @@ pub struct UncertaintyOut {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub extrapolation_mm: Option<f64>,
     /// A radius expected to hold 95 % of the position errors: k95 · √(covariance² +
-    /// unexplained²) + (slope + 1.96 · its standard error) · beyond_validated_mm, k95 the held-out
-    /// errors' p95/RMS. Absent when a part is unknown.
+    /// hysteresis² + unexplained²) + (slope + 1.96 · its standard error) · beyond_validated_mm,
+    /// k95 the held-out errors' p95/RMS. Absent when a part is unknown.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bound_95_mm: Option<f64>,
     /// The parts that are not known, and why (then `uncertainty_mm` is not given).
@@ -520,18 +526,24 @@ pub struct UncertaintyOut {
 }
 
 impl UncertaintyOut {
-    /// The parts at a target whose covariance σ is `sigma` (m), whose TCP is at `tcp` ({W}, m)
-    /// and lies `outside` (m) outside the measured region (`None`: no region recorded), with a
-    /// validation's model `held_out`. Returns the parts and the combined standard uncertainty (mm)
-    /// when every part is known.
+    /// The parts at a target whose covariance σ is `sigma` (m), whose hysteresis left unapplied
+    /// spreads it by `hysteresis` (m, RMS), whose TCP is at `tcp` ({W}, m) and lies `outside` (m)
+    /// outside the measured region (`None`: no region recorded), with a validation's model
+    /// `held_out`. Returns the parts and the combined standard uncertainty (mm) when every part is
+    /// known.
     pub fn of(
         sigma: Option<f64>,
+        hysteresis: Option<f64>,
         tcp: &Vector3<f64>,
         outside: Option<f64>,
         held_out: Option<&HeldOutUncertainty>,
     ) -> (UncertaintyOut, Option<f64>) {
         use crate::units::{OUT_MM, round_to};
-        let mut u = UncertaintyOut { covariance_mm: sigma.map(|s| s / MM), ..UncertaintyOut::default() };
+        let mut u = UncertaintyOut {
+            covariance_mm: sigma.map(|s| s / MM),
+            hysteresis_mm: hysteresis.map(|h| h / MM),
+            ..UncertaintyOut::default()
+        };
         if sigma.is_none() && held_out.is_none() {
             u.unknown.push("covariance: the set records no parameter covariance".into());
         }
@@ -559,7 +571,8 @@ impl UncertaintyOut {
             (None, None) => u.unknown.push("extrapolation: the set records no measured region".into()),
         }
         u.extrapolation_mm = growth;
-        let cov = u.covariance_mm.unwrap_or(0.0);
+        // The covariance and the unapplied hysteresis, combined: independent parts.
+        let cov = u.covariance_mm.unwrap_or(0.0).hypot(u.hysteresis_mm.unwrap_or(0.0));
         let combined = match (u.unexplained_mm, growth) {
             (Some(un), Some(g)) if u.unknown.is_empty() => Some((cov * cov + un * un + g * g).sqrt()),
             _ => None,
@@ -571,6 +584,7 @@ impl UncertaintyOut {
         }
         let r = |v: Option<f64>| v.map(|x| round_to(x, OUT_MM));
         u.covariance_mm = r(u.covariance_mm);
+        u.hysteresis_mm = r(u.hysteresis_mm);
         u.unexplained_mm = r(u.unexplained_mm);
         u.outside_measured_mm = r(u.outside_measured_mm);
         u.beyond_validated_mm = r(u.beyond_validated_mm);
@@ -695,6 +709,33 @@ mod tests {
         let mut f = e.file().clone();
         f.joints_deg[2] = [1.0, -1.0];
         assert_eq!(Envelope::from_file(&f).unwrap_err().path, "joints_deg[2]");
+    }
+
+    /// An unapplied hysteresis is one more independent part: the combined standard uncertainty
+    /// and the 95 % bound take it in quadrature with the covariance, and it is reported by itself.
+    #[test]
+    fn a_hysteresis_left_unapplied_joins_the_uncertainty_in_quadrature() {
+        let held_out = HeldOutUncertainty {
+            n: 100,
+            rms_mm: 0.2,
+            covariance_rms_mm: 0.01,
+            instrument_rms_mm: 0.02,
+            unexplained_mm: 0.15,
+            k95: 1.8,
+            growth: None,
+        };
+        let tcp = Vector3::new(0.4, 0.1, 0.5);
+        let (sigma, h) = (0.03 * MM, 0.12 * MM);
+        let (without, a) = UncertaintyOut::of(Some(sigma), None, &tcp, Some(0.0), Some(&held_out));
+        let (with, b) = UncertaintyOut::of(Some(sigma), Some(h), &tcp, Some(0.0), Some(&held_out));
+        assert_eq!((without.hysteresis_mm, with.hysteresis_mm), (None, Some(0.12)));
+        // Every figure is written to the micrometre.
+        let (a, b) = (a.unwrap(), b.unwrap());
+        assert!((a - 0.03f64.hypot(0.15)).abs() <= 5e-4, "{a}");
+        assert!((b - 0.03f64.hypot(0.15).hypot(0.12)).abs() <= 5e-4, "{b}");
+        let (ba, bb) = (without.bound_95_mm.unwrap(), with.bound_95_mm.unwrap());
+        assert!((ba - 1.8 * 0.03f64.hypot(0.15)).abs() <= 5e-4, "{ba}");
+        assert!((bb - 1.8 * 0.03f64.hypot(0.15).hypot(0.12)).abs() <= 5e-4, "{bb}");
     }
 
     /// σ from the stored std and correlation equals √trace(J·Cov·Jᵀ) with the Jacobian taken by

@@ -12,6 +12,7 @@ use super::ik_analytic::{AnalyticIk, Branch, Confdata, IkError};
 use super::ik_numeric::{self, IkOptions, IkSolution};
 use super::model::MAX_JOINTS;
 use super::param_set::ParameterSet;
+use super::params::{JointTerm, Param};
 
 /// Fixed-point refinements of a closed-form seed before Newton (see `Compensator::branch_seed`).
 const SEED_REFINEMENTS: usize = 2;
@@ -49,6 +50,11 @@ pub struct Compensated {
     /// Its `cfx` equals `branch` except within a hair of a singularity, where the calibrated and
     /// nominal arms put the dividing line in slightly different places.
     pub confdata: Option<Confdata>,
+    /// The direction each joint moves in to reach `q` that the solve assumed (−1, 0, +1; 0 where
+    /// unknown): a set with hysteresis (backlash terms) puts the TCP on the target only when the
+    /// robot arrives so. With 0 the joint sits in the middle of its hysteresis band; see
+    /// [`Compensator::hysteresis_spread`].
+    pub approach: [f64; MAX_JOINTS],
 }
 
 impl Compensated {
@@ -72,6 +78,8 @@ pub struct Compensator {
     nominal_ik: Option<AnalyticIk>,
     limits: Vec<[f64; 2]>,
     opts: IkOptions,
+    /// The set's non-zero backlash terms: joint, b_j (rad).
+    backlash: Vec<(usize, f64)>,
 }
 
 impl Compensator {
@@ -102,6 +110,9 @@ impl Compensator {
             nominal_ik,
             limits: set.model.links.iter().map(|l| l.limits).collect(),
             opts,
+            backlash: (0..set.dof())
+                .filter_map(|j| set.value(Param::Joint(j, JointTerm::Backlash)).filter(|b| *b != 0.0).map(|b| (j, b)))
+                .collect(),
         }
     }
 
@@ -126,18 +137,38 @@ impl Compensator {
         &self.gravity
     }
 
-    /// The joints that put the *calibrated* robot's TCP on `target` (in {W}), and the fake pose.
+    /// The joints that put the *calibrated* robot's TCP on `target` (in {W}), and the fake pose;
+    /// the robot's approach to the target unknown (see [`Self::pose_approaching`]).
     pub fn pose(&self, target: &Frame, seed: Seed<'_>) -> Result<Compensated, IkError> {
+        self.pose_approaching(target, seed, &[])
+    }
+
+    /// [`Self::pose`] for a robot that reaches the target moving each joint in the direction
+    /// `approach[j]` (−1, 0, +1; 0 or a missing entry: unknown, or not moving): a set's backlash
+    /// terms then act as the identification fitted them (θ_j += b_j·approach_j), and the
+    /// calibrated TCP lands on the target for that approach. Without the set's backlash terms the
+    /// approach changes nothing.
+    pub fn pose_approaching(&self, target: &Frame, seed: Seed<'_>, approach: &[f64]) -> Result<Compensated, IkError> {
         let n = self.calibrated.dof();
+        let mut conditions = JointState::new(&[]);
+        for (a, &v) in conditions.approach.iter_mut().zip(approach.iter().take(n)) {
+            *a = if v > 0.0 {
+                1.0
+            } else if v < 0.0 {
+                -1.0
+            } else {
+                0.0
+            };
+        }
         let (seed_q, expected) = match seed {
-            Seed::Branch(b) => (self.branch_seed(target, b)?.to_vec(), Some(b)),
+            Seed::Branch(b) => (self.branch_seed(target, b, &conditions)?.to_vec(), Some(b)),
             Seed::Confdata(c) => {
                 // The branch from cfx; cf1, cf4, cf6 choose the whole turns of axes 1, 4, 6 (the
                 // representative nearest the middle of each requested quadrant). The quadrant is
                 // not enforced: the requested confdata is the nominal model's, and calibration
                 // can move an axis lying within a degree of a quadrant boundary across it. The
                 // answer's `confdata` (the nominal model's of q*) is what to program.
-                let mut q = self.branch_seed(target, c.cfx)?;
+                let mut q = self.branch_seed(target, c.cfx, &conditions)?;
                 for (j, cf) in [(0, c.cf1), (3, c.cf4), (5, c.cf6)] {
                     let centre = (f64::from(cf) + 0.5) * std::f64::consts::FRAC_PI_2;
                     q[j] += ((centre - q[j]) / std::f64::consts::TAU).round() * std::f64::consts::TAU;
@@ -148,11 +179,11 @@ impl Compensator {
                 if q.len() != n {
                     return Err(IkError::InvalidTarget(format!("seed has {} joints, the robot {n}", q.len())));
                 }
-                (q.to_vec(), self.branch_on_calibrated(q))
+                (q.to_vec(), self.branch_on_calibrated(q, &conditions))
             }
         };
-        let sol = ik_numeric::solve(&self.calibrated, &self.gravity, target, &seed_q, &self.opts)?;
-        let branch = self.branch_on_calibrated(sol.joints());
+        let sol = ik_numeric::solve_in(&self.calibrated, &self.gravity, target, &seed_q, &conditions, &self.opts)?;
+        let branch = self.branch_on_calibrated(sol.joints(), &conditions);
         if let (Some(want), Some(got)) = (expected, branch)
             && want != got
         {
@@ -177,7 +208,44 @@ impl Compensator {
             iterations: sol.iterations,
             branch,
             confdata: self.nominal_ik.as_ref().map(|ik| ik.confdata(sol.joints())),
+            approach: conditions.approach,
         })
+    }
+
+    /// The set's hysteresis: each joint's backlash term b_j (rad), for the joints that have a
+    /// non-zero one; empty when the set has none.
+    pub fn hysteresis(&self) -> &[(usize, f64)] {
+        &self.backlash
+    }
+
+    /// How far the TCP may be from where a compensated `c` puts it because the robot's approach
+    /// is unknown for some joints with hysteresis: the RMS over the unknown joints' directions
+    /// (each −1 or +1, independent) of the TCP's displacement from the band's middle,
+    /// √Σ_j ‖p(θ_j + b_j) − p(θ_j)‖² over the joints with a backlash term b_j and approach 0 in
+    /// `c` (m). `None` when no such joint remains: the set has no hysteresis, or the approach of
+    /// every joint that has one is known.
+    pub fn hysteresis_spread(&self, c: &Compensated) -> Option<f64> {
+        let unknown: Vec<usize> =
+            self.backlash.iter().filter(|(j, _)| c.approach[*j] == 0.0).map(|(j, _)| *j).collect();
+        if unknown.is_empty() {
+            return None;
+        }
+        let q = c.joints();
+        let tau = self.gravity.torques(q);
+        let at = |approach: [f64; MAX_JOINTS]| {
+            let s = JointState { approach, ..JointState::with_torques(q, &tau[..q.len()]) };
+            self.calibrated.fk(&s).t
+        };
+        let middle = at(c.approach);
+        let sum: f64 = unknown
+            .iter()
+            .map(|&j| {
+                let mut a = c.approach;
+                a[j] = 1.0;
+                (at(a) - middle).norm_squared()
+            })
+            .sum();
+        Some(sum.sqrt())
     }
 
     /// The starting joints the solver would use for `target` ({W}) on `branch`: the closed-form
@@ -185,7 +253,7 @@ impl Compensator {
     /// caller that wants other whole turns of some axes (KUKA's turn bits, Fanuc's turn numbers)
     /// shifts them and solves with [`Seed::Joints`].
     pub fn seed_on_branch(&self, target: &Frame, branch: Branch) -> Result<[f64; 6], IkError> {
-        self.branch_seed(target, branch)
+        self.branch_seed(target, branch, &JointState::new(&[]))
     }
 
     /// The controller's (nominal model's) joints for `target` ({W}) nearest `seed`: what a
@@ -198,8 +266,14 @@ impl Compensator {
     /// Compensate a nominal joint target: the desired pose is where the *nominal* model puts the
     /// TCP at `q_nominal`; the answer stays on `q_nominal`'s branch.
     pub fn joints(&self, q_nominal: &[f64]) -> Result<Compensated, IkError> {
+        self.joints_approaching(q_nominal, &[])
+    }
+
+    /// [`Self::joints`] for a robot arriving with each joint moving in the direction `approach`
+    /// (see [`Self::pose_approaching`]).
+    pub fn joints_approaching(&self, q_nominal: &[f64], approach: &[f64]) -> Result<Compensated, IkError> {
         let target = self.nominal.fk(&JointState::new(q_nominal));
-        self.pose(&target, Seed::Joints(q_nominal))
+        self.pose_approaching(&target, Seed::Joints(q_nominal), approach)
     }
 
     /// A seed on the requested branch, refined by the fake-target fixed point: with
@@ -208,12 +282,14 @@ impl Compensator {
     /// requested branch by construction and gains about three digits (the models differ by 10⁻³),
     /// so Newton starts micrometres from the answer — even next to a singularity, where a
     /// nominal seed can sit on the dividing line itself.
-    fn branch_seed(&self, target: &Frame, branch: Branch) -> Result<[f64; 6], IkError> {
+    fn branch_seed(&self, target: &Frame, branch: Branch, conditions: &JointState) -> Result<[f64; 6], IkError> {
         let ik = self.closed_form()?;
         let mut q = ik.seed(target, branch)?;
         for _ in 0..SEED_REFINEMENTS {
             let tau = self.gravity.torques(&q);
-            let cal = self.calibrated.fk(&JointState::with_torques(&q, &tau[..6]));
+            let cal = self
+                .calibrated
+                .fk(&JointState { approach: conditions.approach, ..JointState::with_torques(&q, &tau[..6]) });
             let nom = self.seed_chain.fk(&JointState::new(&q));
             q = ik.seed(&nom.compose(&cal.inverse()).compose(target), branch)?;
         }
@@ -221,10 +297,11 @@ impl Compensator {
     }
 
     /// Branch of a configuration on the calibrated arm (compliance deflection included).
-    fn branch_on_calibrated(&self, q: &[f64]) -> Option<Branch> {
+    fn branch_on_calibrated(&self, q: &[f64], conditions: &JointState) -> Option<Branch> {
         let ik = self.seed_ik.as_ref()?;
         let tau = self.gravity.torques(q);
-        Some(ik.classify_on(&self.calibrated, &JointState::with_torques(q, &tau[..q.len()])))
+        let s = JointState { approach: conditions.approach, ..JointState::with_torques(q, &tau[..q.len()]) };
+        Some(ik.classify_on(&self.calibrated, &s))
     }
 
     fn closed_form(&self) -> Result<&AnalyticIk, IkError> {
@@ -346,6 +423,72 @@ mod tests {
             crossed += usize::from(w != g);
         }
         assert!(crossed > 0, "the sweep should carry some axis across its quadrant boundary");
+    }
+
+    /// A set with hysteresis: compensated for a known approach, the calibrated TCP arriving that
+    /// way lands on the target within 1 nm; compensated with the approach unknown it lands on the
+    /// band's middle, and the RMS of its miss over every direction the robot may arrive from
+    /// equals `hysteresis_spread` (an independent evaluation: the solved joints' forward
+    /// kinematics under each of the 2³ arrivals).
+    #[test]
+    fn a_set_with_hysteresis_is_compensated_for_the_approach_or_says_its_spread() {
+        use crate::kinematics::params::JointTerm;
+        let mut set = table_5_1();
+        assert!(Compensator::new(&set).hysteresis().is_empty());
+        let b = [0.02_f64.to_radians(), -0.03_f64.to_radians(), 0.025_f64.to_radians()];
+        set.extend(&(0..3).map(|j| Param::Joint(j, JointTerm::Backlash)).collect::<Vec<_>>());
+        for (j, v) in b.iter().enumerate() {
+            assert!(set.set(Param::Joint(j, JointTerm::Backlash), *v));
+        }
+        let comp = Compensator::new(&set);
+        assert_eq!(comp.hysteresis().len(), 3);
+        let (gravity, calibrated, nominal) = (set.gravity(), set.chain(), set.nominal_chain());
+        let ik = AnalyticIk::new(&set.model, calibrated.base(), calibrated.tool()).unwrap();
+        let land = |q: &[f64], approach: [f64; 3]| {
+            let tau = gravity.torques(q);
+            let mut s = JointState::with_torques(q, &tau[..6]);
+            s.approach[..3].copy_from_slice(&approach);
+            calibrated.fk(&s)
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let mut ratios = Vec::new();
+        for _ in 0..20 {
+            let q = [
+                rng.random_range(-1.5..1.5),
+                rng.random_range(-0.8..0.9),
+                rng.random_range(-1.0..0.6),
+                rng.random_range(-1.5..1.5),
+                rng.random_range(0.3..1.6),
+                rng.random_range(-1.5..1.5),
+            ];
+            let target = nominal.fk(&JointState::new(&q));
+            let branch = Seed::Branch(ik.classify(&q));
+            let a: [f64; 3] = std::array::from_fn(|_| if rng.random_bool(0.5) { 1.0 } else { -1.0 });
+            let known = comp.pose_approaching(&target, branch, &a).unwrap();
+            let (dp, dr) = pose_error(&land(known.joints(), a), &target);
+            assert!(dp <= 1e-9 && dr <= 1e-6, "{dp} m {dr} rad for a known approach");
+            assert_eq!(comp.hysteresis_spread(&known), None, "every joint with hysteresis has its approach");
+            let unknown = comp.pose(&target, branch).unwrap();
+            let (dp, _) = pose_error(&land(unknown.joints(), [0.0; 3]), &target);
+            assert!(dp <= 1e-9, "the unknown approach lands on the band's middle: {dp} m");
+            // The miss for each of the 2³ arrivals.
+            let mut sum = 0.0;
+            for k in 0..8 {
+                let a: [f64; 3] = std::array::from_fn(|j| if k >> j & 1 == 1 { 1.0 } else { -1.0 });
+                sum += pose_error(&land(unknown.joints(), a), &target).0.powi(2);
+            }
+            let rms = (sum / 8.0).sqrt();
+            let spread = comp.hysteresis_spread(&unknown).unwrap();
+            assert!(rms > 20e-6, "arriving from one side misses by {rms} m");
+            ratios.push(spread / rms);
+            // One joint's approach known: the spread is that of the other two.
+            let partly = comp.pose_approaching(&target, branch, &[1.0]).unwrap();
+            let two = comp.hysteresis_spread(&partly).unwrap();
+            assert!(two < spread, "{two} m with joint 1 known, {spread} m without");
+        }
+        for r in &ratios {
+            assert!((r - 1.0).abs() < 0.01, "spread / RMS miss = {r}");
+        }
     }
 
     #[test]

@@ -186,6 +186,7 @@ class Robot:
         branch: int | Sequence[int] | None = None,
         seed_joints_deg: ArrayLike | None = None,
         allow_outside_envelope: bool = False,
+        approach: ArrayLike | None = None,
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
         """Compensated ("fake") targets of a calibrated model: for each pose of ``pose_mm``
         ((4, 4) or (N, 4, 4), mm, in the measurements' frame), the joints in degrees that put the
@@ -197,7 +198,12 @@ class Robot:
         ranges widened by 5°) raises InputError (``field == "pose_mm[i]"``) unless
         ``allow_outside_envelope``. The same joints as ``robocal compensate``. Raises
         NotImplementedError for a preset's nominal model, UnreachableError for a target out of
-        reach."""
+        reach. ``approach`` ((dof,) for every target, or (N, dof); each −1, 0 or +1): the direction
+        each joint moves in to reach the target. A set with hysteresis (backlash terms) is
+        compensated for it; without it, such a set is compensated for the middle of each joint's
+        band and a UserWarning says so (the robot then lands within the band's spread of the
+        target, as ``robocal compensate`` reports in ``uncertainty.hysteresis_mm``). A wrong shape
+        or value raises InputError (``field == "approach"`` or ``"approach[i]"``)."""
 
 class Identification:
     """The result of ``identify``: the calibrated parameter set, every parameter's standard
