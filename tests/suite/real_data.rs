@@ -2083,6 +2083,56 @@ fn a_second_run_merged_into_a_cell_says_whether_the_tracker_moved() {
     refused("ur10", &["--name", "x"], "robot model differs");
 }
 
+/// An ISO 9283 evaluation of a set with hysteresis on a session that does not log its
+/// directions applies the hysteresis with the directions derived from the measuring order, as
+/// `identify` and `validate` do, and says so: every visit's predicted (commanded) pose equals the
+/// same evaluation on the cell with every direction written in beforehand. (Before, the backlash
+/// terms acted nowhere there: the figures were of the set without its hysteresis.)
+#[test]
+fn an_iso_evaluation_applies_a_sets_hysteresis_from_the_measuring_order() {
+    use robocal::domain::iso9283::evaluate::{Assignment, evaluate_session};
+    let dir = common::fresh_dir("iso-hysteresis");
+    let o = TrackerRunOptions { seed: 43, poses: 300, removed: 0, ..Default::default() };
+    let (j, f) = tracker_run(&o).unwrap().write(&dir, "run", 6).unwrap();
+    let cell = three_reflector::import(&j, &f, irb120(), Purpose::Identification).unwrap().cell;
+    let id =
+        identify(&cell, &options("+backlash1,+backlash2,+backlash3", &["reflector-1", "reflector-2", "reflector-3"]))
+            .unwrap();
+    let b1 = id.set.value(Param::Joint(0, JointTerm::Backlash)).unwrap();
+    assert!(b1.abs() > 0.003 * DEG, "the twin's hysteresis is fitted: {} deg", b1 / DEG);
+    let n = cell.session("reflector-2").unwrap().measurements.len();
+    let assignments: Vec<Assignment> = (0..n)
+        .map(|i| Assignment { index: i, pose: format!("p{}", i % 5 + 1), cycle: (i / 5) as u32 + 1, approach: None })
+        .collect();
+    let mut logged = cell.clone();
+    robocal::cell::order::fill_approach(&mut logged, &[]);
+    let derived = evaluate_session(&cell, "reflector-2", Some(&id.set), &assignments, 1e4, &[]).unwrap();
+    let written = evaluate_session(&logged, "reflector-2", Some(&id.set), &assignments, 1e4, &[]).unwrap();
+    assert!(derived.notes.iter().any(|n| n.contains("reflector-2")), "{:?}", derived.notes);
+    assert!(written.notes.is_empty(), "{:?}", written.notes);
+    let mut worst = 0.0f64;
+    for (a, b) in derived.visits.iter().zip(&written.visits) {
+        worst = worst.max((a.commanded.t - b.commanded.t).norm());
+    }
+    assert!(worst < 1e-9, "{} µm from the evaluation with the directions written in", worst / 1e-6);
+    // The hysteresis matters here: the same set scored with every direction unknown predicts
+    // other poses (by the backlash's lever).
+    let mut stripped = cell.clone();
+    for s in &mut stripped.sessions {
+        for m in &mut s.measurements {
+            m.approach = Some(vec![0; 6]);
+        }
+    }
+    let none = evaluate_session(&stripped, "reflector-2", Some(&id.set), &assignments, 1e4, &[]).unwrap();
+    let apart = none
+        .visits
+        .iter()
+        .zip(&written.visits)
+        .map(|(a, b)| (a.commanded.t - b.commanded.t).norm())
+        .fold(0.0, f64::max);
+    assert!(apart > 10e-6, "the hysteresis moves the prediction by {} µm at most", apart / 1e-6);
+}
+
 /// A second run that the diagnosis carries its models to (`transfer`) is scored with the
 /// hysteresis the diagnosis named: the run's approach directions are derived from its measuring
 /// order, as the diagnosed sessions' are. They were not, and the named hysteresis acted nowhere

@@ -22,7 +22,7 @@
 use crate::cell::{Cell, Observation, Session};
 use crate::identify::{IdentifyOptions, identify};
 use crate::kinematics::{Frame, Param, ParameterSet};
-use crate::validate::report::joint_state;
+use crate::validate::report::{approach_for, joint_state};
 
 use super::stats::{Visit, VisitSigma};
 
@@ -59,6 +59,9 @@ pub struct Registration {
 pub struct Evaluated {
     pub visits: Vec<Visit>,
     pub registration: Registration,
+    /// What the evaluation did that its figures depend on (a set's hysteresis applied with
+    /// directions derived from the measuring order).
+    pub notes: Vec<String>,
 }
 
 /// Why a session cannot be evaluated.
@@ -99,6 +102,15 @@ pub fn evaluate_session(
             return Err(EvaluateError::NotMeasured { session: session.to_string(), index: a.index });
         }
     }
+    // A set with hysteresis predicts each reading from the direction of the move into its stop:
+    // where the session does not log it, derive it from the measuring order as the registration
+    // (an identification) does, or the backlash terms would act nowhere in the figures.
+    let (filled, notes) = match set {
+        Some(set) => approach_for(set, cell, &[session.to_string()]),
+        None => (None, Vec::new()),
+    };
+    let cell = filled.as_ref().unwrap_or(cell);
+    let s: &Session = cell.session(session).ok_or_else(|| EvaluateError::UnknownSession(session.to_string()))?;
     let mut opts = IdentifyOptions {
         start: set.cloned(),
         only: vec!["base".into(), "tool".into()],
@@ -148,5 +160,6 @@ pub fn evaluate_session(
             free: id.free_names.clone(),
             held: held.to_vec(),
         },
+        notes,
     })
 }

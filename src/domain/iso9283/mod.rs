@@ -293,6 +293,7 @@ pub fn evaluate(
     let one = |e: &Evaluated, model: &str| -> Result<IsoReport, EvaluationError> {
         let mut r = report(model, &e.visits, pairs, Some(&e.registration))
             .map_err(|error| EvaluationError::Statistics { model: model.to_string(), error })?;
+        r.notes.extend(e.notes.iter().cloned());
         if !held.is_empty() {
             if let Some(g) = &mut r.registration {
                 g.held = held.clone();

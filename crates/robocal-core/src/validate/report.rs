@@ -537,7 +537,7 @@ pub fn validate_fitted(
 /// the direction of the move into its stop: without it the backlash terms act nowhere, and the
 /// figures would be of another model than the set (a twin's second run read the named hysteresis
 /// as costing 0.002 mm where, applied, it gains 0.013 mm).
-fn approach_for(set: &ParameterSet, cell: &Cell, sessions: &[String]) -> (Option<Cell>, Vec<String>) {
+pub fn approach_for(set: &ParameterSet, cell: &Cell, sessions: &[String]) -> (Option<Cell>, Vec<String>) {
     let backlash = set
         .layout
         .params()
