@@ -2216,4 +2216,34 @@ fn a_second_run_is_scored_with_the_named_hysteresis() {
     assert!(e.to_string().contains("it fitted reflector-1, reflector-2, reflector-3"), "{e}");
     let own = validate_fitted(&doc.set, &cell, &reflectors, Reference::Measured, Some(&fit)).unwrap();
     assert!(own.calibrated.position.mean < 0.5 * MM, "{}", own.calibrated.position.mean);
+
+    // The uncertainty model a held-out validation of a set with hysteresis gives compensation
+    // takes the covariance's σ at each reading with the directions the validation applied (the
+    // backlash terms' columns act there), as on the cell with them written in. The second run
+    // names the first run's reflectors as its targets (the plate not remounted), so the set's
+    // TCPs apply to it.
+    let shared = |cell: &Cell| {
+        let mut c = cell.clone();
+        for s in &mut c.sessions {
+            s.target = Some(format!("smr-{}", s.name.rsplit('-').next().unwrap()));
+        }
+        c
+    };
+    let (cell, logged) = (shared(&cell), shared(&logged));
+    let opts = options("+backlash1,+backlash2,+backlash3", &["reflector-1", "reflector-2", "reflector-3"]);
+    let (_, written) = robocal::domain::identification::run_identification(&cell, opts, None, &|| {}).unwrap();
+    let doc = robocal::domain::ParameterSetDoc::from_json(&written.to_json_pretty()).unwrap();
+    let fit = robocal::domain::validation::fit_data(&doc, &[]);
+    let uncertainty = |cell: &Cell| {
+        let report = validate_fitted(&doc.set, cell, &days[..1], Reference::Measured, Some(&fit)).unwrap();
+        robocal::domain::validity::HeldOutUncertainty::of_report(&doc, cell, &report).unwrap().expect("held out")
+    };
+    let (derived, written) = (uncertainty(&cell), uncertainty(&logged));
+    assert!(
+        (derived.covariance_rms_mm - written.covariance_rms_mm).abs() < 1e-12,
+        "{} mm against {} mm with the directions written in",
+        derived.covariance_rms_mm,
+        written.covariance_rms_mm
+    );
+    assert_eq!((derived.rms_mm, derived.unexplained_mm), (written.rms_mm, written.unexplained_mm));
 }

@@ -411,11 +411,15 @@ impl HeldOutUncertainty {
         cell: &crate::cell::Cell,
         report: &crate::validate::report::ValidationReport,
     ) -> Result<Option<HeldOutUncertainty>, DomainError> {
-        use crate::validate::report::{joint_state, session_chains};
+        use crate::validate::report::{approach_for, joint_state, session_chains};
         if !report.held_out() || report.residuals.is_empty() {
             return Ok(None);
         }
         let set = &doc.set;
+        // The directions the validation applied the set's hysteresis with (derived from the
+        // measuring order where not logged): the covariance's σ at each reading is taken there.
+        let filled = approach_for(set, cell, &report.sessions).0;
+        let cell = filled.as_ref().unwrap_or(cell);
         let covariance = PredictionCovariance::of_doc(doc)?;
         let robot_only = covariance.as_ref().map(PredictionCovariance::without_tool);
         let noise = crate::identify::noise::NoiseModel::default();
