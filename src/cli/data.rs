@@ -162,6 +162,11 @@ pub struct ThreeReflectorArgs {
     /// to --out with both; the import says whether the run was measured in the cell's tracker frame.
     #[arg(long)]
     pub into: Option<PathBuf>,
+    /// With --into: this run measured the same reflectors as run NAME of the cell (one plate, not
+    /// remounted): NAME-k and this run's k-th session name one target, so a fit's TCPs apply to
+    /// both (`validate` of NAME's set on this run), and this run declares NAME's tool.
+    #[arg(long, requires = "into", value_name = "NAME")]
+    pub same_plate_as: Option<String>,
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -387,7 +392,20 @@ pub(super) fn import_three(a: ThreeReflectorArgs) -> Result<String, CliError> {
         import_run(&a.joints, &a.positions, model, p, payload, &a.name).map_err(|e| CliError::msg(e.to_string()))?;
     let Some((path, cell, text)) = into else { return write_imported(&a.out, imported) };
     let before = cell.sessions.len();
-    let merged = crate::import::merge(cell, path, imported).map_err(|e| CliError::msg(e.to_string()))?;
+    let mut merged = crate::import::merge(cell, path, imported).map_err(|e| CliError::msg(e.to_string()))?;
+    let given = match &a.same_plate_as {
+        None => Vec::new(),
+        Some(plate) => {
+            let given = crate::import::share_plate(&mut merged.cell, &a.name, plate)
+                .map_err(|e| CliError::arg("--same-plate-as", e.to_string()))?;
+            merged.notes.push(format!(
+                "{}-1…: the same plate as {plate} (targets shared, {plate}'s tool declared): a fit's TCPs for {plate}'s \
+                 reflectors apply to them",
+                a.name
+            ));
+            given
+        }
+    };
     // The cell's own text is kept as written, the run's sessions appended to its list: a cell read
     // and written again would change its values in the last digit (mm to m and back).
     let mut file: serde_json::Value =
@@ -395,7 +413,22 @@ pub(super) fn import_three(a: ThreeReflectorArgs) -> Result<String, CliError> {
     let run = crate::cell::Cell { sessions: merged.cell.sessions[before..].to_vec(), ..merged.cell.clone() };
     let run: serde_json::Value = serde_json::from_str(&crate::domain::cell::cell_to_json(&run)).expect("a cell's JSON");
     match (file.get_mut("sessions").and_then(|s| s.as_array_mut()), run["sessions"].as_array()) {
-        (Some(list), Some(new)) => list.extend(new.iter().cloned()),
+        (Some(list), Some(new)) => {
+            // The plate's sessions given a target name it in their text; a run sharing a target
+            // declares the plate's tool as written there (converted back from SI it could differ
+            // in the last digit, and sessions sharing a target declare one tool).
+            for (i, target) in &given {
+                list[*i]["target"] = serde_json::Value::String(target.clone());
+            }
+            let mut new = new.clone();
+            for s in &mut new {
+                let Some(target) = s["target"].as_str().map(str::to_string) else { continue };
+                if let Some(plate) = list.iter().find(|p| p["target"].as_str() == Some(target.as_str())) {
+                    s["tool"] = plate["tool"].clone();
+                }
+            }
+            list.extend(new);
+        }
         _ => return Err(CliError::msg(format!("{}: no list of sessions", path.display()))),
     }
     write_cell_text(&a.out, serde_json::to_string_pretty(&file).expect("JSON serialises"), merged)

@@ -151,6 +151,66 @@ pub fn merge(into: Cell, into_path: &Path, run: Imported) -> Result<Imported, Im
     })
 }
 
+/// The sessions of run `run` in `cell` (`{run}-1`, `{run}-2`, …) measured the same reflectors as
+/// those of run `plate` (`{plate}-1`, …): one plate, not remounted between the runs. Each pair
+/// then names one `target`, so a fit's TCP for the plate's reflector applies to the run's (a
+/// validation of the first run's set on the second run is scored with the TCPs it fitted), and the
+/// run's sessions declare the plate's tool (one plate: its payload and centre of mass; sessions
+/// sharing a target declare one tool). A plate session without a target gets its own name as
+/// one. Returns the plate's sessions given a target (cell indices, the target), which a caller
+/// that keeps the cell's text writes in. Refused: the run named as its own plate, a run or plate
+/// without sessions of those names, runs of different numbers of reflectors, and a payload mass
+/// declared for the run (not 0 kg, the unknown payload) that differs from the plate's.
+pub fn share_plate(cell: &mut Cell, run: &str, plate: &str) -> Result<Vec<(usize, String)>, ImportError> {
+    let input = |reason: String| Err(ImportError::Input(reason));
+    if run == plate {
+        return input(format!("--same-plate-as {plate}: that is the run being imported"));
+    }
+    let numbered = |name: &str| -> Vec<usize> {
+        (1..).map_while(|k| cell.sessions.iter().position(|s| s.name == format!("{name}-{k}"))).collect()
+    };
+    let (ours, theirs) = (numbered(run), numbered(plate));
+    if theirs.is_empty() {
+        return input(format!(
+            "--same-plate-as {plate}: the cell holds no session {plate}-1 (its sessions: {})",
+            cell.sessions.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", ")
+        ));
+    }
+    if ours.len() != theirs.len() {
+        return input(format!(
+            "--same-plate-as {plate}: {plate} has {} reflectors and this run {}: one plate's runs measure the same \
+             reflectors, in the same order",
+            theirs.len(),
+            ours.len()
+        ));
+    }
+    let mut given = Vec::new();
+    for (&o, &t) in ours.iter().zip(&theirs) {
+        let (mass, plate_mass) = (cell.sessions[o].tool.mass, cell.sessions[t].tool.mass);
+        if mass != 0.0 && mass != plate_mass {
+            return input(format!(
+                "--same-plate-as {plate}: this run declares a {mass} kg payload and {} {plate_mass} kg: one plate \
+                 carries one payload",
+                cell.sessions[t].name
+            ));
+        }
+        let target = match &cell.sessions[t].target {
+            Some(name) => name.clone(),
+            None => {
+                let name = cell.sessions[t].name.clone();
+                cell.sessions[t].target = Some(name.clone());
+                given.push((t, name.clone()));
+                name
+            }
+        };
+        let tool = cell.sessions[t].tool.clone();
+        let s = &mut cell.sessions[o];
+        s.target = Some(target);
+        s.tool = tool;
+    }
+    Ok(given)
+}
+
 /// The robot's base in the measurement frame, registered with every session's reflector or
 /// probe on the nominal robot; `None` when it fails.
 fn registered_base(cell: &Cell) -> Option<crate::kinematics::frame::Frame> {

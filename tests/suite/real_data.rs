@@ -2062,6 +2062,64 @@ fn a_second_run_merged_into_a_cell_says_whether_the_tracker_moved() {
     assert!(said.contains("day3-1, day3-2, day3-3: merged into") && said.contains("no move of the tracker"), "{said}");
     assert_eq!(sessions(&cell(&path("c.json"))).len(), 9);
 
+    // The same plate, not remounted (`--same-plate-as reflector`): the run's sessions name the
+    // first run's reflectors as their targets and declare their tool as written, the first run's
+    // sessions gain the targets and nothing else, and the first run's set is validated on the
+    // run with the TCPs it fitted. Without the option that validation is refused (the run's
+    // readings would be scored at the flange).
+    let e = path("e.json");
+    let said = ok(import(
+        &f3,
+        &[
+            "--name",
+            "day3",
+            "--purpose",
+            "validation",
+            "--into",
+            &path("a.json"),
+            "--same-plate-as",
+            "reflector",
+            "--out",
+            &e,
+        ],
+    ));
+    assert!(said.contains("the same plate as reflector"), "{said}");
+    let (shared, first) = (sessions(&cell(&e)), sessions(&a));
+    assert_eq!(shared.len(), 6);
+    for k in 0..3 {
+        let (p, r) = (&shared[k], &shared[k + 3]);
+        assert_eq!(p["target"], serde_json::json!(format!("reflector-{}", k + 1)));
+        assert_eq!(
+            (&r["name"], &r["target"], &r["tool"]),
+            (&serde_json::json!(format!("day3-{}", k + 1)), &p["target"], &p["tool"])
+        );
+        let mut p = p.clone();
+        p.as_object_mut().unwrap().remove("target");
+        assert_eq!(p, first[k], "the first run's session {k} changed beyond its target");
+    }
+    let set = path("set.json");
+    ok(run(&["identify", &e, "--sessions", "reflector-1,reflector-2,reflector-3", "--out", &set]));
+    let v = ok(run(&["validate", &set, &e, "--session", "day3-1", "--format", "json"]));
+    let v: serde_json::Value = serde_json::from_str(&v).unwrap();
+    let mean = v["mean_mm"].as_f64().unwrap_or_else(|| panic!("{v}"));
+    assert!(mean < 0.3, "the first run's set on the same plate's second run: {mean} mm");
+    let o = run(&["validate", &set, &path("c.json"), "--session", "day3-1", "--format", "json"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("day3-1"), "{err}");
+    // Refused: a plate the cell does not hold, a plate of another number of reflectors.
+    let o = import(
+        &f3,
+        &["--name", "day4", "--into", &path("a.json"), "--same-plate-as", "nope", "--out", &path("f.json")],
+    );
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("no session nope-1"));
+    let o = import(
+        &f3[..6],
+        &["--name", "day4", "--into", &path("a.json"), "--same-plate-as", "reflector", "--out", &path("f.json")],
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("reflector has 3 reflectors and this run 2"), "{err}");
+    assert!(!dir.join("f.json").exists());
+
     // Refused, nothing written: a name the cell holds, another robot.
     let (into, out) = (path("a.json"), path("d.json"));
     let refused = |robot: &str, extra: &[&str], why: &str| {
