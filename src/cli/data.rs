@@ -398,10 +398,19 @@ pub(super) fn import_three(a: ThreeReflectorArgs) -> Result<String, CliError> {
         Some(plate) => {
             let given = crate::import::share_plate(&mut merged.cell, &a.name, plate)
                 .map_err(|e| CliError::arg("--same-plate-as", e.to_string()))?;
+            // The import's payload note told the run's own tool, which the plate's now replaces.
+            merged.notes.retain(|n| !n.starts_with("payload "));
+            let tool = &merged.cell.sessions[before].tool;
+            let (m, c) = (tool.mass, tool.com / MM);
             merged.notes.push(format!(
-                "{}-1…: the same plate as {plate} (targets shared, {plate}'s tool declared): a fit's TCPs for {plate}'s \
-                 reflectors apply to them",
-                a.name
+                "{}-1…: the same plate as {plate} (targets shared, {plate}'s tool declared: payload {m} kg{}, centre \
+                 of mass at ({:.1}, {:.1}, {:.1}) mm in the flange frame): a fit's TCPs for {plate}'s reflectors apply to \
+                 them",
+                a.name,
+                if m == 0.0 { " (unknown; a fit with compliance estimates it)" } else { "" },
+                c.x,
+                c.y,
+                c.z
             ));
             given
         }

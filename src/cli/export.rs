@@ -70,18 +70,22 @@ pub(super) fn export(a: ExportArgs) -> Result<String, CliError> {
             let path = a.targets.as_ref().expect("checked above");
             let file: TargetsFile = from_json(&read(path)?).map_err(|e| CliError::file(path, e))?;
             crate::domain::pose::check_targets(&file.targets, &doc.set.model).map_err(|e| CliError::file(path, e))?;
-            let comp = Compensator::new(&doc.set);
-            let frames =
-                TargetFrames::new(&comp, file.frame, file.work_object.as_ref()).map_err(|e| CliError::file(path, e))?;
             let envelope = Envelope::of_doc(&doc).map_err(|e| CliError::file(&a.params, e))?;
             let covariance = PredictionCovariance::of_doc(&doc).map_err(|e| CliError::file(&a.params, e))?;
+            let (set, covariance, tool_note) = file.set_for(doc.set.clone(), covariance, path)?;
+            let comp = Compensator::new(&set);
+            let frames =
+                TargetFrames::new(&comp, file.frame, file.work_object.as_ref()).map_err(|e| CliError::file(path, e))?;
             let guard = Guard {
                 envelope: envelope.as_ref(),
                 allow_outside: a.allow_outside_envelope,
                 covariance: covariance.as_ref(),
                 held_out: None,
             };
-            let results = compensate_targets(&comp, doc.set.dof(), &frames, &guard, &file.targets);
+            let results = compensate_targets(&comp, set.dof(), &frames, &guard, &file.targets);
+            if let Some(note) = tool_note {
+                eprintln!("note: {note}");
+            }
             let date = humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
             let module = write_rapid(
                 &RapidHeader {
@@ -89,8 +93,12 @@ pub(super) fn export(a: ExportArgs) -> Result<String, CliError> {
                     source: &source,
                     date: &date,
                     frame: &frames.out,
-                    tool: "the parameter set's own (identified) tool",
-                    tooldata: Some(&doc.set.tool),
+                    tool: if file.tool.is_some() {
+                        "the targets file's tool (program the targets with it)"
+                    } else {
+                        "the parameter set's own (identified) tool"
+                    },
+                    tooldata: Some(&set.tool),
                     work_object: frames.work_object.as_ref(),
                 },
                 &results,

@@ -96,7 +96,8 @@ pub struct CompensateArgs {
     /// Calibrated parameter-set JSON file.
     #[arg(long)]
     pub params: PathBuf,
-    /// Targets JSON file: {"targets": [{"position_mm": …, "rotation_deg": …, "cfx": …} | {"joints_deg": …}, …]}.
+    /// Targets JSON file: {"targets": [{"position_mm": …, "rotation_deg": …, "cfx": …} | {"joints_deg": …}, …]},
+    /// optionally with "frame", "work_object" and the controller's "tool" (compensated for it instead of the set's own).
     #[arg(long)]
     pub targets: PathBuf,
     /// Write the result here instead of standard output.
@@ -350,7 +351,39 @@ pub(super) struct TargetsFile {
     pub frame: Option<FrameKind>,
     #[serde(default)]
     pub work_object: Option<WorkObjectSpec>,
+    /// The controller's tool, as in the service's compensation request: the targets are
+    /// compensated for it (only the robot's parameters corrected) instead of the set's own
+    /// (identified) tool.
+    #[serde(default)]
+    pub tool: Option<crate::domain::ToolSpec>,
     pub targets: Vec<TargetSpec>,
+}
+
+impl TargetsFile {
+    /// The parameter set to compensate with (`set`, or `set` with the file's tool), its
+    /// prediction covariance (without the tool's parameters for the file's tool: the
+    /// identification did not see that tool), and the note of a set's own tool far from the one it
+    /// declares.
+    pub(super) fn set_for(
+        &self,
+        set: ParameterSet,
+        covariance: Option<PredictionCovariance>,
+        path: &std::path::Path,
+    ) -> Result<(ParameterSet, Option<PredictionCovariance>, Option<String>), CliError> {
+        match &self.tool {
+            Some(t) => {
+                let tool = t.to_tool().map_err(|e| CliError::file(path, e.within("tool")))?;
+                Ok((set.with_tool(tool), covariance.map(|c| c.without_tool()), None))
+            }
+            None => {
+                let note = crate::domain::validity::tool_note(
+                    &Compensator::new(&set),
+                    "give the controller's tool as the targets file's \"tool\" to compensate for it",
+                );
+                Ok((set, covariance, note))
+            }
+        }
+    }
 }
 
 pub(super) fn compensate(a: CompensateArgs) -> Result<String, CliError> {
@@ -369,20 +402,21 @@ pub(super) fn compensate(a: CompensateArgs) -> Result<String, CliError> {
             Some(u)
         }
     };
+    crate::domain::pose::check_targets(&file.targets, &doc.set.model).map_err(|e| CliError::file(&a.targets, e))?;
+    let (set, covariance, tool_note) = file.set_for(doc.set, covariance, &a.targets)?;
     let guard = Guard {
         envelope: envelope.as_ref(),
         allow_outside: a.allow_outside_envelope,
         covariance: covariance.as_ref(),
         held_out: held_out.as_ref(),
     };
-    crate::domain::pose::check_targets(&file.targets, &doc.set.model).map_err(|e| CliError::file(&a.targets, e))?;
-    let set = doc.set;
     let comp = Compensator::new(&set);
     let dof = set.dof();
     let frames =
         TargetFrames::new(&comp, file.frame, file.work_object.as_ref()).map_err(|e| CliError::file(&a.targets, e))?;
     let results = compensate_targets(&comp, dof, &frames, &guard, &file.targets);
-    let validity = ValidityOut::new(&guard);
+    let mut validity = ValidityOut::new(&guard);
+    validity.notes.extend(tool_note);
     let failed: Vec<String> = results
         .iter()
         .enumerate()

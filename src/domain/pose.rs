@@ -286,21 +286,18 @@ impl Choice {
 
 impl TargetSpec {
     /// The approach directions to compensate for: one per joint (refused otherwise), each −1, 0
-    /// or +1; none given: every one unknown (0).
+    /// or +1 (the values are refused at the door, by [`check_targets`], which every batch passes
+    /// first); none given: every one unknown (0).
     pub fn approach(&self, dof: usize) -> Result<Vec<f64>, DomainError> {
         match &self.approach {
             None => Ok(Vec::new()),
             Some(a) if a.len() != dof => {
                 Err(DomainError::new("approach", format!("expected {dof} values (one per joint), got {}", a.len())))
             }
-            Some(a) => a
-                .iter()
-                .enumerate()
-                .map(|(k, v)| match v {
-                    -1..=1 => Ok(f64::from(*v)),
-                    _ => Err(DomainError::new(format!("approach[{k}]"), "must be -1, 0 or 1")),
-                })
-                .collect(),
+            Some(a) => {
+                debug_assert!(a.iter().all(|v| (-1..=1).contains(v)), "check_targets refuses other values");
+                Ok(a.iter().map(|v| f64::from(*v)).collect())
+            }
         }
     }
 
@@ -681,17 +678,11 @@ pub fn guard_target(
 /// joints, and how far their bands move the TCP (`spread`, m: RMS over the directions), then
 /// `hint`.
 fn hysteresis_note(comp: &Compensator, c: &Compensated, spread: f64, hint: &str) -> String {
-    let joints: Vec<String> = comp
-        .hysteresis()
-        .iter()
-        .filter(|(j, _)| c.approach[*j] == 0.0)
-        .map(|(j, b)| format!("joint {} ±{:.4}°", j + 1, b.abs() / DEG))
-        .collect();
     format!(
         "the set has hysteresis ({}) and which way those joints arrive at this target is not known: it is \
          compensated for the middle of each band, where arriving from one side or the other moves the TCP by \
          {:.3} mm RMS{hint}",
-        joints.join(", "),
+        comp.hysteresis_text(Some(c)),
         spread / MM
     )
 }

@@ -270,7 +270,13 @@ pub(super) async fn run_batch(
     let robot_only = custom.as_ref().and(compiled.covariance.as_ref()).map(|c| c.without_tool());
     let guard =
         |covariance| Guard { envelope: envelope.as_ref(), allow_outside, covariance, held_out: held_out.as_ref() };
-    let validity = ValidityOut::new(&guard(robot_only.as_ref().or(compiled.covariance.as_ref())));
+    let mut validity = ValidityOut::new(&guard(robot_only.as_ref().or(compiled.covariance.as_ref())));
+    if custom.is_none() {
+        validity.notes.extend(crate::domain::validity::tool_note(
+            &compiled.compensator,
+            "give the controller's tool (the request's tool) to compensate for it",
+        ));
+    }
     let results = if custom.is_none() && targets.len() <= INLINE_TARGETS {
         // A few solves (~4 µs each) cost less than handing them to the blocking pool.
         let dof = compiled.set.dof();

@@ -164,21 +164,28 @@ pub fn merge(into: Cell, into_path: &Path, run: Imported) -> Result<Imported, Im
 pub fn share_plate(cell: &mut Cell, run: &str, plate: &str) -> Result<Vec<(usize, String)>, ImportError> {
     let input = |reason: String| Err(ImportError::Input(reason));
     if run == plate {
-        return input(format!("--same-plate-as {plate}: that is the run being imported"));
+        return input(format!("{plate} is the run being imported"));
     }
     let numbered = |name: &str| -> Vec<usize> {
         (1..).map_while(|k| cell.sessions.iter().position(|s| s.name == format!("{name}-{k}"))).collect()
     };
     let (ours, theirs) = (numbered(run), numbered(plate));
     if theirs.is_empty() {
+        // The cell's own sessions: the run's were appended to it under the run's name.
         return input(format!(
-            "--same-plate-as {plate}: the cell holds no session {plate}-1 (its sessions: {})",
-            cell.sessions.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", ")
+            "the cell holds no session {plate}-1 (its sessions: {})",
+            cell.sessions
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| !ours.contains(i))
+                .map(|(_, s)| s.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
         ));
     }
     if ours.len() != theirs.len() {
         return input(format!(
-            "--same-plate-as {plate}: {plate} has {} reflectors and this run {}: one plate's runs measure the same \
+            "{plate} has {} reflectors and this run {}: one plate's runs measure the same \
              reflectors, in the same order",
             theirs.len(),
             ours.len()
@@ -189,7 +196,7 @@ pub fn share_plate(cell: &mut Cell, run: &str, plate: &str) -> Result<Vec<(usize
         let (mass, plate_mass) = (cell.sessions[o].tool.mass, cell.sessions[t].tool.mass);
         if mass != 0.0 && mass != plate_mass {
             return input(format!(
-                "--same-plate-as {plate}: this run declares a {mass} kg payload and {} {plate_mass} kg: one plate \
+                "this run declares a {mass} kg payload and {} {plate_mass} kg: one plate \
                  carries one payload",
                 cell.sessions[t].name
             ));

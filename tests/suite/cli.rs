@@ -252,6 +252,71 @@ fn compensate_applies_a_sets_hysteresis_for_the_approach_given_and_says_when_it_
     assert_eq!(status(&args), 2);
 }
 
+/// A set whose calibrated TCP is a reflector declared at the flange (a three-reflector import):
+/// compensated with its own tool, a joint target sends the reflector where the nominal model puts
+/// the flange, and the answer says so; with the controller's tool in the targets file, only the
+/// robot's parameters correct it, exactly as a set without the tool correction does.
+#[test]
+fn compensate_notes_a_calibrated_tcp_far_from_the_declared_one_and_takes_the_controllers_tool() {
+    let robot = json!([{"name": "a2", "value": 270.146, "nominal": 270.0, "unit": "mm"},
+                       {"name": "c2", "value": -0.00206, "unit": "deg/(N·m)"}]);
+    let mut reflector = robot.as_array().unwrap().clone();
+    for (k, v) in [("x", 19.6), ("y", 86.7), ("z", 40.2)] {
+        reflector.push(json!({"name": format!("tool_{k}"), "value": v, "nominal": 0.0, "unit": "mm"}));
+    }
+    let set = |parameters: Value| {
+        json!({"robot": {"preset": "irb120"}, "tool": {"tcp_mm": [0, 0, 0], "mass_kg": 1.0, "com_mm": [20, 0, 40]},
+               "parameters": parameters})
+    };
+    let (own, plain) = (
+        tmp("reflector_set.json", &set(json!(reflector)).to_string()),
+        tmp("flange_set.json", &set(robot).to_string()),
+    );
+    let q = [10.0, 20.0, -10.0, 5.0, 40.0, 0.0];
+    let targets = |tool: Option<Value>| {
+        let mut t = json!({"targets": [{"joints_deg": q}]});
+        if let Some(tool) = tool {
+            t["tool"] = tool;
+        }
+        t
+    };
+    let compensate = |params: &std::path::Path, name: &str, t: Value| {
+        let tp = tmp(name, &t.to_string());
+        let (ok, out, err) =
+            robocal(&["compensate", "--params", params.to_str().unwrap(), "--targets", tp.to_str().unwrap()]);
+        assert!(ok, "{err}");
+        let notes: Vec<String> =
+            out["validity"]["notes"].as_array().unwrap().iter().map(|n| n.as_str().unwrap().to_string()).collect();
+        (nums(&out["results"][0]["joints_deg"]), notes.join(" "))
+    };
+    let (moved, note) = compensate(&own, "reflector_targets.json", targets(None));
+    let d = (19.6f64.powi(2) + 86.7f64.powi(2) + 40.2f64.powi(2)).sqrt();
+    assert!(
+        note.contains(&format!("calibrated TCP lies {d:.1} mm from the TCP it declares (0.0, 0.0, 0.0) mm")),
+        "{note}"
+    );
+    assert!(note.contains("the targets file's \"tool\""), "{note}");
+    // The reflector sent to the flange's place: the joints move by degrees, not by a correction.
+    // (The controller's tool below carries the set's payload: a tool given is the payload too.)
+    assert!(moved.iter().zip(&q).any(|(a, b)| (a - b).abs() > 1.0), "{moved:?}");
+    let (given, note) = compensate(
+        &own,
+        "reflector_tool.json",
+        targets(Some(json!({"tcp_mm": [0, 0, 0], "mass_kg": 1.0, "com_mm": [20, 0, 40]}))),
+    );
+    assert!(!note.contains("calibrated TCP"), "{note}");
+    let (reference, note) = compensate(&plain, "flange_targets.json", targets(None));
+    assert!(!note.contains("calibrated TCP"), "{note}");
+    for j in 0..6 {
+        assert!((given[j] - reference[j]).abs() < 1e-6, "joint {}: {} vs {}", j + 1, given[j], reference[j]);
+        assert!((given[j] - q[j]).abs() < 0.5, "joint {}: {} vs the target's {}", j + 1, given[j], q[j]);
+    }
+    // A tool out of bounds is refused, naming it.
+    let tp = tmp("bad_tool.json", &targets(Some(json!({"tcp_mm": [0, 0, 1e9]}))).to_string());
+    let (ok, _, err) = robocal(&["compensate", "--params", own.to_str().unwrap(), "--targets", tp.to_str().unwrap()]);
+    assert!(!ok && err.contains("tool.tcp_mm"), "{err}");
+}
+
 #[test]
 fn import_writes_a_valid_cell() {
     let series = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/datasets/ur10-ipa/Series_D");

@@ -2084,6 +2084,12 @@ fn a_second_run_merged_into_a_cell_says_whether_the_tracker_moved() {
         ],
     ));
     assert!(said.contains("the same plate as reflector"), "{said}");
+    // The run's payload is the plate's: the note says the plate's tool, not the run's own
+    // registration of its centre of mass.
+    let plate_tool = &sessions(&a)[0]["tool"];
+    assert!(!said.contains("payload unknown (the files carry none)"), "{said}");
+    let com: Vec<String> = (0..3).map(|k| format!("{:.1}", plate_tool["com_mm"][k].as_f64().unwrap())).collect();
+    assert!(said.contains(&format!("centre of mass at ({})", com.join(", "))), "{said} / {plate_tool}");
     let (shared, first) = (sessions(&cell(&e)), sessions(&a));
     assert_eq!(shared.len(), 6);
     for k in 0..3 {
@@ -2111,7 +2117,13 @@ fn a_second_run_merged_into_a_cell_says_whether_the_tracker_moved() {
         &f3,
         &["--name", "day4", "--into", &path("a.json"), "--same-plate-as", "nope", "--out", &path("f.json")],
     );
-    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("no session nope-1"));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("--same-plate-as: the cell holds no session nope-1"), "{err}");
+    // The cell's own sessions are listed, not the run's being added.
+    assert!(
+        err.contains("reflector-3)") && !err.contains("day4-1") && err.matches("--same-plate-as").count() == 1,
+        "{err}"
+    );
     let o = import(
         &f3[..6],
         &["--name", "day4", "--into", &path("a.json"), "--same-plate-as", "reflector", "--out", &path("f.json")],

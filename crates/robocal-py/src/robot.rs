@@ -611,13 +611,17 @@ impl Robot {
         };
         let hysteresis = self.comp.hysteresis();
         if approach.is_none() && !hysteresis.is_empty() {
-            let joints: Vec<String> =
-                hysteresis.iter().map(|(j, b)| format!("joint {} ±{:.4}°", j + 1, b.abs() / DEG)).collect();
             let message = format!(
                 "the set has hysteresis ({}) and no approach was given: each target is compensated for the middle \
                  of each band; give approach (the direction each joint moves in to reach it) to compensate for it",
-                joints.join(", ")
+                self.comp.hysteresis_text(None)
             );
+            PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &std::ffi::CString::new(message)?, 1)?;
+        }
+        if let Some(message) = robocal_core::formats::validity::tool_note(
+            &self.comp,
+            "robocal compensate (a targets file's \"tool\") and the service (a request's tool) compensate for another tool",
+        ) {
             PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &std::ffi::CString::new(message)?, 1)?;
         }
         let mut branches = vec![first; count];

@@ -666,6 +666,32 @@ impl ValidityOut {
     }
 }
 
+/// A calibrated TCP further than this from the declared one (m) is noted with a compensation.
+/// A tool calibration corrects a declared TCP by a fraction of a millimetre to a few; 10 mm is
+/// beyond what a tool's drawing or teaching misses by, and is what a point measured during the
+/// calibration but not on the controller's tool (a reflector on a plate, declared at the flange)
+/// differs by (50–150 mm on a three-reflector plate).
+pub const TOOL_NOTE_BEYOND: f64 = 10.0 * MM;
+
+/// The note a compensation with `comp`'s own tool carries when its calibrated TCP lies beyond
+/// [`TOOL_NOTE_BEYOND`] from the declared one; `give` says how to compensate for another tool.
+pub fn tool_note(comp: &crate::kinematics::Compensator, give: &str) -> Option<String> {
+    let d = comp.tool_correction();
+    (d > TOOL_NOTE_BEYOND).then(|| {
+        let t = comp.nominal_chain().tool().t / MM;
+        format!(
+            "the set's calibrated TCP lies {:.1} mm from the TCP it declares ({:.1}, {:.1}, {:.1}) mm, and each target \
+             is compensated for the calibrated one: right when the controller's tool data miss by that much, wrong \
+             when the calibrated TCP is a point measured during the calibration that is not the controller's tool (a \
+             reflector on a plate, with the flange declared); {give}",
+            d / MM,
+            t.x,
+            t.y,
+            t.z
+        )
+    })
+}
+
 /// The envelope of a quality report as JSON (for `quality.envelope`).
 pub fn envelope_json(e: &Envelope) -> Value {
     serde_json::to_value(e.file()).expect("an envelope serialises")

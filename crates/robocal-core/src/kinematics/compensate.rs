@@ -218,6 +218,23 @@ impl Compensator {
         &self.backlash
     }
 
+    /// How far the calibrated TCP lies from the declared (nominal) one, m: the tool correction
+    /// the set applies to every compensated target.
+    pub fn tool_correction(&self) -> f64 {
+        (self.calibrated.tool().t - self.nominal.tool().t).norm()
+    }
+
+    /// The set's hysteresis as a user reads it, `joint 1 ±0.0200°, joint 2 ±0.0150°`: every joint
+    /// with a backlash term, or with `unknown_in` only those whose approach is 0 in it.
+    pub fn hysteresis_text(&self, unknown_in: Option<&Compensated>) -> String {
+        self.backlash
+            .iter()
+            .filter(|(j, _)| unknown_in.is_none_or(|c| c.approach[*j] == 0.0))
+            .map(|(j, b)| format!("joint {} ±{:.4}°", j + 1, b.abs().to_degrees()))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
     /// How far the TCP may be from where a compensated `c` puts it because the robot's approach
     /// is unknown for some joints with hysteresis: the RMS over the unknown joints' directions
     /// (each −1 or +1, independent) of the TCP's displacement from the band's middle,
