@@ -1665,3 +1665,48 @@ async fn an_imported_set_that_a_compensation_cannot_compile_is_refused() {
         .await;
     assert_eq!(r.status, StatusCode::OK, "{}", r.text);
 }
+
+/// A set whose calibrated TCP is a reflector fitted on a plate declared at the flange: the
+/// service compensates for it and says so in the answer's validity notes; given the controller's
+/// tool, it compensates for that tool and the note goes.
+#[tokio::test]
+async fn a_calibrated_tcp_far_from_the_declared_one_is_noted_with_the_compensation() {
+    let app = TestApp::default().await;
+    let rid = robot(&app, "reflector-plate").await;
+    let file = json!({"robot": {"preset": "irb120"}, "tool": {"tcp_mm": [0, 0, 0], "mass_kg": 1.0, "com_mm": [20, 0, 40]},
+        "parameters": [{"name": "a2", "value": 270.146, "nominal": 270.0, "unit": "mm"},
+                       {"name": "tool_x", "value": 19.6, "nominal": 0.0, "unit": "mm"},
+                       {"name": "tool_y", "value": 86.7, "nominal": 0.0, "unit": "mm"},
+                       {"name": "tool_z", "value": 40.2, "nominal": 0.0, "unit": "mm"}]});
+    let r = app.post(&format!("/v1/robots/{rid}/parameter-sets"), &file).await;
+    assert_eq!(r.status, StatusCode::CREATED, "{}", r.text);
+    let set_id = r.body["id"].as_str().unwrap().to_string();
+    let cpath = format!("/v1/robots/{rid}/compensate");
+    let body = |tool: Option<Value>| {
+        let mut b = json!({"targets": [{"joints_deg": [10, 20, -10, 5, 40, 0]}], "parameter_set_id": set_id,
+                           "allow_unvalidated": true});
+        if let Some(t) = tool {
+            b["tool"] = t;
+        }
+        b
+    };
+    let noted = |r: &common::Res| {
+        r.body["validity"]["notes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|n| n.as_str().unwrap().contains("calibrated TCP lies"))
+    };
+    let r = app.post(&cpath, &body(None)).await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    assert!(noted(&r), "{}", r.body["validity"]);
+    assert!(r.body["validity"]["notes"].to_string().contains("the request's tool"), "{}", r.body["validity"]);
+    let r = app.post(&cpath, &body(Some(json!({"tcp_mm": [0, 0, 0], "mass_kg": 1.0, "com_mm": [20, 0, 40]})))).await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text);
+    assert!(!noted(&r), "{}", r.body["validity"]);
+    let q: Vec<f64> =
+        r.body["results"][0]["joints_deg"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    for (j, (a, b)) in q.iter().zip([10.0, 20.0, -10.0, 5.0, 40.0, 0.0]).enumerate() {
+        assert!((a - b).abs() < 0.5, "joint {}: {a} for {b}", j + 1);
+    }
+}
