@@ -203,7 +203,10 @@ class Robot:
         compensated for it; without it, such a set is compensated for the middle of each joint's
         band and a UserWarning says so (the robot then lands within the band's spread of the
         target, as ``robocal compensate`` reports in ``uncertainty.hysteresis_mm``). A wrong shape
-        or value raises InputError (``field == "approach"`` or ``"approach[i]"``)."""
+        or value raises InputError (``field == "approach"`` or ``"approach[i]"``). A set whose
+        calibrated TCP lies more than 10 mm from the TCP it declares (a reflector fitted on a plate
+        declared at the flange) is compensated for that calibrated point, with a UserWarning:
+        ``robocal compensate`` (a targets file's ``"tool"``) compensates for the controller's tool."""
 
 class Identification:
     """The result of ``identify``: the calibrated parameter set, every parameter's standard
