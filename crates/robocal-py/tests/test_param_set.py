@@ -239,7 +239,15 @@ def test_compensation_equals_the_cli(fitted, tmp_path):
     out = subprocess.run([cli_binary(), "compensate", "--params", str(path), "--targets", str(tmp_path / "targets.json")],
                          check=True, capture_output=True, text=True)
     cli = json.loads(out.stdout)["results"]
-    joints, fake = robot.compensate(targets, branch=cfx)
+    # The fit moved the TCP 15 mm from the declared one (the simulated tool is not at [0, 0, 90]):
+    # the module warns, as the CLI notes, with the distance the parameters give.
+    with pytest.warns(UserWarning, match="calibrated TCP lies") as caught:
+        joints, fake = robot.compensate(targets, branch=cfx)
+    d = np.linalg.norm([fitted.parameters[k] - fitted.nominal[k] for k in ("tool_x", "tool_y", "tool_z")])
+    said = [str(w.message) for w in caught if "calibrated TCP lies" in str(w.message)][0]
+    assert f"lies {d:.1f} mm from the TCP it declares (0.0, 0.0, 90.0) mm" in said, said
+    noted = [n for n in json.loads(out.stdout)["validity"]["notes"] if "calibrated TCP lies" in n]
+    assert noted and noted[0].split("; ")[0] == said.split("; ")[0], (noted, said)
     for r, j, f in zip(cli, joints, fake):
         assert [rust_round_to(v, 1e-6) for v in j] == pytest.approx(r["joints_deg"], rel=0, abs=1.01e-6)
         assert [rust_round_to(v, 1e-4) for v in f[:3, 3]] == pytest.approx(r["fake_pose"]["position_mm"], rel=0,
