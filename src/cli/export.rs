@@ -83,9 +83,13 @@ pub(super) fn export(a: ExportArgs) -> Result<String, CliError> {
                 held_out: None,
             };
             let results = compensate_targets(&comp, set.dof(), &frames, &guard, &file.targets);
-            if let Some(note) = tool_note {
+            if let Some(note) = &tool_note {
                 eprintln!("note: {note}");
             }
+            let own_tool = match &tool_note {
+                Some(note) => format!("the parameter set's own (identified) tool; {note}"),
+                None => "the parameter set's own (identified) tool".to_string(),
+            };
             let date = humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
             let module = write_rapid(
                 &RapidHeader {
@@ -96,7 +100,7 @@ pub(super) fn export(a: ExportArgs) -> Result<String, CliError> {
                     tool: if file.tool.is_some() {
                         "the targets file's tool (program the targets with it)"
                     } else {
-                        "the parameter set's own (identified) tool"
+                        &own_tool
                     },
                     tooldata: Some(&set.tool),
                     work_object: frames.work_object.as_ref(),

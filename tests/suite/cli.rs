@@ -311,6 +311,24 @@ fn compensate_notes_a_calibrated_tcp_far_from_the_declared_one_and_takes_the_con
         assert!((given[j] - reference[j]).abs() < 1e-6, "joint {}: {} vs {}", j + 1, given[j], reference[j]);
         assert!((given[j] - q[j]).abs() < 0.5, "joint {}: {} vs the target's {}", j + 1, given[j], q[j]);
     }
+    // The RAPID export says it in the module's header (and on stderr), and with the targets
+    // file's tool declares that tool as the module's tooldata.
+    let export = |name: &str, t: Value| {
+        let tp = tmp(name, &t.to_string());
+        let o = Command::new(env!("CARGO_BIN_EXE_robocal"))
+            .args(["export", "--format", "rapid", "--params", own.to_str().unwrap(), "--targets", tp.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        // The header's comment lines joined: a long note wraps.
+        (String::from_utf8(o.stdout).unwrap().replace("\n    ! ", " "), String::from_utf8(o.stderr).unwrap())
+    };
+    let (module, err) = export("reflector_export.json", targets(None));
+    assert!(module.contains("calibrated TCP lies") && err.contains("calibrated TCP lies"), "{module}\n{err}");
+    let (module, err) =
+        export("reflector_export_tool.json", targets(Some(json!({"tcp_mm": [0, 0, 100], "mass_kg": 1.0}))));
+    assert!(!module.contains("calibrated TCP lies") && !err.contains("calibrated TCP lies"), "{module}\n{err}");
+    assert!(module.contains("the targets file's tool") && module.contains("[[0,0,100]"), "{module}");
     // A tool out of bounds is refused, naming it.
     let tp = tmp("bad_tool.json", &targets(Some(json!({"tcp_mm": [0, 0, 1e9]}))).to_string());
     let (ok, _, err) = robocal(&["compensate", "--params", own.to_str().unwrap(), "--targets", tp.to_str().unwrap()]);

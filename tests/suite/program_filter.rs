@@ -451,3 +451,45 @@ fn the_command_line_filters_and_exits_by_the_outcome() {
     assert!(dir.join("krl/weld.src").exists() && dir.join("krl/weld.dat").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A program whose tool is the set's declared one (`tool0`, the flange, as a set fitted on a
+/// reflector declared at the flange declares) is compensated for the set's calibrated TCP, 60 mm
+/// away: each such target says so; a target with the program's own tool does not.
+#[test]
+fn a_program_with_the_sets_declared_tool_says_when_its_calibrated_tcp_is_far_from_it() {
+    use robocal::kinematics::Param;
+    let mut set = ParameterSet::nominal(robocal::kinematics::model::irb120(), Tool::flange(), [0.0; 6]);
+    set.set(Param::A(2), 0.2702);
+    set.set(Param::Tool(0), 0.06);
+    let text = "MODULE Plate\n\
+                PERS tooldata gun:=[TRUE,[[0,0,100],[1,0,0,0]],[1,[0,0,50],[1,0,0,0],0,0,0]];\n\
+                PROC main()\n\
+                \x20 MoveJ [[350,0,450],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]], v100, fine, tool0;\n\
+                \x20 MoveJ [[350,0,350],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]], v100, fine, gun;\n\
+                ENDPROC\n\
+                ENDMODULE\n";
+    let files =
+        vec![robocal::domain::program::ProgramFile { name: "plate.mod".into(), bytes: text.as_bytes().to_vec() }];
+    let comp = Compensator::new(&set);
+    let cal = Calibration {
+        set: &set,
+        compensator: &comp,
+        envelope: None,
+        allow_outside_envelope: false,
+        covariance: None,
+        held_out: None,
+    };
+    let opts = FilterOptions {
+        language: None,
+        joint_targets: JointTargets::Recompute,
+        frames: Default::default(),
+        seed_joints: None,
+    };
+    let out = filter(&cal, &files, &opts).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(out.report.len(), 2);
+    assert!(out.report.iter().all(|r| r.status == TargetStatus::Compensated), "{:?}", out.report);
+    let noted = |i: usize| out.report[i].notes.iter().any(|n| n.contains("calibrated TCP lies 60.0 mm"));
+    assert!(noted(0), "{:?}", out.report[0].notes);
+    assert!(out.report[0].notes.iter().any(|n| n.contains("the program declares the set's tool")));
+    assert!(!noted(1), "{:?}", out.report[1].notes);
+}

@@ -400,6 +400,14 @@ fn solve_target(
             ));
         }
     };
+    // The program's tool is the set's declared one: compensated for the set's calibrated TCP,
+    // which a set fitted on a point other than the controller's tool puts far from it.
+    if rig.own.is_none() {
+        notes.extend(crate::domain::validity::tool_note(
+            comp,
+            "the program declares the set's tool; declare the tool as the controller holds it to compensate for it",
+        ));
+    }
     if let Kind::Pose { posture: Posture::Turns { ranges, .. }, .. } = &t.kind {
         for (j, r) in ranges.iter().enumerate() {
             if let Some((lo, hi)) = r
