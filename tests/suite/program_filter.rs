@@ -57,8 +57,8 @@ fn controller_joints(set: &ParameterSet, t: &ReadTarget) -> Vec<f64> {
     q.to_vec()
 }
 
-/// Filter a sample, check the failures and the diff; the filtered program with both readings.
-fn filtered(sample: &Sample, set: &ParameterSet, joints: JointTargets) -> (Filtered, Vec<ReadTarget>, Vec<ReadTarget>) {
+/// `files` filtered with `set` alone: no envelope, covariance or held-out uncertainty model.
+fn filter_with(set: &ParameterSet, files: &[robocal::domain::program::ProgramFile], opts: &FilterOptions) -> Filtered {
     let comp = Compensator::new(set);
     let cal = Calibration {
         set,
@@ -68,13 +68,18 @@ fn filtered(sample: &Sample, set: &ParameterSet, joints: JointTargets) -> (Filte
         covariance: None,
         held_out: None,
     };
+    filter(&cal, files, opts).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Filter a sample, check the failures and the diff; the filtered program with both readings.
+fn filtered(sample: &Sample, set: &ParameterSet, joints: JointTargets) -> (Filtered, Vec<ReadTarget>, Vec<ReadTarget>) {
     let opts = FilterOptions {
         language: None,
         joint_targets: joints,
         frames: sample.frames.clone(),
         seed_joints: sample.seed_joints.clone(),
     };
-    let out = filter(&cal, &sample.files, &opts).unwrap_or_else(|e| panic!("{e}"));
+    let out = filter_with(set, &sample.files, &opts);
     let (_, before) = read(&sample.files, &opts).unwrap();
     let (_, after) = read(&out.files, &opts).unwrap();
     assert_eq!(before.len(), after.len());
@@ -347,21 +352,12 @@ fn urscript_programs_filter_with_a_round_trip_and_only_target_lines_changed() {
 #[test]
 fn a_pose_without_joints_before_it_is_named() {
     let set = ur10_set();
-    let comp = Compensator::new(&set);
-    let cal = Calibration {
-        set: &set,
-        compensator: &comp,
-        envelope: None,
-        allow_outside_envelope: false,
-        covariance: None,
-        held_out: None,
-    };
     let files = vec![robocal::domain::program::ProgramFile {
         name: "p.script".into(),
         bytes: b"def p():\n  set_tcp(p[0, 0, 0.1, 0, 0, 0])\n  movel(p[0.6, -0.2, 0.4, 0, 3.14, 0], a=1)\nend\n"
             .to_vec(),
     }];
-    let out = filter(&cal, &files, &FilterOptions::default()).unwrap();
+    let out = filter_with(&set, &files, &FilterOptions::default());
     assert_eq!(out.failed(), 1);
     assert!(out.report[0].error.as_deref().unwrap().contains("seed_joints_deg"), "{:?}", out.report[0].error);
     let text = String::from_utf8(out.files[0].bytes.clone()).unwrap();
@@ -395,20 +391,11 @@ fn the_command_line_filters_and_exits_by_the_outcome() {
     assert!(stdout.contains("7 targets, 6 compensated, 1 joint targets kept, 0 not compensated"), "{stdout}");
     let written = std::fs::read(dir.join("w.mod")).unwrap();
     let set = robocal::domain::ParameterSetDoc::from_json(&std::fs::read_to_string(&params).unwrap()).unwrap().set;
-    let comp = Compensator::new(&set);
-    let cal = Calibration {
-        set: &set,
-        compensator: &comp,
-        envelope: None,
-        allow_outside_envelope: false,
-        covariance: None,
-        held_out: None,
-    };
     let files = vec![robocal::domain::program::ProgramFile {
         name: "weld.mod".into(),
         bytes: std::fs::read(format!("{root}/examples/programs/weld.mod")).unwrap(),
     }];
-    let lib = filter(&cal, &files, &FilterOptions::default()).unwrap();
+    let lib = filter_with(&set, &files, &FilterOptions::default());
     assert_eq!(written, lib.files[0].bytes);
     let csv = std::fs::read_to_string(dir.join("r.csv")).unwrap();
     assert_eq!(csv.lines().count(), 8, "{csv}");
@@ -470,22 +457,8 @@ fn a_program_with_the_sets_declared_tool_says_when_its_calibrated_tcp_is_far_fro
                 ENDMODULE\n";
     let files =
         vec![robocal::domain::program::ProgramFile { name: "plate.mod".into(), bytes: text.as_bytes().to_vec() }];
-    let comp = Compensator::new(&set);
-    let cal = Calibration {
-        set: &set,
-        compensator: &comp,
-        envelope: None,
-        allow_outside_envelope: false,
-        covariance: None,
-        held_out: None,
-    };
-    let opts = FilterOptions {
-        language: None,
-        joint_targets: JointTargets::Recompute,
-        frames: Default::default(),
-        seed_joints: None,
-    };
-    let out = filter(&cal, &files, &opts).unwrap_or_else(|e| panic!("{e}"));
+    let opts = FilterOptions { joint_targets: JointTargets::Recompute, ..Default::default() };
+    let out = filter_with(&set, &files, &opts);
     assert_eq!(out.report.len(), 2);
     assert!(out.report.iter().all(|r| r.status == TargetStatus::Compensated), "{:?}", out.report);
     let noted = |i: usize| out.report[i].notes.iter().any(|n| n.contains("calibrated TCP lies 60.0 mm"));
