@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use super::kinematics::TargetsFile;
+use super::kinematics::{GIVE_TOOL, TargetsFile};
 use super::{CliError, read, write_or_return};
 use crate::domain::drift::drift as drift_of;
 use crate::domain::export::rapid::{RapidHeader, write as write_rapid};
@@ -72,7 +72,7 @@ pub(super) fn export(a: ExportArgs) -> Result<String, CliError> {
             crate::domain::pose::check_targets(&file.targets, &doc.set.model).map_err(|e| CliError::file(path, e))?;
             let envelope = Envelope::of_doc(&doc).map_err(|e| CliError::file(&a.params, e))?;
             let covariance = PredictionCovariance::of_doc(&doc).map_err(|e| CliError::file(&a.params, e))?;
-            let (set, covariance, tool_note) = file.set_for(doc.set.clone(), covariance, path)?;
+            let (set, covariance) = file.set_for(doc.set.clone(), covariance, path)?;
             let comp = Compensator::new(&set);
             let frames =
                 TargetFrames::new(&comp, file.frame, file.work_object.as_ref()).map_err(|e| CliError::file(path, e))?;
@@ -83,12 +83,15 @@ pub(super) fn export(a: ExportArgs) -> Result<String, CliError> {
                 held_out: None,
             };
             let results = compensate_targets(&comp, set.dof(), &frames, &guard, &file.targets);
-            if let Some(note) = &tool_note {
-                eprintln!("note: {note}");
-            }
-            let own_tool = match &tool_note {
-                Some(note) => format!("the parameter set's own (identified) tool; {note}"),
-                None => "the parameter set's own (identified) tool".to_string(),
+            let tool = match &file.tool {
+                Some(_) => "the targets file's tool (program the targets with it)".to_string(),
+                None => {
+                    let note = crate::domain::validity::tool_note(&comp, GIVE_TOOL);
+                    if let Some(note) = &note {
+                        eprintln!("note: {note}");
+                    }
+                    crate::domain::export::rapid::own_tool(note.as_deref())
+                }
             };
             let date = humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
             let module = write_rapid(
@@ -97,11 +100,7 @@ pub(super) fn export(a: ExportArgs) -> Result<String, CliError> {
                     source: &source,
                     date: &date,
                     frame: &frames.out,
-                    tool: if file.tool.is_some() {
-                        "the targets file's tool (program the targets with it)"
-                    } else {
-                        &own_tool
-                    },
+                    tool: &tool,
                     tooldata: Some(&set.tool),
                     work_object: frames.work_object.as_ref(),
                 },

@@ -359,29 +359,26 @@ pub(super) struct TargetsFile {
     pub targets: Vec<TargetSpec>,
 }
 
+/// How a targets file compensates for another tool than the set's own: said where a set's
+/// calibrated TCP lies far from the one it declares.
+pub(super) const GIVE_TOOL: &str = "give the controller's tool as the targets file's \"tool\" to compensate for it";
+
 impl TargetsFile {
-    /// The parameter set to compensate with (`set`, or `set` with the file's tool), its
+    /// The parameter set to compensate with (`set`, or `set` with the file's tool) and its
     /// prediction covariance (without the tool's parameters for the file's tool: the
-    /// identification did not see that tool), and the note of a set's own tool far from the one it
-    /// declares.
+    /// identification did not see that tool).
     pub(super) fn set_for(
         &self,
         set: ParameterSet,
         covariance: Option<PredictionCovariance>,
         path: &std::path::Path,
-    ) -> Result<(ParameterSet, Option<PredictionCovariance>, Option<String>), CliError> {
+    ) -> Result<(ParameterSet, Option<PredictionCovariance>), CliError> {
         match &self.tool {
             Some(t) => {
                 let tool = t.to_tool().map_err(|e| CliError::file(path, e.within("tool")))?;
-                Ok((set.with_tool(tool), covariance.map(|c| c.without_tool()), None))
+                Ok((set.with_tool(tool), covariance.map(|c| c.without_tool())))
             }
-            None => {
-                let note = crate::domain::validity::tool_note(
-                    &Compensator::new(&set),
-                    "give the controller's tool as the targets file's \"tool\" to compensate for it",
-                );
-                Ok((set, covariance, note))
-            }
+            None => Ok((set, covariance)),
         }
     }
 }
@@ -403,7 +400,7 @@ pub(super) fn compensate(a: CompensateArgs) -> Result<String, CliError> {
         }
     };
     crate::domain::pose::check_targets(&file.targets, &doc.set.model).map_err(|e| CliError::file(&a.targets, e))?;
-    let (set, covariance, tool_note) = file.set_for(doc.set, covariance, &a.targets)?;
+    let (set, covariance) = file.set_for(doc.set, covariance, &a.targets)?;
     let guard = Guard {
         envelope: envelope.as_ref(),
         allow_outside: a.allow_outside_envelope,
@@ -416,7 +413,9 @@ pub(super) fn compensate(a: CompensateArgs) -> Result<String, CliError> {
         TargetFrames::new(&comp, file.frame, file.work_object.as_ref()).map_err(|e| CliError::file(&a.targets, e))?;
     let results = compensate_targets(&comp, dof, &frames, &guard, &file.targets);
     let mut validity = ValidityOut::new(&guard);
-    validity.notes.extend(tool_note);
+    if file.tool.is_none() {
+        validity.notes.extend(crate::domain::validity::tool_note(&comp, GIVE_TOOL));
+    }
     let failed: Vec<String> = results
         .iter()
         .enumerate()

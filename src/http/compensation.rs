@@ -249,6 +249,10 @@ pub(super) fn check_batch(state: &AppState, targets: &[TargetSpec]) -> Result<()
 /// Compensate a batch with a compiled set (its own tool, or `tool`), reading targets and writing
 /// fake poses in the request's frame, each target checked against `envelope` and given its
 /// predicted uncertainty: the compensation route and the RAPID export share it.
+/// How a request compensates for another tool than the set's own: said where a set's calibrated
+/// TCP lies far from the one it declares.
+pub(super) const GIVE_TOOL: &str = "give the controller's tool (the request's tool) to compensate for it";
+
 pub(super) async fn run_batch(
     compiled: Arc<CompiledSet>,
     tool: Option<&ToolSpec>,
@@ -272,10 +276,7 @@ pub(super) async fn run_batch(
         |covariance| Guard { envelope: envelope.as_ref(), allow_outside, covariance, held_out: held_out.as_ref() };
     let mut validity = ValidityOut::new(&guard(robot_only.as_ref().or(compiled.covariance.as_ref())));
     if custom.is_none() {
-        validity.notes.extend(crate::domain::validity::tool_note(
-            &compiled.compensator,
-            "give the controller's tool (the request's tool) to compensate for it",
-        ));
+        validity.notes.extend(crate::domain::validity::tool_note(&compiled.compensator, GIVE_TOOL));
     }
     let results = if custom.is_none() && targets.len() <= INLINE_TARGETS {
         // A few solves (~4 µs each) cost less than handing them to the blocking pool.

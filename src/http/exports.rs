@@ -11,7 +11,7 @@ use axum::response::{IntoResponse, Response};
 use serde::Deserialize;
 use utoipa::{IntoParams, ToSchema};
 
-use super::compensation::{check_batch, checks, run_batch};
+use super::compensation::{GIVE_TOOL, check_batch, checks, run_batch};
 use super::extract::{Authorized, COMPENSATE, JsonBody, READ};
 use super::{ApiError, AppState};
 use crate::db::records;
@@ -187,13 +187,9 @@ pub async fn export_rapid(
     crate::domain::pose::check_targets(&body.targets, &compiled.set.model).map_err(|e| ApiError::domain(e, ""))?;
     let tool = match &body.tool {
         Some(_) => "the tool of the request (program the targets with it)".to_string(),
-        None => match crate::domain::validity::tool_note(
-            &compiled.compensator,
-            "give the controller's tool (the request's tool) to compensate for it",
-        ) {
-            Some(note) => format!("the parameter set's own (identified) tool; {note}"),
-            None => "the parameter set's own (identified) tool".to_string(),
-        },
+        None => crate::domain::export::rapid::own_tool(
+            crate::domain::validity::tool_note(&compiled.compensator, GIVE_TOOL).as_deref(),
+        ),
     };
     let checked = checks(&state, &compiled, body.allow_unvalidated).await?;
     let frames = crate::domain::pose::TargetFrames::new(&compiled.compensator, body.frame, body.work_object.as_ref())

@@ -57,6 +57,17 @@ pub struct RapidHeader<'a> {
     pub work_object: Option<&'a (String, Frame)>,
 }
 
+/// The header's `tool` for targets compensated with the set's own (identified) tool, with the
+/// note of a calibrated TCP far from the declared one where there is one
+/// ([`crate::domain::validity::tool_note`]).
+pub fn own_tool(note: Option<&str>) -> String {
+    let own = "the parameter set's own (identified) tool";
+    match note {
+        Some(note) => format!("{own}; {note}"),
+        None => own.to_string(),
+    }
+}
+
 /// Whether `s` is a valid RAPID identifier: a letter, then letters, digits and underscores, at
 /// most 32 characters.
 pub fn is_identifier(s: &str) -> bool {
