@@ -25,7 +25,8 @@ pub struct IdentifyArgs {
     pub n: Option<usize>,
     #[command(flatten)]
     pub detmax: DetmaxArgs,
-    /// Model options: +beta,-compliance,+cyc2_h1,+backlash2,+coupling5_6,+c2_cubic,+thermal_alpha.
+    /// Model options: +beta,-compliance,+cyc2_h1,+backlash2,+coupling5_6,+c2_cubic,+thermal_alpha, +drift (a drift of the
+    /// readings along the measuring run, fitted as a nuisance of the run).
     #[arg(long, default_value = "", allow_hyphen_values = true)]
     pub model: String,
     /// Parameters held at their nominal values (comma-separated names, e.g. a2,tool_x).

@@ -2317,3 +2317,91 @@ fn a_second_run_is_scored_with_the_named_hysteresis() {
     );
     assert_eq!((derived.rms_mm, derived.unexplained_mm), (written.rms_mm, written.unexplained_mm));
 }
+
+/// A tracker that settles along the run: every reading moves by D·(1 − e^(−3t)), t the stop's share
+/// of the run (0.27 mm from the first stop to the last), which no term of the robot takes and the
+/// files do not log. `+drift` fits it as a nuisance of the run — three translations of {W}, each
+/// a cubic in the stop's place (here its sequence number, as the import writes it) — and:
+/// - the fitted drift follows the true one (centred over the run, as the term is) to within a
+///   quarter of its RMS; on the same twin without the drift, what it fits is a fraction of that;
+/// - the residual falls by more than the drift's own share would allow a look-alike;
+/// - the set's file keeps the drift terms (mm), and a state with no place in a run (a
+///   compensation) is not moved by them.
+#[test]
+fn a_drift_along_the_run_is_fitted_as_a_nuisance_of_the_run() {
+    use robocal::domain::ParameterSetDoc as ParameterSetDocument;
+    use robocal::kinematics::JointState;
+    let drift = nalgebra::Vector3::new(0.20, -0.10, 0.15) * MM;
+    let o = TrackerRunOptions { seed: 21, poses: 600, removed: 6, ..Default::default() };
+    let fitted_curve = |with_drift: bool| {
+        let mut run = tracker_run(&o).unwrap();
+        let n = run.kept.len();
+        let truth: Vec<nalgebra::Vector3<f64>> =
+            run.kept.iter().map(|&k| drift * (1.0 - (-3.0 * k as f64 / (o.poses - 1) as f64).exp())).collect();
+        if with_drift {
+            for smr in &mut run.positions {
+                for (p, d) in smr.iter_mut().zip(&truth) {
+                    *p += d;
+                }
+            }
+        }
+        let dir = common::fresh_dir(if with_drift { "drift" } else { "no-drift" });
+        let (joints, files) = run.write(&dir, "run", 6).unwrap();
+        let cell = import(&joints, &files);
+        let without = identify(&cell, &options("", &[])).unwrap();
+        let with = identify(&cell, &options("+drift", &[])).unwrap();
+        // The fitted drift at each row: the basis of the rows' places (every reflector reads every
+        // row, so centring over the measurements is centring over the rows).
+        let basis = robocal::identify::run::drift_basis(&(0..n).map(|i| i as f64).collect::<Vec<_>>()).unwrap();
+        let value = |p: Param| with.set.values[with.set.layout.index_of(p).expect("a drift term")];
+        let curve: Vec<nalgebra::Vector3<f64>> = basis
+            .iter()
+            .map(|b| nalgebra::Vector3::from_fn(|a, _| (0..3).map(|k| value(Param::Drift(a, k)) * b[k]).sum()))
+            .collect();
+        let mean = truth.iter().sum::<nalgebra::Vector3<f64>>() / n as f64;
+        let rms = |v: &mut dyn Iterator<Item = f64>| {
+            let v: Vec<f64> = v.collect();
+            (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
+        };
+        let true_rms = rms(&mut truth.iter().map(|d| (d - mean).norm()));
+        let miss = rms(&mut curve.iter().zip(&truth).map(|(c, d)| (c - (d - mean)).norm()));
+        let size = rms(&mut curve.iter().map(|c| c.norm()));
+        eprintln!(
+            "drift {with_drift}: true RMS {:.4} mm, fitted {:.4} mm, miss {:.4} mm; residual {:.4} → {:.4} mm",
+            true_rms / MM,
+            size / MM,
+            miss / MM,
+            without.quality.rms_residual / MM,
+            with.quality.rms_residual / MM
+        );
+        (true_rms, size, miss, without, with)
+    };
+    let (true_rms, _, miss, without, with) = fitted_curve(true);
+    assert!(miss < 0.25 * true_rms, "the fitted drift misses the true one by {miss} m RMS (true {true_rms} m)");
+    assert!(with.quality.rms_residual < without.quality.rms_residual, "the drift term did not lower the residual");
+    let (_, quiet, _, _, _) = fitted_curve(false);
+    assert!(quiet < 0.3 * true_rms, "without a drift, the term fits {quiet} m RMS (a drifting run's {true_rms} m)");
+
+    // The set's file keeps the nine terms, in mm, and reads back the same values.
+    let text = ParameterSetDocument::new(with.set.clone()).to_json_pretty();
+    assert!(text.contains("drift_z_p3"), "{text}");
+    let back = ParameterSetDocument::from_json(&text).unwrap().set;
+    for a in 0..3 {
+        for k in 0..3 {
+            let p = Param::Drift(a, k);
+            let (x, y) = (with.set.value(p).unwrap(), back.value(p).unwrap());
+            assert!((x - y).abs() < 1e-12, "{p}: {x} → {y}");
+        }
+    }
+    // A state with no place in a run is where the drift averages to zero: the drift moves nothing.
+    let mut flat = with.set.clone();
+    for a in 0..3 {
+        for k in 0..3 {
+            let i = flat.layout.index_of(Param::Drift(a, k)).unwrap();
+            flat.values[i] = 0.0;
+        }
+    }
+    let q = [0.3, -0.2, 0.4, 0.1, 0.8, -0.5];
+    let (f1, f0) = (with.set.chain().fk(&JointState::new(&q)), flat.chain().fk(&JointState::new(&q)));
+    assert_eq!(f1.t, f0.t);
+}

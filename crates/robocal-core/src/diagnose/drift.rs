@@ -36,6 +36,8 @@
 
 use nalgebra::{DMatrix, Vector3};
 
+pub use crate::identify::run::RunPosition;
+pub(crate) use crate::identify::run::{legendre, unit_scale};
 use crate::units::DEG;
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
@@ -53,32 +55,10 @@ pub const CONFOUNDED_R2: f64 = 0.2;
 pub const LOCALITY_LIMIT: f64 = 0.8;
 /// Significance level at which a drift is said.
 pub const LEVEL: f64 = 0.01;
-const DEGREE: usize = 3;
+const DEGREE: usize = crate::identify::run::DRIFT_ORDERS;
 /// Above this standard deviation a joint's creep is not determined by the stops and is not given
 /// (the bound `identify` holds an angle at).
 const UNDETERMINED: f64 = DEG;
-
-/// Where each stop's place in the run came from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum RunPosition {
-    /// The measurements' logged times (`time_s`).
-    Time,
-    /// Their sequence numbers (`sequence`).
-    Sequence,
-    /// Their order in the session's list (one session, listed as measured).
-    FileOrder,
-}
-
-impl RunPosition {
-    /// The name reports use: `time_s`, `sequence` or `file_order`.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            RunPosition::Time => "time_s",
-            RunPosition::Sequence => "sequence",
-            RunPosition::FileOrder => "file_order",
-        }
-    }
-}
 
 /// The outcome of the test.
 #[derive(Clone, Debug, PartialEq)]
@@ -183,8 +163,14 @@ impl OrderDrift {
             } else {
                 format!("no drift common to every pose along the measuring order: {figures}")
             };
+            // The nuisance term takes a drift common to every pose, not a creeping zero.
+            let nuisance = if self.found() {
+                "; `identify --model +drift` fits the common drift as a nuisance of this run (the readings translated by a cubic in their place in the run, averaging to zero over it), so that the robot's parameters are identified without it; a compensation serves at the run's mean, where it is zero"
+            } else {
+                ""
+            };
             format!(
-                "{common}{creep}. No term of a robot's model takes a drift in time that no logged temperature follows (a warm-up, a tracker or a base that settled, a joint's zero creeping as its motor warms): log time_s and temperature_c with each measurement, or measure after warming up; the figures above include it"
+                "{common}{creep}. No term of a robot's model takes a drift in time that no logged temperature follows (a warm-up, a tracker or a base that settled, a joint's zero creeping as its motor warms): log time_s and temperature_c with each measurement, or measure after warming up; the figures above include it{nuisance}"
             )
         } else if self.confounded() {
             format!(
@@ -306,19 +292,6 @@ fn orthonormal(a: &DMatrix<f64>) -> DMatrix<f64> {
 /// `a` minus its projection on the orthonormal columns of `q`.
 fn remove(q: &DMatrix<f64>, a: &DMatrix<f64>) -> DMatrix<f64> {
     a - q * (q.transpose() * a)
-}
-
-/// The map of places in the run onto [−1, 1] (first to last); `None` when they are all the same or
-/// not finite.
-pub(crate) fn unit_scale(at: impl Iterator<Item = f64>) -> Option<impl Fn(f64) -> f64> {
-    let (lo, hi) = at.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), t| (l.min(t), h.max(t)));
-    let span = hi - lo;
-    (span > 0.0 && span.is_finite()).then_some(move |t: f64| 2.0 * (t - lo) / span - 1.0)
-}
-
-/// Legendre polynomials P1…P3 at u ∈ [−1, 1].
-pub(crate) fn legendre(u: f64) -> [f64; DEGREE] {
-    [u, 0.5 * (3.0 * u * u - 1.0), 0.5 * (5.0 * u * u * u - 3.0 * u)]
 }
 
 /// The test on `stops` (see the module). `None` with fewer than [`MIN_STOPS`] stops, or when every

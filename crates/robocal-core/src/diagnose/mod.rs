@@ -994,40 +994,15 @@ fn order_drift(stage: &stage::Stage, cell: &Cell, heldout: &cv::Heldout, seed: u
     drift::order_drift(&drift::stops(readings), source, seed)
 }
 
-/// Each of the observations `obs`' place in one run: its logged time, else its sequence number
-/// (one numbering: no number names two configurations), else its index in the one session's list
-/// when that is in measuring order. `None` when they have no common place in a run.
+/// Each of the observations `obs`' place in one run ([`crate::identify::run::run_positions`]).
 pub(crate) fn run_positions(
     pr: &crate::identify::problem::Problem,
     cell: &Cell,
     obs: &[usize],
 ) -> Option<(drift::RunPosition, Vec<f64>)> {
-    use crate::cell::MeasuringOrder;
-    let measurement = |o: usize| {
-        let ob = pr.obs.get(o)?;
-        cell.sessions.get(ob.session).and_then(|s| s.measurements.get(ob.index))
-    };
-    let ms: Vec<&crate::cell::Measurement> = obs.iter().map(|&o| measurement(o)).collect::<Option<Vec<_>>>()?;
-    if let Some(t) = ms.iter().map(|m| m.time_s).collect::<Option<Vec<f64>>>() {
-        Some((drift::RunPosition::Time, t))
-    } else if let Some(n) = ms.iter().map(|m| m.sequence).collect::<Option<Vec<u64>>>() {
-        let mut named: std::collections::HashMap<u64, &[f64]> = Default::default();
-        for (k, m) in n.iter().zip(&ms) {
-            let q = named.entry(*k).or_insert(&m.q);
-            if q.iter().zip(&m.q).any(|(a, b)| (a - b).abs() > 1e-9) {
-                return None;
-            }
-        }
-        Some((drift::RunPosition::Sequence, n.iter().map(|&k| k as f64).collect()))
-    } else {
-        let mut sessions = obs.iter().map(|&o| pr.obs[o].session);
-        let first = sessions.next()?;
-        let listed = matches!(cell.sessions.get(first)?.order, MeasuringOrder::Measured | MeasuringOrder::Unknown);
-        if !listed || sessions.any(|s| s != first) {
-            return None;
-        }
-        Some((drift::RunPosition::FileOrder, obs.iter().map(|&o| pr.obs[o].index as f64).collect()))
-    }
+    let picks: Vec<(usize, usize)> =
+        obs.iter().map(|&o| pr.obs.get(o).map(|ob| (ob.session, ob.index))).collect::<Option<_>>()?;
+    crate::identify::run::run_positions(cell, &picks)
 }
 
 /// The start model's error split: the floor (what no model removes), the unmodelled gap (held

@@ -322,6 +322,10 @@ impl std::fmt::Display for crate::identify::FixedReason {
             ),
             NoApproachDirection { name, axis } => write!(f, "{name}: no approach direction logged for axis {axis}"),
             NoTemperatureChange { name } => write!(f, "{name}: no temperature change in the data"),
+            NoRunOrder { name } => write!(
+                f,
+                "{name}: the measurements have no place in one run (no time_s, no sequence, not one session listed as measured)"
+            ),
             TcpOnLastAxis { name, axis } => {
                 write!(f, "{name}: no effect, the TCP lies on axis {axis} and orientation is not measured")
             }

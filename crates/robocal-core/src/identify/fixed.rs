@@ -54,6 +54,12 @@ pub enum FixedReason {
         /// The parameter's name.
         name: String,
     },
+    /// A drift term whose measurements have no common place in one run (no `time_s`, no
+    /// `sequence`, and not one session listed as measured), or all the same place.
+    NoRunOrder {
+        /// The parameter's name.
+        name: String,
+    },
     /// The last joint's offset when the TCP lies on its axis and orientation is not measured.
     TcpOnLastAxis {
         /// The parameter's name.
@@ -188,6 +194,7 @@ impl FixedReason {
             | NoGravityTorque { name, .. }
             | NoApproachDirection { name, .. }
             | NoTemperatureChange { name }
+            | NoRunOrder { name }
             | TcpOnLastAxis { name, .. }
             | OrientationNotMeasured { name }
             | NoEffect { name }

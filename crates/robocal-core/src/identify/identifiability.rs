@@ -52,6 +52,7 @@ fn priority(problem: &Problem, g: usize) -> (u8, i64) {
             Param::Thermal => (4, 100),
             Param::ToolMass => (4, 101),
             Param::ToolMoment(k) => (4, 102 + k as i64),
+            Param::Drift(a, k) => (4, 110 + 3 * a as i64 + k as i64),
             Param::Alpha(_) | Param::A(_) | Param::D(_) | Param::Theta(_) => (5, 0),
             Param::Tool(k) => (6, k as i64),
         },
@@ -95,7 +96,7 @@ pub(super) fn undetermined_bound(problem: &Problem, g: usize) -> Option<(f64, bo
                     angle
                 }
             }
-            Param::Joint(..) | Param::Thermal | Param::ToolMass | Param::ToolMoment(_) => None,
+            Param::Joint(..) | Param::Thermal | Param::ToolMass | Param::ToolMoment(_) | Param::Drift(..) => None,
         },
         GlobalParam::Tool { k, .. } => {
             if k < 3 {
@@ -267,6 +268,7 @@ fn no_effect_reason(problem: &Problem, g: usize) -> FixedReason {
             }
             Param::Joint(j, JointTerm::Backlash) => FixedReason::NoApproachDirection { name, axis: j + 1 },
             Param::Thermal => FixedReason::NoTemperatureChange { name },
+            Param::Drift(..) => FixedReason::NoRunOrder { name },
             Param::Theta(j) if j + 1 == problem.model.dof() && !problem.tools.iter().any(|t| t.has_orientation) => {
                 FixedReason::TcpOnLastAxis { name, axis: j + 1 }
             }

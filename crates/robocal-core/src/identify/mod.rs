@@ -11,6 +11,7 @@ pub(crate) mod noise;
 pub mod observability;
 pub mod problem;
 pub(crate) mod quality;
+pub mod run;
 pub(crate) mod solver;
 pub mod study;
 

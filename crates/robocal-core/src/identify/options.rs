@@ -31,7 +31,9 @@ impl Default for ModelOptions {
 impl ModelOptions {
     /// Parse `+beta,-compliance,+cyc2_h1,+backlash2,+coupling5_6,+c2_cubic,+thermal_alpha`
     /// (a `+cyc{j}_h{h}` or `+cyc{j}_f{f}` adds its sine and cosine terms), `+tool_mass`,
-    /// `+map{j}_s{step}` (a correction table of joint j with knots every `step` degrees), and
+    /// `+map{j}_s{step}` (a correction table of joint j with knots every `step` degrees), `+drift`
+    /// (a drift of the readings along the measuring run, [`crate::identify::run`]: the nine
+    /// `drift_{x,y,z}_p{1,2,3}`, or one of them by its name), and
     /// single terms of a block that is off (`-compliance,+c3`; `-beta,+beta2`). Unsigned items
     /// add.
     pub fn parse(spec: &str, dof: usize) -> Result<ModelOptions, String> {
@@ -44,6 +46,14 @@ impl ModelOptions {
             match name {
                 "beta" => m.beta = on,
                 "compliance" => m.compliance = on,
+                "drift" if on => {
+                    for p in drift_terms() {
+                        if !m.extra.contains(&p) {
+                            m.extra.push(p);
+                        }
+                    }
+                }
+                "drift" => return Err(format!("'{item}': effect terms are added with +, not removed")),
                 _ if parse_map(name).is_some() => {
                     let (j, step) = parse_map(name).expect("checked");
                     if j >= dof {
@@ -69,7 +79,7 @@ impl ModelOptions {
                         vec![p, Param::Joint(j, cos)]
                     } else {
                         return Err(format!(
-                            "'{item}': unknown model option (beta, compliance, or an effect term such as cyc2_h1, cyc2_f7.25, backlash2, coupling5_6, c2_cubic, c3, beta2, map2_s3, thermal_alpha, tool_mass)"
+                            "'{item}': unknown model option (beta, compliance, or an effect term such as cyc2_h1, cyc2_f7.25, backlash2, coupling5_6, c2_cubic, c3, beta2, map2_s3, thermal_alpha, tool_mass, drift)"
                         ));
                     };
                     for p in params {
@@ -78,7 +88,7 @@ impl ModelOptions {
                             Param::Joint(_, JointTerm::Map { .. }) => false,
                             Param::Joint(j, _) => j < dof,
                             Param::Beta(j) => j < dof,
-                            Param::Thermal | Param::ToolMass => true,
+                            Param::Thermal | Param::ToolMass | Param::Drift(..) => true,
                             _ => false,
                         };
                         if !ok {
@@ -103,8 +113,14 @@ impl ModelOptions {
 pub fn term_spec(terms: &[Param]) -> Vec<String> {
     let mut items: Vec<String> = Vec::new();
     let mut maps: Vec<(usize, u8)> = Vec::new();
+    let every_drift = drift_terms().iter().all(|p| terms.contains(p));
     for p in terms {
         match p {
+            Param::Drift(..) if every_drift => {
+                if !items.iter().any(|i| i == "+drift") {
+                    items.push("+drift".into());
+                }
+            }
             Param::Joint(j, JointTerm::Map { step_deg, .. }) => {
                 if !maps.contains(&(*j, *step_deg)) {
                     maps.push((*j, *step_deg));
@@ -123,6 +139,11 @@ pub fn term_spec(terms: &[Param]) -> Vec<String> {
     }
     items.extend(maps.iter().map(|(j, s)| format!("+map{}_s{s}", j + 1)));
     items
+}
+
+/// The nine terms of a drift along the measuring run (`+drift`).
+pub fn drift_terms() -> Vec<Param> {
+    (0..3).flat_map(|a| (0..super::run::DRIFT_ORDERS).map(move |k| Param::Drift(a, k))).collect()
 }
 
 /// `map{j}_s{step}` → (0-based joint, step in degrees).
@@ -276,3 +297,24 @@ impl Default for IdentifyOptions {
 
 /// Default η of [`IdentifyOptions::map_smoothing`].
 pub const DEFAULT_MAP_SMOOTHING: f64 = 1.0;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `+drift` adds the nine terms of a drift along the run and is written back as one item;
+    /// one of them is added by its name; a drift is not removed with `-`.
+    #[test]
+    fn a_drift_is_added_as_one_item_and_spelled_back_as_one() {
+        let m = ModelOptions::parse("+drift,+backlash2", 6).unwrap();
+        assert_eq!(m.extra.len(), 10);
+        assert!(drift_terms().iter().all(|p| m.extra.contains(p)));
+        assert_eq!(term_spec(&m.extra), ["+drift", "+backlash2"]);
+        let one = ModelOptions::parse("+drift_y_p2", 6).unwrap();
+        assert_eq!(one.extra, [Param::Drift(1, 1)]);
+        assert_eq!(term_spec(&one.extra), ["+drift_y_p2"]);
+        let err = ModelOptions::parse("-drift", 6).unwrap_err();
+        assert!(err.contains("added with +"), "{err}");
+        assert!(ModelOptions::parse("+drift_w_p1", 6).unwrap_err().contains("unknown model option"));
+    }
+}

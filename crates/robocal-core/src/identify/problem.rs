@@ -352,9 +352,12 @@ impl Problem {
                 gravity[t].torques_and_payload_slopes(q, &tools[t].tool.com, moments)
             })
             .collect();
+        // Each measurement's place in the run, as the drift terms' basis: zero (the run's mean, no
+        // drift) when the measurements share no run.
+        let run = super::run::run_positions(cell, &picks).and_then(|(_, at)| super::run::drift_basis(&at));
         let mut obs = Vec::with_capacity(picks.len());
         let mut row = 0;
-        for ((s, i), (tau, per_kg, per_kgm)) in picks.into_iter().zip(torques) {
+        for (n, ((s, i), (tau, per_kg, per_kgm))) in picks.into_iter().zip(torques).enumerate() {
             let m: &Measurement = &cell.sessions[s].measurements[i];
             let t = session_tool[s];
             let mut state = JointState::with_torques(&m.q, &tau[..model.dof()]);
@@ -366,6 +369,9 @@ impl Problem {
             state.temperature_c = m.temperature_c.unwrap_or(REFERENCE_TEMPERATURE_C);
             state.tau_per_kg = per_kg;
             state.tau_per_kgm = per_kgm;
+            if let Some(run) = &run {
+                state.run = run[n];
+            }
             let target = match (&m.observation, &m.indicators) {
                 (Observation::Ball(k), ind) => {
                     let centre =
@@ -773,6 +779,39 @@ mod tests {
         let mut r = vec![0.0; p.n_rows];
         p.residual(x, &mut r);
         r
+    }
+
+    /// Each measurement's place in its run becomes the drift basis of its state: from the sequence
+    /// numbers two sessions share (a plate's reflectors), centred over the problem's
+    /// measurements; two sessions with neither times nor sequence numbers share no run, and every
+    /// state keeps the run's mean (zero), where a drift term moves nothing.
+    #[test]
+    fn each_measurements_place_in_its_run_is_its_drift_basis() {
+        let q = random_configurations(40, 3);
+        let seq = |first: usize, with: bool| -> Vec<Measurement> {
+            (0..20)
+                .map(|i| {
+                    let mut m = measurement(q[first + i].clone(), Observation::Position(Vector3::new(0.4, 0.1, 0.5)));
+                    m.sequence = with.then_some(10 * i as u64);
+                    m
+                })
+                .collect()
+        };
+        for with in [true, false] {
+            // The same stops read by two reflectors when numbered; two separate runs otherwise.
+            let second = if with { 0 } else { 20 };
+            let cell = irb120_cell(vec![
+                session("r1", Purpose::Identification, trical_tool(), seq(0, with)),
+                session("r2", Purpose::Identification, nest(), seq(second, with)),
+            ]);
+            let p = problem(&cell, &MeasurementSelection::default()).unwrap();
+            let expected = crate::identify::run::drift_basis(&(0..20).map(|i| 10.0 * i as f64).collect::<Vec<_>>());
+            for o in &p.obs {
+                let want = if with { expected.as_ref().unwrap()[o.index] } else { [0.0; 3] };
+                let off = o.state.run.iter().zip(want).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+                assert!(off < 1e-15, "{} [{}]: {:?} against {want:?}", o.session, o.index, o.state.run);
+            }
+        }
     }
 
     /// A problem large enough to be split across threads (1,200 measurements, mixed position and

@@ -34,6 +34,11 @@ pub struct JointState {
     /// along the flange's axis k (x, y, z), N·m/(kg·m), indexed `[k][joint]`. Filled, like
     /// `tau_per_kg`, only where the payload's centre of mass is identified (`tool_moment_*`).
     pub tau_per_kgm: [[f64; MAX_JOINTS]; 3],
+    /// The measurement's place in its measuring run as the drift basis P̃1…P̃3 (Legendre
+    /// polynomials of the place on [−1, 1], centred over the run: [`crate::identify::run`]). Zero —
+    /// the run's mean, where a drift term moves nothing — for every state but an identification's
+    /// measurements.
+    pub run: [f64; 3],
 }
 
 impl JointState {
@@ -46,6 +51,7 @@ impl JointState {
             temperature_c: REFERENCE_TEMPERATURE_C,
             tau_per_kg: [0.0; MAX_JOINTS],
             tau_per_kgm: [[0.0; MAX_JOINTS]; 3],
+            run: [0.0; 3],
         };
         s.q[..q.len()].copy_from_slice(q);
         s
@@ -190,6 +196,10 @@ pub struct Chain {
     /// Payload first-moment error in the flange frame, kg·m (acts through
     /// `JointState::tau_per_kgm`).
     tool_moment: [f64; 3],
+    /// Drift of {W} along the measuring run, m, `[axis][order]` (acts through `JointState::run`).
+    drift: [[f64; 3]; 3],
+    /// Whether any drift term is non-zero (FK is a hot path: without one, nothing is added).
+    has_drift: bool,
 }
 
 impl Chain {
@@ -219,6 +229,8 @@ impl Chain {
             thermal: 0.0,
             tool_mass: 0.0,
             tool_moment: [0.0; 3],
+            drift: [[0.0; 3]; 3],
+            has_drift: false,
         };
         for (p, &v) in layout.params().iter().zip(values) {
             match *p {
@@ -234,6 +246,7 @@ impl Chain {
                 Param::Thermal => chain.thermal = v,
                 Param::ToolMass => chain.tool_mass = v,
                 Param::ToolMoment(k) => chain.tool_moment[k] = v,
+                Param::Drift(a, k) => chain.drift[a][k] = v,
             }
         }
         // The first and last knot of each (joint, step) table extend their value beyond it.
@@ -261,6 +274,7 @@ impl Chain {
         }
         chain.base = Frame::from_xyzabc(&chain.base_chi);
         chain.tool = Frame::from_xyzabc(&chain.tool_chi);
+        chain.has_drift = chain.drift.iter().flatten().any(|&v| v != 0.0);
         chain
     }
 
@@ -442,9 +456,28 @@ impl Chain {
         1.0 + self.thermal * (s.temperature_c - REFERENCE_TEMPERATURE_C)
     }
 
+    /// The drift of {W} at a state's place in its run, m (zero at the run's mean).
+    #[inline]
+    fn drift_at(&self, s: &JointState) -> Vector3<f64> {
+        let mut v = Vector3::zeros();
+        for (a, row) in self.drift.iter().enumerate() {
+            v[a] = row[0] * s.run[0] + row[1] * s.run[1] + row[2] * s.run[2];
+        }
+        v
+    }
+
+    /// `f` moved by the drift at the state's place in its run.
+    #[inline]
+    fn drifted(&self, s: &JointState, mut f: Frame) -> Frame {
+        if self.has_drift {
+            f.t += self.drift_at(s);
+        }
+        f
+    }
+
     /// T_T^W at a configuration.
     pub fn fk(&self, s: &JointState) -> Frame {
-        self.fk_theta_scaled(&self.joint_angles(s), self.length_scale(s))
+        self.drifted(s, self.fk_theta_scaled(&self.joint_angles(s), self.length_scale(s)))
     }
 
     /// TCP pose from DH joint angles with every link length scaled by `scale`.
@@ -455,7 +488,7 @@ impl Chain {
     /// T_T^W at a configuration whose readings' (sin, cos) the caller keeps (see
     /// [`Self::joint_sincos`]).
     pub(crate) fn fk_cached(&self, s: &JointState, q_sc: &[(f64, f64); MAX_JOINTS]) -> Frame {
-        self.fk_sincos_scaled(&self.joint_sincos(s, q_sc), self.length_scale(s))
+        self.drifted(s, self.fk_sincos_scaled(&self.joint_sincos(s, q_sc), self.length_scale(s)))
     }
 
     /// TCP pose from the (sin, cos) of the DH joint angles, link lengths scaled by `scale`.
@@ -500,7 +533,7 @@ impl Chain {
             // [Ry(β)]·Rz(θ)·Tz(d): the translation is the rotated z axis times d.
             f = f.compose(&Frame::new(rot, rot * Vector3::new(0.0, 0.0, r.d * scale)));
         }
-        f.compose(&self.tool)
+        self.drifted(s, f.compose(&self.tool))
     }
 
     /// Forward kinematics recording the world line of every elementary motion (reference
@@ -688,6 +721,9 @@ impl Chain {
                     }
                     col
                 }
+                // A translation of every reading: rotations keep their columns, since the drift
+                // moves the axes' points and the TCP alike.
+                Param::Drift(a, k) => trans_col(&(unit(a) * s.run[k])),
                 Param::Thermal => {
                     // ∂p/∂α = (T − 20)·Σ_j (a_j·x_{j−1} + d_j·z_j): every length grows together.
                     let dt = s.temperature_c - REFERENCE_TEMPERATURE_C;
@@ -724,7 +760,7 @@ impl Chain {
                 *d = v;
             }
         }
-        t.tcp
+        self.drifted(s, t.tcp)
     }
 }
 
@@ -896,7 +932,13 @@ mod tests {
             }
             t = t.compose(&r(rot_z(th))).compose(&tz(get(Param::D(j)).unwrap() * grow));
         }
-        t.compose(&Frame::from_xyzabc(&chi(Param::Tool)))
+        let mut t = t.compose(&Frame::from_xyzabc(&chi(Param::Tool)));
+        for a in 0..3 {
+            for k in 0..3 {
+                t.t[a] += get(Param::Drift(a, k)).unwrap_or(0.0) * s.run[k];
+            }
+        }
+        t
     }
 
     /// The full layout plus one of every effect term.
@@ -921,6 +963,10 @@ mod tests {
             Param::ToolMoment(0),
             Param::ToolMoment(1),
             Param::ToolMoment(2),
+            Param::Drift(0, 0),
+            Param::Drift(1, 1),
+            Param::Drift(2, 2),
+            Param::Drift(2, 0),
         ]);
         l
     }
@@ -952,6 +998,9 @@ mod tests {
             *a = rng.random_range(-1..=1) as f64;
         }
         s.temperature_c = rng.random_range(15.0..35.0);
+        for r in &mut s.run {
+            *r = rng.random_range(-1.0..1.0);
+        }
         for g in s.tau_per_kg.iter_mut().take(model.dof()) {
             *g = rng.random_range(-5.0..5.0);
         }
@@ -978,8 +1027,10 @@ mod tests {
                 let b = fk_reference(&model, &layout, &values, &s);
                 assert!((a.t - b.t).norm() < 1e-14, "{}", (a.t - b.t).norm());
                 assert!((a.r - b.r).abs().max() < 1e-14);
+                // The trace is the robot's geometry: the drift along the run moves the readings.
                 let tr = chain.trace_scaled(&chain.joint_angles(&s), chain.length_scale(&s));
-                assert!((tr.tcp.t - a.t).norm() < 1e-15);
+                assert!((chain.drifted(&s, tr.tcp).t - a.t).norm() < 1e-15);
+                assert!((tr.tcp.t + chain.drift_at(&s) - a.t).norm() < 1e-15 && chain.drift_at(&s).norm() > 0.0);
                 let d = chain.fk_deformed(&s, &[]);
                 assert!((d.t - a.t).norm() < 1e-14 && (d.r - a.r).abs().max() < 1e-14);
                 // From the readings' cached (sin, cos): the same angles, FK and Jacobian.

@@ -126,6 +126,13 @@ pub enum Param {
     /// compliances; with it, the payload's centre of mass is identified beside its mass:
     /// `tool_moment_x` …
     ToolMoment(usize),
+    /// Drift of the readings along the measuring run, m: component (axis a = x, y, z of {W},
+    /// order k = 0, 1, 2) of a translation of {W} by Σ_k d_{a,k}·P̃_{k+1}(u), P̃ the Legendre
+    /// polynomial of the measurement's place in its run, centred over the run
+    /// ([`crate::identify::run`]). A nuisance of the identification's run: it averages to zero
+    /// over the run, and a state with no place in a run (a compensation) has none:
+    /// `drift_x_p1` … `drift_z_p3`.
+    Drift(usize, usize),
 }
 
 /// Reference temperature of the nominal link lengths (ISO 1), °C.
@@ -209,6 +216,7 @@ impl Param {
             Param::Thermal => Unit::PpmPerK,
             Param::ToolMass => Unit::Kg,
             Param::ToolMoment(_) => Unit::KgMm,
+            Param::Drift(..) => Unit::Mm,
             Param::Base(k) | Param::Tool(k) => {
                 if k < 3 {
                     Unit::Mm
@@ -236,6 +244,12 @@ impl Param {
         }
         if name == "thermal_alpha" {
             return Some(Param::Thermal);
+        }
+        if let Some(rest) = name.strip_prefix("drift_") {
+            let (axis, order) = rest.split_once("_p")?;
+            let axis = POSE_COMPONENTS[..3].iter().position(|c| *c == axis)?;
+            let k = index1(order)?;
+            return (k < crate::identify::run::DRIFT_ORDERS).then_some(Param::Drift(axis, k));
         }
         if let Some(rest) = name.strip_prefix("cyc") {
             // cyc{j}_h{h}_sin | cyc{j}_h{h}_cos (whole harmonic) | cyc{j}_f{f}_sin (f in quarters)
@@ -373,6 +387,7 @@ impl fmt::Display for Param {
             Param::Thermal => f.write_str("thermal_alpha"),
             Param::ToolMass => f.write_str("tool_mass"),
             Param::ToolMoment(k) => write!(f, "tool_moment_{}", POSE_COMPONENTS[k]),
+            Param::Drift(a, k) => write!(f, "drift_{}_p{}", POSE_COMPONENTS[a], k + 1),
             Param::Base(k) => write!(f, "base_{}", POSE_COMPONENTS[k]),
             Param::Tool(k) => write!(f, "tool_{}", POSE_COMPONENTS[k]),
         }
@@ -450,6 +465,7 @@ impl ParamLayout {
             Param::Joint(j, _) => j < self.dof,
             Param::Thermal | Param::ToolMass => true,
             Param::ToolMoment(k) => k < 3,
+            Param::Drift(a, k) => a < 3 && k < crate::identify::run::DRIFT_ORDERS,
             // Hayati's β can be given to any row whose joint axis is nominally parallel to the
             // previous one (where plain DH is not proportional, §3.4).
             Param::Beta(j) => self.index_of(p).is_some() || (j < self.dof && self.parallel & (1 << j) != 0),
@@ -473,7 +489,7 @@ impl ParamLayout {
                 Param::D(j) => model.links[j].d,
                 Param::Theta(j) => model.links[j].theta,
                 Param::Beta(j) => model.links[j].beta.unwrap_or(0.0),
-                Param::Joint(..) | Param::Thermal | Param::ToolMass | Param::ToolMoment(_) => 0.0,
+                Param::Joint(..) | Param::Thermal | Param::ToolMass | Param::ToolMoment(_) | Param::Drift(..) => 0.0,
                 Param::Base(k) => base[k],
                 Param::Tool(k) => tool.tcp[k],
             })
@@ -540,6 +556,8 @@ mod tests {
             Param::Joint(1, JointTerm::Map { step_deg: 3, knot: -12 }),
             Param::Joint(1, JointTerm::Map { step_deg: 3, knot: 0 }),
             Param::ToolMass,
+            Param::Drift(2, 0),
+            Param::Drift(0, 2),
         ];
         ext.extend(&extra);
         let names: Vec<String> = extra.iter().map(|p| p.to_string()).collect();
@@ -556,6 +574,8 @@ mod tests {
                 "map2_s3_k-12",
                 "map2_s3_k0",
                 "tool_mass",
+                "drift_z_p1",
+                "drift_x_p3",
             ]
         );
         assert_eq!(JointTerm::cyclic(8, false), Some(JointTerm::Cyclic { harmonic: 2, cosine: false }));
@@ -597,6 +617,11 @@ mod tests {
             "map2_s3",
             "map0_s3_k1",
             "tool_mass2",
+            "drift_x_p0",
+            "drift_x_p4",
+            "drift_a_p1",
+            "drift_x",
+            "drift_x_p01",
         ] {
             assert_eq!(Param::parse(bad), None, "{bad}");
         }
