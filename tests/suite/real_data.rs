@@ -2405,3 +2405,25 @@ fn a_drift_along_the_run_is_fitted_as_a_nuisance_of_the_run() {
     let (f1, f0) = (with.set.chain().fk(&JointState::new(&q)), flat.chain().fk(&JointState::new(&q)));
     assert_eq!(f1.t, f0.t);
 }
+
+/// The drift terms in a measuring order that follows the configuration: the same twin's stops
+/// renumbered as a sweep over joint 1. There a trend along the order is also an error of the pose,
+/// and the identification says so in a note; in the twin's own random order it says nothing.
+#[test]
+fn drift_terms_along_an_order_that_follows_the_configuration_are_noted() {
+    let (_, cell) = twin(300, 5);
+    let noted = |cell: &Cell| {
+        let id = identify(cell, &options("-compliance,+drift", &[])).unwrap();
+        id.notes.iter().find(|n| n.contains("carries the configuration")).cloned()
+    };
+    assert_eq!(noted(&cell), None);
+    let mut q1: Vec<f64> = cell.sessions.iter().flat_map(|s| s.measurements.iter().map(|m| m.q[0])).collect();
+    q1.sort_by(f64::total_cmp);
+    q1.dedup();
+    let mut sweep = cell.clone();
+    for m in sweep.sessions.iter_mut().flat_map(|s| s.measurements.iter_mut()) {
+        m.sequence = Some(q1.partition_point(|&v| v < m.q[0]) as u64);
+    }
+    let note = noted(&sweep).expect("a note on the sweep");
+    assert!(note.contains("adjusted R²") && note.contains("fit without +drift"), "{note}");
+}

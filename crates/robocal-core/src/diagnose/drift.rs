@@ -294,6 +294,41 @@ fn remove(q: &DMatrix<f64>, a: &DMatrix<f64>) -> DMatrix<f64> {
     a - q * (q.transpose() * a)
 }
 
+/// The configuration basis of every stop (stops × columns), positions centred on their mean and
+/// scaled by their RMS distance from it.
+fn configuration_matrix(stops: &[Stop]) -> DMatrix<f64> {
+    let m = stops.len();
+    let centre = stops.iter().map(|s| s.position).sum::<Vector3<f64>>() / m as f64;
+    let scale = (stops.iter().map(|s| (s.position - centre).norm_squared()).sum::<f64>() / m as f64).sqrt().max(1e-9);
+    let rows: Vec<Vec<f64>> = stops.iter().map(|s| configuration(s, &centre, scale)).collect();
+    DMatrix::from_fn(m, rows[0].len(), |i, k| rows[i][k])
+}
+
+/// How much the order follows the pose: the adjusted R² (at least 0) of the place in the run `u`
+/// on the orthonormal configuration basis `qz`.
+fn order_r2(stops: &[Stop], u: &impl Fn(f64) -> f64, qz: &DMatrix<f64>) -> f64 {
+    let m = stops.len();
+    let uu = DMatrix::from_fn(m, 1, |i, _| u(stops[i].at));
+    let ur = remove(qz, &uu);
+    let centred = uu.add_scalar(-uu.mean());
+    let (sse, sst) = (ur.norm_squared(), centred.norm_squared());
+    let k = (qz.ncols() - 1) as f64;
+    (1.0 - (sse / (m as f64 - k - 1.0)) / (sst / (m as f64 - 1.0))).max(0.0)
+}
+
+/// Whether the measuring order of `stops` carries the configuration, as [`OrderDrift::confounded`]
+/// judges it: `Some((adjusted R² of the place in the run on the configuration, locality))` when it
+/// does, `None` when it does not or with fewer than [`MIN_STOPS`] stops or one place.
+pub(crate) fn order_carries_configuration(stops: &[Stop]) -> Option<(f64, f64)> {
+    if stops.len() < MIN_STOPS {
+        return None;
+    }
+    let u = unit_scale(stops.iter().map(|s| s.at))?;
+    let qz = orthonormal(&configuration_matrix(stops));
+    let (r2, local) = (order_r2(stops, &u, &qz), locality(stops));
+    (r2 > CONFOUNDED_R2 || local < LOCALITY_LIMIT).then_some((r2, local))
+}
+
 /// The test on `stops` (see the module). `None` with fewer than [`MIN_STOPS`] stops, or when every
 /// stop has the same place in the run.
 pub fn order_drift(stops: &[Stop], source: RunPosition, seed: u64) -> Option<OrderDrift> {
@@ -302,10 +337,7 @@ pub fn order_drift(stops: &[Stop], source: RunPosition, seed: u64) -> Option<Ord
         return None;
     }
     let u = unit_scale(stops.iter().map(|s| s.at))?;
-    let centre = stops.iter().map(|s| s.position).sum::<Vector3<f64>>() / m as f64;
-    let scale = (stops.iter().map(|s| (s.position - centre).norm_squared()).sum::<f64>() / m as f64).sqrt().max(1e-9);
-    let rows: Vec<Vec<f64>> = stops.iter().map(|s| configuration(s, &centre, scale)).collect();
-    let z = DMatrix::from_fn(m, rows[0].len(), |i, k| rows[i][k]);
+    let z = configuration_matrix(stops);
     let x = DMatrix::from_fn(m, DEGREE, |i, k| legendre(u(stops[i].at))[k]);
     let y = DMatrix::from_fn(m, 3, |i, c| stops[i].error[c]);
     let qz = orthonormal(&z);
@@ -365,13 +397,7 @@ pub fn order_drift(stops: &[Stop], source: RunPosition, seed: u64) -> Option<Ord
     let rest = (m - qz.ncols() - DEGREE).max(1) as f64;
     let ctc = xtx.cholesky().map_or(f64::NAN, |ch| c.dot(&ch.solve(&c)));
     let first_to_last_std = Vector3::from_fn(|axis, _| (full.column(axis).norm_squared() / rest * ctc).sqrt());
-    // How much the order follows the pose: adjusted R² of u on Z.
-    let uu = DMatrix::from_fn(m, 1, |i, _| u(stops[i].at));
-    let ur = remove(&qz, &uu);
-    let centred = uu.add_scalar(-uu.mean());
-    let (sse, sst) = (ur.norm_squared(), centred.norm_squared());
-    let k = (qz.ncols() - 1) as f64;
-    let r2 = 1.0 - (sse / (m as f64 - k - 1.0)) / (sst / (m as f64 - 1.0));
+    let r2 = order_r2(stops, &u, &qz);
     Some(OrderDrift {
         source,
         stops: m,
@@ -379,7 +405,7 @@ pub fn order_drift(stops: &[Stop], source: RunPosition, seed: u64) -> Option<Ord
         permutations: PERMUTATIONS,
         first_to_last,
         first_to_last_std,
-        order_on_configuration_r2: r2.max(0.0),
+        order_on_configuration_r2: r2,
         order_locality: locality(stops),
         joint_creep: joint_creep(stops, &u, &qz, &c, seed),
     })

@@ -95,6 +95,31 @@ pub fn drift_basis(at: &[f64]) -> Option<Vec<[f64; DRIFT_ORDERS]>> {
     Some(basis)
 }
 
+/// When `problem` fits a drift along its run and the run's order carries the configuration (a
+/// sweep, poses planned for short moves: [`crate::diagnose::drift::order_carries_configuration`]),
+/// a note that the drift terms can take an error of the pose as well.
+pub(crate) fn drift_order_note(cell: &Cell, problem: &super::Problem) -> Option<String> {
+    if !problem.layout.params().iter().any(|p| matches!(p, crate::kinematics::Param::Drift(..))) {
+        return None;
+    }
+    let dof = problem.model.dof();
+    let picks: Vec<(usize, usize)> = problem.obs.iter().map(|o| (o.session, o.index)).collect();
+    let (_, at) = run_positions(cell, &picks)?;
+    let readings = problem
+        .obs
+        .iter()
+        .zip(at)
+        .map(|(o, t)| {
+            (t, o.state.q[..dof].to_vec(), problem.target_position(o), nalgebra::Vector3::zeros(), Vec::new())
+        })
+        .collect();
+    let stops = crate::diagnose::drift::stops(readings);
+    let (r2, local) = crate::diagnose::drift::order_carries_configuration(&stops)?;
+    Some(format!(
+        "the drift terms are fitted along a measuring order that carries the configuration (adjusted R² {r2:.2} of the place in the run on the joint readings and positions; consecutive stops {local:.2} as far apart in the joints as any two): they can take an error of the pose as well as a drift, and the robot's parameters then lose it; fit without +drift, or measure in random order"
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
