@@ -1174,8 +1174,9 @@ fn parallel_axes_without_beta_are_said() {
 /// a twin warming up along its run (a stop every 10 s, the thermal effect, no time or temperature
 /// in the files) and the same run cold. The warm run's held-out errors drift along the measuring
 /// order (p at the permutations' floor), the summary says so with what to log; the cold run's do
-/// not, and its summary says nothing of it. (The trend's size and σ against a known drift:
-/// `diagnose::drift`'s unit tests.)
+/// not, and its summary says nothing of it. Where the drift is said, the last accepted model is
+/// refitted with the drift as a nuisance (`+drift`) and the figures are given. (The trend's size
+/// and σ against a known drift: `diagnose::drift`'s unit tests.)
 #[test]
 fn an_unlogged_warm_up_is_said_as_a_drift_along_the_measuring_order() {
     let run = |effects: &str, stop_s: f64| {
@@ -1197,9 +1198,17 @@ fn an_unlogged_warm_up_is_said_as_a_drift_along_the_measuring_order() {
         warm.verdict.summary
     );
     assert!(warm.verdict.summary.contains("log time_s and temperature_c"), "{}", warm.verdict.summary);
+    // The drift fitted as a nuisance of the run beside the last accepted model: of the trend's
+    // size (a warm-up's curve about its mean is a fraction of its first-to-last change), and the
+    // robot's parameters fitted without it predict held-out poses no worse at the run's mean.
+    let n = d.nuisance.expect("the last model refitted with +drift");
+    eprintln!("nuisance {n:?}, first to last {:.4} mm", d.first_to_last.norm() / MM);
+    assert!((0.15..1.0).contains(&(n.fitted_rms / d.first_to_last.norm())), "{n:?} {d:?}");
+    assert!(n.with <= 1.02 * n.without, "{n:?}");
+    assert!(warm.verdict.summary.contains("`identify --model +drift`"), "{}", warm.verdict.summary);
     let cold = run("", 0.0);
     let c = cold.location.order_drift.as_ref().expect("tested");
-    assert!(!c.found(), "{c:?}");
+    assert!(!c.found() && c.nuisance.is_none(), "{c:?}");
     assert!(!cold.verdict.summary.contains("along the measuring order"), "{}", cold.verdict.summary);
     assert!(d.first_to_last.norm() > 3.0 * c.first_to_last.norm().max(d.first_to_last_std.norm()), "{d:?} {c:?}");
 }

@@ -598,7 +598,7 @@ pub fn diagnose_with_progress(
     // 4. Where the start model misses, and the decomposition of its error.
     progress(0.85, "locating the residual error");
     let t0 = std::time::Instant::now();
-    let location = tested.locate(&s, cell, input.set.chain().base().t, opts);
+    let mut location = tested.locate(&s, cell, input.set.chain().base().t, opts);
     // One model, one figure: the held-out errors of the models refitted in full on the folds where
     // that worked (always, unless a fold's refit failed: then the linearised folds', and a note
     // says so).
@@ -606,6 +606,10 @@ pub fn diagnose_with_progress(
     let refit_note = s.refits.iter().find_map(|r| r.as_ref().err()).map(|e| {
         format!("a model could not be refitted on the folds ({e}): its held-out figures are the linearised folds'")
     });
+    if let Some(d) = location.order_drift.as_mut().filter(|d| d.found()) {
+        progress(0.87, "refitting the final model with the drift as a nuisance");
+        d.nuisance = drift_nuisance(&work, &s, &figures, &tested.folds, opts.threads);
+    }
     let decomposition = decompose(input, &validation, &figures, tested.floor)?;
     let evidence = evidence(&s, &figures);
     let shrink = shrink_table(&s, &figures, &decomposition)?;
@@ -992,6 +996,45 @@ fn order_drift(stage: &stage::Stage, cell: &Cell, heldout: &cv::Heldout, seed: u
         })
         .collect();
     drift::order_drift(&drift::stops(readings), source, seed)
+}
+
+/// The final model with the drift terms (`+drift`), fitted on the pooled data and refitted on the
+/// folds ([`drift::DriftNuisance`]). `None` when either fit fails.
+fn drift_nuisance(
+    work: &Cell,
+    s: &search::Search,
+    figures: &[&cv::Heldout],
+    folds: &Folds,
+    threads: usize,
+) -> Option<drift::DriftNuisance> {
+    let last = s.stages.last()?;
+    let terms = crate::identify::drift_terms();
+    let mut o = last.options.clone();
+    for p in &terms {
+        if !o.model.extra.contains(p) {
+            o.model.extra.push(*p);
+        }
+    }
+    if let Some(start) = &mut o.start {
+        start.extend(&terms);
+    }
+    let st = stage::Stage::fit(work, o).ok()?;
+    st.fit.as_ref().ok()?;
+    let h = refit::refit_heldout(work, &st, folds, threads).ok()?;
+    let without = ErrorStats::of(&figures.get(s.stages.len() - 1)?.norms())?.mean;
+    let with = ErrorStats::of(&h.norms())?.mean;
+    let pr = &st.problem;
+    let value = |p: Param| pr.robot_index(p).map_or(0.0, |g| st.x[g]);
+    let tested: Vec<usize> = h.errors.iter().map(|(o, _)| *o).collect();
+    let sq: f64 = tested
+        .iter()
+        .map(|&o| {
+            let run = pr.obs[o].state.run;
+            Vector3::<f64>::from_fn(|a, _| (0..3).map(|k| value(Param::Drift(a, k)) * run[k]).sum()).norm_squared()
+        })
+        .sum();
+    let fitted_rms = (sq / tested.len().max(1) as f64).sqrt();
+    Some(drift::DriftNuisance { fitted_rms, without, with })
 }
 
 /// Each of the observations `obs`' place in one run ([`crate::identify::run::run_positions`]).

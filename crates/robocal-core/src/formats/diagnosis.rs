@@ -536,8 +536,27 @@ pub struct OrderDriftOut {
     /// was available (and in documents of earlier versions).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub joint_creep: Option<JointCreepOut>,
+    /// Where a drift is found: the last model the search accepted, refitted on the same folds with
+    /// the drift as a nuisance of the run (`identify --model +drift`). Absent otherwise, when that
+    /// model could not be fitted, and in documents of earlier versions.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nuisance: Option<DriftNuisanceOut>,
     /// What it says, in a sentence.
     pub statement: String,
+}
+
+/// The drift fitted as a nuisance of the run beside the diagnosis's last accepted model.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct DriftNuisanceOut {
+    /// RMS over the tested readings of the drift the pooled fit reads at each one's place in the
+    /// run, mm.
+    pub fitted_rms_mm: f64,
+    /// The held-out mean of the last model the search accepted, mm (its shrink-table figure).
+    pub without_mm: f64,
+    /// The same model with the drift terms, refitted on the same folds: held-out mean at the run's
+    /// mean (where the drift is zero, as a compensation serves), mm.
+    pub with_mm: f64,
 }
 
 /// The test of the joints' zeros creeping along the measuring order.
@@ -822,6 +841,11 @@ fn where_out(w: &Where) -> WhereOut {
                 p: c.p,
                 first_to_last_deg: c.first_to_last.iter().map(|v| v.map(|v| v / DEG)).collect(),
                 first_to_last_std_deg: c.first_to_last_std.iter().map(|v| v.map(|v| v / DEG)).collect(),
+            }),
+            nuisance: d.nuisance.map(|n| DriftNuisanceOut {
+                fitted_rms_mm: n.fitted_rms / MM,
+                without_mm: n.without / MM,
+                with_mm: n.with / MM,
             }),
             statement: d.statement(),
         }),

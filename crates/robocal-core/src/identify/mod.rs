@@ -38,8 +38,8 @@ pub use identify::{
 };
 pub use noise::NoiseModel;
 pub use options::{
-    Anchor, DEFAULT_MAP_SMOOTHING, IdentifyOptions, ModelOptions, OUTLIER_FACTOR, RESIDUAL_RATIO_LIMIT, map_knots,
-    term_spec,
+    Anchor, DEFAULT_MAP_SMOOTHING, IdentifyOptions, ModelOptions, OUTLIER_FACTOR, RESIDUAL_RATIO_LIMIT, drift_terms,
+    map_knots, term_spec,
 };
 pub use pool::{DetmaxPool, select_detmax};
 pub use prepare::{Prepared, map_priors, prepare, row_sigmas, table_priors, weight_by_instrument};
