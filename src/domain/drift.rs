@@ -3,6 +3,9 @@
 //! it; parameters identified in only one of them are listed as such. Values in each parameter's
 //! file unit (mm, deg, deg/(N·m), …).
 //!
+//! The drift terms along a measuring run (`drift_x_p1` …, `identify --model +drift`) are each run's
+//! own nuisance, not a property of the robot: they are not compared, and a note says so.
+//!
 //! "Moved" means |Δ| > σ: one combined standard deviation, the question a dashboard asks ("did
 //! this change by more than the sets' own uncertainty?"), not a significance test — with 30-odd
 //! parameters some move by more than 1σ by chance; `n_sigma` says by how much.
@@ -11,6 +14,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::{DomainError, ParameterSetDoc};
+use crate::kinematics::Param;
 
 /// One parameter both sets identify.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
@@ -71,7 +75,17 @@ pub fn drift(a: &ParameterSetDoc, b: &ParameterSetDoc, field: &str) -> Result<Dr
     let mut parameters = Vec::new();
     let mut only_in_a = Vec::new();
     let mut notes = Vec::new();
+    let run_term = |p: &Param| matches!(p, Param::Drift(..));
+    if [a, b].iter().any(|d| d.set.layout.params().iter().any(run_term)) {
+        notes.push(
+            "the drift terms along a measuring run (drift_*) are each run's own nuisance, not the robot's: not compared"
+                .into(),
+        );
+    }
     for (i, p) in a.set.layout.params().iter().enumerate() {
+        if run_term(p) {
+            continue;
+        }
         let j = b.set.layout.index_of(*p);
         let in_b = j.is_some_and(|j| identified(b, j));
         match (identified(a, i), in_b) {
@@ -116,7 +130,9 @@ pub fn drift(a: &ParameterSetDoc, b: &ParameterSetDoc, field: &str) -> Result<Dr
         .params()
         .iter()
         .enumerate()
-        .filter(|&(j, p)| identified(b, j) && !a.set.layout.index_of(*p).is_some_and(|i| identified(a, i)))
+        .filter(|&(j, p)| {
+            identified(b, j) && !run_term(p) && !a.set.layout.index_of(*p).is_some_and(|i| identified(a, i))
+        })
         .map(|(_, p)| p.to_string())
         .collect();
     let moved = parameters.iter().filter(|e| e.moved).count();
@@ -172,6 +188,27 @@ mod tests {
             (s.only_in_a.as_slice(), s.only_in_b.as_slice()),
             (["d2".to_string()].as_slice(), ["c5".to_string()].as_slice())
         );
+    }
+
+    /// Each run's drift terms are its own: two sets that both fit them (different values, far
+    /// beyond their σ) compare their robot parameters only, and a note says why the drift terms
+    /// are left out; a set with them against one without lists them in neither `only_in` list.
+    #[test]
+    fn the_drift_terms_of_each_run_are_not_compared() {
+        let with = |v: f64| {
+            doc(json!([
+                {"name": "a2", "value": 270.146, "std": 0.003, "status": "identified"},
+                {"name": "drift_x_p1", "value": v, "std": 0.001, "status": "identified"}]))
+        };
+        let r = drift(&with(0.05), &with(-0.05), "against").unwrap();
+        assert_eq!(r.parameters.iter().map(|e| e.name.as_str()).collect::<Vec<_>>(), ["a2"]);
+        assert_eq!(r.moved, 0);
+        assert!(r.notes.iter().any(|n| n.contains("drift_*") && n.contains("not compared")), "{:?}", r.notes);
+        let plain = doc(json!([{"name": "a2", "value": 270.146, "std": 0.003, "status": "identified"}]));
+        for r in [drift(&with(0.05), &plain, "against").unwrap(), drift(&plain, &with(0.05), "against").unwrap()] {
+            assert!(r.only_in_a.is_empty() && r.only_in_b.is_empty(), "{r:?}");
+        }
+        assert!(drift(&plain, &plain, "against").unwrap().notes.is_empty());
     }
 
     #[test]

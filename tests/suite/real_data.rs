@@ -2413,6 +2413,20 @@ fn a_drift_along_the_run_is_fitted_as_a_nuisance_of_the_run() {
     let q = [0.3, -0.2, 0.4, 0.1, 0.8, -0.5];
     let (f1, f0) = (with.set.chain().fk(&JointState::new(&q)), flat.chain().fk(&JointState::new(&q)));
     assert_eq!(f1.t, f0.t);
+    // Re-registered on another run (`--start set --only base,tool`), the set's drift stays with its
+    // own run: it is neither carried nor applied along the other run's order, and the fit is the
+    // re-registration of the same set without a drift.
+    let (_, other) = twin(300, 9);
+    let register = |start: &robocal::kinematics::ParameterSet| {
+        let mut o = options("", &[]);
+        o.start = Some(start.clone());
+        o.only = vec!["base".into(), "tool".into()];
+        identify(&other, &o).unwrap()
+    };
+    let (moved, plain) = (register(&with.set), register(&flat));
+    assert!(!moved.set.layout.params().iter().any(|p| matches!(p, Param::Drift(..))), "{:?}", moved.notes);
+    assert!(!moved.notes.iter().any(|n| n.contains("drift")), "{:?}", moved.notes);
+    assert_eq!(moved.quality.rms_residual, plain.quality.rms_residual);
 }
 
 /// The drift terms in a measuring order that follows the configuration: the same twin's stops

@@ -57,7 +57,8 @@ pub fn with_approach(cell: &Cell, models: &[&ModelOptions]) -> Option<(Cell, Vec
 }
 
 /// The start set's own effect terms and correction tables that `opts.model` does not name
-/// (its payload excepted: an unknown payload has its own rule), in its layout's order.
+/// (its payload excepted: an unknown payload has its own rule; and its drift along its own run), in
+/// its layout's order.
 fn start_terms_missing(cell: &Cell, opts: &IdentifyOptions) -> Vec<Param> {
     let Some(start) = &opts.start else { return Vec::new() };
     let full = ParamLayout::full(&cell.model);
@@ -71,7 +72,8 @@ fn start_terms_missing(cell: &Cell, opts: &IdentifyOptions) -> Vec<Param> {
         .iter()
         .copied()
         .filter(|p| full.index_of(*p).is_none() && full.admits(*p))
-        .filter(|p| !matches!(p, Param::ToolMass | Param::ToolMoment(_)))
+        // A drift along the start set's run is that run's own: never carried to another.
+        .filter(|p| !matches!(p, Param::ToolMass | Param::ToolMoment(_) | Param::Drift(..)))
         .filter(|p| !named(p))
         .collect()
 }
@@ -282,7 +284,9 @@ fn start_values(
     for (g, gp) in problem.params.iter().enumerate() {
         let v = match *gp {
             GlobalParam::Robot(i) => match problem.layout.params()[i] {
-                Param::Base(_) => None,
+                // A drift along the start set's run is that run's, not this one's: the drift terms
+                // start at zero, this run's mean.
+                Param::Base(_) | Param::Drift(..) => None,
                 p => start.value(p),
             },
             GlobalParam::Tool { tool, k } if problem.tools[tool].tool == start.tool => start.value(Param::Tool(k)),
