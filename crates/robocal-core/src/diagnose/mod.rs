@@ -1024,16 +1024,9 @@ fn drift_nuisance(
     let without = ErrorStats::of(&figures.get(s.stages.len() - 1)?.norms())?.mean;
     let with = ErrorStats::of(&h.norms())?.mean;
     let pr = &st.problem;
-    let value = |p: Param| pr.robot_index(p).map_or(0.0, |g| st.x[g]);
-    let tested: Vec<usize> = h.errors.iter().map(|(o, _)| *o).collect();
-    let sq: f64 = tested
-        .iter()
-        .map(|&o| {
-            let run = pr.obs[o].state.run;
-            Vector3::<f64>::from_fn(|a, _| (0..3).map(|k| value(Param::Drift(a, k)) * run[k]).sum()).norm_squared()
-        })
-        .sum();
-    let fitted_rms = (sq / tested.len().max(1) as f64).sqrt();
+    let d = nalgebra::Matrix3::<f64>::from_fn(|a, k| pr.robot_index(Param::Drift(a, k)).map_or(0.0, |g| st.x[g]));
+    let sq: f64 = h.errors.iter().map(|(o, _)| (d * Vector3::from(pr.obs[*o].state.run)).norm_squared()).sum();
+    let fitted_rms = (sq / h.errors.len().max(1) as f64).sqrt();
     Some(drift::DriftNuisance { fitted_rms, without, with })
 }
 

@@ -298,7 +298,7 @@ fn identify_cell(cell: &Cell, opts: &IdentifyOptions) -> Result<Identification, 
     if opts.model.beta {
         notes.extend(parallel_axes_without_beta(&cell.model));
     }
-    notes.extend(super::run::drift_order_note(cell, &problem));
+    notes.extend(super::run::drift_order_note(&problem));
     // Parameters held where a first fit stopped: not freed again below.
     let mut held_where_stopped = Vec::new();
     let mut fit = match solver::solve(&problem, &free, &x0, &opts.solver) {

@@ -352,9 +352,13 @@ impl Problem {
                 gravity[t].torques_and_payload_slopes(q, &tools[t].tool.com, moments)
             })
             .collect();
-        // Each measurement's place in the run, as the drift terms' basis: zero (the run's mean, no
-        // drift) when the measurements share no run.
-        let run = super::run::run_positions(cell, &picks).and_then(|(_, at)| super::run::drift_basis(&at));
+        // Each measurement's place in the run, as the drift terms' basis, where the model has
+        // them: zero (the run's mean, no drift) otherwise and when the measurements share no run.
+        let drifts = layout.params().iter().any(|p| matches!(p, Param::Drift(..)));
+        let run = drifts
+            .then(|| super::run::run_positions(cell, &picks))
+            .flatten()
+            .and_then(|(_, at)| super::run::drift_basis(&at));
         let mut obs = Vec::with_capacity(picks.len());
         let mut row = 0;
         for (n, ((s, i), (tau, per_kg, per_kgm))) in picks.into_iter().zip(torques).enumerate() {
@@ -781,10 +785,10 @@ mod tests {
         r
     }
 
-    /// Each measurement's place in its run becomes the drift basis of its state: from the sequence
-    /// numbers two sessions share (a plate's reflectors), centred over the problem's
-    /// measurements; two sessions with neither times nor sequence numbers share no run, and every
-    /// state keeps the run's mean (zero), where a drift term moves nothing.
+    /// In a model with drift terms, each measurement's place in its run becomes the drift basis of
+    /// its state: from the sequence numbers two sessions share (a plate's reflectors), centred
+    /// over the problem's measurements; two sessions with neither times nor sequence numbers share
+    /// no run, and every state keeps the run's mean (zero), where a drift term moves nothing.
     #[test]
     fn each_measurements_place_in_its_run_is_its_drift_basis() {
         let q = random_configurations(40, 3);
@@ -804,7 +808,9 @@ mod tests {
                 session("r1", Purpose::Identification, trical_tool(), seq(0, with)),
                 session("r2", Purpose::Identification, nest(), seq(second, with)),
             ]);
-            let p = problem(&cell, &MeasurementSelection::default()).unwrap();
+            let mut layout = ParamLayout::full(&cell.model);
+            layout.extend(&crate::identify::drift_terms());
+            let p = Problem::new(&cell, layout, BASE, &MeasurementSelection::default(), ROTATION_WEIGHT).unwrap();
             let expected = crate::identify::run::drift_basis(&(0..20).map(|i| 10.0 * i as f64).collect::<Vec<_>>());
             for o in &p.obs {
                 let want = if with { expected.as_ref().unwrap()[o.index] } else { [0.0; 3] };

@@ -98,19 +98,24 @@ pub fn drift_basis(at: &[f64]) -> Option<Vec<[f64; DRIFT_ORDERS]>> {
 /// When `problem` fits a drift along its run and the run's order carries the configuration (a
 /// sweep, poses planned for short moves: [`crate::diagnose::drift::order_carries_configuration`]),
 /// a note that the drift terms can take an error of the pose as well.
-pub(crate) fn drift_order_note(cell: &Cell, problem: &super::Problem) -> Option<String> {
+pub(crate) fn drift_order_note(problem: &super::Problem) -> Option<String> {
     if !problem.layout.params().iter().any(|p| matches!(p, crate::kinematics::Param::Drift(..))) {
         return None;
     }
     let dof = problem.model.dof();
-    let picks: Vec<(usize, usize)> = problem.obs.iter().map(|o| (o.session, o.index)).collect();
-    let (_, at) = run_positions(cell, &picks)?;
+    // The state's P̃1 is the place in the run up to an affine map: the same order, the same R².
+    // (All zero where the measurements share no run: then no note.)
     let readings = problem
         .obs
         .iter()
-        .zip(at)
-        .map(|(o, t)| {
-            (t, o.state.q[..dof].to_vec(), problem.target_position(o), nalgebra::Vector3::zeros(), Vec::new())
+        .map(|o| {
+            (
+                o.state.run[0],
+                o.state.q[..dof].to_vec(),
+                problem.target_position(o),
+                nalgebra::Vector3::zeros(),
+                Vec::new(),
+            )
         })
         .collect();
     let stops = crate::diagnose::drift::stops(readings);
