@@ -206,6 +206,8 @@ fn read_files(
     )];
     notes.extend(joint_header.map(|h| header_note(joints, h)));
     let mut sessions = Vec::with_capacity(positions.len());
+    // Every pose line's readings, bit for bit, for the copies check below.
+    let mut readings: Vec<Vec<Option<[u64; 3]>>> = vec![Vec::new(); poses.len()];
     for (k, path) in positions.iter().enumerate() {
         let name = format!("{name}-{}", k + 1);
         let text = read_text(path)?;
@@ -222,7 +224,9 @@ fn read_files(
         let mut measurements = Vec::with_capacity(lines.len());
         let (mut hidden, mut zeros) = (Vec::new(), Vec::new());
         for (pose, ((line, text), q)) in lines.iter().zip(&poses).enumerate() {
-            match position(path, *line, text)? {
+            let read = position(path, *line, text)?;
+            readings[pose].push(read.map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]));
+            match read {
                 None => hidden.push(*line),
                 Some(p) => {
                     if p == Vector3::zeros() {
@@ -284,8 +288,40 @@ fn read_files(
             files.join(", ")
         )));
     }
+    notes.extend(copied_lines(&poses, &readings, &joint_lines));
     notes.extend(approach_through_unread_stops(&mut sessions, &poses, &joint_lines));
     Ok(Imported { cell: Cell { model, base_guess: None, artefact: None, sessions }, notes })
+}
+
+/// Pose lines equal, bit for bit, to an earlier one in the joints file and in every positions file
+/// (with a reading there): a line copied, not a stop measured again — a second measurement of a
+/// stop differs by the instrument's noise. The public FANUC run has one (its rows 36 and 37). It
+/// is imported as written, and said: the copy weighs twice in every fit, the drift test counts it
+/// once. `None` without copies.
+fn copied_lines(poses: &[Vec<f64>], readings: &[Vec<Option<[u64; 3]>>], lines: &[PoseLine<'_>]) -> Option<String> {
+    /// A pose line's joints and readings, bit for bit.
+    type Line<'a> = (Vec<u64>, &'a [Option<[u64; 3]>]);
+    let mut first: std::collections::HashMap<Line<'_>, usize> = Default::default();
+    let mut copies = Vec::new();
+    for (k, (q, r)) in poses.iter().zip(readings).enumerate() {
+        if r.iter().all(Option::is_none) {
+            continue;
+        }
+        let key = (q.iter().map(|v| v.to_bits()).collect(), r.as_slice());
+        match first.get(&key) {
+            Some(&was) => copies.push(format!("{} (as {})", lines[k].0, lines[was].0)),
+            None => {
+                first.insert(key, k);
+            }
+        }
+    }
+    (!copies.is_empty()).then(|| {
+        format!(
+            "{} pose line(s) repeat an earlier one exactly, joints and every reflector's position: line(s) {}. A stop measured again differs by the instrument's noise; a copied line weighs twice in every fit: delete it if it is a copy",
+            copies.len(),
+            copies.join(", ")
+        )
+    })
 }
 
 /// Where some pose lines have no reading in any file (every reflector hidden, or the row's

@@ -79,6 +79,8 @@ pub struct Where {
     /// Whether the errors drift along the measuring order ([`super::drift`]); `None` where the
     /// run positions are unknown or too few.
     pub order_drift: Option<super::drift::OrderDrift>,
+    /// Why the order was not tested for a drift, when it was not (said in the notes).
+    pub order_drift_untested: Option<String>,
 }
 
 /// Smallest number of positions in a tested voxel.
@@ -215,5 +217,6 @@ pub fn locate(
         voxels_tested: tested.len(),
         voxels,
         order_drift: None,
+        order_drift_untested: None,
     }
 }

@@ -350,6 +350,9 @@ pub struct Diagnosis {
     pub excluded: Vec<(String, usize)>,
     /// What was left out for the set, in a sentence, when it left some readings out.
     pub excluded_note: Option<String>,
+    /// The set's drift terms along its run, left out of every model here, in a sentence, when it
+    /// has some.
+    pub drift_note: Option<String>,
 }
 
 /// A model carried to another session, base and tools refitted there.
@@ -472,6 +475,12 @@ fn start_options(input: &Input<'_>, opts: &DiagnoseOptions, sessions: Vec<String
             Param::Beta(_) | Param::Joint(_, JointTerm::Compliance) if fitted(i) => model.extra.push(*p),
             // A payload the identification held (not determined by its data) stays held.
             Param::ToolMass if !fitted(i) => {}
+            // A drift along the set's run is a nuisance of that run, not a term of the robot: every
+            // figure here predicts a reading at the run's mean, as the refits do, and the order is
+            // tested for a drift by `where.order_drift` (its nuisance refit adds the terms back).
+            // Kept, the screening would have predicted held-out readings at their place in the run
+            // while the refitted figures predicted them at its mean. [`drift_left_out_note`].
+            Param::Drift(..) => {}
             p if full.index_of(*p).is_none() => model.extra.push(*p),
             _ => {}
         }
@@ -493,6 +502,17 @@ fn start_options(input: &Input<'_>, opts: &DiagnoseOptions, sessions: Vec<String
     o.selection.sessions = sessions;
     o.selection.exclude = opts.exclude.clone();
     o
+}
+
+/// The sentence for a set identified with drift terms along its run (`--model +drift`), which the
+/// diagnosis leaves out of every model ([`start_options`]): `None` when the set has none.
+fn drift_left_out_note(set: &ParameterSet) -> Option<String> {
+    let n = set.layout.params().iter().filter(|p| matches!(p, Param::Drift(..))).count();
+    (n > 0).then(|| {
+        format!(
+            "the set's {n} drift terms along its measuring run are left out of every model here: the diagnosis predicts each reading at the run's mean, and tests the measuring order for a drift itself (where.order_drift); accepting gives a set without them"
+        )
+    })
 }
 
 /// Identification options whose fits are never refused for their residual: the diagnosis studies
@@ -705,6 +725,7 @@ pub fn diagnose_with_progress(
         transfer,
         evidence,
         excluded_note: left_out.note(),
+        drift_note: drift_left_out_note(input.set),
         excluded: left_out.all,
     })
 }
@@ -967,7 +988,10 @@ impl Tested {
             voxel,
             opts.fdr,
         );
-        w.order_drift = order_drift(&s.stages[0], cell, &s.baselines[0], opts.seed);
+        match order_drift(&s.stages[0], cell, &s.baselines[0], opts.seed) {
+            Ok(d) => w.order_drift = Some(d),
+            Err(why) => w.order_drift_untested = Some(why),
+        }
         w
     }
 }
@@ -975,11 +999,19 @@ impl Tested {
 /// The drift test ([`drift`]) on the starting model's held-out errors, where every tested
 /// observation has a place in one run ([`run_positions`]), with each joint's ∂(position)/∂θ_j at
 /// the starting model for the creep of the zeros.
-fn order_drift(stage: &stage::Stage, cell: &Cell, heldout: &cv::Heldout, seed: u64) -> Option<drift::OrderDrift> {
+/// Why the order was not tested, in a sentence, when it was not.
+fn order_drift(
+    stage: &stage::Stage,
+    cell: &Cell,
+    heldout: &cv::Heldout,
+    seed: u64,
+) -> Result<drift::OrderDrift, String> {
     let pr = &stage.problem;
     let dof = pr.model.dof();
     let obs: Vec<usize> = heldout.errors.iter().map(|(o, _)| *o).collect();
-    let (source, at) = run_positions(pr, cell, &obs)?;
+    let (source, at) = run_positions(pr, cell, &obs).ok_or_else(|| {
+        "the tested readings have no place in one run (no time_s or sequence logged, and not one session in measuring order)".to_string()
+    })?;
     // The weighted joint columns, unweighted row by row (a row of zero weight tells nothing).
     let g = stage.joint_columns();
     let zero_columns = |o: &crate::identify::problem::Obs| -> Vec<Vector3<f64>> {
@@ -995,7 +1027,15 @@ fn order_drift(stage: &stage::Stage, cell: &Cell, heldout: &cv::Heldout, seed: u
             (t, ob.state.q[..dof].to_vec(), pr.target_position(ob), *e, zero_columns(ob))
         })
         .collect();
-    drift::order_drift(&drift::stops(readings), source, seed)
+    let stops = drift::stops(readings);
+    if stops.len() < drift::MIN_STOPS {
+        return Err(format!(
+            "{} stops (consecutive readings at one configuration count once), fewer than the {} it needs",
+            stops.len(),
+            drift::MIN_STOPS
+        ));
+    }
+    drift::order_drift(&stops, source, seed).ok_or_else(|| "every stop has the same place in the run".to_string())
 }
 
 /// The final model with the drift terms (`+drift`), fitted on the pooled data and refitted on the

@@ -177,7 +177,11 @@ impl Stage {
         r0.resize(n, 0.0);
         // The pooled least-squares step of the extended linear model.
         let g = at_b(a.as_ref(), a.as_ref());
-        let scale: Vec<f64> = (0..w).map(|c| g[(c, c)].sqrt().max(f64::MIN_POSITIVE)).collect();
+        // A column with no effect (a payload where nothing carries its torque to the TCP: no
+        // compliance free: each held) keeps the scale 1: floored at the smallest positive number, its
+        // square underflowed to 0 and the scaled Gram matrix read 0/0 (a panic in the
+        // eigendecomposition on a FANUC sweeps twin).
+        let scale: Vec<f64> = (0..w).map(|c| if g[(c, c)] > 0.0 { g[(c, c)].sqrt() } else { 1.0 }).collect();
         let gs = Mat::<f64>::from_fn(w, w, |i, k| g[(i, k)] / (scale[i] * scale[k]));
         let b: Vec<f64> = at_v(a.as_ref(), &r0).iter().zip(&scale).map(|(v, s)| v / s).collect();
         let delta: Vec<f64> = psd_solve(&gs, &b, 1e-13).iter().zip(&scale).map(|(v, s)| v / s).collect();

@@ -291,12 +291,22 @@ fn last_finding(s: &search::Search, d: &Decomposition) -> Finding {
         Decision::Partial { best, share, smoother_gain_rms, closure_only } => {
             let b = &lr.screened[*best];
             let gain = lr.evaluated.iter().find(|e| e.index == *best).map_or(0.0, |e| e.vs_model.gain_rms);
+            // The smoother's own gain is the round's (`rounds[].smoother_gain_rms_mm`); where the
+            // term beside it gains more, that is what the share was taken of, and both are said.
+            let against = if *smoother_gain_rms > lr.smoother.gain_rms {
+                format!(
+                    "{} for a smooth function of the configuration, {} for both together",
+                    mm(lr.smoother.gain_rms),
+                    mm(*smoother_gain_rms)
+                )
+            } else {
+                format!("{} for a smooth function of the configuration", mm(lr.smoother.gain_rms))
+            };
             let explains = format!(
-                "{} explains {:.0} % of what a smooth function of the configuration explains beyond the model (held-out RMS gain {} against {})",
+                "{} explains {:.0} % of what a smooth function of the configuration explains beyond the model (held-out RMS gain {} against {against})",
                 b.candidate.label(),
                 share * 100.0,
                 mm(gain),
-                mm(*smoother_gain_rms)
             );
             let summary = match closure_only {
                 // No smooth structure beyond it: what it leaves changes from pose to pose. Too

@@ -970,6 +970,10 @@ pub fn diagnosis_out(d: &Diagnosis) -> DiagnosisOut {
         .collect();
     let mut notes = d.approach_notes.clone();
     notes.extend(d.excluded_note.clone());
+    notes.extend(d.drift_note.clone());
+    if let Some(why) = &d.location.order_drift_untested {
+        notes.push(format!("the measuring order was not tested for a drift (where.order_drift): {why}"));
+    }
     if let Some(n) = &d.start_note {
         notes.push(format!(
             "the starting model does not converge on the pooled data ({n}); it is linearised at the given parameter set"

@@ -98,8 +98,8 @@ pub enum IdentifyError {
     /// A session's measured positions spread over a different scale than the nominal robot's TCP
     /// at the same joint readings: a unit mistake, refused before it is fitted.
     #[error(
-        "session '{session}': its measured positions spread {} mm around their centroid, where the nominal robot's TCP spreads {} mm at the same joint readings ({ratio:.3} times): a calibration changes the robot by millimetres, not by this factor. Check the positions' unit (position_mm: centimetres read as mm give 0.1, inches 0.039, metres 0.001) and that the joints are in degrees (joints_deg)",
-        mm(*measured), mm(*nominal)
+        "session '{session}': its measured positions spread {} mm around their centroid, where the nominal robot's TCP spreads {} mm at the same joint readings ({ratio:.3} times) and a point up to {} mm from it between {} and {} mm: a calibration changes the robot by millimetres, not by this factor. Check the positions' unit (position_mm: centimetres read as mm give 0.1, inches 0.039, metres 0.001) and that the joints are in degrees (joints_deg)",
+        mm(*measured), mm(*nominal), mm(super::scale::MAX_TCP_OFFSET), mm(reach.0), mm(reach.1)
     )]
     PositionScale {
         /// The session.
@@ -110,6 +110,10 @@ pub enum IdentifyError {
         nominal: f64,
         /// `measured` / `nominal`.
         ratio: f64,
+        /// The least and the most RMS spread, m, of a point up to 500 mm
+        /// from the declared TCP at the same readings (a reflector or tool the file does not
+        /// declare).
+        reach: (f64, f64),
     },
     /// A session's joint readings are radians read as degrees: every one, taken as radians, lies
     /// within its joint's limits, the nominal robot hardly moves at them, and read as radians its TCP spreads as the measured
