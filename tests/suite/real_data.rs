@@ -563,8 +563,13 @@ fn diagnose_cell(cell: &Cell) -> robocal::diagnose::Diagnosis {
 /// `cell` identified with the default model changed by `model` (`--model` syntax) and diagnosed on
 /// 5 folds of its poses.
 fn diagnose_cell_identified_with(cell: &Cell, model: &str) -> robocal::diagnose::Diagnosis {
+    diagnose_identified(cell, &options(model, &[]))
+}
+
+/// `cell` identified with `o` and diagnosed on 5 folds of its poses.
+fn diagnose_identified(cell: &Cell, o: &IdentifyOptions) -> robocal::diagnose::Diagnosis {
     use robocal::diagnose::{DiagnoseOptions, Input, diagnose};
-    let id = identify(cell, &options(model, &[])).unwrap();
+    let id = identify(cell, o).unwrap();
     let identified = id.status.iter().map(|s| matches!(s, robocal::identify::Status::Identified)).collect();
     let input = Input { cell, set: &id.set, identified: Some(identified), fixed: Vec::new(), excluded: Vec::new() };
     let opts = DiagnoseOptions { validation: Some(Vec::new()), threads: 2, ..DiagnoseOptions::default() };
@@ -1956,16 +1961,10 @@ fn a_copied_pose_line_is_said_and_an_order_too_short_for_the_drift_test_is_said(
     assert!(note.starts_with("1 pose line(s)") && note.contains("line(s) 38 (as 37)"), "{note}");
     assert_eq!(imported.cell.sessions[0].measurements.len(), 60, "imported as written");
 
-    use robocal::diagnose::{DiagnoseOptions, Input, diagnose};
     let cell = imported.cell;
     let mut o = options("-compliance", &[]);
     o.residual_ratio_limit = f64::INFINITY;
-    let id = identify(&cell, &o).unwrap();
-    let identified = id.status.iter().map(|s| matches!(s, robocal::identify::Status::Identified)).collect();
-    let input =
-        Input { cell: &cell, set: &id.set, identified: Some(identified), fixed: Vec::new(), excluded: Vec::new() };
-    let opts = DiagnoseOptions { validation: Some(Vec::new()), threads: 2, ..DiagnoseOptions::default() };
-    let d = diagnose(&input, &opts).unwrap();
+    let d = diagnose_identified(&cell, &o);
     assert!(d.location.order_drift.is_none());
     let why = d.location.order_drift_untested.as_deref().expect("said");
     assert!(why.starts_with("59 stops") && why.ends_with("fewer than the 60 it needs"), "{why}");
@@ -1983,17 +1982,11 @@ fn a_copied_pose_line_is_said_and_an_order_too_short_for_the_drift_test_is_said(
 /// eigendecomposition panicked on these sweeps.
 #[test]
 fn a_payload_trial_with_no_effect_does_not_stop_a_diagnosis() {
-    use robocal::diagnose::{DiagnoseOptions, Input, diagnose};
     let (joints, files, model) = sweeps_twin_files_as(2, 0.04, true);
     let cell = three_reflector::import(&joints, &files, model, Purpose::Identification).unwrap().cell;
     let mut o = options("", &[]);
     o.residual_ratio_limit = f64::INFINITY;
-    let id = identify(&cell, &o).unwrap();
-    let identified = id.status.iter().map(|s| matches!(s, robocal::identify::Status::Identified)).collect();
-    let input =
-        Input { cell: &cell, set: &id.set, identified: Some(identified), fixed: Vec::new(), excluded: Vec::new() };
-    let opts = DiagnoseOptions { validation: Some(Vec::new()), threads: 2, ..DiagnoseOptions::default() };
-    let d = diagnose(&input, &opts).unwrap();
+    let d = diagnose_identified(&cell, &o);
     assert!(d.shrink[0].stats.mean.is_finite() && d.shrink[0].stats.mean > 0.5 * MM, "{:?}", d.shrink[0].stats);
 }
 

@@ -359,14 +359,18 @@ pub(crate) fn order_carries_configuration(stops: &[Stop]) -> Option<(f64, f64)> 
     (r2 > CONFOUNDED_R2 || local < LOCALITY_LIMIT).then_some((r2, local))
 }
 
-/// The test on `stops` (see the module). `None` with fewer than [`MIN_STOPS`] stops, or when every
-/// stop has the same place in the run.
-pub fn order_drift(stops: &[Stop], source: RunPosition, seed: u64) -> Option<OrderDrift> {
+/// The test on `stops` (see the module). Refused, with why in a sentence, with fewer than
+/// [`MIN_STOPS`] stops, when every stop has the same place in the run, or when the configuration
+/// leaves the place nothing to test.
+pub fn order_drift(stops: &[Stop], source: RunPosition, seed: u64) -> Result<OrderDrift, String> {
     let m = stops.len();
     if m < MIN_STOPS {
-        return None;
+        return Err(format!(
+            "{m} stops (consecutive readings at one configuration count once), fewer than the {MIN_STOPS} it needs"
+        ));
     }
-    let u = unit_scale(stops.iter().map(|s| s.at))?;
+    let u =
+        unit_scale(stops.iter().map(|s| s.at)).ok_or_else(|| "every stop has the same place in the run".to_string())?;
     let z = configuration_matrix(stops);
     let x = DMatrix::from_fn(m, DEGREE, |i, k| legendre(u(stops[i].at))[k]);
     let y = DMatrix::from_fn(m, 3, |i, c| stops[i].error[c]);
@@ -375,7 +379,7 @@ pub fn order_drift(stops: &[Stop], source: RunPosition, seed: u64) -> Option<Ord
     let r = remove(&qz, &y);
     let w = orthonormal(&xr);
     if w.ncols() == 0 {
-        return None;
+        return Err("the configuration explains the place in the run: nothing is left to test".into());
     }
     let stat = |rows: &[usize]| -> f64 {
         // ‖Wᵀ·R_π‖²: R's rows taken in the order `rows`.
@@ -404,7 +408,9 @@ pub fn order_drift(stops: &[Stop], source: RunPosition, seed: u64) -> Option<Ord
     let p = (1 + above) as f64 / (1 + PERMUTATIONS) as f64;
     // The trend: the coefficients of X in the full regression (Frisch–Waugh: R on X beyond Z).
     let xtx = xr.transpose() * &xr;
-    let b = xtx.clone().cholesky().map(|c| c.solve(&(xr.transpose() * &r)))?;
+    let b = xtx.clone().cholesky().map(|c| c.solve(&(xr.transpose() * &r))).ok_or_else(|| {
+        "the place in the run is nearly explained by the configuration: its trend is not determined".to_string()
+    })?;
     // c: the basis averaged over the last tenth of the stops minus over the first tenth, so that
     // the change is cᵀb.
     let mut ats: Vec<f64> = stops.iter().map(|s| s.at).collect();
@@ -428,7 +434,7 @@ pub fn order_drift(stops: &[Stop], source: RunPosition, seed: u64) -> Option<Ord
     let ctc = xtx.cholesky().map_or(f64::NAN, |ch| c.dot(&ch.solve(&c)));
     let first_to_last_std = Vector3::from_fn(|axis, _| (full.column(axis).norm_squared() / rest * ctc).sqrt());
     let r2 = order_r2(stops, &u, &qz);
-    Some(OrderDrift {
+    Ok(OrderDrift {
         source,
         stops: m,
         p,

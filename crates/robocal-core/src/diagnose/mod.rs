@@ -998,8 +998,8 @@ impl Tested {
 
 /// The drift test ([`drift`]) on the starting model's held-out errors, where every tested
 /// observation has a place in one run ([`run_positions`]), with each joint's ∂(position)/∂θ_j at
-/// the starting model for the creep of the zeros.
-/// Why the order was not tested, in a sentence, when it was not.
+/// the starting model for the creep of the zeros; `Err`: why the order was not tested, in a
+/// sentence.
 fn order_drift(
     stage: &stage::Stage,
     cell: &Cell,
@@ -1027,15 +1027,7 @@ fn order_drift(
             (t, ob.state.q[..dof].to_vec(), pr.target_position(ob), *e, zero_columns(ob))
         })
         .collect();
-    let stops = drift::stops(readings);
-    if stops.len() < drift::MIN_STOPS {
-        return Err(format!(
-            "{} stops (consecutive readings at one configuration count once), fewer than the {} it needs",
-            stops.len(),
-            drift::MIN_STOPS
-        ));
-    }
-    drift::order_drift(&stops, source, seed).ok_or_else(|| "every stop has the same place in the run".to_string())
+    drift::order_drift(&drift::stops(readings), source, seed)
 }
 
 /// The final model with the drift terms (`+drift`), fitted on the pooled data and refitted on the

@@ -137,11 +137,8 @@ pub(super) fn hold_undetermined(
             }
             Undetermined::Geometry(..) => {
                 let (bound, angle) = undetermined_bound(f.problem, g).expect("a geometric parameter");
-                let partner = (0..free.len())
-                    .filter(|&k| k != c)
-                    .max_by(|&a, &b| q.correlation[(c, a)].abs().total_cmp(&q.correlation[(c, b)].abs()))
-                    .map(|k| free[k])
-                    .filter(|&h| is_compliance(f.problem, h));
+                let partner =
+                    strongest_partner(free, &q, c).map(|(k, _)| free[k]).filter(|&h| is_compliance(f.problem, h));
                 held_geometry.push((g, partner));
                 FixedReason::UndeterminedAtSolution {
                     name: f.problem.name(g),
@@ -322,12 +319,16 @@ fn undetermined_geometry(
 /// The free parameter most correlated with column `c`, with the correlation (the one it is one
 /// direction with), when there is another.
 fn strongest_correlation(problem: &Problem, free: &[usize], q: &Quality, c: usize) -> Option<(String, f64)> {
+    strongest_partner(free, q, c).map(|(k, r)| (problem.name(free[k]), r))
+}
+
+/// The column of the free parameter most correlated with column `c`, with the correlation.
+fn strongest_partner(free: &[usize], q: &Quality, c: usize) -> Option<(usize, f64)> {
     (0..free.len())
         .filter(|&k| k != c)
         .map(|k| (k, q.correlation[(c, k)]))
         .filter(|(_, r)| r.is_finite())
         .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
-        .map(|(k, r)| (problem.name(free[k]), r))
 }
 
 /// The free compliance with the smallest |estimate − nominal|/σ below the threshold (with its

@@ -74,7 +74,7 @@ pub(crate) fn check_position_scale(problem: &Problem, x0: &[f64], cell: &Cell) -
         // Above the ratio, a point off the TCP that the wrist turns may explain the spread. Not
         // below it: random orientations bound nothing there (the least spread of a point 0.5 m
         // off is 0), and positions in cm read as mm would pass.
-        let reach = reach(&at_declared, MAX_TCP_OFFSET);
+        let reach = reach(&at_declared, nominal, MAX_TCP_OFFSET);
         if agrees(nominal)
             || (nominal >= MIN_NOMINAL_SPREAD && measured > nominal && measured <= reach.1 * REACH_MARGIN)
         {
@@ -121,12 +121,11 @@ pub(crate) fn check_position_scale(problem: &Problem, x0: &[f64], cell: &Cell) -
 }
 
 /// The least and the most RMS spread, m, of a point fixed at up to `offset` (m) from the frames'
-/// origin, over the frames: with p_i = t_i + R_i·r, Minkowski's inequality puts the spread of p
-/// within spread(t) ± ‖r‖·√λ_max(mean (R_i − R̄)ᵀ(R_i − R̄)). The least is said in the refusal;
-/// only the most is a bound of the check.
-fn reach(frames: &[crate::kinematics::Frame], offset: f64) -> (f64, f64) {
+/// origin, over the frames whose origins spread `centre` (m): with p_i = t_i + R_i·r, Minkowski's
+/// inequality puts the spread of p within spread(t) ± ‖r‖·√λ_max(mean (R_i − R̄)ᵀ(R_i − R̄)). The
+/// least is said in the refusal; only the most is a bound of the check.
+fn reach(frames: &[crate::kinematics::Frame], centre: f64, offset: f64) -> (f64, f64) {
     let n = frames.len().max(1) as f64;
-    let centre = spread(frames.iter().map(|f| f.t));
     let mean = frames.iter().map(|f| f.r).sum::<nalgebra::Matrix3<f64>>() / n;
     let m = frames.iter().map(|f| (f.r - mean).transpose() * (f.r - mean)).sum::<nalgebra::Matrix3<f64>>() / n;
     let turn = m.symmetric_eigenvalues().max().max(0.0).sqrt() * offset;
@@ -164,7 +163,7 @@ mod tests {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         for (arm, turn) in [(0.3, 0.2), (0.05, 2.0), (0.0, 1.0)] {
             let f = frames(&mut rng, 60, arm, turn);
-            let (lo, hi) = reach(&f, 0.5);
+            let (lo, hi) = reach(&f, spread(f.iter().map(|x| x.t)), 0.5);
             for _ in 0..300 {
                 let r = Vector3::<f64>::from_fn(|_, _| rng.random_range(-1.0..1.0)).normalize()
                     * rng.random_range(0.0..0.5);
